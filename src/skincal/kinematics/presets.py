@@ -1,0 +1,135 @@
+"""Robot presets and user chains from YAML/JSON files.
+
+Presets:
+* ``panda``: Franka Emika Panda, modified DH, Franka's published table, position and velocity
+  limits, flange ``d = 0.107`` m along z of frame 7 (the paper's robot).
+* ``sawyer``: Rethink Sawyer, standard DH (Layeghi 2017 table, as in Corke's Robotics Toolbox).
+* ``ur5e``: Universal Robots UR5e, standard DH (UR's published table).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from skincal.errors import ConfigError
+from skincal.kinematics.chain import SerialChain
+
+_PI = np.pi
+
+
+def panda() -> SerialChain:
+    """Franka Emika Panda (modified DH), the robot of the paper."""
+    dh = [
+        [0.0, 0.333, 0.0, 0.0],
+        [0.0, 0.0, 0.0, -_PI / 2],
+        [0.0, 0.316, 0.0, _PI / 2],
+        [0.0, 0.0, 0.0825, _PI / 2],
+        [0.0, 0.384, -0.0825, -_PI / 2],
+        [0.0, 0.0, 0.0, _PI / 2],
+        [0.0, 0.0, 0.088, _PI / 2],
+    ]
+    flange = np.eye(4)
+    flange[2, 3] = 0.107
+    return SerialChain(
+        name="panda",
+        convention="modified",
+        dh=np.array(dh),
+        joint_lower=np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973]),
+        joint_upper=np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973]),
+        velocity_limit=np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61]),
+        T_link_flange=flange,
+    )
+
+
+def sawyer() -> SerialChain:
+    """Rethink Sawyer (standard DH)."""
+    d = [0.317, 0.1925, 0.4, 0.1685, 0.4, 0.1363, 0.13375]
+    a = [0.081, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    alpha = [-_PI / 2] * 6 + [0.0]
+    dh = np.column_stack([np.zeros(7), d, a, alpha])
+    return SerialChain(
+        name="sawyer",
+        convention="standard",
+        dh=dh,
+        joint_lower=np.array([-3.0503, -3.8095, -3.0426, -3.0439, -2.9761, -2.9761, -4.7124]),
+        joint_upper=np.array([3.0503, 2.2736, 3.0426, 3.0439, 2.9761, 2.9761, 4.7124]),
+        velocity_limit=np.array([1.74, 1.328, 1.957, 1.957, 3.485, 3.485, 4.545]),
+    )
+
+
+def ur5e() -> SerialChain:
+    """Universal Robots UR5e (standard DH), a 6-DoF standard-DH example."""
+    d = [0.1625, 0.0, 0.0, 0.1333, 0.0997, 0.0996]
+    a = [0.0, -0.425, -0.3922, 0.0, 0.0, 0.0]
+    alpha = [_PI / 2, 0.0, 0.0, _PI / 2, -_PI / 2, 0.0]
+    dh = np.column_stack([np.zeros(6), d, a, alpha])
+    lim = np.array([2 * _PI, 2 * _PI, _PI, 2 * _PI, 2 * _PI, 2 * _PI])
+    return SerialChain(
+        name="ur5e",
+        convention="standard",
+        dh=dh,
+        joint_lower=-lim,
+        joint_upper=lim,
+        velocity_limit=np.full(6, _PI),
+    )
+
+
+PRESETS = {"panda": panda, "sawyer": sawyer, "ur5e": ur5e}
+
+
+def get_robot(name: str) -> SerialChain:
+    """A preset by name, or a chain file (``.yaml``, ``.yml``, ``.json``) by path."""
+    if name in PRESETS:
+        return PRESETS[name]()
+    if Path(name).suffix.lower() in (".yaml", ".yml", ".json"):
+        return load_chain(name)
+    raise ConfigError(f"unknown robot '{name}' (presets: {', '.join(PRESETS)}; or a .yaml/.json chain file)")
+
+
+def load_chain(path: str | Path) -> SerialChain:
+    """Read a chain file.
+
+    Format (YAML or JSON)::
+
+        name: myarm
+        convention: modified          # or standard
+        dh:                           # one row per joint: [theta_offset, d, a, alpha], rad and m
+          - [0, 0.333, 0, 0]
+        joint_lower: [...]            # optional, rad
+        joint_upper: [...]            # optional, rad
+        velocity_limit: [...]         # optional, rad/s
+        T_link_flange: [[...], ...]   # optional 4x4
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read chain file ({exc.strerror or exc})") from None
+    try:
+        if path.suffix.lower() == ".json":
+            spec = json.loads(text)
+        else:
+            import yaml
+
+            spec = yaml.safe_load(text)
+    except Exception as exc:  # noqa: BLE001 - parser errors vary; name the file and move on
+        raise ConfigError(f"{path}: not valid {path.suffix[1:].upper()}: {str(exc).splitlines()[0]}") from None
+    if not isinstance(spec, dict):
+        raise ConfigError(f"{path}: a chain file must be a mapping with at least 'convention' and 'dh'")
+    unknown = set(spec) - {"name", "convention", "dh", "joint_lower", "joint_upper", "velocity_limit", "T_link_flange"}
+    if unknown:
+        raise ConfigError(f"{path}: unknown field(s) {', '.join(sorted(unknown))}")
+    for key in ("convention", "dh"):
+        if key not in spec:
+            raise ConfigError(f"{path}: missing field '{key}'")
+    try:
+        kwargs = {k: np.asarray(v, dtype=float) for k, v in spec.items() if k not in ("name", "convention")}
+    except (TypeError, ValueError):
+        raise ConfigError(f"{path}: numeric fields must hold numbers only") from None
+    try:
+        return SerialChain(name=str(spec.get("name", path.stem)), convention=str(spec["convention"]), **kwargs)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
