@@ -1,0 +1,50 @@
+"""The ``skincal`` command: a thin typer layer over the packages.
+
+Each command group lives in its own module of this package and registers itself on :data:`app`;
+add a module and one import line below. Library errors (:class:`skincal.SkincalError`) become a
+one-line message on stderr and exit code 2; no traceback reaches the user.
+"""
+
+from __future__ import annotations
+
+import sys
+
+# Command modules register themselves on import (one line each).
+from skincal.cli import info as _info  # noqa: E402,F401
+from skincal.cli.app import app, console_error
+
+__all__ = ["app", "main"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the console script; returns the process exit code."""
+    from skincal.errors import SkincalError
+
+    try:
+        app(args=argv, prog_name="skincal", standalone_mode=False)
+    except SkincalError as exc:
+        console_error(str(exc))
+        return 2
+    except KeyboardInterrupt:
+        console_error("interrupted")
+        return 130
+    except OSError as exc:
+        console_error(f"{getattr(exc, 'filename', '') or ''}: {exc.strerror or exc}".lstrip(": "))
+        return 2
+    except SystemExit as exc:  # typer/click usage errors and explicit exits
+        return int(exc.code or 0) if isinstance(exc.code, int) else 1
+    except Exception as exc:  # click's own exceptions (bad option, missing argument)
+        import click
+
+        if isinstance(exc, click.exceptions.ClickException):
+            exc.show()
+            return exc.exit_code
+        if isinstance(exc, click.exceptions.Abort):
+            console_error("aborted")
+            return 1
+        raise
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
