@@ -78,6 +78,9 @@ class Dataset:
         truth: true unit poses (simulation only; may be empty).
         gravity: ``(3,)`` gravity in the base frame, m/s^2.
         description: free text.
+        truth_sensor: true simulated sensor errors per unit (simulation only; may be empty), e.g.
+            ``accel_bias`` ``(3,)`` m/s^2, ``accel_scale`` ``(3,)``, ``accel_misalignment`` ``(3, 3)``,
+            ``time_offset_s`` (float, s); stored as extra attrs of ``/truth/<unit>``.
     """
 
     robot: SerialChain
@@ -88,6 +91,7 @@ class Dataset:
     truth: dict[str, SkinUnitPose] = field(default_factory=dict)
     gravity: FloatArray = field(default_factory=lambda: GRAVITY_BASE.copy())
     description: str = ""
+    truth_sensor: dict[str, dict[str, FloatArray | float]] = field(default_factory=dict)
 
     @property
     def units(self) -> list[str]:
