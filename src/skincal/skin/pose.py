@@ -19,6 +19,7 @@ from skincal.kinematics.transforms import (
     matrix_from_quat_wxyz,
     modified_dh,
     quat_wxyz_from_matrix,
+    rot_x,
     rot_z,
 )
 
@@ -26,6 +27,7 @@ DH6_NAMES = ("theta_v", "d_v", "theta_su", "d_su", "a_su", "alpha_su")
 """Order of the paper's SU parameters (the authors' code order)."""
 
 _SINGULAR_SIN = 1e-12
+_NEAR_SINGULAR_SIN = 1e-6
 
 
 @dataclass(frozen=True)
@@ -110,7 +112,9 @@ def dh6_from_transform(T: ArrayLike) -> FloatArray:
     linear system whose determinant is ``sin(alpha_su)``. The branch with ``a_su >= 0`` is chosen
     (the paper's bound). When the SU's z axis is parallel to the joint axis (``sin(alpha) = 0``)
     the representation is singular: then ``theta_v`` points the virtual joint's x axis at the SU,
-    ``d_su = 0`` and ``d_v`` carries the height, which still reproduces the pose exactly.
+    ``d_su = 0`` and ``d_v`` carries the height, which still reproduces the pose exactly. Within
+    ``sin(alpha) < 1e-6`` of the singularity no parameter set is both bounded and exact; the better
+    of the two readings is returned (round-trip error below 1e-8 everywhere).
     """
     T = np.asarray(T, dtype=float)
     if T.shape[-2:] != (4, 4):
@@ -123,27 +127,45 @@ def dh6_from_transform(T: ArrayLike) -> FloatArray:
 def _dh6_single(T: FloatArray) -> FloatArray:
     R, p = T[:3, :3], T[:3, 3]
     sin_alpha = float(np.hypot(R[0, 2], R[1, 2]))
-    if sin_alpha > _SINGULAR_SIN:
-        # Branch with alpha in (0, pi): theta_v from the SU's z axis, theta_su from its x/y rows.
-        alpha = float(np.arctan2(sin_alpha, R[2, 2]))
-        theta_v = float(np.arctan2(R[0, 2], -R[1, 2]))
-        theta_su = float(np.arctan2(R[2, 0], R[2, 1]))
-        x_v = np.array([np.cos(theta_v), np.sin(theta_v), 0.0])
-        A = np.column_stack([R[:, 2], x_v, [0.0, 0.0, 1.0]])
-        d_su, a_su, d_v = np.linalg.solve(A, p)
-        if a_su < 0.0:  # the equivalent branch (theta_v + pi, -alpha, theta_su + pi) flips a_su
-            theta_v, alpha, theta_su, a_su = theta_v + np.pi, -alpha, theta_su + np.pi, -a_su
-    else:
-        # z_su is +-z_link: R = Rz(theta_v) Rx(alpha) Rz(theta_su) with alpha in {0, pi}.
-        alpha = 0.0 if R[2, 2] > 0 else np.pi
-        theta_v = float(np.arctan2(p[1], p[0])) if np.hypot(p[0], p[1]) > 0 else 0.0
-        a_su = float(np.hypot(p[0], p[1]))
-        # Rx(alpha)^T Rz(theta_v)^T R = Rz(theta_su)
-        M = (rot_z(theta_v) @ _rot_x_exact(alpha)).T @ R
-        theta_su = float(np.arctan2(M[1, 0], M[0, 0]))
-        d_su, d_v = 0.0, float(p[2])
-    wrap = lambda a: float((a + np.pi) % (2 * np.pi) - np.pi)  # noqa: E731
-    return np.array([wrap(theta_v), d_v, wrap(theta_su), d_su, a_su, wrap(alpha)])
+    if sin_alpha < _SINGULAR_SIN:
+        return _dh6_singular(R, p)
+    general = _dh6_general(R, p, sin_alpha)
+    if sin_alpha < _NEAR_SINGULAR_SIN:
+        # Near the singularity the position solve amplifies rounding by 1/sin(alpha) while snapping
+        # alpha to {0, pi} costs sin(alpha) in rotation: keep whichever reproduces the pose better.
+        snapped = _dh6_singular(R, p)
+        err = [np.abs(dh6_to_transform(x) - T).max() for x in (general, snapped)]
+        return general if err[0] <= err[1] else snapped
+    return general
+
+
+def _wrap(angle: float) -> float:
+    return float((angle + np.pi) % (2 * np.pi) - np.pi)
+
+
+def _dh6_general(R: FloatArray, p: FloatArray, sin_alpha: float) -> FloatArray:
+    # Branch with alpha in (0, pi): theta_v from the SU's z axis; theta_su from the residual
+    # rotation (Rz(theta_v) Rx(alpha))^T R = Rz(theta_su), accurate also for small alpha.
+    alpha = float(np.arctan2(sin_alpha, R[2, 2]))
+    theta_v = float(np.arctan2(R[0, 2], -R[1, 2]))
+    M = (rot_z(theta_v) @ rot_x(alpha)).T @ R
+    theta_su = float(np.arctan2(M[1, 0], M[0, 0]))
+    x_v = np.array([np.cos(theta_v), np.sin(theta_v), 0.0])
+    A = np.column_stack([R[:, 2], x_v, [0.0, 0.0, 1.0]])
+    d_su, a_su, d_v = np.linalg.solve(A, p)
+    if a_su < 0.0:  # the equivalent branch (theta_v + pi, -alpha, theta_su + pi) flips a_su
+        theta_v, alpha, theta_su, a_su = theta_v + np.pi, -alpha, theta_su + np.pi, -a_su
+    return np.array([_wrap(theta_v), d_v, _wrap(theta_su), d_su, a_su, _wrap(alpha)])
+
+
+def _dh6_singular(R: FloatArray, p: FloatArray) -> FloatArray:
+    # z_su is +-z_link: R = Rz(theta_v) Rx(alpha) Rz(theta_su) with alpha in {0, pi}.
+    alpha = 0.0 if R[2, 2] > 0 else np.pi
+    radial = float(np.hypot(p[0], p[1]))
+    theta_v = float(np.arctan2(p[1], p[0])) if radial > 0 else 0.0
+    M = (rot_z(theta_v) @ _rot_x_exact(alpha)).T @ R
+    theta_su = float(np.arctan2(M[1, 0], M[0, 0]))
+    return np.array([_wrap(theta_v), float(p[2]), _wrap(theta_su), 0.0, radial, _wrap(alpha)])
 
 
 def _rot_x_exact(alpha: float) -> FloatArray:
