@@ -1,0 +1,65 @@
+"""Atomic file replacement: write a temporary file next to the target, fsync it, then rename.
+
+A reader of the target sees either the old complete file or the new complete file, never a
+half-written one; a crash or an exception while writing leaves the old file untouched and no
+temporary file behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import secrets
+from collections.abc import Iterator
+from pathlib import Path
+
+
+def _fsync_path(path: Path, directory: bool = False) -> None:
+    flags = os.O_RDONLY | (getattr(os, "O_DIRECTORY", 0) if directory else 0)
+    try:
+        fd = os.open(path, flags)
+    except OSError:
+        if directory:  # some platforms cannot open directories; the rename is still atomic
+            return
+        raise
+    try:
+        os.fsync(fd)
+    except OSError:
+        if not directory:
+            raise
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a fresh temporary path in ``path``'s directory; on clean exit replace ``path`` with it.
+
+    The caller writes and closes the temporary file inside the ``with`` block. Afterwards it is
+    fsynced and moved onto ``path`` with :func:`os.replace` (atomic on POSIX and Windows), and the
+    directory is fsynced so the rename survives a power cut. If the block raises, the temporary is
+    removed and ``path`` keeps its previous contents. The temporary is created empty with the usual
+    permissions (``0o666`` minus the umask) so the final file is not private by accident.
+    """
+    target = Path(path)
+    directory = target.parent if str(target.parent) else Path(".")
+    tmp = directory / f".{target.name}.{secrets.token_hex(6)}.tmp"
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    os.close(fd)
+    try:
+        yield tmp
+        _fsync_path(tmp)
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+    _fsync_path(directory, directory=True)
+
+
+def write_bytes_atomic(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_path`)."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())

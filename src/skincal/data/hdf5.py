@@ -1,0 +1,360 @@
+"""Dataset files: HDF5 ``format = "skincal-dataset"``, ``version = 1`` (``shared/interfaces.md``).
+
+Layout (optional parts in brackets)::
+
+    /            attrs format, version, [description]
+    /robot       attrs name, convention, gravity (3,) m/s^2
+    /robot/dh    (n, 4) [theta_offset, d, a, alpha], rad and m
+    [/robot/joint_lower, /robot/joint_upper]   (n,) rad
+    [/robot/velocity_limit]                    (n,) rad/s     (skincal extra)
+    [/robot/T_link_flange]                     (4, 4)         (skincal extra)
+    /joints/t (N,) s, /joints/q, /joints/qd (N, n), [/joints/qdd]
+    /imu/<unit>/t (M,) s, accel (M, 3) m/s^2, [gyro (M, 3) rad/s]
+    [/tof/<unit>/t (K,) s, range (K,) m, NaN = no target]
+    [/segments/t_start, t_end (S,) s, kind int8, pose int32, joint int32]
+    [/truth/<unit> attrs link, position (3,), quaternion_wxyz (4,),
+                   [accel_bias, accel_scale, accel_misalignment, time_offset_s, ...]]
+
+Reading opens the file read-only, checks the structure, builds a :class:`Dataset` and runs
+:func:`~skincal.data.validate.validate_dataset`; writing validates first, then writes atomically.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from skincal.data.atomic import atomic_path
+from skincal.data.dataset import Dataset, ImuStream, JointStates, Segments, TofStream
+from skincal.data.validate import validate_dataset
+from skincal.errors import ConfigError, DatasetError
+from skincal.kinematics.chain import CONVENTIONS, SerialChain
+from skincal.skin.pose import SkinUnitPose
+
+FORMAT = "skincal-dataset"
+VERSION = 1
+_QUAT_NORM_TOL = 1e-3
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+class _Reader:
+    """Reads fields of one open file, turning every structural problem into a one-line DatasetError."""
+
+    def __init__(self, f: h5py.File, source: str) -> None:
+        self.f = f
+        self.source = source
+
+    def fail(self, field: str, problem: str) -> DatasetError:
+        return DatasetError(f"{self.source}: {field} {problem}")
+
+    def node(self, path: str, kind: type, required: bool = True) -> h5py.Group | h5py.Dataset | None:
+        try:
+            obj = self.f.get(path)
+        except (OSError, KeyError, ValueError) as exc:
+            raise self.fail(path, f"cannot be read ({_first_line(exc)})") from None
+        if obj is None:
+            if required:
+                raise self.fail(path, "is missing")
+            return None
+        if not isinstance(obj, kind):
+            want = "a group" if kind is h5py.Group else "a dataset"
+            raise self.fail(path, f"must be {want}")
+        return obj
+
+    def group(self, path: str, required: bool = True) -> h5py.Group | None:
+        return self.node(path, h5py.Group, required)  # type: ignore[return-value]
+
+    def array(self, path: str, required: bool = True, dtype: type | None = None) -> np.ndarray | None:
+        """Dataset ``path`` as an array; numbers are converted to ``dtype`` (float64 by default)."""
+        obj = self.node(path, h5py.Dataset, required)
+        if obj is None:
+            return None
+        try:
+            value = np.asarray(obj[()])
+        except (OSError, KeyError, ValueError, TypeError) as exc:
+            raise self.fail(path, f"cannot be read ({_first_line(exc)})") from None
+        want = dtype or np.float64
+        allowed = "iu" if np.issubdtype(want, np.integer) else "fiu"
+        if value.dtype.kind not in allowed:
+            what = "integers" if allowed == "iu" else "real numbers"
+            raise self.fail(path, f"has dtype {value.dtype}, expected {what}")
+        return value.astype(want, copy=False)
+
+    def attr(self, path: str, name: str, required: bool = True) -> object:
+        obj = self.f if path == "/" else self.group(path)
+        try:
+            if name not in obj.attrs:
+                if required:
+                    raise self.fail(self.attr_field(path, name), "is missing")
+                return None
+            return obj.attrs[name]
+        except (OSError, ValueError, TypeError) as exc:
+            raise self.fail(self.attr_field(path, name), f"cannot be read ({_first_line(exc)})") from None
+
+    @staticmethod
+    def attr_field(path: str, name: str) -> str:
+        return f"root attr '{name}'" if path == "/" else f"{path} attr '{name}'"
+
+    def str_attr(self, path: str, name: str, required: bool = True) -> str | None:
+        value = self.attr(path, name, required)
+        if value is None:
+            return None
+        if isinstance(value, np.ndarray) and value.shape == ():
+            value = value[()]
+        if isinstance(value, bytes | np.bytes_):
+            try:
+                value = value.decode("utf-8")
+            except UnicodeDecodeError:
+                raise self.fail(self.attr_field(path, name), "is not valid UTF-8 text") from None
+        if not isinstance(value, str):
+            raise self.fail(self.attr_field(path, name), f"must be a string, got {value!r}")
+        return str(value)
+
+    def num_attr(self, path: str, name: str, shape: tuple[int, ...], integer: bool = False) -> np.ndarray:
+        value = np.asarray(self.attr(path, name))
+        field = self.attr_field(path, name)
+        kinds = "iu" if integer else "fiu"
+        if value.dtype.kind not in kinds:
+            raise self.fail(field, f"must be {'an integer' if integer else 'numeric'}, got {value.dtype}")
+        if value.shape != shape:
+            raise self.fail(field, f"has shape {value.shape}, expected {shape}")
+        return value if integer else value.astype(np.float64)
+
+    # ------------------------------------------------------------------ parts
+    def header(self) -> str:
+        fmt = self.str_attr("/", "format")
+        if fmt != FORMAT:
+            raise self.fail("root attr 'format'", f"is '{fmt}', expected '{FORMAT}'")
+        version = self.attr("/", "version")
+        if isinstance(version, np.ndarray) and version.shape == ():
+            version = version[()]
+        if isinstance(version, bool | np.bool_) or not isinstance(version, int | np.integer):
+            raise self.fail("root attr 'version'", f"must be an integer, got {version!r}")
+        if int(version) != VERSION:
+            raise self.fail("root attr 'version'", f"is {int(version)}; this skincal reads version {VERSION}")
+        return self.str_attr("/", "description", required=False) or ""
+
+    def robot(self) -> tuple[SerialChain, np.ndarray]:
+        self.group("/robot")
+        name = self.str_attr("/robot", "name")
+        convention = self.str_attr("/robot", "convention")
+        if convention not in CONVENTIONS:
+            raise self.fail("/robot attr 'convention'", f"is '{convention}', expected one of {CONVENTIONS}")
+        gravity = self.num_attr("/robot", "gravity", (3,))
+        dh = self.array("/robot/dh")
+        if dh.ndim != 2 or dh.shape[1] != 4 or dh.shape[0] < 1:
+            raise self.fail("/robot/dh", f"has shape {dh.shape}, expected (n, 4) with n >= 1")
+        n = dh.shape[0]
+        optional = {}
+        for key, shape in (("joint_lower", (n,)), ("joint_upper", (n,)), ("velocity_limit", (n,)),
+                           ("T_link_flange", (4, 4))):
+            value = self.array(f"/robot/{key}", required=False)
+            if value is not None:
+                if value.shape != shape:
+                    raise self.fail(f"/robot/{key}", f"has shape {value.shape}, expected {shape}")
+                optional[key] = value
+        try:
+            chain = SerialChain(name=name, convention=convention, dh=dh, **optional)
+        except ConfigError as exc:
+            raise self.fail("/robot", f"is not a valid chain: {exc}") from None
+        return chain, gravity
+
+    def joints(self) -> JointStates:
+        self.group("/joints")
+        return JointStates(
+            t=self.array("/joints/t"),
+            q=self.array("/joints/q"),
+            qd=self.array("/joints/qd"),
+            qdd=self.array("/joints/qdd", required=False),
+        )
+
+    def imu(self) -> dict[str, ImuStream]:
+        grp = self.group("/imu")
+        out = {}
+        for unit in grp:
+            base = f"/imu/{unit}"
+            self.group(base)
+            out[unit] = ImuStream(
+                t=self.array(f"{base}/t"),
+                accel=self.array(f"{base}/accel"),
+                gyro=self.array(f"{base}/gyro", required=False),
+            )
+        return out
+
+    def tof(self) -> dict[str, TofStream]:
+        grp = self.group("/tof", required=False)
+        out = {}
+        for unit in grp or ():
+            base = f"/tof/{unit}"
+            self.group(base)
+            out[unit] = TofStream(t=self.array(f"{base}/t"), range=self.array(f"{base}/range"))
+        return out
+
+    def segments(self) -> Segments | None:
+        if self.group("/segments", required=False) is None:
+            return None
+        return Segments(
+            t_start=self.array("/segments/t_start"),
+            t_end=self.array("/segments/t_end"),
+            kind=self.array("/segments/kind", dtype=np.int8),
+            pose=self.array("/segments/pose", dtype=np.int32),
+            joint=self.array("/segments/joint", dtype=np.int32),
+        )
+
+    def truth(self) -> tuple[dict[str, SkinUnitPose], dict[str, dict[str, np.ndarray | float]]]:
+        grp = self.group("/truth", required=False)
+        poses: dict[str, SkinUnitPose] = {}
+        sensor: dict[str, dict[str, np.ndarray | float]] = {}
+        for unit in grp or ():
+            base = f"/truth/{unit}"
+            node = self.group(base)
+            link = int(self.num_attr(base, "link", (), integer=True))
+            position = self.num_attr(base, "position", (3,))
+            quat = self.num_attr(base, "quaternion_wxyz", (4,))
+            norm = float(np.linalg.norm(quat)) if np.all(np.isfinite(quat)) else float("nan")
+            if not abs(norm - 1.0) <= _QUAT_NORM_TOL:
+                raise self.fail(f"{base} attr 'quaternion_wxyz'", f"is not a unit quaternion (norm {norm:.6g})")
+            try:
+                poses[unit] = SkinUnitPose.from_quaternion(link, position, quat)
+            except ConfigError as exc:
+                raise self.fail(base, f"is not a valid pose: {exc}") from None
+            extra: dict[str, np.ndarray | float] = {}
+            for key in node.attrs:
+                if key in ("link", "position", "quaternion_wxyz"):
+                    continue
+                value = np.asarray(self.attr(base, key))
+                if value.dtype.kind not in "fiu":  # non-numeric extras (notes, labels) are not sensor errors
+                    continue
+                extra[key] = float(value) if value.shape == () else value.astype(np.float64)
+            if extra:
+                sensor[unit] = extra
+        return poses, sensor
+
+
+def read_dataset(path: str | Path) -> Dataset:
+    """Read and validate a dataset file (opened read-only; the file is never modified).
+
+    Raises:
+        DatasetError: missing, truncated or non-HDF5 file, wrong format string or version, missing
+            group or field, or any validation failure; one line naming the file and the field.
+    """
+    path = Path(path)
+    source = str(path)
+    if not path.exists():
+        raise DatasetError(f"{source}: no such file")
+    if path.is_dir():
+        raise DatasetError(f"{source}: is a directory, expected a dataset file (.h5)")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise DatasetError(f"{source}: not a readable HDF5 file ({_first_line(exc)})") from None
+    with f:
+        r = _Reader(f, source)
+        try:
+            description = r.header()
+            robot, gravity = r.robot()
+            joints = r.joints()
+            imu = r.imu()
+            tof = r.tof()
+            segments = r.segments()
+            truth, truth_sensor = r.truth()
+        except DatasetError:
+            raise
+        except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:  # h5py on damaged files
+            raise DatasetError(f"{source}: damaged file ({_first_line(exc)})") from None
+    ds = Dataset(
+        robot=robot,
+        joints=joints,
+        imu=imu,
+        tof=tof,
+        segments=segments,
+        truth=truth,
+        gravity=gravity,
+        description=description,
+        truth_sensor=truth_sensor,
+    )
+    validate_dataset(ds, source=source)
+    return ds
+
+
+def _write_floats(grp: h5py.Group, name: str, value: object) -> None:
+    grp.create_dataset(name, data=np.asarray(value, dtype=np.float64))
+
+
+def _write(f: h5py.File, ds: Dataset) -> None:
+    f.attrs["format"] = FORMAT
+    f.attrs["version"] = np.int64(VERSION)
+    if ds.description:
+        f.attrs["description"] = ds.description
+
+    robot = f.create_group("robot")
+    robot.attrs["name"] = ds.robot.name
+    robot.attrs["convention"] = ds.robot.convention
+    robot.attrs["gravity"] = np.asarray(ds.gravity, dtype=np.float64)
+    _write_floats(robot, "dh", ds.robot.dh)
+    for key in ("joint_lower", "joint_upper", "velocity_limit"):
+        value = getattr(ds.robot, key)
+        if value is not None:
+            _write_floats(robot, key, value)
+    if not np.array_equal(ds.robot.T_link_flange, np.eye(4)):
+        _write_floats(robot, "T_link_flange", ds.robot.T_link_flange)
+
+    joints = f.create_group("joints")
+    for key in ("t", "q", "qd", "qdd"):
+        value = getattr(ds.joints, key)
+        if value is not None:
+            _write_floats(joints, key, value)
+
+    imu = f.create_group("imu")
+    for unit, stream in ds.imu.items():
+        g = imu.create_group(unit)
+        _write_floats(g, "t", stream.t)
+        _write_floats(g, "accel", stream.accel)
+        if stream.gyro is not None:
+            _write_floats(g, "gyro", stream.gyro)
+
+    if ds.tof:
+        tof = f.create_group("tof")
+        for unit, stream in ds.tof.items():
+            g = tof.create_group(unit)
+            _write_floats(g, "t", stream.t)
+            _write_floats(g, "range", stream.range)
+
+    if ds.segments is not None:
+        seg = f.create_group("segments")
+        _write_floats(seg, "t_start", ds.segments.t_start)
+        _write_floats(seg, "t_end", ds.segments.t_end)
+        seg.create_dataset("kind", data=np.asarray(ds.segments.kind, dtype=np.int8))
+        seg.create_dataset("pose", data=np.asarray(ds.segments.pose, dtype=np.int32))
+        seg.create_dataset("joint", data=np.asarray(ds.segments.joint, dtype=np.int32))
+
+    if ds.truth:
+        truth = f.create_group("truth")
+        for unit, pose in ds.truth.items():
+            g = truth.create_group(unit)
+            g.attrs["link"] = np.int64(pose.link)
+            g.attrs["position"] = np.asarray(pose.p_link_su, dtype=np.float64)
+            g.attrs["quaternion_wxyz"] = np.asarray(pose.quaternion_wxyz, dtype=np.float64)
+            for key, value in ds.truth_sensor.get(unit, {}).items():
+                g.attrs[key] = np.asarray(value, dtype=np.float64)
+
+
+def write_dataset(dataset: Dataset, path: str | Path) -> None:
+    """Validate ``dataset`` and write it to ``path`` atomically (temporary file, fsync, rename).
+
+    On any error the temporary file is removed and an existing file at ``path`` stays as it was.
+
+    Raises:
+        DatasetError: the dataset fails validation (one line naming the field).
+        OSError: the directory is not writable or the disk is full.
+    """
+    path = Path(path)
+    validate_dataset(dataset, source=str(path))
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        _write(f, dataset)

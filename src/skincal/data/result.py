@@ -1,0 +1,340 @@
+"""Calibration result files: JSON ``format = "skincal-result"``, ``version = 1`` (``shared/interfaces.md``).
+
+Example::
+
+    {"format": "skincal-result", "version": 1, "method": "mle", "robot": "panda",
+     "dataset_sha256": "...", "runtime_s": 0.41,
+     "units": {"su1": {"link": 3, "position_m": [0.05, 0.0, 0.12], "quaternion_wxyz": [1, 0, 0, 0],
+                       "observable": true, "position_std_m": [1e-5, 1e-5, 2e-5],
+                       "rotation_std_deg": [0.01, 0.01, 0.02], "warnings": []}}}
+
+Poses are in link frame ``link`` (DH frame {link}); quaternions are (w, x, y, z). Fields beyond the
+contract (per unit, e.g. ``link_confidence``, ``accel_bias_mps2``, ``dh6``; at the top level, e.g.
+``options``) are written next to the contract fields and read back into ``extras``. In extras,
+NumPy arrays become JSON lists (non-finite numbers become ``null``) and numeric lists come back as
+float64 arrays (``null`` -> NaN). Floats are written with full (round-trip) precision.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from skincal.data.atomic import write_bytes_atomic
+from skincal.errors import ConfigError, DatasetError
+from skincal.kinematics.transforms import FloatArray
+from skincal.skin.pose import SkinUnitPose
+
+FORMAT = "skincal-result"
+VERSION = 1
+_TOP_KEYS = ("format", "version", "method", "robot", "dataset_sha256", "runtime_s", "units")
+_UNIT_KEYS = ("link", "position_m", "quaternion_wxyz", "observable", "position_std_m", "rotation_std_deg", "warnings")
+_QUAT_NORM_TOL = 1e-3
+
+
+@dataclass(frozen=True)
+class UnitResult:
+    """Calibrated pose of one skin unit.
+
+    Attributes:
+        pose: the estimated pose in its link frame (link, ``R_link_su``, ``p_link_su`` in m).
+        observable: False where the data cannot determine the full pose (e.g. a unit on link 1).
+        position_std_m: ``(3,)`` standard deviation of ``p_link_su`` per axis, m, or None.
+        rotation_std_deg: ``(3,)`` standard deviation of the rotation about the link axes, deg, or None.
+        warnings: human-readable notes (which part is unobservable and why, poor fit, ...).
+        extras: further per-unit fields written next to the contract fields (numbers, strings,
+            lists, arrays, nested dicts), e.g. ``link_confidence``, ``accel_bias_mps2``, ``dh6``.
+    """
+
+    pose: SkinUnitPose
+    observable: bool = True
+    position_std_m: FloatArray | None = None
+    rotation_std_deg: FloatArray | None = None
+    warnings: tuple[str, ...] = ()
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("position_std_m", "rotation_std_deg"):
+            value = getattr(self, name)
+            if value is not None:
+                arr = np.array(value, dtype=float)
+                arr.setflags(write=False)
+                object.__setattr__(self, name, arr)
+        object.__setattr__(self, "warnings", tuple(self.warnings))
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """Result of one calibration run.
+
+    Attributes:
+        method: method name (``mle``, ``om``, ``mmm``, ``mm``).
+        robot: robot name of the dataset.
+        dataset_sha256: SHA-256 hex digest of the dataset file (:func:`sha256_file`), or ``""``.
+        runtime_s: wall-clock time of the calibration, s.
+        units: per-unit results keyed by unit name.
+        extras: further top-level fields (e.g. ``options``, ``skincal_version``).
+    """
+
+    method: str
+    robot: str
+    dataset_sha256: str
+    runtime_s: float
+    units: dict[str, UnitResult]
+    extras: dict[str, Any] = field(default_factory=dict)
+
+
+def sha256_file(path: str | Path) -> str:
+    """SHA-256 hex digest of a file's bytes (streamed, any size)."""
+    try:
+        with open(path, "rb") as fh:
+            return hashlib.file_digest(fh, "sha256").hexdigest()
+    except OSError as exc:
+        raise DatasetError(f"{path}: cannot read file ({exc.strerror or exc})") from None
+
+
+# ---------------------------------------------------------------------- JSON <-> Python values
+def _short(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _to_json(value: Any, source: str, where: str) -> Any:
+    """Plain JSON value of ``value``: arrays and NumPy scalars to lists/numbers, non-finite floats to None."""
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str):
+                raise DatasetError(f"{source}: {where} has a non-string key {_short(k)}")
+            out[k] = _to_json(v, source, f"{where}.{k}")
+        return out
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "biuf":
+            raise DatasetError(f"{source}: {where} is an array of dtype {value.dtype}, not numbers")
+        return _to_json(value.tolist(), source, where)
+    if isinstance(value, list | tuple):
+        return [_to_json(v, source, f"{where}[{i}]") for i, v in enumerate(value)]
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        return float(value) if math.isfinite(value) else None
+    if value is None or isinstance(value, str):
+        return value
+    raise DatasetError(f"{source}: {where} has a value of type {type(value).__name__} that JSON cannot hold")
+
+
+def _numeric_leaves(value: Any) -> tuple[bool, bool]:
+    """(all leaves are numbers or None, at least one leaf is a number) for nested lists."""
+    if isinstance(value, list):
+        flags = [_numeric_leaves(v) for v in value]
+        return all(f[0] for f in flags), any(f[1] for f in flags)
+    if value is None:
+        return True, False
+    is_num = isinstance(value, int | float) and not isinstance(value, bool)
+    return is_num, is_num
+
+
+def _none_to_nan(value: Any) -> Any:
+    if isinstance(value, list):
+        return [_none_to_nan(v) for v in value]
+    return math.nan if value is None else value
+
+
+def _from_json(value: Any) -> Any:
+    """Inverse of :func:`_to_json` for extras: numeric (possibly nested, rectangular) lists -> float arrays."""
+    if isinstance(value, dict):
+        return {k: _from_json(v) for k, v in value.items()}
+    if isinstance(value, list):
+        all_numeric, any_number = _numeric_leaves(value)
+        if all_numeric and any_number:
+            try:
+                return np.array(_none_to_nan(value), dtype=float)
+            except ValueError:  # ragged
+                pass
+        return [_from_json(v) for v in value]
+    return value
+
+
+# ---------------------------------------------------------------------- validation of the JSON document
+class _Checker:
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, where: str, problem: str) -> DatasetError:
+        return DatasetError(f"{self.source}: {where} {problem}")
+
+    def get(self, obj: dict, key: str, where: str) -> Any:
+        if key not in obj:
+            raise self.fail(f"{where}.{key}".lstrip("."), "is missing")
+        return obj[key]
+
+    def string(self, value: Any, where: str) -> str:
+        if not isinstance(value, str):
+            raise self.fail(where, f"must be a string, got {_short(value)}")
+        return value
+
+    def vector(self, value: Any, n: int, where: str, *, nonneg: bool = False) -> FloatArray:
+        ok = isinstance(value, list) and len(value) == n
+        ok = ok and all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+        if not ok:
+            raise self.fail(where, f"must be a list of {n} finite numbers, got {_short(value)}")
+        arr = np.array(value, dtype=float)
+        if nonneg and np.any(arr < 0):
+            raise self.fail(where, f"must not be negative, got {_short(value)}")
+        return arr
+
+    def document(self, doc: Any) -> None:
+        if not isinstance(doc, dict):
+            raise DatasetError(f"{self.source}: top level must be a JSON object, got {type(doc).__name__}")
+        fmt = self.get(doc, "format", "")
+        if fmt != FORMAT:
+            raise self.fail("format", f"is {_short(fmt)}, expected '{FORMAT}'")
+        version = self.get(doc, "version", "")
+        if isinstance(version, bool) or not isinstance(version, int):
+            raise self.fail("version", f"must be an integer, got {_short(version)}")
+        if version != VERSION:
+            raise self.fail("version", f"is {version}; this skincal reads version {VERSION}")
+        if not self.string(self.get(doc, "method", ""), "method"):
+            raise self.fail("method", "is empty")
+        self.string(self.get(doc, "robot", ""), "robot")
+        sha = self.string(self.get(doc, "dataset_sha256", ""), "dataset_sha256")
+        if sha and (len(sha) != 64 or any(c not in "0123456789abcdefABCDEF" for c in sha)):
+            raise self.fail("dataset_sha256", f"must be 64 hex digits or empty, got {_short(sha)}")
+        runtime = self.get(doc, "runtime_s", "")
+        number = isinstance(runtime, int | float) and not isinstance(runtime, bool)
+        if not number or not math.isfinite(runtime) or runtime < 0:
+            raise self.fail("runtime_s", f"must be a non-negative number of seconds, got {_short(runtime)}")
+        units = self.get(doc, "units", "")
+        if not isinstance(units, dict):
+            raise self.fail("units", f"must be an object of unit name -> result, got {_short(units)}")
+        for name, unit in units.items():
+            self.unit(unit, f"units.{name}")
+
+    def unit(self, unit: Any, where: str) -> None:
+        if not isinstance(unit, dict):
+            raise self.fail(where, f"must be an object, got {_short(unit)}")
+        link = self.get(unit, "link", where)
+        if isinstance(link, bool) or not isinstance(link, int) or link < 1:
+            raise self.fail(f"{where}.link", f"must be a positive integer (1-based link), got {_short(link)}")
+        self.vector(self.get(unit, "position_m", where), 3, f"{where}.position_m")
+        quat = self.vector(self.get(unit, "quaternion_wxyz", where), 4, f"{where}.quaternion_wxyz")
+        norm = float(np.linalg.norm(quat))
+        if abs(norm - 1.0) > _QUAT_NORM_TOL:
+            raise self.fail(f"{where}.quaternion_wxyz", f"is not a unit quaternion (norm {norm:.6g})")
+        if not isinstance(self.get(unit, "observable", where), bool):
+            raise self.fail(f"{where}.observable", f"must be true or false, got {_short(unit['observable'])}")
+        for key in ("position_std_m", "rotation_std_deg"):
+            value = self.get(unit, key, where)
+            if value is not None:
+                self.vector(value, 3, f"{where}.{key}", nonneg=True)
+        warnings = self.get(unit, "warnings", where)
+        if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
+            raise self.fail(f"{where}.warnings", f"must be a list of strings, got {_short(warnings)}")
+
+
+# ---------------------------------------------------------------------- conversions
+def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[str, Any]:
+    """The JSON document of ``result`` (plain Python values), validated against the contract."""
+    doc: dict[str, Any] = {
+        "format": FORMAT,
+        "version": VERSION,
+        "method": result.method,
+        "robot": result.robot,
+        "dataset_sha256": result.dataset_sha256,
+        "runtime_s": _to_json(result.runtime_s, source, "runtime_s"),
+    }
+    clash = sorted(set(result.extras) & set(_TOP_KEYS))
+    if clash:
+        raise DatasetError(f"{source}: extras may not redefine contract field(s) {', '.join(clash)}")
+    doc.update(_to_json(result.extras, source, "extras"))
+    units: dict[str, Any] = {}
+    for name, unit in result.units.items():
+        where = f"units.{name}"
+        if not isinstance(unit, UnitResult):
+            raise DatasetError(f"{source}: {where} must be a UnitResult, got {type(unit).__name__}")
+        clash = sorted(set(unit.extras) & set(_UNIT_KEYS))
+        if clash:
+            raise DatasetError(f"{source}: {where} extras may not redefine contract field(s) {', '.join(clash)}")
+        entry = {
+            "link": unit.pose.link,
+            "position_m": _to_json(unit.pose.p_link_su, source, f"{where}.position_m"),
+            "quaternion_wxyz": _to_json(unit.pose.quaternion_wxyz, source, f"{where}.quaternion_wxyz"),
+            "observable": _to_json(unit.observable, source, f"{where}.observable"),
+            "position_std_m": _to_json(unit.position_std_m, source, f"{where}.position_std_m"),
+            "rotation_std_deg": _to_json(unit.rotation_std_deg, source, f"{where}.rotation_std_deg"),
+            "warnings": list(unit.warnings),
+        }
+        entry.update(_to_json(unit.extras, source, f"{where}"))
+        units[name] = entry
+    doc["units"] = units
+    _Checker(source).document(doc)
+    return doc
+
+
+def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
+    """Validate a parsed JSON document and build the :class:`CalibrationResult`."""
+    _Checker(source).document(doc)
+    units = {}
+    for name, entry in doc["units"].items():
+        try:
+            pose = SkinUnitPose.from_quaternion(entry["link"], entry["position_m"], entry["quaternion_wxyz"])
+        except ConfigError as exc:
+            raise DatasetError(f"{source}: units.{name} is not a valid pose: {exc}") from None
+        stds = {k: None if entry[k] is None else np.array(entry[k], dtype=float) for k in _UNIT_KEYS[4:6]}
+        units[name] = UnitResult(
+            pose=pose,
+            observable=entry["observable"],
+            warnings=tuple(entry["warnings"]),
+            extras={k: _from_json(v) for k, v in entry.items() if k not in _UNIT_KEYS},
+            **stds,
+        )
+    return CalibrationResult(
+        method=doc["method"],
+        robot=doc["robot"],
+        dataset_sha256=doc["dataset_sha256"],
+        runtime_s=float(doc["runtime_s"]),
+        units=units,
+        extras={k: _from_json(v) for k, v in doc.items() if k not in _TOP_KEYS},
+    )
+
+
+def write_result(result: CalibrationResult, path: str | Path) -> None:
+    """Validate ``result`` and write it as indented JSON to ``path`` atomically."""
+    doc = result_to_dict(result, source=str(path))
+    text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
+    write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def read_result(path: str | Path) -> CalibrationResult:
+    """Read and validate a result file.
+
+    Raises:
+        DatasetError: missing file, not JSON, wrong format or version, or a malformed field; one line
+            naming the file and the field (``units.su1.position_m``).
+    """
+    source = str(path)
+    try:
+        raw = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise DatasetError(f"{source}: no such file") from None
+    except OSError as exc:
+        raise DatasetError(f"{source}: cannot read file ({exc.strerror or exc})") from None
+    try:
+        doc = json.loads(raw.decode("utf-8"), parse_constant=lambda c: _reject_constant(source, c))
+    except UnicodeDecodeError:
+        raise DatasetError(f"{source}: not a JSON text file (not valid UTF-8)") from None
+    except json.JSONDecodeError as exc:
+        raise DatasetError(f"{source}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+    return result_from_dict(doc, source=source)
+
+
+def _reject_constant(source: str, name: str) -> Any:
+    raise DatasetError(f"{source}: contains {name}, which is not valid JSON (use null)")

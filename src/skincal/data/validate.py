@@ -1,0 +1,196 @@
+"""Validation of an in-memory :class:`~skincal.data.dataset.Dataset` against ``shared/interfaces.md``.
+
+:func:`validate_dataset` runs after every read and before every write. Each failure raises one
+:class:`~skincal.errors.DatasetError` whose single line names the source (file), the field as its
+HDF5 path and the problem, e.g. ``data.h5: /joints/t is not strictly increasing (sample 412)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from skincal.data.dataset import DYNAMIC, STATIC, Dataset, Segments
+from skincal.errors import DatasetError
+from skincal.kinematics.chain import CONVENTIONS, SerialChain
+from skincal.skin.pose import SkinUnitPose
+
+TRUTH_SENSOR_SHAPES: dict[str, tuple[int, ...]] = {
+    "accel_bias": (3,),
+    "accel_scale": (3,),
+    "accel_misalignment": (3, 3),
+    "gyro_bias": (3,),
+    "time_offset_s": (),
+}
+"""Known optional per-unit truth attributes (simulated sensor errors) and their shapes; others may
+be added (any finite numbers)."""
+
+_TRUTH_POSE_ATTRS = ("link", "position", "quaternion_wxyz")
+
+
+def _fail(source: str, field: str, problem: str) -> DatasetError:
+    return DatasetError(f"{source}: {field} {problem}")
+
+
+def _real_array(value: object, source: str, field: str, *, integer: bool = False) -> np.ndarray:
+    """``value`` as an array of real numbers (integers when ``integer``); bools, strings, objects fail."""
+    arr = np.asarray(value)
+    kinds = "iu" if integer else "fiu"
+    if arr.dtype.kind not in kinds:
+        want = "integers" if integer else "real numbers"
+        raise _fail(source, field, f"has dtype {arr.dtype}, expected {want}")
+    return arr
+
+
+def _check_shape(arr: np.ndarray, shape: tuple[int | None, ...], source: str, field: str) -> None:
+    ok = arr.ndim == len(shape) and all(s is None or s == a for s, a in zip(shape, arr.shape, strict=False))
+    if not ok:
+        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
+        raise _fail(source, field, f"has shape {arr.shape}, expected {want}")
+
+
+def _check_finite(arr: np.ndarray, source: str, field: str, *, allow_nan: bool = False) -> None:
+    bad = np.isinf(arr) if allow_nan else ~np.isfinite(arr)
+    if np.any(bad):
+        where = np.argwhere(bad)[0]
+        idx = f"sample {where[0]}" + (f", column {where[1]}" if len(where) > 1 else "") if where.size else "value"
+        what = "infinite values" if allow_nan else "NaN or infinite values"
+        raise _fail(source, field, f"contains {what} ({idx})")
+
+
+def _float_field(
+    value: object, shape: tuple[int | None, ...], source: str, field: str, *, allow_nan: bool = False
+) -> np.ndarray:
+    arr = _real_array(value, source, field)
+    _check_shape(arr, shape, source, field)
+    _check_finite(arr, source, field, allow_nan=allow_nan)
+    return arr
+
+
+def _time_field(value: object, source: str, field: str, *, min_samples: int) -> np.ndarray:
+    t = _float_field(value, (None,), source, field)
+    if t.shape[0] < min_samples:
+        raise _fail(source, field, f"has {t.shape[0]} samples, at least {min_samples} needed")
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        raise _fail(source, field, f"is not strictly increasing (sample {bad[0] + 1})")
+    return t
+
+
+def _check_unit_name(name: object, source: str, group: str) -> None:
+    if not isinstance(name, str) or not name or "/" in name or name in (".", ".."):
+        raise _fail(source, group, f"has an invalid unit name {name!r} (a non-empty string without '/')")
+
+
+def validate_robot(robot: object, gravity: object, source: str) -> int:
+    """Check the chain and gravity; returns the number of joints ``n``."""
+    if not isinstance(robot, SerialChain):
+        raise _fail(source, "/robot", f"must be a SerialChain, got {type(robot).__name__}")
+    if robot.convention not in CONVENTIONS:
+        raise _fail(source, "/robot attr 'convention'", f"is '{robot.convention}', expected one of {CONVENTIONS}")
+    dh = _float_field(robot.dh, (None, 4), source, "/robot/dh")
+    if dh.shape[0] < 1:
+        raise _fail(source, "/robot/dh", "is empty (a chain needs at least one joint)")
+    n = dh.shape[0]
+    for name in ("joint_lower", "joint_upper", "velocity_limit"):
+        value = getattr(robot, name)
+        if value is not None:
+            _float_field(value, (n,), source, f"/robot/{name}")
+    _float_field(robot.T_link_flange, (4, 4), source, "/robot/T_link_flange")
+    _float_field(gravity, (3,), source, "/robot attr 'gravity'")
+    return n
+
+
+def validate_segments(segments: Segments, n: int, source: str) -> None:
+    """Check segment arrays: equal lengths, ``t_start < t_end``, kinds, ``joint == -1`` iff static."""
+    t0 = _float_field(segments.t_start, (None,), source, "/segments/t_start")
+    S = t0.shape[0]
+    t1 = _float_field(segments.t_end, (S,), source, "/segments/t_end")
+    kind = _real_array(segments.kind, source, "/segments/kind", integer=True)
+    pose = _real_array(segments.pose, source, "/segments/pose", integer=True)
+    joint = _real_array(segments.joint, source, "/segments/joint", integer=True)
+    for arr, field in ((kind, "/segments/kind"), (pose, "/segments/pose"), (joint, "/segments/joint")):
+        _check_shape(arr, (S,), source, field)
+    checks = (
+        (t0 >= t1, "/segments/t_end", "is not after t_start"),
+        ((kind != STATIC) & (kind != DYNAMIC), "/segments/kind", f"must be {STATIC} (static) or {DYNAMIC} (dynamic)"),
+        (pose < 0, "/segments/pose", "must be a non-negative pose index"),
+        ((kind == STATIC) & (joint != -1), "/segments/joint", "must be -1 for a static segment"),
+        ((kind == DYNAMIC) & ((joint < 0) | (joint >= n)), "/segments/joint", f"must be in 0..{n - 1} when dynamic"),
+    )
+    for bad, field, problem in checks:
+        if np.any(bad):
+            raise _fail(source, field, f"{problem} (segment {int(np.argmax(bad))})")
+
+
+def validate_truth(ds: Dataset, n: int, source: str) -> None:
+    """Check true poses (units exist in ``imu``, link in ``1..n``) and true sensor errors."""
+    for unit, pose in ds.truth.items():
+        _check_unit_name(unit, source, "/truth")
+        field = f"/truth/{unit}"
+        if unit not in ds.imu:
+            raise _fail(source, field, f"names unit '{unit}' which has no /imu/{unit} stream")
+        if not isinstance(pose, SkinUnitPose):
+            raise _fail(source, field, f"must be a SkinUnitPose, got {type(pose).__name__}")
+        if not 1 <= pose.link <= n:
+            raise _fail(source, f"{field} attr 'link'", f"is {pose.link}, expected 1..{n}")
+    for unit, errors in ds.truth_sensor.items():
+        field = f"/truth/{unit}"
+        if unit not in ds.truth:
+            raise _fail(source, field, "has sensor errors but no true pose (link, position, quaternion_wxyz)")
+        if not isinstance(errors, Mapping):
+            raise _fail(source, field, f"sensor errors must be a mapping, got {type(errors).__name__}")
+        for key, value in errors.items():
+            if not isinstance(key, str) or key in _TRUTH_POSE_ATTRS:
+                raise _fail(source, field, f"has an invalid sensor error name {key!r}")
+            attr = f"{field} attr '{key}'"
+            arr = _real_array(value, source, attr)
+            if key in TRUTH_SENSOR_SHAPES:
+                _check_shape(arr, TRUTH_SENSOR_SHAPES[key], source, attr)
+            _check_finite(arr, source, attr)
+
+
+def validate_dataset(ds: Dataset, source: str = "<dataset>") -> None:
+    """Check every field of ``ds`` against the dataset contract; raise :class:`DatasetError` on the first problem.
+
+    Checked: robot (convention, ``(n, 4)`` DH, limits ``(n,)``), gravity ``(3,)``; every time base
+    ``(N,)`` finite and strictly increasing; ``q``, ``qd``, ``qdd`` ``(N, n)``; IMU ``accel``/``gyro``
+    ``(M, 3)``; ToF ``range`` ``(K,)`` (NaN allowed: no target; not infinite, not negative); values
+    finite everywhere else; ToF units have IMU streams; segments consistent; truth units exist
+    in ``imu`` with link in ``1..n``. ``source`` (the file name) starts every message.
+    """
+    if not isinstance(ds, Dataset):
+        raise DatasetError(f"{source}: expected a Dataset, got {type(ds).__name__}")
+    n = validate_robot(ds.robot, ds.gravity, source)
+    if not isinstance(ds.description, str):
+        raise _fail(source, "root attr 'description'", "must be a string")
+
+    js = ds.joints
+    t = _time_field(js.t, source, "/joints/t", min_samples=1)
+    N = t.shape[0]
+    _float_field(js.q, (N, n), source, "/joints/q")
+    _float_field(js.qd, (N, n), source, "/joints/qd")
+    if js.qdd is not None:
+        _float_field(js.qdd, (N, n), source, "/joints/qdd")
+
+    for unit, imu in ds.imu.items():
+        _check_unit_name(unit, source, "/imu")
+        ti = _time_field(imu.t, source, f"/imu/{unit}/t", min_samples=1)
+        M = ti.shape[0]
+        _float_field(imu.accel, (M, 3), source, f"/imu/{unit}/accel")
+        if imu.gyro is not None:
+            _float_field(imu.gyro, (M, 3), source, f"/imu/{unit}/gyro")
+
+    for unit, tof in ds.tof.items():
+        _check_unit_name(unit, source, "/tof")
+        if unit not in ds.imu:
+            raise _fail(source, f"/tof/{unit}", f"names unit '{unit}' which has no /imu/{unit} stream")
+        tt = _time_field(tof.t, source, f"/tof/{unit}/t", min_samples=0)
+        r = _float_field(tof.range, (tt.shape[0],), source, f"/tof/{unit}/range", allow_nan=True)
+        if np.any(r < 0):
+            raise _fail(source, f"/tof/{unit}/range", f"contains negative ranges (sample {int(np.argmax(r < 0))})")
+
+    if ds.segments is not None:
+        validate_segments(ds.segments, n, source)
+    validate_truth(ds, n, source)
