@@ -1,9 +1,10 @@
-"""``skincal info``: summary of a dataset file (placeholder until the dataset reader lands)."""
+"""``skincal info``: summary of a dataset file; ``skincal version``."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import typer
 
 from skincal.cli.app import app, console
@@ -17,9 +18,67 @@ def version() -> None:
     console.print(skincal.__version__)
 
 
+def _rate_hz(t: np.ndarray) -> float | None:
+    """Nominal sample rate, Hz: the inverse of the median sample interval (None below 2 samples)."""
+    return float(1.0 / np.median(np.diff(t))) if len(t) >= 2 else None
+
+
+def _fmt_rate(rate: float | None) -> str:
+    return "-" if rate is None else f"{rate:.4g}"
+
+
 @app.command()
 def info(path: Path = typer.Argument(..., help="dataset file (.h5)")) -> None:
     """Summarise a dataset: robot, units, duration, segments, sample rates."""
-    from skincal.data.hdf5 import read_dataset  # noqa: F401  (lands with the dataset reader)
+    from rich.table import Table
 
-    raise NotImplementedError
+    from skincal.data.dataset import DYNAMIC, STATIC
+    from skincal.data.hdf5 import read_dataset
+
+    ds = read_dataset(path)
+    robot = ds.robot
+    js = ds.joints
+
+    head = Table.grid(padding=(0, 2))
+    head.add_column(style="bold")
+    head.add_column()
+    head.add_row("file", str(path))
+    if ds.description:
+        head.add_row("description", ds.description)
+    head.add_row("robot", f"{robot.name} ({robot.convention} DH, {robot.n_joints} joints)")
+    head.add_row("duration", f"{ds.duration:.3f} s (t = {js.t[0]:.3f} .. {js.t[-1]:.3f} s)")
+    qdd = "with qdd" if js.qdd is not None else "no qdd"
+    head.add_row("joint stream", f"{len(js.t)} samples, {_fmt_rate(_rate_hz(js.t))} Hz, {qdd}")
+    if ds.segments is None:
+        head.add_row("segments", "none (segmented automatically)")
+    else:
+        kind = np.asarray(ds.segments.kind)
+        poses = len(np.unique(ds.segments.pose))
+        head.add_row(
+            "segments",
+            f"{len(ds.segments)} ({int(np.sum(kind == STATIC))} static, {int(np.sum(kind == DYNAMIC))} dynamic), "
+            f"{poses} poses",
+        )
+    console.print(head)
+
+    units = Table(title=f"skin units ({len(ds.imu)})", title_justify="left")
+    for column, justify in (
+        ("unit", "left"),
+        ("IMU samples", "right"),
+        ("rate Hz", "right"),
+        ("gyro", "center"),
+        ("ToF", "center"),
+        ("truth link", "right"),
+    ):
+        units.add_column(column, justify=justify)  # type: ignore[arg-type]
+    for name, imu in ds.imu.items():
+        truth = ds.truth.get(name)
+        units.add_row(
+            name,
+            str(len(imu.t)),
+            _fmt_rate(_rate_hz(imu.t)),
+            "yes" if imu.gyro is not None else "no",
+            "yes" if name in ds.tof else "no",
+            str(truth.link) if truth is not None else "-",
+        )
+    console.print(units)
