@@ -1,0 +1,351 @@
+"""MuJoCo model (MJCF) of any DH chain, with skin-unit sites and IMU / range sensors.
+
+Frames
+------
+Body ``link{i}`` IS link frame ``i`` = DH frame {i} of the chain's convention (``shared/interfaces.md``),
+so a unit pose ``T_link_su`` becomes a site at that pose on body ``link{i}`` with no conversion.
+``link0`` is a static body at the base frame {0} (= MuJoCo world frame).
+
+* Modified DH (Craig): ``T_{i-1,i}(q) = Rx(alpha) Tx(a) Rz(theta + q) Tz(d) = B_i Rz(q)`` with
+  ``B_i = T_{i-1,i}(0)``; ``Rz(q)`` commutes with ``Tz(d)``, so the hinge is the body's own z axis
+  through its origin.
+* Standard DH: ``T_{i-1,i}(q) = Rz(theta + q) Tz(d) Tx(a) Rx(alpha) = Rz(q) B_i = B_i (B_i^-1 Rz(q) B_i)``:
+  a rotation by ``q`` about the axis ``R_B^T e_z`` through the point ``-R_B^T p_B`` (the origin of
+  frame {i-1} seen from frame {i}), both constant in body ``i``'s frame: no intermediate body.
+
+Sensors per unit ``u`` (site ``su/u``, site frame = SU frame): ``su/u/accel`` (MuJoCo's
+accelerometer: ``f = R_base_su^T (a - g)``, +9.81 m/s^2 along "up" at rest), ``su/u/gyro``
+(rad/s, SU frame) and ``su/u/range`` (distance along the site's +z to the nearest geom not on the
+unit's own body, m; -1 when nothing is hit). All geoms have ``contype = conaffinity = 0``: no
+contacts are simulated (the obstacles of :mod:`skincal.sim.scene` are seen by the range sensors only).
+
+Masses: for the Panda the link inertials of Franka's ``franka_description`` (see
+:data:`PANDA_INERTIALS`), otherwise MuJoCo computes them from the link capsules at
+:data:`DEFAULT_LINK_DENSITY`. ``mujoco`` is optional: it is imported only when a model is compiled.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from skincal.errors import ConfigError
+from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
+from skincal.kinematics.geometry import DEFAULT_LINK_RADIUS, link_capsules
+from skincal.kinematics.presets import panda
+from skincal.kinematics.transforms import FloatArray, modified_dh, quat_wxyz_from_matrix, standard_dh
+from skincal.skin.pose import SkinUnitPose
+
+if TYPE_CHECKING:  # pragma: no cover
+    import mujoco
+
+    from skincal.sim.scene import Scene
+
+DEFAULT_LINK_DENSITY = 1350.0
+"""Density of the solid link capsules of non-Panda chains, kg/m^3: aluminium (2700) at half fill,
+giving 2-8 kg per 0.3-0.4 m link of 6 cm radius, about what UR5e/Sawyer links weigh."""
+
+BOARD_SIZE = (0.033, 0.036, 0.005)
+"""Skin-unit board (x, y, z) extent, m; the board lies under the site (its top face at z = 0)."""
+
+TIMESTEP = 0.001
+"""Physics time step, s (1 kHz, the Panda's control rate)."""
+
+_MISSING_MUJOCO = "MuJoCo is not installed: pip install 'skincal[mujoco]'"
+
+
+@dataclass(frozen=True)
+class LinkInertial:
+    """Rigid-body inertia of one link, in its link frame (DH frame {i}).
+
+    Attributes:
+        mass: kg.
+        com: ``(3,)`` centre of mass in the link frame, m.
+        inertia: ``(6,)`` ``[Ixx, Iyy, Izz, Ixy, Ixz, Iyz]`` about the CoM, link-frame axes, kg m^2.
+    """
+
+    mass: float
+    com: FloatArray
+    inertia: FloatArray
+
+
+def _li(mass: float, com: Sequence[float], inertia: Sequence[float]) -> LinkInertial:
+    return LinkInertial(float(mass), np.array(com, dtype=float), np.array(inertia, dtype=float))
+
+
+# Franka Emika Panda links 1-7 as published in franka_ros, franka_description/robots/common/inertial.yaml
+# (values from C. Gaz, M. Cognetti, A. Oliva, P. Robuffo Giordano, A. De Luca, "Dynamic identification of
+# the Franka Emika Panda robot with retrieval of feasible parameters using penalty-based optimization",
+# IEEE RA-L 4(4), 2019). franka_description's link frames are the modified DH frames of the Panda table.
+# Columns: mass [kg], CoM [m], [Ixx, Iyy, Izz, Ixy, Ixz, Iyz] [kg m^2] about the CoM.
+PANDA_INERTIALS: tuple[LinkInertial, ...] = (
+    _li(4.970684, [0.003875, 0.002081, -0.04762], [0.70337, 0.70661, 0.009117, -0.000139, 0.006772, 0.019169]),
+    _li(0.646926, [-0.003141, -0.02872, 0.003495], [0.007962, 0.02811, 0.025995, -0.003925, 0.010254, 0.000704]),
+    _li(3.228604, [0.027518, 0.039252, -0.066502], [0.037242, 0.036155, 0.01083, -0.004761, -0.011396, -0.012805]),
+    _li(3.587895, [-0.05317, 0.104419, 0.027454], [0.025853, 0.019552, 0.028323, 0.007796, -0.001332, 0.008641]),
+    _li(1.225946, [-0.011953, 0.041065, -0.038437], [0.035549, 0.029474, 0.008627, -0.002117, -0.004037, 0.000229]),
+    _li(1.666555, [0.060149, -0.014117, -0.010517], [0.001964, 0.004354, 0.005433, 0.000109, -0.001158, 0.000341]),
+    _li(0.735522, [0.010517, -0.004252, 0.061597], [0.012516, 0.010027, 0.004815, -0.000428, -0.001196, -0.000741]),
+)
+
+
+def require_mujoco() -> Any:
+    """Import and return the ``mujoco`` module, or raise :class:`ConfigError` saying how to install it."""
+    try:
+        import mujoco
+    except ImportError:  # pragma: no cover - exercised only without the extra
+        raise ConfigError(_MISSING_MUJOCO) from None
+    return mujoco
+
+
+def is_panda(chain: SerialChain) -> bool:
+    """True when ``chain`` has the Panda's DH table (modified DH), whatever its name."""
+    ref = panda()
+    return chain.convention == ref.convention and chain.dh.shape == ref.dh.shape and bool(np.allclose(chain.dh, ref.dh))
+
+
+def default_inertials(chain: SerialChain) -> list[LinkInertial] | None:
+    """Franka's published inertials for the Panda, else ``None`` (MuJoCo derives them from the capsules)."""
+    return list(PANDA_INERTIALS) if is_panda(chain) else None
+
+
+# ---------------------------------------------------------------------------------------------- names
+def body_name(link: int) -> str:
+    """Name of the body of link frame ``link`` (0 = base)."""
+    return f"link{link}"
+
+
+def joint_name(joint: int) -> str:
+    """Name of joint ``joint`` (1-based)."""
+    return f"joint{joint}"
+
+
+def site_name(unit: str) -> str:
+    """Name of the site of skin unit ``unit``."""
+    return f"su/{unit}"
+
+
+def sensor_name(unit: str, kind: str) -> str:
+    """Name of a unit's sensor; ``kind`` is ``accel``, ``gyro`` or ``range``."""
+    return f"su/{unit}/{kind}"
+
+
+# ---------------------------------------------------------------------------------------------- MJCF
+def _fmt(values: FloatArray | Sequence[float] | float) -> str:
+    """Floats at full precision (repr round-trips), so frames survive the XML text exactly."""
+    arr = np.atleast_1d(np.asarray(values, dtype=float))
+    return " ".join(repr(float(x)) + "" for x in arr)
+
+
+def _body_offset(chain: SerialChain, i: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Body ``i`` (1-based) in body ``i-1`` at ``q_i = 0``, and its hinge: ``(pos, quat_wxyz, axis, anchor)``."""
+    theta, d, a, alpha = chain.dh[i - 1]
+    if chain.convention == "modified":
+        B = modified_dh(theta, d, a, alpha)
+        axis, anchor = np.array([0.0, 0.0, 1.0]), np.zeros(3)
+    else:
+        B = standard_dh(theta, d, a, alpha)
+        R_B, p_B = B[:3, :3], B[:3, 3]
+        axis, anchor = R_B.T @ np.array([0.0, 0.0, 1.0]), -R_B.T @ p_B
+    return B[:3, 3], quat_wxyz_from_matrix(B[:3, :3]), axis, anchor
+
+
+def _add_capsules(body: ET.Element, chain: SerialChain, link: int, radius: float | FloatArray, density: float) -> None:
+    for k, cap in enumerate(c for c in link_capsules(chain, radius) if c.link == link):
+        attrs = {
+            "name": f"{body_name(link)}/capsule{k}",
+            "contype": "0",
+            "conaffinity": "0",
+            "density": repr(float(density)),
+            "rgba": "0.85 0.85 0.88 1",
+        }
+        if cap.length > 0:
+            attrs |= {"type": "capsule", "fromto": _fmt(np.concatenate([cap.p0, cap.p1])), "size": _fmt(cap.radius)}
+        else:
+            attrs |= {"type": "sphere", "pos": _fmt(cap.p0), "size": _fmt(cap.radius)}
+        ET.SubElement(body, "geom", attrs)
+
+
+def _check_placements(chain: SerialChain, placements: Mapping[str, SkinUnitPose]) -> None:
+    for unit, pose in placements.items():
+        if not isinstance(unit, str) or not unit:
+            raise ConfigError(f"skin unit names must be non-empty strings, got {unit!r}")
+        if not isinstance(pose, SkinUnitPose):
+            raise ConfigError(f"skin unit '{unit}': placement must be a SkinUnitPose, got {type(pose).__name__}")
+        if pose.link > chain.n_joints:
+            raise ConfigError(
+                f"skin unit '{unit}': link {pose.link} does not exist on '{chain.name}' (1..{chain.n_joints})"
+            )
+
+
+def build_mjcf(
+    chain: SerialChain,
+    placements: Mapping[str, SkinUnitPose] | None = None,
+    *,
+    scene: Scene | None = None,
+    board_geoms: bool = True,
+    inertials: Sequence[LinkInertial] | None = None,
+    link_radius: float | FloatArray = DEFAULT_LINK_RADIUS,
+    density: float = DEFAULT_LINK_DENSITY,
+    velocity_gain: float | Sequence[float] | None = None,
+    gravity: FloatArray = GRAVITY_BASE,
+) -> str:
+    """MJCF text of ``chain`` with one site and accelerometer/gyro/rangefinder per skin unit.
+
+    Args:
+        chain: any DH chain (modified or standard); already validated by :class:`SerialChain`.
+        placements: unit name -> :class:`SkinUnitPose` (pose in link frame ``pose.link``).
+        scene: obstacles (:class:`skincal.sim.scene.Scene`), added as mocap bodies.
+        board_geoms: add a 33 x 36 x 5 mm massless, non-colliding box per unit (visual only).
+        inertials: ``n`` link inertials in the link frames; default :func:`default_inertials`
+            (Panda: Franka's values; others: MuJoCo's inertia of the solid capsules at ``density``).
+        link_radius: capsule radius (m), one or ``(n + 1,)``.
+        density: capsule density for links without explicit inertials, kg/m^3.
+        velocity_gain: when given, one MuJoCo ``velocity`` actuator per joint with this gain
+            ``kv`` (N m s/rad, one or ``(n,)``): ``tau = kv (ctrl - qd)``, ``ctrl`` in rad/s.
+        gravity: ``(3,)`` gravity in the base frame, m/s^2.
+    """
+    placements = dict(placements or {})
+    _check_placements(chain, placements)
+    n = chain.n_joints
+    if inertials is None:
+        inertials = default_inertials(chain)
+    if inertials is not None and len(inertials) != n:
+        raise ConfigError(f"robot '{chain.name}': inertials must list {n} links, got {len(inertials)}")
+    g = np.asarray(gravity, dtype=float)
+    if g.shape != (3,) or not np.all(np.isfinite(g)):
+        raise ConfigError(f"gravity must be 3 finite numbers in m/s^2, got {np.asarray(gravity).tolist()}")
+
+    root = ET.Element("mujoco", {"model": f"skincal_{chain.name}"})
+    ET.SubElement(root, "compiler", {"angle": "radian", "autolimits": "true", "inertiafromgeom": "auto"})
+    ET.SubElement(root, "option", {"timestep": repr(TIMESTEP), "gravity": _fmt(g), "integrator": "implicitfast"})
+    world = ET.SubElement(root, "worldbody")
+    parent = ET.SubElement(world, "body", {"name": body_name(0)})
+    _add_capsules(parent, chain, 0, link_radius, density)
+    bodies = [parent]
+    for i in range(1, n + 1):
+        pos, quat, axis, anchor = _body_offset(chain, i)
+        body = ET.SubElement(parent, "body", {"name": body_name(i), "pos": _fmt(pos), "quat": _fmt(quat)})
+        jattrs = {"name": joint_name(i), "type": "hinge", "axis": _fmt(axis), "pos": _fmt(anchor)}
+        if chain.joint_lower is not None and chain.joint_upper is not None:
+            jattrs["range"] = _fmt([chain.joint_lower[i - 1], chain.joint_upper[i - 1]])
+        ET.SubElement(body, "joint", jattrs)
+        if inertials is not None:
+            li = inertials[i - 1]
+            ET.SubElement(
+                body, "inertial", {"pos": _fmt(li.com), "mass": _fmt(li.mass), "fullinertia": _fmt(li.inertia)}
+            )
+        _add_capsules(body, chain, i, link_radius, density)
+        bodies.append(body)
+        parent = body
+
+    sensors = ET.SubElement(root, "sensor")
+    for unit, pose in placements.items():
+        body = bodies[pose.link]
+        site_quat = _fmt(quat_wxyz_from_matrix(pose.R_link_su))
+        ET.SubElement(
+            body,
+            "site",
+            {
+                "name": site_name(unit),
+                "pos": _fmt(pose.p_link_su),
+                "quat": site_quat,
+                "size": "0.005",
+                "rgba": "0.1 0.6 0.2 1",
+            },
+        )
+        if board_geoms:
+            half = np.asarray(BOARD_SIZE) / 2
+            centre = pose.p_link_su - half[2] * pose.R_link_su[:, 2]
+            ET.SubElement(
+                body,
+                "geom",
+                {
+                    "name": f"{site_name(unit)}/board",
+                    "type": "box",
+                    "size": _fmt(half),
+                    "pos": _fmt(centre),
+                    "quat": site_quat,
+                    "mass": "0",
+                    "contype": "0",
+                    "conaffinity": "0",
+                    "group": "3",
+                    "rgba": "0.1 0.5 0.2 1",
+                },
+            )
+        for kind, tag in (("accel", "accelerometer"), ("gyro", "gyro"), ("range", "rangefinder")):
+            ET.SubElement(sensors, tag, {"name": sensor_name(unit, kind), "site": site_name(unit)})
+
+    if velocity_gain is not None:
+        kv = np.broadcast_to(np.asarray(velocity_gain, dtype=float), (n,))
+        if not np.all(np.isfinite(kv) & (kv > 0)):
+            raise ConfigError(f"velocity_gain must be positive N m s/rad, got {kv.tolist()}")
+        actuators = ET.SubElement(root, "actuator")
+        for i in range(1, n + 1):
+            ET.SubElement(
+                actuators,
+                "velocity",
+                {"name": f"{joint_name(i)}/velocity", "joint": joint_name(i), "kv": repr(float(kv[i - 1]))},
+            )
+    if scene is not None:
+        scene.add_to_mjcf(world)
+    ET.indent(root)
+    return ET.tostring(root, encoding="unicode")
+
+
+def build_model(
+    chain: SerialChain, placements: Mapping[str, SkinUnitPose] | None = None, **kwargs: Any
+) -> mujoco.MjModel:
+    """Compiled :class:`mujoco.MjModel` of :func:`build_mjcf` (same arguments)."""
+    mujoco = require_mujoco()
+    xml = build_mjcf(chain, placements, **kwargs)
+    try:
+        return mujoco.MjModel.from_xml_string(xml)
+    except ValueError as exc:
+        raise ConfigError(f"robot '{chain.name}': MuJoCo rejected the generated model: {exc}") from None
+
+
+@dataclass(frozen=True)
+class SensorIndex:
+    """Where each unit's readings live in ``MjData.sensordata`` and which site it is.
+
+    Attributes:
+        units: unit names in placement order.
+        site: ``(U,)`` site ids.
+        accel, gyro: ``(U, 3)`` sensordata indices.
+        range: ``(U,)`` sensordata indices.
+    """
+
+    units: tuple[str, ...]
+    site: np.ndarray
+    accel: np.ndarray
+    gyro: np.ndarray
+    range: np.ndarray
+
+    @classmethod
+    def of(cls, model: mujoco.MjModel, units: Sequence[str]) -> SensorIndex:
+        """Look the units' sites and sensors up in a model built by :func:`build_model`."""
+
+        def adr(unit: str, kind: str, dim: int) -> np.ndarray:
+            start = int(model.sensor(sensor_name(unit, kind)).adr[0])
+            return np.arange(start, start + dim)
+
+        try:
+            return cls(
+                units=tuple(units),
+                site=np.array([model.site(site_name(u)).id for u in units], dtype=int),
+                accel=np.array([adr(u, "accel", 3) for u in units], dtype=int).reshape(-1, 3),
+                gyro=np.array([adr(u, "gyro", 3) for u in units], dtype=int).reshape(-1, 3),
+                range=np.array([adr(u, "range", 1)[0] for u in units], dtype=int),
+            )
+        except KeyError as exc:
+            raise ConfigError(f"MuJoCo model has no skin unit sensors for {exc}") from None
+
+
+def link_body_ids(model: mujoco.MjModel, n_joints: int) -> np.ndarray:
+    """Body ids ``(n + 1,)`` of link frames 0..n."""
+    return np.array([model.body(body_name(i)).id for i in range(n_joints + 1)], dtype=int)
