@@ -89,13 +89,13 @@ class _Reader:
     def attr(self, path: str, name: str, required: bool = True) -> object:
         obj = self.f if path == "/" else self.group(path)
         try:
-            if name not in obj.attrs:
-                if required:
-                    raise self.fail(self.attr_field(path, name), "is missing")
-                return None
-            return obj.attrs[name]
+            present = name in obj.attrs
+            value = obj.attrs[name] if present else None
         except (OSError, ValueError, TypeError) as exc:
             raise self.fail(self.attr_field(path, name), f"cannot be read ({_first_line(exc)})") from None
+        if not present and required:
+            raise self.fail(self.attr_field(path, name), "is missing")
+        return value
 
     @staticmethod
     def attr_field(path: str, name: str) -> str:
@@ -128,14 +128,17 @@ class _Reader:
 
     # ------------------------------------------------------------------ parts
     def header(self) -> str:
-        fmt = self.str_attr("/", "format")
+        fmt = self.str_attr("/", "format", required=False)
+        if fmt is None:
+            raise self.fail("root attr 'format'", f"is missing (not a {FORMAT} file)")
         if fmt != FORMAT:
             raise self.fail("root attr 'format'", f"is '{fmt}', expected '{FORMAT}'")
         version = self.attr("/", "version")
         if isinstance(version, np.ndarray) and version.shape == ():
             version = version[()]
         if isinstance(version, bool | np.bool_) or not isinstance(version, int | np.integer):
-            raise self.fail("root attr 'version'", f"must be an integer, got {version!r}")
+            shown = version.item() if isinstance(version, np.generic) else version
+            raise self.fail("root attr 'version'", f"must be an integer, got {shown!r}")
         if int(version) != VERSION:
             raise self.fail("root attr 'version'", f"is {int(version)}; this skincal reads version {VERSION}")
         return self.str_attr("/", "description", required=False) or ""
@@ -284,7 +287,7 @@ def read_dataset(path: str | Path) -> Dataset:
 
 
 def _write_floats(grp: h5py.Group, name: str, value: object) -> None:
-    grp.create_dataset(name, data=np.asarray(value, dtype=np.float64))
+    grp.create_dataset(name, data=np.asarray(value, dtype=np.float64), fletcher32=True)
 
 
 def _write(f: h5py.File, ds: Dataset) -> None:
@@ -311,7 +314,7 @@ def _write(f: h5py.File, ds: Dataset) -> None:
         if value is not None:
             _write_floats(joints, key, value)
 
-    imu = f.create_group("imu")
+    imu = f.create_group("imu", track_order=True)  # keep the unit order
     for unit, stream in ds.imu.items():
         g = imu.create_group(unit)
         _write_floats(g, "t", stream.t)
@@ -320,7 +323,7 @@ def _write(f: h5py.File, ds: Dataset) -> None:
             _write_floats(g, "gyro", stream.gyro)
 
     if ds.tof:
-        tof = f.create_group("tof")
+        tof = f.create_group("tof", track_order=True)
         for unit, stream in ds.tof.items():
             g = tof.create_group(unit)
             _write_floats(g, "t", stream.t)
@@ -330,12 +333,12 @@ def _write(f: h5py.File, ds: Dataset) -> None:
         seg = f.create_group("segments")
         _write_floats(seg, "t_start", ds.segments.t_start)
         _write_floats(seg, "t_end", ds.segments.t_end)
-        seg.create_dataset("kind", data=np.asarray(ds.segments.kind, dtype=np.int8))
-        seg.create_dataset("pose", data=np.asarray(ds.segments.pose, dtype=np.int32))
-        seg.create_dataset("joint", data=np.asarray(ds.segments.joint, dtype=np.int32))
+        seg.create_dataset("kind", data=np.asarray(ds.segments.kind, dtype=np.int8), fletcher32=True)
+        seg.create_dataset("pose", data=np.asarray(ds.segments.pose, dtype=np.int32), fletcher32=True)
+        seg.create_dataset("joint", data=np.asarray(ds.segments.joint, dtype=np.int32), fletcher32=True)
 
     if ds.truth:
-        truth = f.create_group("truth")
+        truth = f.create_group("truth", track_order=True)
         for unit, pose in ds.truth.items():
             g = truth.create_group(unit)
             g.attrs["link"] = np.int64(pose.link)
@@ -356,5 +359,5 @@ def write_dataset(dataset: Dataset, path: str | Path) -> None:
     """
     path = Path(path)
     validate_dataset(dataset, source=str(path))
-    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+    with atomic_path(path) as tmp, h5py.File(tmp, "w", libver=("v108", "latest")) as f:
         _write(f, dataset)
