@@ -1,0 +1,230 @@
+"""Calibration result JSON: contract example, round trip, extras, validation, atomic write, sha256."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from skincal.data import CalibrationResult, UnitResult, read_result, result_to_dict, sha256_file, write_result
+from skincal.errors import DatasetError
+from skincal.kinematics import rotation_angle
+from skincal.skin.pose import SkinUnitPose
+
+# The example of shared/interfaces.md, verbatim apart from a real digest.
+CONTRACT_EXAMPLE = """
+{"format": "skincal-result", "version": 1, "method": "mle", "robot": "panda",
+ "dataset_sha256": "%s", "runtime_s": 0.41,
+ "units": {"su1": {"link": 3, "position_m": [0.05, 0.0, 0.12], "quaternion_wxyz": [1, 0, 0, 0],
+                   "observable": true, "position_std_m": [1e-5, 1e-5, 2e-5],
+                   "rotation_std_deg": [0.01, 0.01, 0.02], "warnings": []}}}
+""" % ("ab" * 32)
+
+
+def make_result() -> CalibrationResult:
+    su1 = SkinUnitPose.from_dh6(3, [0.3, -0.08, 1.2, 0.05, 0.01, 1.4])
+    su0 = SkinUnitPose.from_dh6(1, [1.571, 0.06, -1.571, 0.06, 0.0, 1.571])
+    return CalibrationResult(
+        method="mle",
+        robot="panda",
+        dataset_sha256=hashlib.sha256(b"dataset").hexdigest(),
+        runtime_s=0.1 + 0.2,  # 0.30000000000000004: full precision must survive
+        units={
+            "su1": UnitResult(
+                pose=su1,
+                observable=True,
+                position_std_m=np.array([1e-5, 1.5e-5, 2.123456789012345e-5]),
+                rotation_std_deg=np.array([0.01, 0.01, 0.02]),
+                warnings=(),
+                extras={
+                    "link_confidence": 0.987654321,
+                    "accel_bias_mps2": np.array([0.01, -0.02, np.nan]),
+                    "accel_scale": np.array([1.001, 0.999, 1.0]),
+                    "time_offset_s": np.float64(0.0042),
+                    "dh6": su1.dh6(),
+                    "iterations": np.int64(17),
+                    "note": "converged",
+                },
+            ),
+            "base_unit": UnitResult(
+                pose=su0,
+                observable=False,
+                warnings=("link 1: yaw about and offset along the joint-1 axis are unobservable",),
+            ),
+        },
+        extras={"options": {"robust_loss": "huber", "f_scale": 0.5}, "skincal_version": "0.1.0"},
+    )
+
+
+def test_reads_the_contract_example(tmp_path: Path) -> None:
+    path = tmp_path / "result.json"
+    path.write_text(CONTRACT_EXAMPLE)
+    result = read_result(path)
+    assert (result.method, result.robot, result.runtime_s) == ("mle", "panda", 0.41)
+    unit = result.units["su1"]
+    assert unit.pose.link == 3 and unit.observable and unit.warnings == () and unit.extras == {}
+    np.testing.assert_array_equal(unit.pose.p_link_su, [0.05, 0.0, 0.12])
+    np.testing.assert_array_equal(unit.pose.R_link_su, np.eye(3))
+    np.testing.assert_array_equal(unit.position_std_m, [1e-5, 1e-5, 2e-5])
+    np.testing.assert_array_equal(unit.rotation_std_deg, [0.01, 0.01, 0.02])
+    # Writing it back gives the same document (contract fields only, same values).
+    write_result(result, tmp_path / "again.json")
+    assert json.loads((tmp_path / "again.json").read_text()) == json.loads(CONTRACT_EXAMPLE)
+
+
+def test_round_trip(tmp_path: Path) -> None:
+    original = make_result()
+    path = tmp_path / "result.json"
+    write_result(original, path)
+    back = read_result(path)
+    assert (back.method, back.robot, back.dataset_sha256) == (original.method, original.robot, original.dataset_sha256)
+    assert back.runtime_s == 0.30000000000000004
+    assert back.extras == original.extras
+    assert list(back.units) == list(original.units)
+    for name, unit in original.units.items():
+        got = back.units[name]
+        assert got.pose.link == unit.pose.link and got.observable == unit.observable
+        assert got.warnings == unit.warnings
+        np.testing.assert_array_equal(got.pose.p_link_su, unit.pose.p_link_su)
+        assert rotation_angle(got.pose.R_link_su, unit.pose.R_link_su) < 1e-15
+        for key in ("position_std_m", "rotation_std_deg"):
+            a, b = getattr(unit, key), getattr(got, key)
+            assert (a is None and b is None) or np.array_equal(a, b)
+        assert set(got.extras) == set(unit.extras)
+        for key, value in unit.extras.items():
+            if isinstance(value, np.ndarray):
+                assert isinstance(got.extras[key], np.ndarray)
+                np.testing.assert_array_equal(got.extras[key], value)  # NaN -> null -> NaN
+            else:  # NumPy scalars come back as the matching Python number
+                plain = value.item() if isinstance(value, np.generic) else value
+                assert got.extras[key] == plain and type(got.extras[key]) is type(plain)
+
+
+def test_json_layout(tmp_path: Path) -> None:
+    path = tmp_path / "result.json"
+    write_result(make_result(), path)
+    doc = json.loads(path.read_text())
+    assert list(doc)[:6] == ["format", "version", "method", "robot", "dataset_sha256", "runtime_s"]
+    assert doc["format"] == "skincal-result" and doc["version"] == 1
+    base = doc["units"]["base_unit"]
+    assert base["position_std_m"] is None and base["rotation_std_deg"] is None and base["observable"] is False
+    su1 = doc["units"]["su1"]
+    assert su1["accel_bias_mps2"] == [0.01, -0.02, None]
+    assert su1["position_std_m"][2] == 2.123456789012345e-05
+    assert doc["options"] == {"robust_loss": "huber", "f_scale": 0.5}
+    q = np.array(su1["quaternion_wxyz"])
+    assert abs(np.linalg.norm(q) - 1) < 1e-15 and q[0] >= 0
+    assert "NaN" not in path.read_text()
+
+
+def test_sha256_file(tmp_path: Path) -> None:
+    path = tmp_path / "blob.bin"
+    data = np.random.default_rng(0).bytes(300_000)
+    path.write_bytes(data)
+    assert sha256_file(path) == hashlib.sha256(data).hexdigest()
+    with pytest.raises(DatasetError, match="nothing.bin: cannot read file"):
+        sha256_file(tmp_path / "nothing.bin")
+
+
+def _doc() -> dict:
+    return json.loads(CONTRACT_EXAMPLE)
+
+
+def _set(path: str, value: object) -> dict:
+    doc = _doc()
+    *parents, last = path.split(".")
+    node = doc
+    for key in parents:
+        node = node[key]
+    if value is KeyError:
+        del node[last]
+    else:
+        node[last] = value
+    return doc
+
+
+BAD_DOCS = {
+    "wrong format": (_set("format", "skincal-dataset"), "format is 'skincal-dataset', expected 'skincal-result'"),
+    "wrong version": (_set("version", 2), "version is 2; this skincal reads version 1"),
+    "bool version": (_set("version", True), "version must be an integer"),
+    "missing units": (_set("units", KeyError), "units is missing"),
+    "missing method": (_set("method", KeyError), "method is missing"),
+    "bad sha": (_set("dataset_sha256", "xyz"), "dataset_sha256 must be 64 hex digits"),
+    "negative runtime": (_set("runtime_s", -1), "runtime_s must be a non-negative number"),
+    "link zero": (_set("units.su1.link", 0), "units.su1.link must be a positive integer"),
+    "float link": (_set("units.su1.link", 3.0), "units.su1.link must be a positive integer"),
+    "short position": (_set("units.su1.position_m", [0.0, 1.0]), "units.su1.position_m must be a list of 3 finite"),
+    "string in position": (_set("units.su1.position_m", [0, "1", 2]), "units.su1.position_m must be a list of 3"),
+    "not unit quaternion": (_set("units.su1.quaternion_wxyz", [1, 1, 0, 0]), "is not a unit quaternion"),
+    "missing quaternion": (_set("units.su1.quaternion_wxyz", KeyError), "units.su1.quaternion_wxyz is missing"),
+    "observable string": (_set("units.su1.observable", "yes"), "units.su1.observable must be true or false"),
+    "negative std": (_set("units.su1.position_std_m", [1, -1, 0]), "units.su1.position_std_m must not be negative"),
+    "warnings not list": (_set("units.su1.warnings", "bad"), "units.su1.warnings must be a list of strings"),
+    "unit not object": (_set("units.su1", [1, 2]), "units.su1 must be an object"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_DOCS))
+def test_bad_result_gives_one_line_error(tmp_path: Path, case: str) -> None:
+    doc, expected = BAD_DOCS[case]
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(DatasetError) as info:
+        read_result(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: ") and "\n" not in message
+    assert expected in message
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (CONTRACT_EXAMPLE[: len(CONTRACT_EXAMPLE) // 2], "not valid JSON (line"),
+        ('{"format": NaN}', "contains NaN, which is not valid JSON"),
+        ("[1, 2]", "top level must be a JSON object"),
+        ("", "not valid JSON (line 1, column 1"),
+    ],
+)
+def test_unreadable_result_files(tmp_path: Path, text: str, expected: str) -> None:
+    path = tmp_path / "r.json"
+    path.write_text(text)
+    with pytest.raises(DatasetError) as info:
+        read_result(path)
+    assert expected in str(info.value) and "\n" not in str(info.value)
+    with pytest.raises(DatasetError, match="r2.json: no such file"):
+        read_result(tmp_path / "r2.json")
+    (tmp_path / "bin.json").write_bytes(b"\xff\xfe\x00garbage")
+    with pytest.raises(DatasetError, match="not valid UTF-8"):
+        read_result(tmp_path / "bin.json")
+
+
+def test_write_validates_and_keeps_old_file(tmp_path: Path) -> None:
+    path = tmp_path / "result.json"
+    write_result(make_result(), path)
+    old = path.read_bytes()
+    good = make_result()
+    bad_unit = UnitResult(pose=good.units["su1"].pose, position_std_m=np.array([np.nan, 0.0, 0.0]))
+    cases = [
+        (CalibrationResult("mle", "panda", "", 1.0, {"su1": bad_unit}), "units.su1.position_std_m must be a list"),
+        (CalibrationResult("", "panda", "", 1.0, {}), "method is empty"),
+        (CalibrationResult("mle", "p", "", 1.0, {}, extras={"units": 1}), "may not redefine contract field(s) units"),
+        (
+            CalibrationResult("mle", "p", "", 1.0, {"a": UnitResult(good.units["su1"].pose, extras={"link": 2})}),
+            "units.a extras may not redefine contract field(s) link",
+        ),
+        (CalibrationResult("mle", "p", "", 1.0, {}, extras={"when": object()}), "extras.when has a value of type"),
+    ]
+    for result, expected in cases:
+        with pytest.raises(DatasetError) as info:
+            write_result(result, path)
+        assert expected in str(info.value), str(info.value)
+        assert path.read_bytes() == old
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["result.json"]
+
+
+def test_result_to_dict_is_plain_json() -> None:
+    doc = result_to_dict(make_result())
+    assert json.loads(json.dumps(doc, allow_nan=False)) == doc
