@@ -14,6 +14,19 @@ from skincal.skin.imu import (
 )
 from skincal.skin.placement import PAPER_TABLE_II, paper_placement, random_placement
 from skincal.skin.pose import DH6_NAMES, SkinUnitPose, dh6_from_transform, dh6_to_transform
+from skincal.skin.tof import (
+    TOF_PRESETS,
+    Box,
+    Capsule,
+    Plane,
+    Sphere,
+    TofModel,
+    capsules_in_base,
+    cone_directions,
+    get_tof_model,
+    ray_distance,
+    tof_range,
+)
 
 __all__ = [
     "DH6_NAMES",
@@ -33,4 +46,15 @@ __all__ = [
     "sample_instants",
     "specific_force",
     "true_sample_times",
+    "TOF_PRESETS",
+    "Box",
+    "Capsule",
+    "Plane",
+    "Sphere",
+    "TofModel",
+    "capsules_in_base",
+    "cone_directions",
+    "get_tof_model",
+    "ray_distance",
+    "tof_range",
 ]
