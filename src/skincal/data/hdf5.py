@@ -17,6 +17,9 @@ Layout (optional parts in brackets)::
 
 Reading opens the file read-only, checks the structure, builds a :class:`Dataset` and runs
 :func:`~skincal.data.validate.validate_dataset`; writing validates first, then writes atomically.
+Written datasets carry Fletcher-32 checksums (and the HDF5 1.8+ format, whose metadata is
+checksummed too), so bit rot becomes a read error instead of silently different samples; files
+without checksums (other writers) read just as well. Unit groups keep their creation order.
 """
 
 from __future__ import annotations
