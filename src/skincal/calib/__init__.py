@@ -1,1 +1,28 @@
-"""skincal.calib"""
+"""Calibration of skin-unit poses behind one door: ``calibrate(dataset, method=...)``.
+
+Methods (registered in :data:`METHODS`): ``mle`` (default), ``om`` and ``om-joint`` (the paper),
+``mmm`` and ``mm`` (the paper's baselines). Shared pieces: preprocessing of the joint and IMU
+streams, link discovery, metrics.
+"""
+
+from skincal.calib.api import METHODS, MethodSpec, UnitProblem, calibrate, register
+from skincal.calib.links import LinkAssignment, discover_link
+from skincal.calib.metrics import evaluate, pose_errors
+from skincal.calib.preprocess import UnitSamples, estimate_qdd, joint_states_at, static_means, unit_samples
+
+__all__ = [
+    "METHODS",
+    "LinkAssignment",
+    "MethodSpec",
+    "UnitProblem",
+    "UnitSamples",
+    "calibrate",
+    "discover_link",
+    "estimate_qdd",
+    "evaluate",
+    "joint_states_at",
+    "pose_errors",
+    "register",
+    "static_means",
+    "unit_samples",
+]

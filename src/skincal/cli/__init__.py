@@ -9,8 +9,11 @@ from __future__ import annotations
 
 import sys
 
+from skincal.cli import calibrate as _calibrate  # noqa: E402,F401
+
 # Command modules register themselves on import (one line each).
 from skincal.cli import info as _info  # noqa: E402,F401
+from skincal.cli import simulate as _simulate  # noqa: E402,F401
 from skincal.cli.app import app, console_error
 
 __all__ = ["app", "main"]

@@ -119,18 +119,23 @@ class SerialChain:
         step = modified_dh if self.convention == "modified" else standard_dh
         return step(theta, self.dh[:, 1], self.dh[:, 2], self.dh[:, 3])
 
-    def link_frames(self, q: ArrayLike) -> FloatArray:
+    def link_frames(self, q: ArrayLike, upto: int | None = None) -> FloatArray:
         """Poses ``T_base_link[i]`` of DH frames {0}..{n}, shape ``(N, n + 1, 4, 4)``.
 
         ``T_base_link[:, 0]`` is the identity (the base); ``T_base_link[:, i]`` is link frame ``i``.
+        ``upto``: compute frames {0}..{upto} only (shape ``(N, upto + 1, 4, 4)``).
+        (Stored joint-major so that each frame is a contiguous block; the result is a view.)
         """
-        A = self.dh_transforms(q)
-        N, n = A.shape[:2]
-        T = np.empty((N, n + 1, 4, 4))
-        T[:, 0] = np.eye(4)
+        q = self.check_q(q)
+        N = q.shape[0]
+        n = self.n_joints if upto is None else self.check_link(upto)
+        step = modified_dh if self.convention == "modified" else standard_dh
+        T = np.empty((n + 1, N, 4, 4))
+        T[0] = np.eye(4)
         for i in range(n):
-            T[:, i + 1] = T[:, i] @ A[:, i]
-        return T
+            theta, d, a, alpha = self.dh[i]
+            np.matmul(T[i], step(q[:, i] + theta, d, a, alpha), out=T[i + 1])
+        return np.moveaxis(T, 0, 1)
 
     def flange_pose(self, q: ArrayLike) -> FloatArray:
         """``T_base_flange`` of shape ``(N, 4, 4)``."""
@@ -149,8 +154,10 @@ class SerialChain:
         frames = link_frames[:, 1:] if self.convention == "modified" else link_frames[:, :-1]
         return frames[..., :3, 3], frames[..., :3, 2]
 
-    def link_motion(self, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike) -> LinkMotion:
+    def link_motion(self, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike, upto: int | None = None) -> LinkMotion:
         """Frames, angular and linear velocity/acceleration of every link frame (base frame).
+
+        ``upto``: stop at link ``upto`` (arrays then hold links 0..upto only).
 
         Recursion over joints ``k = 1..n`` with the joint axis ``z_k`` through ``c_k``::
 
@@ -168,24 +175,32 @@ class SerialChain:
         qdd = self.check_q(qdd, "qdd")
         if not (q.shape == qd.shape == qdd.shape):
             raise ConfigError(f"robot '{self.name}': q, qd and qdd must have the same shape")
-        T = self.link_frames(q)
-        c, z = self.joint_axes(T)
-        N, n = q.shape
-        o = T[..., :3, 3]
-        w = np.zeros((N, n + 1, 3))
-        dw = np.zeros((N, n + 1, 3))
-        v = np.zeros((N, n + 1, 3))
-        a = np.zeros((N, n + 1, 3))
+        T = self.link_frames(q, upto)
+        N, n = q.shape[0], T.shape[1] - 1
+        if self.convention == "modified":
+            c, z = T[:, 1:, :3, 3], T[:, 1:, :3, 2]
+        else:
+            c, z = T[:, :-1, :3, 3], T[:, :-1, :3, 2]
+        # Joint-major, contiguous per link; returned as (N, n + 1, 3) views.
+        o = np.ascontiguousarray(np.moveaxis(T[..., :3, 3], 1, 0))
+        c = np.ascontiguousarray(np.moveaxis(c, 1, 0))
+        z = np.ascontiguousarray(np.moveaxis(z, 1, 0))
+        w = np.zeros((n + 1, N, 3))
+        dw = np.zeros((n + 1, N, 3))
+        v = np.zeros((n + 1, N, 3))
+        a = np.zeros((n + 1, N, 3))
         for k in range(1, n + 1):
-            zk = z[:, k - 1]
-            w[:, k] = w[:, k - 1] + qd[:, k - 1, None] * zk
-            dw[:, k] = dw[:, k - 1] + qdd[:, k - 1, None] * zk + np.cross(w[:, k - 1], qd[:, k - 1, None] * zk)
-            r = c[:, k - 1] - o[:, k - 1]
-            s = o[:, k] - c[:, k - 1]
-            v_c = v[:, k - 1] + np.cross(w[:, k - 1], r)
-            a_c = a[:, k - 1] + np.cross(dw[:, k - 1], r) + np.cross(w[:, k - 1], np.cross(w[:, k - 1], r))
-            v[:, k] = v_c + np.cross(w[:, k], s)
-            a[:, k] = a_c + np.cross(dw[:, k], s) + np.cross(w[:, k], np.cross(w[:, k], s))
+            zk = z[k - 1]
+            wz = qd[:, k - 1, None] * zk
+            w[k] = w[k - 1] + wz
+            dw[k] = dw[k - 1] + qdd[:, k - 1, None] * zk + cross(w[k - 1], wz)
+            r = c[k - 1] - o[k - 1]
+            s = o[k] - c[k - 1]
+            v_c = v[k - 1] + cross(w[k - 1], r)
+            a_c = a[k - 1] + cross(dw[k - 1], r) + cross(w[k - 1], cross(w[k - 1], r))
+            v[k] = v_c + cross(w[k], s)
+            a[k] = a_c + cross(dw[k], s) + cross(w[k], cross(w[k], s))
+        w, dw, v, a = (np.moveaxis(x, 0, 1) for x in (w, dw, v, a))
         return LinkMotion(T_base_link=T, omega=w, omega_dot=dw, v_origin=v, a_origin=a)
 
     def point_jacobian(self, q: ArrayLike, link: int, p_link: ArrayLike) -> FloatArray:
@@ -239,9 +254,16 @@ class LinkMotion:
         x = transform_points(T, p_link)
         r = x - T[:, :3, 3]
         w = self.omega[:, link]
-        v = self.v_origin[:, link] + np.cross(w, r)
-        a = self.a_origin[:, link] + np.cross(self.omega_dot[:, link], r) + np.cross(w, np.cross(w, r))
+        v = self.v_origin[:, link] + cross(w, r)
+        a = self.a_origin[:, link] + cross(self.omega_dot[:, link], r) + cross(w, cross(w, r))
         return x, v, a
+
+
+def cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Row-wise cross product of ``(..., 3)`` arrays (a lean ``np.cross`` for the hot loops)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def transform_points(T: FloatArray, p: ArrayLike) -> FloatArray:

@@ -1,0 +1,184 @@
+"""One door to every calibration method: ``calibrate(dataset, method=...)``.
+
+A method is a per-unit function registered in :data:`METHODS` with the signature of
+:class:`UnitMethod`; adding a method touches one new module and one line in ``calib/__init__``.
+The link each unit sits on comes from ``links`` (user-given), from the dataset truth when
+``use_truth_links`` is set, and otherwise from the data (:func:`skincal.calib.links.discover_link`,
+or the method's own discovery when it has one).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from skincal.calib.links import LinkAssignment, discover_link
+from skincal.calib.preprocess import UnitSamples, unit_samples
+from skincal.data.dataset import Dataset
+from skincal.data.result import CalibrationResult, UnitResult
+from skincal.errors import CalibrationError, ConfigError
+from skincal.kinematics.chain import SerialChain
+
+
+@dataclass(frozen=True)
+class UnitProblem:
+    """Everything a method needs to calibrate one unit.
+
+    Attributes:
+        chain: the robot.
+        gravity: ``(3,)`` gravity in the base frame, m/s^2.
+        samples: the unit's tagged samples (joint states interpolated to its IMU instants).
+        link: 1-based link the unit is on (given or discovered).
+        link_assignment: the discovery result, or ``None`` when the link was given.
+        rng: this unit's random generator (seeded from the run's seed and the unit's index).
+        options: method options.
+    """
+
+    chain: SerialChain
+    gravity: np.ndarray
+    samples: UnitSamples
+    link: int
+    link_assignment: LinkAssignment | None
+    rng: np.random.Generator
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+
+class UnitMethod(Protocol):
+    def __call__(self, problem: UnitProblem) -> UnitResult: ...
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """A registered method: its per-unit function, a one-line description, and whether it uses
+    the gyroscope for link discovery and takes care of link discovery itself."""
+
+    run_unit: UnitMethod
+    description: str
+    discovers_links: bool = False
+    use_gyro_for_links: bool = False
+
+
+METHODS: dict[str, MethodSpec] = {}
+
+
+def register(name: str, spec: MethodSpec) -> None:
+    """Add a method to :data:`METHODS` (called once by each method module)."""
+    METHODS[name] = spec
+
+
+def _resolve_links(
+    dataset: Dataset, links: Mapping[str, int] | None, use_truth_links: bool
+) -> dict[str, int]:
+    if links is not None and use_truth_links:
+        raise ConfigError("give either links or use_truth_links, not both")
+    if use_truth_links:
+        missing = [u for u in dataset.units if u not in dataset.truth]
+        if missing:
+            raise ConfigError(f"use_truth_links: dataset has no truth for unit(s) {', '.join(missing)}")
+        return {u: dataset.truth[u].link for u in dataset.units}
+    if links is None:
+        return {}
+    unknown = [u for u in links if u not in dataset.imu]
+    if unknown:
+        raise ConfigError(f"links given for unknown unit(s) {', '.join(unknown)}")
+    for link in links.values():
+        dataset.robot.check_link(link)
+    return dict(links)
+
+
+def calibrate(
+    dataset: Dataset,
+    method: str = "mle",
+    *,
+    seed: int = 0,
+    links: Mapping[str, int] | None = None,
+    use_truth_links: bool = False,
+    use_dataset_qdd: bool = False,
+    units: list[str] | None = None,
+    dataset_sha256: str = "",
+    progress: Callable[[str], None] | None = None,
+    **options: Any,
+) -> CalibrationResult:
+    """Calibrate the units of ``dataset`` with ``method``; units that fail are reported in
+    ``result.extras["failed_units"]`` (name -> reason) while the others are calibrated.
+
+    Args:
+        dataset: a validated dataset with segments.
+        method: a name in :data:`METHODS`.
+        seed: seed of the run; unit ``k`` gets ``np.random.default_rng([seed, k])``.
+        links: user-given 1-based link per unit (others are discovered).
+        use_truth_links: take links from the dataset truth (simulation).
+        use_dataset_qdd: use the dataset's ``/joints/qdd`` instead of estimating it.
+        units: calibrate only these units (default: all).
+        dataset_sha256: recorded in the result.
+        progress: called with each unit's name when it is done.
+        options: method-specific options.
+    """
+    if method not in METHODS:
+        raise ConfigError(f"unknown method '{method}' (available: {', '.join(sorted(METHODS))})")
+    spec = METHODS[method]
+    given = _resolve_links(dataset, links, use_truth_links)
+    names = dataset.units if units is None else list(units)
+    for u in names:
+        if u not in dataset.imu:
+            raise ConfigError(f"unknown unit '{u}' (dataset has: {', '.join(dataset.units)})")
+    start = time.perf_counter()
+    results: dict[str, UnitResult] = {}
+    failed: dict[str, str] = {}
+    for k, name in enumerate(names):
+        try:
+            results[name] = calibrate_unit(
+                dataset, name, spec, link=given.get(name), rng=np.random.default_rng([seed, k]),
+                use_dataset_qdd=use_dataset_qdd, options=options,
+            )
+        except CalibrationError as exc:
+            failed[name] = str(exc)
+        if progress is not None:
+            progress(name)
+    if not results:
+        reasons = "; ".join(f"{u}: {m}" for u, m in failed.items())
+        raise CalibrationError(f"no unit could be calibrated ({reasons})")
+    return CalibrationResult(
+        method=method,
+        robot=dataset.robot.name,
+        dataset_sha256=dataset_sha256,
+        runtime_s=time.perf_counter() - start,
+        units=results,
+        extras={"failed_units": failed, "seed": seed} if failed else {"seed": seed},
+    )
+
+
+def calibrate_unit(
+    dataset: Dataset,
+    unit: str,
+    spec: MethodSpec,
+    *,
+    link: int | None,
+    rng: np.random.Generator,
+    use_dataset_qdd: bool = False,
+    options: Mapping[str, Any] | None = None,
+) -> UnitResult:
+    """Calibrate one unit (see :func:`calibrate`)."""
+    samples = unit_samples(dataset, unit, use_dataset_qdd=use_dataset_qdd)
+    if not np.any(samples.kind == 0):
+        raise CalibrationError(f"unit '{unit}': no samples in static segments")
+    assignment = None
+    if link is None and not spec.discovers_links:
+        assignment = discover_link(samples, dataset.robot.n_joints, use_gyro=spec.use_gyro_for_links)
+        if assignment.link == 0:
+            raise CalibrationError(f"unit '{unit}': {'; '.join(assignment.warnings)}")
+        link = assignment.link
+    problem = UnitProblem(
+        chain=dataset.robot,
+        gravity=np.asarray(dataset.gravity, dtype=float),
+        samples=samples,
+        link=0 if link is None else int(link),
+        link_assignment=assignment,
+        rng=rng,
+        options=dict(options or {}),
+    )
+    return spec.run_unit(problem)

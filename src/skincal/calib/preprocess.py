@@ -1,0 +1,218 @@
+"""Shared preprocessing of a dataset for every calibration method.
+
+Real robots report ``q`` and ``qd`` on their own clock; IMUs sample on theirs. This module
+estimates joint accelerations, interpolates the joint states to each IMU sample instant, tags
+every IMU sample with its protocol segment and averages the static segments.
+
+Frames: accelerometer samples are specific force in the unit frame (``f = R_base_su^T (a - g)``);
+joint states are in rad, rad/s, rad/s^2; times in s on the dataset's common clock.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicHermiteSpline
+from scipy.signal import savgol_filter
+
+from skincal.data.dataset import DYNAMIC, STATIC, Dataset, JointStates, Segments
+from skincal.errors import CalibrationError
+from skincal.kinematics.transforms import FloatArray
+
+DEFAULT_QDD_WINDOW_S = 0.05
+"""Savitzky-Golay window used to estimate joint accelerations from velocities, s."""
+
+
+def estimate_qdd(
+    joints: JointStates, window_s: float = DEFAULT_QDD_WINDOW_S
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Joint accelerations from the reported velocities by a Savitzky-Golay derivative.
+
+    The joint stream is first put on a uniform grid (its median period) when its sampling is
+    uneven. The derivative is a cubic local fit over ``window_s`` (an odd number of samples, at
+    least 5): ``qdd(t_i) = d/dt [poly fit of qd over t_i +- window/2]``.
+
+    Returns:
+        ``(t, qd, qdd)`` on the (possibly resampled) grid, shapes ``(N,)``, ``(N, n)``, ``(N, n)``.
+    """
+    t = np.asarray(joints.t, dtype=float)
+    qd = np.asarray(joints.qd, dtype=float)
+    if t.shape[0] < 7:
+        raise CalibrationError(f"joint stream has {t.shape[0]} samples; at least 7 are needed to estimate qdd")
+    dt = float(np.median(np.diff(t)))
+    if np.max(np.abs(np.diff(t) - dt)) > 0.01 * dt:
+        grid = t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt)) + 1)
+        qd = np.column_stack([np.interp(grid, t, qd[:, j]) for j in range(qd.shape[1])])
+        t = grid
+    window = max(5, int(round(window_s / dt)) | 1)  # odd, at least 5
+    if window > t.shape[0]:
+        window = t.shape[0] if t.shape[0] % 2 else t.shape[0] - 1
+    qdd = savgol_filter(qd, window, polyorder=3, deriv=1, delta=dt, axis=0, mode="interp")
+    return t, qd, qdd
+
+
+def joint_states_at(
+    joints: JointStates,
+    t: FloatArray,
+    *,
+    use_dataset_qdd: bool = False,
+    qdd_window_s: float = DEFAULT_QDD_WINDOW_S,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Joint position, velocity and acceleration at arbitrary instants ``t`` (M,).
+
+    ``q`` is a cubic Hermite interpolant of the reported ``(q, qd)``; ``qd`` a cubic Hermite
+    interpolant of ``(qd, qdd)``; ``qdd`` linear in the estimated (or, when ``use_dataset_qdd`` and
+    the dataset has it, the reported) accelerations. Instants outside the joint stream are an error.
+    """
+    t = np.asarray(t, dtype=float)
+    tj = np.asarray(joints.t, dtype=float)
+    if t.size and (t.min() < tj[0] - 1e-9 or t.max() > tj[-1] + 1e-9):
+        raise CalibrationError(
+            f"IMU samples at {t.min():.3f}..{t.max():.3f} s fall outside the joint stream {tj[0]:.3f}..{tj[-1]:.3f} s"
+        )
+    if use_dataset_qdd and joints.qdd is not None:
+        qdd_j = np.asarray(joints.qdd, dtype=float)
+        t_acc = tj
+        qd_acc = np.asarray(joints.qd, dtype=float)
+    else:
+        t_acc, qd_acc, qdd_j = estimate_qdd(joints, qdd_window_s)
+    q = CubicHermiteSpline(tj, joints.q, joints.qd, axis=0)(t)
+    qd = CubicHermiteSpline(t_acc, qd_acc, qdd_j, axis=0)(t)
+    qdd = np.column_stack([np.interp(t, t_acc, qdd_j[:, j]) for j in range(qdd_j.shape[1])])
+    return q, qd, qdd
+
+
+@dataclass(frozen=True)
+class UnitSamples:
+    """One unit's IMU samples with the joint states at their instants and their segment tags.
+
+    Attributes:
+        unit: unit name.
+        t: ``(M,)`` sample instants, s (shifted by ``time_offset_s`` when one was applied).
+        accel: ``(M, 3)`` measured specific force in the unit frame, m/s^2.
+        gyro: ``(M, 3)`` measured angular rate in the unit frame, rad/s, or ``None``.
+        q, qd, qdd: ``(M, n)`` joint states at ``t``.
+        segment: ``(M,)`` index into the dataset's segments, -1 outside every segment.
+        kind: ``(M,)`` :data:`STATIC` / :data:`DYNAMIC`, -1 outside every segment.
+        joint: ``(M,)`` 0-based excited joint, -1 when static or outside.
+        pose: ``(M,)`` 0-based pose index, -1 outside.
+    """
+
+    unit: str
+    t: FloatArray
+    accel: FloatArray
+    gyro: FloatArray | None
+    q: FloatArray
+    qd: FloatArray
+    qdd: FloatArray
+    segment: np.ndarray
+    kind: np.ndarray
+    joint: np.ndarray
+    pose: np.ndarray
+
+    def select(self, mask: np.ndarray) -> UnitSamples:
+        """The samples where ``mask`` is true."""
+        return UnitSamples(
+            self.unit,
+            self.t[mask],
+            self.accel[mask],
+            None if self.gyro is None else self.gyro[mask],
+            self.q[mask],
+            self.qd[mask],
+            self.qdd[mask],
+            self.segment[mask],
+            self.kind[mask],
+            self.joint[mask],
+            self.pose[mask],
+        )
+
+    @property
+    def static(self) -> UnitSamples:
+        return self.select(self.kind == STATIC)
+
+    @property
+    def dynamic(self) -> UnitSamples:
+        return self.select(self.kind == DYNAMIC)
+
+
+def tag_segments(t: FloatArray, segments: Segments) -> np.ndarray:
+    """Index of the segment containing each instant ``t`` (M,), -1 where none does."""
+    order = np.argsort(segments.t_start)
+    starts = np.asarray(segments.t_start)[order]
+    ends = np.asarray(segments.t_end)[order]
+    i = np.searchsorted(starts, t, side="right") - 1
+    inside = (i >= 0) & (t <= ends[np.clip(i, 0, None)])
+    return np.where(inside, order[np.clip(i, 0, None)], -1)
+
+
+def unit_samples(
+    dataset: Dataset,
+    unit: str,
+    *,
+    time_offset_s: float = 0.0,
+    use_dataset_qdd: bool = False,
+    qdd_window_s: float = DEFAULT_QDD_WINDOW_S,
+) -> UnitSamples:
+    """Gather one unit's samples with joint states interpolated to its instants.
+
+    ``time_offset_s`` is the IMU's latency: the sample stamped ``t`` measured the motion at
+    ``t - time_offset_s``. Samples whose shifted instant lies outside the joint stream are dropped.
+    """
+    if unit not in dataset.imu:
+        raise CalibrationError(f"unknown unit '{unit}' (dataset has: {', '.join(dataset.units)})")
+    if dataset.segments is None or len(dataset.segments) == 0:
+        raise CalibrationError("dataset has no segments; segment the recording first (skincal segment)")
+    imu = dataset.imu[unit]
+    t = np.asarray(imu.t, dtype=float) - time_offset_s
+    accel = np.asarray(imu.accel, dtype=float)
+    finite = np.all(np.isfinite(accel), axis=1)
+    tj = dataset.joints.t
+    keep = finite & (t >= tj[0]) & (t <= tj[-1])
+    t, accel = t[keep], accel[keep]
+    gyro = None if imu.gyro is None else np.asarray(imu.gyro, dtype=float)[keep]
+    q, qd, qdd = joint_states_at(dataset.joints, t, use_dataset_qdd=use_dataset_qdd, qdd_window_s=qdd_window_s)
+    seg = tag_segments(t, dataset.segments)
+    inside = seg >= 0
+    pick = lambda arr, fill: np.where(inside, np.asarray(arr)[np.clip(seg, 0, None)], fill)  # noqa: E731
+    return UnitSamples(
+        unit=unit,
+        t=t,
+        accel=accel,
+        gyro=gyro,
+        q=q,
+        qd=qd,
+        qdd=qdd,
+        segment=seg,
+        kind=pick(dataset.segments.kind, -1).astype(np.int8),
+        joint=pick(dataset.segments.joint, -1).astype(np.int32),
+        pose=pick(dataset.segments.pose, -1).astype(np.int32),
+    )
+
+
+@dataclass(frozen=True)
+class StaticMeans:
+    """Per static segment: mean specific force ``(S, 3)`` (unit frame), joint angles ``(S, n)``,
+    sample counts ``(S,)`` and the segment indices ``(S,)``."""
+
+    accel: FloatArray
+    q: FloatArray
+    count: np.ndarray
+    segment: np.ndarray
+
+
+def static_means(samples: UnitSamples, min_samples: int = 1) -> StaticMeans:
+    """Average the accelerometer and joint angles over each static segment (paper Sec. II-A)."""
+    st = samples.static
+    segs, inverse, counts = np.unique(st.segment, return_inverse=True, return_counts=True)
+    keep = counts >= min_samples
+    sums = np.zeros((segs.size, 3))
+    np.add.at(sums, inverse, st.accel)
+    qsum = np.zeros((segs.size, st.q.shape[1] if st.q.ndim == 2 else 0))
+    np.add.at(qsum, inverse, st.q)
+    return StaticMeans(
+        accel=(sums / counts[:, None])[keep],
+        q=(qsum / counts[:, None])[keep],
+        count=counts[keep],
+        segment=segs[keep],
+    )

@@ -1,0 +1,124 @@
+"""``skincal calibrate`` and ``skincal evaluate``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+from skincal.cli.app import app, console
+from skincal.errors import ConfigError
+
+
+def read_links_file(path: Path) -> dict[str, int]:
+    """A mapping ``unit -> 1-based link`` from a YAML or JSON file."""
+    import yaml
+
+    try:
+        doc = yaml.safe_load(path.read_text())  # JSON is YAML
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read links file ({exc.strerror or exc})") from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML/JSON: {str(exc).splitlines()[0]}") from None
+    if not isinstance(doc, dict) or not all(isinstance(v, int) and not isinstance(v, bool) for v in doc.values()):
+        raise ConfigError(f"{path}: a links file maps unit names to 1-based link numbers, e.g. 'su1: 3'")
+    return {str(k): int(v) for k, v in doc.items()}
+
+
+def _unit_table(result, title: str):
+    from rich.table import Table
+
+    table = Table(title=title)
+    for col in ("unit", "link", "position [m]", "quaternion (w,x,y,z)", "pos std [mm]", "rot std [deg]", "notes"):
+        table.add_column(col)
+    for name, unit in result.units.items():
+        std_p = "-" if unit.position_std_m is None else f"{1e3 * max(unit.position_std_m):.3f}"
+        std_r = "-" if unit.rotation_std_deg is None else f"{max(unit.rotation_std_deg):.3f}"
+        notes = ("unobservable; " if not unit.observable else "") + "; ".join(unit.warnings)
+        table.add_row(
+            name,
+            str(unit.pose.link),
+            " ".join(f"{x:+.4f}" for x in unit.pose.p_link_su),
+            " ".join(f"{x:+.4f}" for x in unit.pose.quaternion_wxyz),
+            std_p,
+            std_r,
+            notes or "",
+        )
+    return table
+
+
+@app.command()
+def calibrate(
+    dataset: Path = typer.Argument(..., help="dataset file (.h5)"),
+    out: Path = typer.Option(..., "--out", "-o", help="result file to write (.json)"),
+    method: str = typer.Option("mle", help="mle (default), om (paper), om-joint, mmm, mm"),
+    seed: int = typer.Option(0, help="seed for methods with random starts"),
+    links: Path | None = typer.Option(None, help="YAML/JSON file mapping unit -> 1-based link"),
+    use_truth_links: bool = typer.Option(False, help="take each unit's link from the dataset truth"),
+    use_dataset_qdd: bool = typer.Option(False, help="use the dataset's qdd instead of estimating it"),
+    unit: list[str] | None = typer.Option(None, help="calibrate only this unit (repeatable)"),
+) -> None:
+    """Calibrate the skin units of a dataset and write the result JSON."""
+    from rich.progress import Progress
+
+    from skincal.calib import calibrate as run
+    from skincal.data.hdf5 import read_dataset
+    from skincal.data.result import sha256_file, write_result
+
+    ds = read_dataset(dataset)
+    link_map = read_links_file(links) if links is not None else None
+    names = unit or ds.units
+    with Progress(console=console, transient=True) as progress:
+        task = progress.add_task(f"calibrating ({method})", total=len(names))
+        result = run(
+            ds, method, seed=seed, links=link_map, use_truth_links=use_truth_links,
+            use_dataset_qdd=use_dataset_qdd, units=list(names), dataset_sha256=sha256_file(dataset),
+            progress=lambda _name: progress.advance(task),
+        )
+    write_result(result, out)
+    console.print(_unit_table(result, f"{method}: {len(result.units)} units in {result.runtime_s:.2f} s"))
+    for name, reason in result.extras.get("failed_units", {}).items():
+        console.print(f"[yellow]warning[/]: unit {name} not calibrated: {reason}", highlight=False)
+    console.print(f"wrote {out}")
+
+
+@app.command()
+def evaluate(
+    result: Path = typer.Argument(..., help="calibration result (.json)"),
+    truth: Path = typer.Option(..., help="simulated dataset with /truth (.h5)"),
+    as_json: bool = typer.Option(False, "--json", help="print JSON for scripts instead of a table"),
+) -> None:
+    """Compare a calibration result with the true poses of a simulated dataset."""
+    from rich.table import Table
+
+    from skincal.calib.metrics import evaluate as run
+    from skincal.data.hdf5 import read_dataset
+    from skincal.data.result import read_result
+
+    doc = run(read_result(result), read_dataset(truth))
+    if as_json:
+        typer.echo(json.dumps(doc, indent=2))
+        return
+    table = Table(title=f"{result.name} vs truth")
+    for col in ("unit", "link true/est", "position error [mm]", "rotation error [deg]", "quat. distance"):
+        table.add_column(col, justify="right")
+    for name, u in doc["units"].items():
+        mark = "" if u["observable"] else " (unobservable)"
+        table.add_row(
+            name + mark,
+            f"{u['link_true']}/{u['link_estimated']}",
+            f"{u['position_error_mm']:.3f}",
+            f"{u['rotation_error_deg']:.4f}",
+            f"{u['quaternion_distance']:.5f}",
+        )
+    if doc["mean_position_error_mm"] is not None:
+        table.add_row(
+            "mean",
+            f"{doc['links_correct']}/{doc['units_total']} ok",
+            f"{doc['mean_position_error_mm']:.3f}",
+            f"{doc['mean_rotation_error_deg']:.4f}",
+            f"{doc['mean_quaternion_distance']:.5f}",
+            style="bold",
+        )
+    console.print(table)

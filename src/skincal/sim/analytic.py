@@ -1,0 +1,126 @@
+"""The analytic simulator: exact kinematics, each sensor on its own clock, sensor model on top.
+
+For every unit ``k`` on link ``n`` with pose ``T_link_su = (R, p)``:
+
+1. the IMU stamps samples at its own instants ``t_stamp`` (rate, random phase, jitter, drops);
+2. the physical instants are ``t_true = t_stamp - latency`` (the unit's time offset);
+3. the motion is evaluated exactly there: ``q, qd, qdd = trajectory.evaluate(t_true)``; the unit's
+   acceleration ``a_base`` and the link's angular velocity ``w_base`` come from
+   :meth:`SerialChain.link_motion`; ``R_base_su = R_base_link(q) R``;
+4. the true specific force ``f = R_base_su^T (a_base - g_base)`` and rate ``w = R_base_su^T w_base``
+   go through :func:`skincal.skin.imu.apply_imu_model` (scale, misalignment, bias, noise,
+   quantisation, saturation).
+
+The robot stream is the trajectory at its own rate (1 kHz by default) with exact ``q, qd, qdd``.
+Time-of-flight streams are simulated when a scene is given.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from skincal.data.dataset import Dataset, ImuStream, JointStates, TofStream
+from skincal.errors import ConfigError
+from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
+from skincal.protocol import Trajectory
+from skincal.skin.imu import (
+    ImuModel,
+    angular_rate,
+    apply_imu_model,
+    draw_imu_errors,
+    sample_instants,
+    specific_force,
+    true_sample_times,
+)
+from skincal.skin.pose import SkinUnitPose
+
+
+def unit_kinematics(
+    chain: SerialChain, pose: SkinUnitPose, trajectory: Trajectory, t: np.ndarray, gravity: np.ndarray = GRAVITY_BASE
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """True specific force ``(M, 3)`` and angular rate ``(M, 3)`` in the unit frame at instants ``t``,
+    with the unit's base-frame position ``(M, 3)`` and orientation ``R_base_su`` ``(M, 3, 3)``."""
+    q, qd, qdd = trajectory.evaluate(t)
+    motion = chain.link_motion(q, qd, qdd, upto=pose.link)
+    x_base, _, a_base = motion.point(pose.link, pose.p_link_su)
+    R_base_su = motion.T_base_link[:, pose.link, :3, :3] @ pose.R_link_su
+    f_su = specific_force(a_base, R_base_su, gravity)
+    w_su = angular_rate(motion.omega[:, pose.link], R_base_su)
+    return f_su, w_su, x_base, R_base_su
+
+
+def simulate(
+    chain: SerialChain,
+    placements: Mapping[str, SkinUnitPose],
+    trajectory: Trajectory,
+    imu_model: ImuModel,
+    rng: np.random.Generator,
+    *,
+    tof_model=None,
+    scene: Sequence | None = None,
+    gravity: np.ndarray = GRAVITY_BASE,
+    description: str = "",
+) -> Dataset:
+    """Simulate a calibration session (see module docstring).
+
+    Args:
+        chain: the robot.
+        placements: true unit poses by name.
+        trajectory: the protocol motion (:func:`skincal.protocol.build_trajectory`).
+        imu_model: sensor model (:func:`skincal.skin.imu.get_imu_model`).
+        rng: random generator; each unit draws from its own child generator.
+        tof_model, scene: time-of-flight model and obstacle primitives (base frame); when a scene
+            is given, each unit also gets a ToF stream at ``tof_model.rate_hz``.
+        gravity: ``(3,)`` base-frame gravity, m/s^2.
+        description: stored in the dataset.
+    """
+    if not placements:
+        raise ConfigError("simulate: no skin units to simulate")
+    for pose in placements.values():
+        chain.check_link(pose.link)
+    gravity = np.asarray(gravity, dtype=float)
+    t0, t1 = float(trajectory.t[0]), float(trajectory.t[-1])
+    imu: dict[str, ImuStream] = {}
+    tof: dict[str, TofStream] = {}
+    truth_sensor: dict[str, dict[str, np.ndarray | float]] = {}
+    for (name, pose), unit_rng in zip(placements.items(), rng.spawn(len(placements)), strict=True):
+        errors = draw_imu_errors(imu_model, unit_rng)
+        t_stamp = sample_instants(imu_model, t0 + errors.latency_s, t1 + min(errors.latency_s, 0.0), unit_rng)
+        t_true = true_sample_times(t_stamp, errors)
+        inside = (t_true >= t0) & (t_true <= t1)
+        t_stamp, t_true = t_stamp[inside], t_true[inside]
+        f_su, w_su, _, _ = unit_kinematics(chain, pose, trajectory, t_true, gravity)
+        accel, gyro = apply_imu_model(imu_model, errors, f_su, w_su, unit_rng)
+        imu[name] = ImuStream(t=t_stamp, accel=accel, gyro=gyro)
+        truth_sensor[name] = {
+            "accel_bias": errors.accel_bias,
+            "accel_scale": errors.accel_scale,
+            "accel_misalignment": errors.accel_misalignment,
+            "time_offset_s": float(errors.latency_s),
+        }
+        if scene is not None:
+            tof[name] = _simulate_tof(chain, pose, trajectory, tof_model, scene, unit_rng, t0, t1)
+    joints = JointStates(t=trajectory.t, q=trajectory.q, qd=trajectory.qd, qdd=trajectory.qdd)
+    return Dataset(
+        robot=chain,
+        joints=joints,
+        imu=imu,
+        tof=tof,
+        segments=trajectory.segments,
+        truth=dict(placements),
+        truth_sensor=truth_sensor,
+        gravity=gravity,
+        description=description,
+    )
+
+
+def _simulate_tof(chain, pose, trajectory, tof_model, scene, rng, t0: float, t1: float) -> TofStream:
+    from skincal.skin.tof import TofModel, tof_range
+
+    model = tof_model if tof_model is not None else TofModel()
+    phase = rng.uniform(0.0, 1.0 / model.rate_hz)
+    t = t0 + phase + np.arange(int(np.floor((t1 - t0 - phase) * model.rate_hz)) + 1) / model.rate_hz
+    _, _, x_base, R_base_su = unit_kinematics(chain, pose, trajectory, t)
+    return TofStream(t=t, range=tof_range(x_base, R_base_su, scene, model, rng))
