@@ -15,7 +15,9 @@ from skincal.sim.analytic import simulate
 from skincal.skin.imu import ImuModel, get_imu_model
 from skincal.skin.pose import SkinUnitPose
 
-SHORT = ProtocolConfig(n_poses=2, amplitude=1.2, excite_duration=1.0, rest_duration=1.0, static_duration=0.5, name="short")
+SHORT = ProtocolConfig(
+    n_poses=2, amplitude=1.2, excite_duration=1.0, rest_duration=1.0, static_duration=0.5, name="short"
+)
 
 
 def placements(chain):
