@@ -1,0 +1,150 @@
+"""Writing and reading protocol trajectories: CSV (the sampled stream) and JSON (the definition).
+
+* CSV: header ``t,q1..qn,qd1..qdn``, one row per sample, s, rad, rad/s, 17 significant digits
+  (exact float64 round trip): the stream a joint controller replays.
+* JSON: ``format = "skincal-protocol"``, ``version = 1``, the robot name, the config, the poses,
+  the segments and the piecewise closed form (``knots``, ``coef``, ``sine_amplitude``,
+  ``sine_omega``), from which :func:`read_trajectory_json` rebuilds the exact trajectory.
+
+Writes are atomic (:func:`skincal.data.atomic.atomic_path`: a temporary file in the target's
+directory is fsynced and moved onto the target with :func:`os.replace`): readers never see half a file.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+from skincal.data.atomic import atomic_path
+from skincal.data.dataset import Segments
+from skincal.errors import ConfigError, DatasetError
+from skincal.kinematics.transforms import FloatArray
+from skincal.protocol.config import ProtocolConfig
+from skincal.protocol.trajectory import Trajectory
+
+FORMAT = "skincal-protocol"
+VERSION = 1
+
+
+def _write_atomic(path: Path, write: Callable[[TextIO], object]) -> None:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as fh:
+        write(fh)
+
+
+def export_trajectory(traj: Trajectory, path: str | Path) -> Path:
+    """Write ``traj`` to ``path``: ``.csv`` (samples) or ``.json`` (definition), chosen by suffix."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        n = traj.n_joints
+        header = ",".join(["t"] + [f"q{i + 1}" for i in range(n)] + [f"qd{i + 1}" for i in range(n)])
+        table = np.column_stack([traj.t, traj.q, traj.qd])
+        _write_atomic(path, lambda fh: np.savetxt(fh, table, fmt="%.17g", delimiter=",", header=header, comments=""))
+    elif suffix == ".json":
+        doc = trajectory_to_json(traj)
+        _write_atomic(path, lambda fh: json.dump(doc, fh))
+    else:
+        raise ConfigError(f"{path}: unknown trajectory format '{path.suffix}' (use .csv or .json)")
+    return path
+
+
+def trajectory_to_json(traj: Trajectory) -> dict[str, Any]:
+    """The JSON document of :func:`export_trajectory` as a dictionary."""
+    seg = traj.segments
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "robot": traj.robot,
+        "duration_s": traj.duration,
+        "config": traj.config.to_dict(),
+        "poses": traj.poses.tolist(),
+        "segments": {
+            "t_start": np.asarray(seg.t_start).tolist(),
+            "t_end": np.asarray(seg.t_end).tolist(),
+            "kind": np.asarray(seg.kind).tolist(),
+            "pose": np.asarray(seg.pose).tolist(),
+            "joint": np.asarray(seg.joint).tolist(),
+        },
+        "knots": traj.knots.tolist(),
+        "coef": traj.coef.tolist(),
+        "sine_amplitude": traj.sine_amplitude.tolist(),
+        "sine_omega": traj.sine_omega.tolist(),
+    }
+
+
+def read_trajectory_csv(path: str | Path) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Read a CSV written by :func:`export_trajectory`: ``t`` ``(N,)``, ``q`` and ``qd`` ``(N, n)``."""
+    path = Path(path)
+    try:
+        with open(path) as fh:
+            header = fh.readline().strip().split(",")
+            data = np.loadtxt(fh, delimiter=",", ndmin=2)
+    except OSError as exc:
+        raise DatasetError(f"{path}: cannot read trajectory CSV ({exc.strerror or exc})") from None
+    except ValueError as exc:
+        raise DatasetError(f"{path}: trajectory CSV holds non-numeric rows ({exc})") from None
+    n = (len(header) - 1) // 2
+    expected = ["t"] + [f"q{i + 1}" for i in range(n)] + [f"qd{i + 1}" for i in range(n)]
+    if header != expected or data.shape[1] != len(header):
+        raise DatasetError(f"{path}: trajectory CSV header must be t,q1..qn,qd1..qdn, got {','.join(header)}")
+    return data[:, 0], data[:, 1 : n + 1], data[:, n + 1 :]
+
+
+def read_trajectory_json(path: str | Path) -> Trajectory:
+    """Rebuild the exact trajectory from a JSON written by :func:`export_trajectory`.
+
+    The samples are re-evaluated from the piecewise form at ``config.rate_hz``.
+    """
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except OSError as exc:
+        raise DatasetError(f"{path}: cannot read trajectory JSON ({exc.strerror or exc})") from None
+    except json.JSONDecodeError as exc:
+        raise DatasetError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise DatasetError(f"{path}: field 'format' must be '{FORMAT}'")
+    if doc.get("version") != VERSION:
+        raise DatasetError(f"{path}: unsupported version {doc.get('version')!r} (this reader knows {VERSION})")
+    try:
+        config = ProtocolConfig.from_dict(doc["config"], source=str(path))
+        seg = doc["segments"]
+        segments = Segments(
+            t_start=np.asarray(seg["t_start"], dtype=float),
+            t_end=np.asarray(seg["t_end"], dtype=float),
+            kind=np.asarray(seg["kind"], dtype=np.int8),
+            pose=np.asarray(seg["pose"], dtype=np.int32),
+            joint=np.asarray(seg["joint"], dtype=np.int32),
+        )
+        knots = np.asarray(doc["knots"], dtype=float)
+        coef = np.asarray(doc["coef"], dtype=float)
+        B = np.asarray(doc["sine_amplitude"], dtype=float)
+        w = np.asarray(doc["sine_omega"], dtype=float)
+        poses = np.asarray(doc["poses"], dtype=float)
+    except KeyError as exc:
+        raise DatasetError(f"{path}: missing field {exc}") from None
+    except (TypeError, ValueError) as exc:
+        raise DatasetError(f"{path}: malformed trajectory field ({exc})") from None
+    K = knots.size - 1
+    if (
+        K < 1
+        or coef.ndim != 3
+        or coef.shape[0] != K
+        or coef.shape[2] != 6
+        or not (B.shape == w.shape == coef.shape[:2])
+    ):
+        raise DatasetError(f"{path}: fields 'knots', 'coef', 'sine_amplitude', 'sine_omega' have inconsistent shapes")
+    traj = Trajectory(
+        t=np.empty(0), q=np.empty((0, coef.shape[1])), qd=np.empty((0, coef.shape[1])),
+        qdd=np.empty((0, coef.shape[1])), segments=segments, config=config, poses=poses, knots=knots,
+        coef=coef, sine_amplitude=B, sine_omega=w, robot=str(doc.get("robot", "")),
+    )  # fmt: skip
+    from dataclasses import replace
+
+    t = np.arange(int(np.floor(traj.duration * config.rate_hz + 1e-9)) + 1) / config.rate_hz
+    q, qd, qdd = traj.evaluate(t)
+    return replace(traj, t=t, q=q, qd=qd, qdd=qdd)
