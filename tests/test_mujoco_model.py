@@ -216,7 +216,7 @@ def test_rangefinder_matches_closed_form_ray_casts() -> None:
     data = mujoco.MjData(model)
     mujoco.mj_inverse(model, data)
     idx = SensorIndex.of(model, list(placements))
-    mj = data.sensordata[idx.range]
+    mj = data.sensordata[idx.range[:, 0]]
     mj = np.where(mj < 0, np.nan, mj)
     origin = data.site_xpos[idx.site]
     direction = data.site_xmat[idx.site].reshape(-1, 3, 3)[:, :, 2]
@@ -246,7 +246,7 @@ def test_rangefinder_sees_other_links_but_not_its_own() -> None:
     model = build_model(chain, placements, board_geoms=False)
     data = mujoco.MjData(model)
     mujoco.mj_inverse(model, data)
-    reading = data.sensordata[SensorIndex.of(model, ["up"]).range[0]]
+    reading = data.sensordata[SensorIndex.of(model, ["up"]).range[0, 0]]
     # Nearest surface above the site that is not on link 1: lowest capsule end below a radius.
     z_site = 0.333 - 0.2
     z_hits = [T[c.link, 2, 3] + (T[c.link, :3, :3] @ c.p0)[2] - c.radius for c in capsules if c.link >= 2]
@@ -267,7 +267,7 @@ def test_scene_time_table_and_mocap_playback() -> None:
     for t in (0.0, 2.0, 4.0):
         data.mocap_pos[:] = scene.mocap_positions([t])[0]
         mujoco.mj_inverse(model, data)
-        readings.append(data.sensordata[idx.range[0]])
+        readings.append(data.sensordata[idx.range[0, 0]])
     # Ray along +x at y = 0.3, z = 0.433 m: under the table top, between its legs, below the ball: the wall.
     np.testing.assert_allclose(readings, 2.5, atol=1e-9)
     scene2 = Scene(
@@ -285,7 +285,7 @@ def test_scene_time_table_and_mocap_playback() -> None:
     for t in (0.0, 2.0, 4.0):
         data2.mocap_pos[:] = scene2.mocap_positions([t])[0]
         mujoco.mj_inverse(model2, data2)
-        got.append(data2.sensordata[SensorIndex.of(model2, ["fwd"]).range[0]])
+        got.append(data2.sensordata[SensorIndex.of(model2, ["fwd"]).range[0, 0]])
     np.testing.assert_allclose(got, [1.9, 1.4, 0.9], atol=1e-9)
 
 

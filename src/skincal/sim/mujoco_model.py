@@ -192,6 +192,8 @@ def build_mjcf(
     link_radius: float | FloatArray = DEFAULT_LINK_RADIUS,
     density: float = DEFAULT_LINK_DENSITY,
     velocity_gain: float | Sequence[float] | None = None,
+    gravity_compensation: bool = False,
+    range_directions: FloatArray | None = None,
     gravity: FloatArray = GRAVITY_BASE,
 ) -> str:
     """MJCF text of ``chain`` with one site and accelerometer/gyro/rangefinder per skin unit.
@@ -207,6 +209,11 @@ def build_mjcf(
         density: capsule density for links without explicit inertials, kg/m^3.
         velocity_gain: when given, one MuJoCo ``velocity`` actuator per joint with this gain
             ``kv`` (N m s/rad, one or ``(n,)``): ``tau = kv (ctrl - qd)``, ``ctrl`` in rad/s.
+        gravity_compensation: cancel gravity on every link (MuJoCo ``gravcomp``), as the robot's own
+            controller does; sensors still feel gravity.
+        range_directions: ``(K, 3)`` unit ray directions in the SU frame (e.g. a ToF cone from
+            :func:`skincal.skin.tof.cone_directions`): rangefinders ``su/u/range{k}`` on extra sites
+            ``su/u/ray{k}`` at the unit's origin. Default: one rangefinder ``su/u/range`` along +z.
         gravity: ``(3,)`` gravity in the base frame, m/s^2.
     """
     placements = dict(placements or {})
@@ -229,7 +236,10 @@ def build_mjcf(
     bodies = [parent]
     for i in range(1, n + 1):
         pos, quat, axis, anchor = _body_offset(chain, i)
-        body = ET.SubElement(parent, "body", {"name": body_name(i), "pos": _fmt(pos), "quat": _fmt(quat)})
+        battrs = {"name": body_name(i), "pos": _fmt(pos), "quat": _fmt(quat)}
+        if gravity_compensation:
+            battrs["gravcomp"] = "1"
+        body = ET.SubElement(parent, "body", battrs)
         jattrs = {"name": joint_name(i), "type": "hinge", "axis": _fmt(axis), "pos": _fmt(anchor)}
         if chain.joint_lower is not None and chain.joint_upper is not None:
             jattrs["range"] = _fmt([chain.joint_lower[i - 1], chain.joint_upper[i - 1]])
@@ -277,8 +287,23 @@ def build_mjcf(
                     "rgba": "0.1 0.5 0.2 1",
                 },
             )
-        for kind, tag in (("accel", "accelerometer"), ("gyro", "gyro"), ("range", "rangefinder")):
+        for kind, tag in (("accel", "accelerometer"), ("gyro", "gyro")):
             ET.SubElement(sensors, tag, {"name": sensor_name(unit, kind), "site": site_name(unit)})
+        if range_directions is None:
+            ET.SubElement(sensors, "rangefinder", {"name": sensor_name(unit, "range"), "site": site_name(unit)})
+            continue
+        for k, R_su_ray in enumerate(_frames_along(np.asarray(range_directions, dtype=float))):
+            ray_site = f"{site_name(unit)}/ray{k}"
+            ET.SubElement(
+                body,
+                "site",
+                {
+                    "name": ray_site,
+                    "pos": _fmt(pose.p_link_su),
+                    "quat": _fmt(quat_wxyz_from_matrix(pose.R_link_su @ R_su_ray)),
+                },
+            )
+            ET.SubElement(sensors, "rangefinder", {"name": sensor_name(unit, f"range{k}"), "site": ray_site})
 
     if velocity_gain is not None:
         kv = np.broadcast_to(np.asarray(velocity_gain, dtype=float), (n,))
@@ -295,6 +320,17 @@ def build_mjcf(
         scene.add_to_mjcf(world)
     ET.indent(root)
     return ET.tostring(root, encoding="unicode")
+
+
+def _frames_along(directions: FloatArray) -> FloatArray:
+    """Rotations ``(K, 3, 3)`` whose z columns are the given unit directions ``(K, 3)``."""
+    if directions.ndim != 2 or directions.shape[1] != 3 or not np.all(np.isfinite(directions)):
+        raise ConfigError(f"range_directions must be a finite (K, 3) array, got shape {directions.shape}")
+    z = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    helper = np.where(np.abs(z[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    return np.stack([x, np.cross(z, x), z], axis=-1)
 
 
 def build_model(
@@ -317,7 +353,7 @@ class SensorIndex:
         units: unit names in placement order.
         site: ``(U,)`` site ids.
         accel, gyro: ``(U, 3)`` sensordata indices.
-        range: ``(U,)`` sensordata indices.
+        range: ``(U, K)`` sensordata indices of the ``K`` rangefinders of each unit.
     """
 
     units: tuple[str, ...]
@@ -327,8 +363,12 @@ class SensorIndex:
     range: np.ndarray
 
     @classmethod
-    def of(cls, model: mujoco.MjModel, units: Sequence[str]) -> SensorIndex:
-        """Look the units' sites and sensors up in a model built by :func:`build_model`."""
+    def of(cls, model: mujoco.MjModel, units: Sequence[str], n_rays: int | None = None) -> SensorIndex:
+        """Look the units' sites and sensors up in a model built by :func:`build_model`.
+
+        ``n_rays``: the number of ``range_directions`` the model was built with (``None``: one
+        rangefinder along +z)."""
+        range_kinds = ["range"] if n_rays is None else [f"range{k}" for k in range(n_rays)]
 
         def adr(unit: str, kind: str, dim: int) -> np.ndarray:
             start = int(model.sensor(sensor_name(unit, kind)).adr[0])
@@ -340,7 +380,9 @@ class SensorIndex:
                 site=np.array([model.site(site_name(u)).id for u in units], dtype=int),
                 accel=np.array([adr(u, "accel", 3) for u in units], dtype=int).reshape(-1, 3),
                 gyro=np.array([adr(u, "gyro", 3) for u in units], dtype=int).reshape(-1, 3),
-                range=np.array([adr(u, "range", 1)[0] for u in units], dtype=int),
+                range=np.array([[adr(u, kind, 1)[0] for kind in range_kinds] for u in units], dtype=int).reshape(
+                    len(units), len(range_kinds)
+                ),
             )
         except KeyError as exc:
             raise ConfigError(f"MuJoCo model has no skin unit sensors for {exc}") from None

@@ -162,6 +162,31 @@ class Scene:
             return np.zeros((t.size, 0, 3))
         return np.stack([o.positions(t) for o in self.obstacles], axis=1)
 
+    def tof_primitives(self, t: ArrayLike | None = None) -> list:
+        """The scene as :mod:`skincal.skin.tof` solids in the base frame (for ``tof_range`` and the
+        analytic simulator): fixed ``(3,)`` centres when ``t`` is ``None`` (obstacles at ``p_base_obs``),
+        else ``(M, 3)`` centres at times ``t`` ``(M,)`` s. Only unbounded planes convert (to half-spaces)."""
+        from skincal.skin import tof
+
+        out: list = []
+        for obs in self.obstacles:
+            p_obs = obs.p_base_obs if t is None else obs.positions(t)
+            for prim in obs.primitives:
+                R = obs.R_base_obs @ prim.R_obs_prim
+                c = p_obs + obs.R_base_obs @ prim.p_obs_prim
+                if prim.kind == "sphere":
+                    out.append(tof.Sphere(c, prim.size[0]))
+                elif prim.kind == "capsule":
+                    half = prim.size[1] * R[:, 2]
+                    out.append(tof.Capsule(c - half, c + half, prim.size[0]))
+                elif prim.kind == "box":
+                    out.append(tof.Box(c, prim.size, R))
+                elif np.any(prim.size > 0):
+                    raise ConfigError(f"obstacle '{obs.name}': a bounded plane has no ToF half-space equivalent")
+                else:
+                    out.append(tof.Plane(c, R[:, 2]))
+        return out
+
     def ray_distance(self, origin: ArrayLike, direction: ArrayLike, t: ArrayLike = 0.0) -> FloatArray:
         """Closed-form distance along rays to the nearest obstacle surface, ``(M,)`` m, NaN = no hit.
 

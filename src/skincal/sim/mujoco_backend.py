@@ -1,0 +1,320 @@
+"""MuJoCo simulator: the same :class:`~skincal.data.dataset.Dataset` as :func:`skincal.sim.analytic.simulate`,
+with the sensor physics from an independent engine.
+
+Per unit (mirroring the analytic simulator draw for draw, so that one seed gives the same stamps,
+errors and noise in both): constant errors :func:`~skincal.skin.imu.draw_imu_errors`, own stamps
+:func:`~skincal.skin.imu.sample_instants`, physical instants ``t_true = t_stamp - latency``; the
+true specific force ``f = R_base_su^T (a - g)`` and rate ``R_base_su^T w`` come from MuJoCo's
+``accelerometer`` and ``gyro`` at the unit's site; then :func:`~skincal.skin.imu.apply_imu_model`.
+
+Modes:
+
+* ``"kinematic"`` (default): at each instant the state is imposed, ``(q, qd, qdd) =
+  trajectory.evaluate(t)``, and ``mj_inverse`` evaluates the sensors with that ``qacc`` (unlike
+  ``mj_forward``, which would overwrite ``qacc`` with the free-motion acceleration). The joint
+  stream is the trajectory's own samples.
+* ``"dynamic"``: the robot is simulated at 1 kHz (semi-implicit Euler) under gravity with one
+  velocity servo per joint, ``tau = kv (u - qd)``, commanded ``u = qd_ref(t) + kp (q_ref(t) - q)``,
+  and, like the real robot's controller, gravity compensation. The joint stream is the state the
+  robot actually reached (``q``, ``qd`` and MuJoCo's ``qacc`` as ``qdd``) interpolated to the
+  trajectory's sample times; IMU readings are linearly interpolated between the 1 kHz steps,
+  range readings take the latest step (zero-order hold). The tracking error is what a real
+  controller adds to the data.
+
+Time-of-flight: with a :class:`~skincal.sim.scene.Scene`, each unit gets a ToF stream at
+``tof_model.rate_hz``, measured by MuJoCo rangefinders (one per ToF cone ray) against the obstacles
+(mocap bodies following their time tables) and the robot's own other links.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from skincal.data.dataset import Dataset, ImuStream, JointStates, TofStream
+from skincal.errors import ConfigError
+from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
+from skincal.kinematics.transforms import FloatArray
+from skincal.protocol import Trajectory
+from skincal.sim.mujoco_model import SensorIndex, build_model, require_mujoco
+from skincal.sim.scene import Scene
+from skincal.skin.imu import ImuModel, apply_imu_model, draw_imu_errors, sample_instants, true_sample_times
+from skincal.skin.pose import SkinUnitPose
+
+MODES = ("kinematic", "dynamic")
+
+SERVO_TIME_CONSTANT = 0.01
+"""Velocity-servo time constant, s: ``kv_j = M_jj(q0) / tau`` (100 rad/s bandwidth at 1 kHz)."""
+
+POSITION_GAIN = 20.0
+"""Outer position-loop gain ``kp`` of the dynamic mode's velocity command, 1/s."""
+
+
+@dataclass(frozen=True)
+class SensorTrace:
+    """Sensor readings of every unit at instants ``t`` ``(M,)`` s: ``accel``/``gyro`` ``(M, U, 3)``
+    (SU frame, m/s^2 and rad/s), ``range`` ``(M, U, K)`` m per ToF ray (NaN = nothing hit)."""
+
+    t: FloatArray
+    accel: FloatArray
+    gyro: FloatArray
+    range: FloatArray
+
+
+def _read(data: Any, idx: SensorIndex) -> tuple[FloatArray, FloatArray, FloatArray]:
+    s = data.sensordata
+    return s[idx.accel], s[idx.gyro], s[idx.range]
+
+
+def _empty_trace(t: FloatArray, idx: SensorIndex) -> SensorTrace:
+    U, K = idx.range.shape
+    M = t.size
+    return SensorTrace(t, np.empty((M, U, 3)), np.empty((M, U, 3)), np.empty((M, U, K)))
+
+
+def _no_hit_to_nan(trace: SensorTrace) -> SensorTrace:
+    trace.range[trace.range < 0] = np.nan
+    return trace
+
+
+def kinematic_playback(
+    model: Any, idx: SensorIndex, trajectory: Trajectory, t: FloatArray, scene: Scene | None = None
+) -> SensorTrace:
+    """Sensors at instants ``t`` ``(M,)`` s with ``q, qd, qdd = trajectory.evaluate(t)`` imposed (``mj_inverse``)."""
+    mujoco = require_mujoco()
+    t = np.asarray(t, dtype=float)
+    q, qd, qdd = trajectory.evaluate(t)
+    mocap = scene.mocap_positions(t) if scene is not None and scene.obstacles else None
+    data = mujoco.MjData(model)
+    out = _empty_trace(t, idx)
+    for m in range(t.size):  # MuJoCo evaluates one state per call
+        data.qpos[:], data.qvel[:], data.qacc[:] = q[m], qd[m], qdd[m]
+        if mocap is not None:
+            data.mocap_pos[:] = mocap[m]
+        mujoco.mj_inverse(model, data)
+        out.accel[m], out.gyro[m], out.range[m] = _read(data, idx)
+    return _no_hit_to_nan(out)
+
+
+@dataclass(frozen=True)
+class ServoRun:
+    """A dynamic run on the 1 kHz grid ``t`` ``(S,)``: actual ``q``, ``qd``, ``qdd`` ``(S, n)``,
+    the reference ``q_ref``, ``qd_ref`` ``(S, n)`` and the sensors (MuJoCo's, at each step's state)."""
+
+    t: FloatArray
+    q: FloatArray
+    qd: FloatArray
+    qdd: FloatArray
+    q_ref: FloatArray
+    qd_ref: FloatArray
+    sensors: SensorTrace
+
+
+def servo_gains(model: Any, q0: FloatArray, time_constant: float = SERVO_TIME_CONSTANT) -> FloatArray:
+    """Velocity gains ``kv_j = M_jj(q0) / time_constant`` (N m s/rad) from MuJoCo's mass matrix at ``q0``."""
+    mujoco = require_mujoco()
+    data = mujoco.MjData(model)
+    data.qpos[:] = q0
+    mujoco.mj_forward(model, data)
+    M = np.zeros((model.nv, model.nv))
+    try:
+        mujoco.mj_fullM(model, data, M)  # MuJoCo >= 3.3
+    except TypeError:  # pragma: no cover - older signature (m, dst, qM)
+        mujoco.mj_fullM(model, M, data.qM)
+    return np.diag(M) / time_constant
+
+
+def servo_run(
+    model: Any,
+    idx: SensorIndex,
+    trajectory: Trajectory,
+    t_end: float,
+    scene: Scene | None = None,
+    position_gain: float = POSITION_GAIN,
+) -> ServoRun:
+    """Simulate the velocity-servoed robot from ``trajectory``'s start state to ``t_end`` s.
+
+    ``model`` must have one velocity actuator per joint (``build_model(..., velocity_gain=...)``).
+    Each step records the state, then ``mj_step`` (Euler: ``qacc`` and the sensors belong to
+    that recorded state) integrates it by ``model.opt.timestep``.
+    """
+    mujoco = require_mujoco()
+    n = model.nq
+    if model.nu != n:
+        raise ConfigError(f"servo_run needs {n} velocity actuators in the model, found {model.nu}")
+    dt = float(model.opt.timestep)
+    t0 = float(trajectory.knots[0])
+    t = t0 + dt * np.arange(int(np.floor((t_end - t0) / dt + 1e-9)) + 1)
+    q_ref, qd_ref, _ = trajectory.evaluate(t)
+    mocap = scene.mocap_positions(t) if scene is not None and scene.obstacles else None
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = q_ref[0], qd_ref[0]
+    S = t.size
+    q, qd, qdd = np.empty((S, n)), np.empty((S, n)), np.empty((S, n))
+    sensors = _empty_trace(t, idx)
+    for k in range(S):  # the physics is sequential
+        q[k], qd[k] = data.qpos, data.qvel
+        data.ctrl[:] = qd_ref[k] + position_gain * (q_ref[k] - data.qpos)
+        if mocap is not None:
+            data.mocap_pos[:] = mocap[k]
+        mujoco.mj_step(model, data)
+        qdd[k] = data.qacc
+        sensors.accel[k], sensors.gyro[k], sensors.range[k] = _read(data, idx)
+    return ServoRun(t, q, qd, qdd, q_ref, qd_ref, _no_hit_to_nan(sensors))
+
+
+def _interp_rows(t: FloatArray, t_grid: FloatArray, values: FloatArray) -> FloatArray:
+    """Linear interpolation of ``values`` ``(S, ...)`` on ``t_grid`` at ``t`` ``(M,)`` -> ``(M, ...)``."""
+    flat = values.reshape(values.shape[0], -1)
+    out = np.stack([np.interp(t, t_grid, flat[:, j]) for j in range(flat.shape[1])], axis=-1)
+    return out.reshape((t.size,) + values.shape[1:])
+
+
+def _hold_rows(t: FloatArray, t_grid: FloatArray, values: FloatArray) -> FloatArray:
+    """Zero-order hold: the latest grid row at or before each ``t``."""
+    k = np.clip(np.searchsorted(t_grid, t + 1e-12, side="right") - 1, 0, t_grid.size - 1)
+    return values[k]
+
+
+def _apply_tof(model: Any, distance: FloatArray, rng: np.random.Generator) -> FloatArray:
+    """The post-processing steps of :func:`skincal.skin.tof.tof_range` on true distances ``(M,)`` m:
+    range window, range-dependent Gaussian noise, rounding (same draws from ``rng``)."""
+    valid = (distance >= model.min_range) & (distance <= model.max_range)
+    measured = np.where(valid, distance, np.nan)
+    if model.noise_std > 0 or model.noise_std_per_m > 0:
+        measured = measured + rng.normal(size=measured.shape) * model.noise_std_at(np.where(valid, distance, 0.0))
+    if model.resolution_m > 0:
+        measured = np.round(measured / model.resolution_m) * model.resolution_m
+    return measured
+
+
+def simulate_mujoco(
+    chain: SerialChain,
+    placements: Mapping[str, SkinUnitPose],
+    trajectory: Trajectory,
+    imu_model: ImuModel,
+    rng: np.random.Generator,
+    *,
+    mode: str = "kinematic",
+    scene: Scene | None = None,
+    tof_model: Any = None,
+    gravity: FloatArray = GRAVITY_BASE,
+    description: str = "",
+    position_gain: float = POSITION_GAIN,
+    model_options: Mapping[str, Any] | None = None,
+) -> Dataset:
+    """Simulate a calibration session with MuJoCo (see the module docstring).
+
+    Args:
+        chain, placements, trajectory, imu_model, rng: as :func:`skincal.sim.analytic.simulate`.
+        mode: ``"kinematic"`` (imposed motion) or ``"dynamic"`` (velocity servos under gravity).
+        scene: obstacles; when given, every unit also gets a ToF stream.
+        tof_model: :class:`skincal.skin.tof.TofModel` (default: VL53L1X defaults).
+        gravity: ``(3,)`` base-frame gravity, m/s^2.
+        description: stored in the dataset.
+        position_gain: ``kp`` of the dynamic mode's velocity command, 1/s.
+        model_options: extra keyword arguments of :func:`build_model` (e.g. ``link_radius``).
+    """
+    if mode not in MODES:
+        raise ConfigError(f"simulate_mujoco: mode must be one of {', '.join(MODES)}, got '{mode}'")
+    if not placements:
+        raise ConfigError("simulate_mujoco: no skin units to simulate")
+    for pose in placements.values():
+        chain.check_link(pose.link)
+    if trajectory.n_joints != chain.n_joints:
+        raise ConfigError(f"trajectory has {trajectory.n_joints} joints, robot '{chain.name}' has {chain.n_joints}")
+    gravity = np.asarray(gravity, dtype=float)
+    directions = None
+    if scene is not None:
+        from skincal.skin.tof import TofModel, cone_directions
+
+        tof_model = tof_model if tof_model is not None else TofModel()
+        directions = cone_directions(tof_model.fov_deg, tof_model.n_rays)
+    options = dict(model_options or {})
+    units = list(placements)
+    t0, t1 = float(trajectory.t[0]), float(trajectory.t[-1])
+
+    kv = None
+    if mode == "dynamic":
+        probe = build_model(chain, placements, scene=scene, gravity=gravity, range_directions=directions, **options)
+        kv = servo_gains(probe, trajectory.evaluate([t0])[0][0])
+    model = build_model(
+        chain,
+        placements,
+        scene=scene,
+        gravity=gravity,
+        range_directions=directions,
+        velocity_gain=kv,
+        gravity_compensation=mode == "dynamic",
+        **options,
+    )
+    idx = SensorIndex.of(model, units, None if directions is None else len(directions))
+
+    # 1. Each unit's own clock (same draws as the analytic simulator).
+    unit_rngs = rng.spawn(len(units))
+    errors, stamps, true_t = [], [], []
+    for unit_rng in unit_rngs:
+        err = draw_imu_errors(imu_model, unit_rng)
+        t_stamp = sample_instants(imu_model, t0 + err.latency_s, t1 + min(err.latency_s, 0.0), unit_rng)
+        t_true = true_sample_times(t_stamp, err)
+        inside = (t_true >= t0) & (t_true <= t1)
+        errors.append(err)
+        stamps.append(t_stamp[inside])
+        true_t.append(t_true[inside])
+
+    # 2. Physics.
+    run = None
+    if mode == "kinematic":
+        joints = JointStates(t=trajectory.t, q=trajectory.q, qd=trajectory.qd, qdd=trajectory.qdd)
+    else:
+        run = servo_run(model, idx, trajectory, t1, scene, position_gain)
+        tj = trajectory.t
+        joints = JointStates(
+            t=tj,
+            q=_interp_rows(tj, run.t, run.q),
+            qd=_interp_rows(tj, run.t, run.qd),
+            qdd=_interp_rows(tj, run.t, run.qdd),
+        )
+
+    def sense(t: FloatArray) -> SensorTrace:
+        if run is None:
+            return kinematic_playback(model, idx, trajectory, t, scene)
+        s = run.sensors
+        return SensorTrace(
+            t, _interp_rows(t, run.t, s.accel), _interp_rows(t, run.t, s.gyro), _hold_rows(t, run.t, s.range)
+        )
+
+    # 3. Sensor models per unit.
+    imu: dict[str, ImuStream] = {}
+    tof: dict[str, TofStream] = {}
+    truth_sensor: dict[str, dict[str, FloatArray | float]] = {}
+    for u, (name, unit_rng) in enumerate(zip(units, unit_rngs, strict=True)):
+        trace = sense(true_t[u])
+        accel, gyro = apply_imu_model(imu_model, errors[u], trace.accel[:, u], trace.gyro[:, u], unit_rng)
+        imu[name] = ImuStream(t=stamps[u], accel=accel, gyro=gyro)
+        truth_sensor[name] = {
+            "accel_bias": errors[u].accel_bias,
+            "accel_scale": errors[u].accel_scale,
+            "accel_misalignment": errors[u].accel_misalignment,
+            "time_offset_s": float(errors[u].latency_s),
+        }
+        if scene is not None:
+            phase = unit_rng.uniform(0.0, 1.0 / tof_model.rate_hz)
+            t_tof = t0 + phase + np.arange(int(np.floor((t1 - t0 - phase) * tof_model.rate_hz)) + 1) / tof_model.rate_hz
+            rays = sense(t_tof).range[:, u]  # (M, K), NaN = ray hit nothing
+            nearest = np.where(np.isnan(rays), np.inf, rays).min(axis=1)
+            tof[name] = TofStream(t=t_tof, range=_apply_tof(tof_model, nearest, unit_rng))
+    return Dataset(
+        robot=chain,
+        joints=joints,
+        imu=imu,
+        tof=tof,
+        segments=trajectory.segments,
+        truth=dict(placements),
+        truth_sensor=truth_sensor,
+        gravity=gravity,
+        description=description,
+    )
