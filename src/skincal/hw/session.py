@@ -1,0 +1,73 @@
+"""A recording session: a :class:`SkinReceiver` feeding a :class:`Recorder` until told to stop."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+from skincal.errors import ConfigError
+from skincal.hw.receiver import ReceiverStats, SkinReceiver
+from skincal.hw.recorder import Recorder, RecordingSummary
+from skincal.kinematics.chain import SerialChain
+
+
+async def record(
+    path: str | Path,
+    *,
+    host: str = "127.0.0.1",
+    port: int = 0,
+    duration_s: float | None = None,
+    stop: asyncio.Event | None = None,
+    robot: SerialChain | None = None,
+    unit_names: Mapping[int, str] | None = None,
+    flush_every_s: float = 1.0,
+    flush_every_samples: int = 1000,
+    overwrite: bool = False,
+    description: str = "",
+    reorder_window: int = 64,
+    reorder_timeout_s: float = 0.2,
+    tick_s: float = 0.05,
+    on_start: Callable[[int], None] | None = None,
+    on_tick: Callable[[ReceiverStats, Recorder, SkinReceiver], None] | None = None,
+    on_flush: Callable[[int], None] | None = None,
+) -> tuple[RecordingSummary, ReceiverStats]:
+    """Receive on ``host:port`` and record to ``path`` until ``duration_s`` (s) elapses or ``stop`` is set.
+
+    ``on_start(port)`` is called once bound; ``on_tick(stats, recorder, receiver)`` every ``tick_s``
+    seconds (live status); ``on_flush(total_samples)`` after each flush. On the way out (normal end,
+    ``stop``, or cancellation) the reorder buffers are drained and the file finished atomically.
+    Returns the recording summary and the final receiver counters.
+    """
+    if duration_s is not None and duration_s <= 0:
+        raise ConfigError(f"record: duration {duration_s} s must be > 0")
+    stop = stop or asyncio.Event()
+    recorder = Recorder(
+        path, robot=robot, unit_names=unit_names, flush_every_s=flush_every_s,
+        flush_every_samples=flush_every_samples, overwrite=overwrite, description=description, on_flush=on_flush,
+    )
+    receiver = SkinReceiver(host, port, on_packet=recorder.add, reorder_window=reorder_window,
+                            reorder_timeout_s=reorder_timeout_s)
+    try:
+        bound = await receiver.start()
+    except BaseException:
+        recorder.close()
+        raise
+    if on_start is not None:
+        on_start(bound)
+    t_end = None if duration_s is None else time.monotonic() + duration_s
+    try:
+        while not stop.is_set() and (t_end is None or time.monotonic() < t_end):
+            timeout = tick_s if t_end is None else max(0.0, min(tick_s, t_end - time.monotonic()))
+            try:
+                await asyncio.wait_for(stop.wait(), timeout)
+            except TimeoutError:
+                pass
+            recorder.maybe_flush(receiver.clock_fits())
+            if on_tick is not None:
+                on_tick(receiver.stats(), recorder, receiver)
+    finally:
+        await receiver.stop()
+        summary = recorder.finish(receiver.clock_fits())
+    return summary, receiver.stats()
