@@ -8,10 +8,18 @@ streams, link discovery, metrics.
 from skincal.calib.api import METHODS, MethodSpec, UnitProblem, calibrate, register
 from skincal.calib.links import LinkAssignment, discover_link
 from skincal.calib.metrics import evaluate, pose_errors
-from skincal.calib.preprocess import UnitSamples, estimate_qdd, joint_states_at, static_means, unit_samples
+from skincal.calib.preprocess import (
+    JointInterpolator,
+    UnitSamples,
+    estimate_qdd,
+    joint_states_at,
+    static_means,
+    unit_samples,
+)
 
 __all__ = [
     "METHODS",
+    "JointInterpolator",
     "LinkAssignment",
     "MethodSpec",
     "UnitProblem",

@@ -17,7 +17,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from skincal.calib.links import LinkAssignment, discover_link
-from skincal.calib.preprocess import UnitSamples, unit_samples
+from skincal.calib.preprocess import JointInterpolator, UnitSamples, unit_samples
 from skincal.data.dataset import Dataset
 from skincal.data.result import CalibrationResult, UnitResult
 from skincal.errors import CalibrationError, ConfigError
@@ -35,6 +35,8 @@ class UnitProblem:
         link: 1-based link the unit is on (given or discovered).
         link_assignment: the discovery result, or ``None`` when the link was given.
         rng: this unit's random generator (seeded from the run's seed and the unit's index).
+        interpolator: the dataset's joint interpolator (to re-evaluate joint states at shifted
+            instants, e.g. when estimating a time offset).
         options: method options.
     """
 
@@ -44,6 +46,7 @@ class UnitProblem:
     link: int
     link_assignment: LinkAssignment | None
     rng: np.random.Generator
+    interpolator: JointInterpolator | None = None
     options: Mapping[str, Any] = field(default_factory=dict)
 
 
@@ -127,13 +130,14 @@ def calibrate(
         if u not in dataset.imu:
             raise ConfigError(f"unknown unit '{u}' (dataset has: {', '.join(dataset.units)})")
     start = time.perf_counter()
+    interpolator = JointInterpolator(dataset.joints, use_dataset_qdd=use_dataset_qdd)
     results: dict[str, UnitResult] = {}
     failed: dict[str, str] = {}
     for k, name in enumerate(names):
         try:
             results[name] = calibrate_unit(
                 dataset, name, spec, link=given.get(name), rng=np.random.default_rng([seed, k]),
-                use_dataset_qdd=use_dataset_qdd, options=options,
+                interpolator=interpolator, options=options,
             )
         except CalibrationError as exc:
             failed[name] = str(exc)
@@ -159,11 +163,13 @@ def calibrate_unit(
     *,
     link: int | None,
     rng: np.random.Generator,
-    use_dataset_qdd: bool = False,
+    interpolator: JointInterpolator | None = None,
     options: Mapping[str, Any] | None = None,
 ) -> UnitResult:
     """Calibrate one unit (see :func:`calibrate`)."""
-    samples = unit_samples(dataset, unit, use_dataset_qdd=use_dataset_qdd)
+    if interpolator is None:
+        interpolator = JointInterpolator(dataset.joints)
+    samples = unit_samples(dataset, unit, interpolator=interpolator)
     if not np.any(samples.kind == 0):
         raise CalibrationError(f"unit '{unit}': no samples in static segments")
     assignment = None
@@ -179,6 +185,7 @@ def calibrate_unit(
         link=0 if link is None else int(link),
         link_assignment=assignment,
         rng=rng,
+        interpolator=interpolator,
         options=dict(options or {}),
     )
     return spec.run_unit(problem)

@@ -52,6 +52,42 @@ def estimate_qdd(
     return t, qd, qdd
 
 
+class JointInterpolator:
+    """Joint position, velocity and acceleration at arbitrary instants, built once per dataset.
+
+    ``q`` is a cubic Hermite interpolant of the reported ``(q, qd)``; ``qd`` a cubic Hermite
+    interpolant of ``(qd, qdd)``; ``qdd`` linear in the estimated (or, when ``use_dataset_qdd`` and
+    the dataset has it, the reported) accelerations. Instants outside the joint stream are an error.
+    """
+
+    def __init__(
+        self, joints: JointStates, *, use_dataset_qdd: bool = False, qdd_window_s: float = DEFAULT_QDD_WINDOW_S
+    ) -> None:
+        tj = np.asarray(joints.t, dtype=float)
+        if use_dataset_qdd and joints.qdd is not None:
+            t_acc, qd_acc, qdd = tj, np.asarray(joints.qd, dtype=float), np.asarray(joints.qdd, dtype=float)
+        else:
+            t_acc, qd_acc, qdd = estimate_qdd(joints, qdd_window_s)
+        self.t_start, self.t_end = float(tj[0]), float(tj[-1])
+        self._q = CubicHermiteSpline(tj, joints.q, joints.qd, axis=0)
+        self._qd = CubicHermiteSpline(t_acc, qd_acc, qdd, axis=0)
+        self._t_acc, self._qdd = t_acc, qdd
+
+    def __call__(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``(q, qd, qdd)`` at instants ``t`` (M,), each ``(M, n)``."""
+        t = np.asarray(t, dtype=float)
+        if t.size and (t.min() < self.t_start - 1e-9 or t.max() > self.t_end + 1e-9):
+            raise CalibrationError(
+                f"instants {t.min():.3f}..{t.max():.3f} s fall outside the joint stream "
+                f"{self.t_start:.3f}..{self.t_end:.3f} s"
+            )
+        i = np.clip(np.searchsorted(self._t_acc, t) - 1, 0, self._t_acc.size - 2)
+        t0, t1 = self._t_acc[i], self._t_acc[i + 1]
+        w = ((t - t0) / (t1 - t0))[:, None]
+        qdd = (1.0 - w) * self._qdd[i] + w * self._qdd[i + 1]
+        return self._q(t), self._qd(t), qdd
+
+
 def joint_states_at(
     joints: JointStates,
     t: FloatArray,
@@ -59,28 +95,8 @@ def joint_states_at(
     use_dataset_qdd: bool = False,
     qdd_window_s: float = DEFAULT_QDD_WINDOW_S,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Joint position, velocity and acceleration at arbitrary instants ``t`` (M,).
-
-    ``q`` is a cubic Hermite interpolant of the reported ``(q, qd)``; ``qd`` a cubic Hermite
-    interpolant of ``(qd, qdd)``; ``qdd`` linear in the estimated (or, when ``use_dataset_qdd`` and
-    the dataset has it, the reported) accelerations. Instants outside the joint stream are an error.
-    """
-    t = np.asarray(t, dtype=float)
-    tj = np.asarray(joints.t, dtype=float)
-    if t.size and (t.min() < tj[0] - 1e-9 or t.max() > tj[-1] + 1e-9):
-        raise CalibrationError(
-            f"IMU samples at {t.min():.3f}..{t.max():.3f} s fall outside the joint stream {tj[0]:.3f}..{tj[-1]:.3f} s"
-        )
-    if use_dataset_qdd and joints.qdd is not None:
-        qdd_j = np.asarray(joints.qdd, dtype=float)
-        t_acc = tj
-        qd_acc = np.asarray(joints.qd, dtype=float)
-    else:
-        t_acc, qd_acc, qdd_j = estimate_qdd(joints, qdd_window_s)
-    q = CubicHermiteSpline(tj, joints.q, joints.qd, axis=0)(t)
-    qd = CubicHermiteSpline(t_acc, qd_acc, qdd_j, axis=0)(t)
-    qdd = np.column_stack([np.interp(t, t_acc, qdd_j[:, j]) for j in range(qdd_j.shape[1])])
-    return q, qd, qdd
+    """One-off :class:`JointInterpolator` evaluation at instants ``t`` (M,)."""
+    return JointInterpolator(joints, use_dataset_qdd=use_dataset_qdd, qdd_window_s=qdd_window_s)(t)
 
 
 @dataclass(frozen=True)
@@ -151,13 +167,14 @@ def unit_samples(
     unit: str,
     *,
     time_offset_s: float = 0.0,
+    interpolator: JointInterpolator | None = None,
     use_dataset_qdd: bool = False,
-    qdd_window_s: float = DEFAULT_QDD_WINDOW_S,
 ) -> UnitSamples:
     """Gather one unit's samples with joint states interpolated to its instants.
 
     ``time_offset_s`` is the IMU's latency: the sample stamped ``t`` measured the motion at
     ``t - time_offset_s``. Samples whose shifted instant lies outside the joint stream are dropped.
+    Pass the dataset's ``interpolator`` when gathering several units (it is built once).
     """
     if unit not in dataset.imu:
         raise CalibrationError(f"unknown unit '{unit}' (dataset has: {', '.join(dataset.units)})")
@@ -171,7 +188,9 @@ def unit_samples(
     keep = finite & (t >= tj[0]) & (t <= tj[-1])
     t, accel = t[keep], accel[keep]
     gyro = None if imu.gyro is None else np.asarray(imu.gyro, dtype=float)[keep]
-    q, qd, qdd = joint_states_at(dataset.joints, t, use_dataset_qdd=use_dataset_qdd, qdd_window_s=qdd_window_s)
+    if interpolator is None:
+        interpolator = JointInterpolator(dataset.joints, use_dataset_qdd=use_dataset_qdd)
+    q, qd, qdd = interpolator(t)
     seg = tag_segments(t, dataset.segments)
     inside = seg >= 0
     pick = lambda arr, fill: np.where(inside, np.asarray(arr)[np.clip(seg, 0, None)], fill)  # noqa: E731
