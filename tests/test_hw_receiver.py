@@ -181,7 +181,7 @@ def test_emulated_clock_offset_and_drift_recovered():
                        rng=np.random.default_rng(8))
 
     async def main():
-        async with SkinReceiver() as rx:
+        async with SkinReceiver(clock_estimator=lambda: ClockEstimator(min_span_s=1.0)) as rx:
             emu.addr = ("127.0.0.1", rx.port)
             report = await emu.run_async(max_wall_s=10)
             await _until(lambda: rx.stats().datagrams >= report.datagrams_sent)

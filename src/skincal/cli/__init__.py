@@ -10,6 +10,7 @@ from __future__ import annotations
 import sys
 
 from skincal.cli import calibrate as _calibrate  # noqa: E402,F401
+from skincal.cli import hw as _hw  # noqa: E402,F401
 
 # Command modules register themselves on import (one line each).
 from skincal.cli import info as _info  # noqa: E402,F401

@@ -109,6 +109,7 @@ class SkinReceiver:
         reorder_timeout_s: longest a packet waits for a missing predecessor, s.
         host_clock: host time source, s (``time.monotonic``).
         rcvbuf_bytes: requested socket receive buffer (the kernel may cap it).
+        clock_estimator: factory of the per-stream :class:`ClockEstimator` (e.g. to change ``min_span_s``).
     """
 
     def __init__(
@@ -121,6 +122,7 @@ class SkinReceiver:
         reorder_timeout_s: float = 0.2,
         host_clock: Callable[[], float] = time.monotonic,
         rcvbuf_bytes: int = 4 << 20,
+        clock_estimator: Callable[[], ClockEstimator] = ClockEstimator,
     ) -> None:
         if reorder_window < 1 or reorder_timeout_s <= 0:
             raise ConfigError("receiver: reorder_window must be >= 1 packet and reorder_timeout_s > 0 s")
@@ -132,6 +134,7 @@ class SkinReceiver:
         self.reorder_timeout_s = float(reorder_timeout_s)
         self.host_clock = host_clock
         self.rcvbuf_bytes = rcvbuf_bytes
+        self.clock_estimator = clock_estimator
         self._streams: dict[StreamKey, _Stream] = {}
         self._malformed: dict[str, int] = {}
         self._datagrams = 0
@@ -202,7 +205,7 @@ class SkinReceiver:
             key = ("joints", packet.source_id)
         stream = self._streams.get(key)
         if stream is None:
-            stream = self._streams[key] = _Stream(ClockEstimator())
+            stream = self._streams[key] = _Stream(self.clock_estimator())
         self._accept(key, stream, packet, host_s)
 
     def _accept(self, key: StreamKey, s: _Stream, packet: SkinPacket | JointPacket, host_s: float) -> None:

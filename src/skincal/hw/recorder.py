@@ -12,7 +12,8 @@ Layout (``shared/interfaces.md``, dataset version 1) plus recording fields, per 
 
 ``t`` is on the host clock, seconds since the recording started (root attr ``t_origin_host_s`` on
 ``host_clock``): ``t = fit.to_host(device_t_us * 1e-6) - t_origin`` with the stream's clock fit
-(:mod:`skincal.hw.clock`). While recording, ``t`` uses the fit known at each flush; :meth:`Recorder.finish`
+(:mod:`skincal.hw.clock`). While recording, ``t`` uses the fit known at each flush (so it can step
+by the change of that fit between flushes, normally well under a sample period); :meth:`Recorder.finish`
 recomputes every ``t`` with the final fits, writes ``/clock/<stream>`` attrs and replaces the file
 atomically. Datasets are chunked and resizable and the file is flushed every ``flush_every_samples``
 samples or ``flush_every_s`` seconds; after a kill the file opens with h5py and holds everything up

@@ -1,0 +1,122 @@
+"""``skincal record`` (UDP skin stream -> HDF5) and ``skincal emulate`` (dataset -> UDP skin stream)."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+from pathlib import Path
+
+import typer
+from rich.live import Live
+from rich.table import Table
+
+from skincal.cli.app import app, console
+from skincal.errors import ConfigError
+
+
+def _status_table(stats, recorder, receiver) -> Table:  # noqa: ANN001  (types from skincal.hw)
+    table = Table(title=f"skincal record -> {recorder.path}  (flushed {recorder.flushed_samples} samples)",
+                  title_justify="left")
+    for col in ("stream", "packets", "samples", "lost", "late", "dup", "reordered", "offset s", "drift ppm"):
+        table.add_column(col, justify="left" if col == "stream" else "right")
+    for key, s in stats.streams.items():
+        fit = receiver.clock_fit(key)
+        table.add_row(f"{key[0]} {key[1]}", str(s.received), str(s.samples), str(s.lost), str(s.late),
+                      str(s.duplicates), str(s.out_of_order), "-" if fit is None else f"{fit.offset_s:.6f}",
+                      "-" if fit is None else f"{fit.drift_ppm:.1f}")
+    bad = ", ".join(f"{k} {v}" for k, v in sorted(stats.malformed.items())) or "none"
+    table.caption = f"datagrams {stats.datagrams}; malformed: {bad}"
+    return table
+
+
+@app.command()
+def record(
+    port: int = typer.Option(..., "--port", help="UDP port to listen on (0: any free port, printed)"),
+    out: Path = typer.Option(..., "--out", help="output recording (.h5)"),
+    duration: float | None = typer.Option(None, "--duration", help="stop after this many seconds"),
+    bind: str = typer.Option("127.0.0.1", "--bind", help="address to bind (loopback by default)"),
+    robot: str | None = typer.Option(None, "--robot", help="robot preset written to /robot (e.g. panda)"),
+    flush_every: float = typer.Option(1.0, "--flush-every", help="flush to disk at least every S seconds"),
+    force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
+) -> None:
+    """Record skin (and joint-state) UDP packets into an HDF5 dataset; Ctrl-C or SIGTERM stop cleanly."""
+    from skincal.hw.session import record as run_record
+    from skincal.kinematics.presets import get_robot
+
+    chain = get_robot(robot) if robot else None
+    if flush_every <= 0:
+        raise ConfigError(f"--flush-every {flush_every} s must be > 0")
+
+    async def main() -> tuple:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        with Live(console=console, refresh_per_second=4, transient=False) as live:
+            return await run_record(
+                out, host=bind, port=port, duration_s=duration, stop=stop, robot=chain, overwrite=force,
+                flush_every_s=flush_every,
+                on_start=lambda p: console.print(f"listening on {bind}:{p}", highlight=False),
+                on_tick=lambda st, rec, rx: live.update(_status_table(st, rec, rx)),
+            )
+
+    summary, stats = asyncio.run(main())
+    if not console.is_terminal:
+        console.line()
+    lost = sum(s.lost for s in stats.streams.values())
+    console.print(f"wrote {summary.path}: {sum(summary.samples.values())} samples in {len(summary.samples)} "
+                  f"streams; lost {lost} packets, malformed {stats.malformed_total}", highlight=False)
+
+
+@app.command()
+def emulate(
+    data: Path = typer.Argument(..., help="dataset to play (.h5)"),
+    port: int = typer.Option(..., "--port", help="destination UDP port"),
+    host: str = typer.Option("127.0.0.1", "--host", help="destination address (loopback by default)"),
+    loss: float = typer.Option(0.0, "--loss", help="probability a packet is dropped"),
+    duplicate: float = typer.Option(0.0, "--duplicate", help="probability a packet is sent twice"),
+    reorder: float = typer.Option(0.0, "--reorder", help="probability a datagram is sent late"),
+    reorder_depth: int = typer.Option(3, "--reorder-depth", help="a late datagram is sent after up to N others"),
+    jitter: float = typer.Option(0.0, "--jitter", help="mean extra send delay, s"),
+    corrupt: float = typer.Option(0.0, "--corrupt", help="probability a datagram has one corrupted byte"),
+    speed: float = typer.Option(1.0, "--speed", help="data seconds per wall second"),
+    batch: int = typer.Option(1, "--batch", help="samples per packet"),
+    duration: float | None = typer.Option(None, "--duration", help="play only the first S seconds of data"),
+    clock_offset: float = typer.Option(0.0, "--clock-offset", help="device clock offset of every unit, s"),
+    drift_ppm: float = typer.Option(0.0, "--drift-ppm", help="device clock drift of every unit, ppm"),
+    no_joints: bool = typer.Option(False, "--no-joints", help="do not send the joint-state stream"),
+    seed: int = typer.Option(0, "--seed", help="seed of the fault generator"),
+) -> None:
+    """Play a dataset as skin units over UDP with optional loss, duplication, reordering and corruption."""
+    import numpy as np
+
+    from skincal.data.hdf5 import read_dataset
+    from skincal.hw.emulator import DeviceClock, Faults, SkinEmulator
+
+    ds = read_dataset(data)
+    faults = Faults(loss=loss, duplicate=duplicate, reorder=reorder, reorder_depth=reorder_depth, jitter_s=jitter,
+                    corrupt=corrupt)
+    clock = DeviceClock(clock_offset, drift_ppm)
+    emu = SkinEmulator(ds, port, host=host, faults=faults, rng=np.random.default_rng(seed), speed=speed,
+                       batch=batch, clocks=dict.fromkeys([*ds.imu, *ds.tof], clock), duration_s=duration,
+                       joints=not no_joints)
+    plan = emu.plan
+    console.print(f"sending {plan.datagrams_planned} datagrams to {host}:{port} at speed {speed:g} "
+                  f"(units {', '.join(f'{n}={i}' for n, i in plan.unit_ids.items())})", highlight=False)
+    previous = signal.signal(signal.SIGTERM, lambda *_: emu.stop())
+    try:
+        report = emu.run()
+    except KeyboardInterrupt:
+        emu.stop()
+        raise
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    table = Table(title=f"sent {report.datagrams_sent} datagrams in {report.wall_s:.2f} s", title_justify="left")
+    for col in ("stream", "packets", "dropped", "duplicated", "corrupted"):
+        table.add_column(col, justify="left" if col == "stream" else "right")
+    for key in sorted(report.packets):
+        table.add_row(f"{key[0]} {key[1]}", str(report.packets[key]), str(len(report.dropped[key])),
+                      str(len(report.duplicated[key])), str(len(report.corrupted[key])))
+    console.print(table)
+    if not report.completed:
+        console.print("stopped early", highlight=False)
