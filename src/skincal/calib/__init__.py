@@ -5,6 +5,9 @@ Methods (registered in :data:`METHODS`): ``mle`` (default), ``om`` and ``om-join
 streams, link discovery, metrics.
 """
 
+from skincal.calib import mittendorfer as _mittendorfer  # noqa: F401  (registers mmm, mm)
+from skincal.calib import mle as _mle  # noqa: F401  (registers "mle")
+from skincal.calib import om as _om  # noqa: F401  (registers om, om-joint)
 from skincal.calib.api import METHODS, MethodSpec, UnitProblem, calibrate, register
 from skincal.calib.links import LinkAssignment, discover_link
 from skincal.calib.metrics import evaluate, pose_errors
