@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 
+from skincal.cli import benchmark as _benchmark  # noqa: E402,F401
 from skincal.cli import calibrate as _calibrate  # noqa: E402,F401
 from skincal.cli import hw as _hw  # noqa: E402,F401
 
