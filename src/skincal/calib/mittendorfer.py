@@ -24,7 +24,7 @@ from skincal.data.result import UnitResult
 def _run(problem: UnitProblem, model: str) -> UnitResult:
     options = PaperOptions.from_options(problem.options)
     static, dynamic = unit_data(problem, options)
-    return paper_unit_result(problem, fit_joint(static, dynamic, problem.rng, options, model), options)
+    return paper_unit_result(problem, fit_joint(static, dynamic, problem.rng, options, model))
 
 
 def run_mmm(problem: UnitProblem) -> UnitResult:

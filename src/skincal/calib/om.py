@@ -26,7 +26,7 @@ POOR_STATIC_FIT = 0.05
 """Static error above which a unit gets a warning, (m/s^2)^2 (about 1.3 deg of tilt at 1 g)."""
 
 
-def paper_unit_result(problem: UnitProblem, fit: Fit, options: PaperOptions) -> UnitResult:
+def paper_unit_result(problem: UnitProblem, fit: Fit) -> UnitResult:
     """Wrap a fit as a :class:`UnitResult` with the paper's parameters and errors in ``extras``."""
     warnings: list[str] = []
     if problem.link_assignment is not None:
@@ -58,14 +58,14 @@ def run_om(problem: UnitProblem) -> UnitResult:
     """OM, two stages (see module docstring)."""
     options = PaperOptions.from_options(problem.options)
     static, dynamic = unit_data(problem, options)
-    return paper_unit_result(problem, fit_two_stage(static, dynamic, problem.rng, options), options)
+    return paper_unit_result(problem, fit_two_stage(static, dynamic, problem.rng, options))
 
 
 def run_om_joint(problem: UnitProblem) -> UnitResult:
     """OM's model with all six parameters optimised at once (see module docstring)."""
     options = PaperOptions.from_options(problem.options)
     static, dynamic = unit_data(problem, options)
-    return paper_unit_result(problem, fit_joint(static, dynamic, problem.rng, options, "om"), options)
+    return paper_unit_result(problem, fit_joint(static, dynamic, problem.rng, options, "om"))
 
 
 register("om", MethodSpec(run_om, "paper: static rotation then dynamic position, NLopt MLSL-LDS + NEWUOA"))
