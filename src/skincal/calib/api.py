@@ -37,6 +37,7 @@ class UnitProblem:
         rng: this unit's random generator (seeded from the run's seed and the unit's index).
         interpolator: the dataset's joint interpolator (to re-evaluate joint states at shifted
             instants, e.g. when estimating a time offset).
+        shared: what the method's ``prepare`` computed once for the whole dataset, or ``None``.
         options: method options.
     """
 
@@ -47,6 +48,7 @@ class UnitProblem:
     link_assignment: LinkAssignment | None
     rng: np.random.Generator
     interpolator: JointInterpolator | None = None
+    shared: Any = None
     options: Mapping[str, Any] = field(default_factory=dict)
 
 
@@ -56,13 +58,16 @@ class UnitMethod(Protocol):
 
 @dataclass(frozen=True)
 class MethodSpec:
-    """A registered method: its per-unit function, a one-line description, and whether it uses
-    the gyroscope for link discovery and takes care of link discovery itself."""
+    """A registered method: its per-unit function, a one-line description, whether it uses the
+    gyroscope for link discovery and takes care of link discovery itself, and an optional
+    ``prepare(dataset, interpolator)`` run once per dataset whose result reaches every unit as
+    ``UnitProblem.shared``."""
 
     run_unit: UnitMethod
     description: str
     discovers_links: bool = False
     use_gyro_for_links: bool = False
+    prepare: Callable[[Dataset, JointInterpolator], Any] | None = None
 
 
 METHODS: dict[str, MethodSpec] = {}
@@ -131,13 +136,14 @@ def calibrate(
             raise ConfigError(f"unknown unit '{u}' (dataset has: {', '.join(dataset.units)})")
     start = time.perf_counter()
     interpolator = JointInterpolator(dataset.joints, use_dataset_qdd=use_dataset_qdd)
+    shared = spec.prepare(dataset, interpolator) if spec.prepare is not None else None
     results: dict[str, UnitResult] = {}
     failed: dict[str, str] = {}
     for k, name in enumerate(names):
         try:
             results[name] = calibrate_unit(
                 dataset, name, spec, link=given.get(name), rng=np.random.default_rng([seed, k]),
-                interpolator=interpolator, options=options,
+                interpolator=interpolator, shared=shared, options=options,
             )
         except CalibrationError as exc:
             failed[name] = str(exc)
@@ -164,11 +170,14 @@ def calibrate_unit(
     link: int | None,
     rng: np.random.Generator,
     interpolator: JointInterpolator | None = None,
+    shared: Any = None,
     options: Mapping[str, Any] | None = None,
 ) -> UnitResult:
     """Calibrate one unit (see :func:`calibrate`)."""
     if interpolator is None:
         interpolator = JointInterpolator(dataset.joints)
+    if shared is None and spec.prepare is not None:
+        shared = spec.prepare(dataset, interpolator)
     samples = unit_samples(dataset, unit, interpolator=interpolator)
     if not np.any(samples.kind == 0):
         raise CalibrationError(f"unit '{unit}': no samples in static segments")
@@ -186,6 +195,7 @@ def calibrate_unit(
         link_assignment=assignment,
         rng=rng,
         interpolator=interpolator,
+        shared=shared,
         options=dict(options or {}),
     )
     return spec.run_unit(problem)

@@ -7,6 +7,7 @@ one-line message on stderr and exit code 2; no traceback reaches the user.
 
 from __future__ import annotations
 
+import os
 import sys
 
 from skincal.cli import benchmark as _benchmark  # noqa: E402,F401
@@ -47,7 +48,10 @@ def main(argv: list[str] | None = None) -> int:
         if isinstance(exc, click.exceptions.Abort):
             console_error("aborted")
             return 1
-        raise
+        if os.environ.get("SKINCAL_DEBUG"):
+            raise
+        console_error(f"internal error ({type(exc).__name__}: {exc}); rerun with SKINCAL_DEBUG=1 for a traceback")
+        return 3
     return 0
 
 

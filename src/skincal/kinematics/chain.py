@@ -263,7 +263,11 @@ def cross(a: FloatArray, b: FloatArray) -> FloatArray:
     """Row-wise cross product of ``(..., 3)`` arrays (a lean ``np.cross`` for the hot loops)."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
+    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
+    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
+    return out
 
 
 def transform_points(T: FloatArray, p: ArrayLike) -> FloatArray:

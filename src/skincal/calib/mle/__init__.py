@@ -1,0 +1,5 @@
+"""The default calibrator ``mle`` (see :mod:`skincal.calib.mle.method`)."""
+
+from skincal.calib.mle.method import choose_link, run_unit
+
+__all__ = ["choose_link", "run_unit"]
