@@ -158,9 +158,12 @@ def test_recording_killed_mid_way_keeps_flushed_samples(tmp_path):
         assert not f.attrs["recording_complete"] and f.attrs["flushed_samples"] >= flushed
         accel = f["imu/su3/accel"][...]
         t = f["imu/su3/t"][...]
+        host_t = f["imu/su3/host_receive_t"][...]
     assert accel.shape[0] == t.shape[0] >= flushed >= 300
     np.testing.assert_array_equal(accel[:, 2], np.arange(accel.shape[0]))  # in order, none lost
-    assert np.all(np.diff(t) > 0)
+    # provisional times (fit at each flush): the lower envelope puts them before arrival, mostly close,
+    # and a changing fit steps them back by less than a millisecond
+    assert np.all(t - host_t < 1e-3) and np.median(host_t - t) < 5e-3 and np.all(np.diff(t) > -1e-3)
 
 
 def test_cli_record_stops_cleanly_on_sigterm(tmp_path):

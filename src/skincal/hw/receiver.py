@@ -10,7 +10,11 @@ numbers. Per stream the receiver:
   skipped packet that arrives afterwards is dropped and moves from ``lost`` to ``late``. So ``lost``
   is exactly the number of sequence numbers never received between the first and last delivered;
 * feeds (host receive time, device timestamp of the packet's last sample) to a
-  :class:`~skincal.hw.clock.ClockEstimator`.
+  :class:`~skincal.hw.clock.ClockEstimator`;
+* treats a packet as a device *restart* when its sequence number is already behind but its device
+  timestamp is newer than any seen, or more than ``restart_s`` older (duplicates and late packets
+  carry the old timestamps): buffered packets are delivered, sequence state and clock fit start
+  afresh, and ``restarts`` counts it.
 
 Invalid datagrams are counted by :attr:`PacketError.reason`; nothing a sender does stops the
 receiver. In-order packets go to ``on_packet(Delivery)``. Sequence numbers are unwrapped (u32) into
@@ -55,6 +59,7 @@ class StreamStats:
     out_of_order: int = 0
     lost: int = 0
     late: int = 0
+    restarts: int = 0
     buffered: int = 0
 
 
@@ -81,7 +86,8 @@ class _Stream:
     oldest_s: float = 0.0
     skipped: set[int] = field(default_factory=set)
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
-        ("received", "samples", "delivered", "duplicates", "out_of_order", "lost", "late"), 0))
+        ("received", "samples", "delivered", "duplicates", "out_of_order", "lost", "late", "restarts"), 0))
+    max_device_us: int = -1
 
     def unwrap(self, seq: int) -> int:
         ref = self.highest if self.highest is not None else seq
@@ -110,6 +116,8 @@ class SkinReceiver:
         host_clock: host time source, s (``time.monotonic``).
         rcvbuf_bytes: requested socket receive buffer (the kernel may cap it).
         clock_estimator: factory of the per-stream :class:`ClockEstimator` (e.g. to change ``min_span_s``).
+        restart_s: how far back (s of device time) an already-passed sequence number must be stamped
+            to count as a device restart rather than a duplicate or late packet.
     """
 
     def __init__(
@@ -123,6 +131,7 @@ class SkinReceiver:
         host_clock: Callable[[], float] = time.monotonic,
         rcvbuf_bytes: int = 4 << 20,
         clock_estimator: Callable[[], ClockEstimator] = ClockEstimator,
+        restart_s: float = 5.0,
     ) -> None:
         if reorder_window < 1 or reorder_timeout_s <= 0:
             raise ConfigError("receiver: reorder_window must be >= 1 packet and reorder_timeout_s > 0 s")
@@ -135,6 +144,7 @@ class SkinReceiver:
         self.host_clock = host_clock
         self.rcvbuf_bytes = rcvbuf_bytes
         self.clock_estimator = clock_estimator
+        self.restart_us = int(restart_s * 1e6)
         self._streams: dict[StreamKey, _Stream] = {}
         self._malformed: dict[str, int] = {}
         self._datagrams = 0
@@ -211,6 +221,13 @@ class SkinReceiver:
     def _accept(self, key: StreamKey, s: _Stream, packet: SkinPacket | JointPacket, host_s: float) -> None:
         seq = s.unwrap(packet.seq)
         c = s.counts
+        t_last = int(packet.t_us[-1])
+        if s.next_seq is not None and seq < s.next_seq and (
+            t_last > s.max_device_us or t_last < s.max_device_us - self.restart_us
+        ):
+            self._restart(key, s)
+            seq = packet.seq
+        s.max_device_us = max(s.max_device_us, t_last)
         if s.next_seq is not None and seq < s.next_seq:
             if s.first_seq is not None and seq < s.first_seq:  # before the stream's start: late
                 c["late"] += 1
@@ -257,6 +274,15 @@ class SkinReceiver:
             force = len(s.buffer) > self.reorder_window
         if s.buffer:
             s.oldest_s = min(h for _, h in s.buffer.values())
+
+    def _restart(self, key: StreamKey, s: _Stream) -> None:
+        while s.buffer:
+            self._release(key, s, force=True)
+        s.next_seq = s.first_seq = s.highest = None
+        s.skipped.clear()
+        s.clock = self.clock_estimator()
+        s.max_device_us = -1
+        s.counts["restarts"] += 1
 
     def _skip(self, s: _Stream, first: int, stop: int) -> None:
         s.counts["lost"] += stop - first

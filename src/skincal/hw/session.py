@@ -43,17 +43,20 @@ async def record(
     if duration_s is not None and duration_s <= 0:
         raise ConfigError(f"record: duration {duration_s} s must be > 0")
     stop = stop or asyncio.Event()
-    recorder = Recorder(
-        path, robot=robot, unit_names=unit_names, flush_every_s=flush_every_s,
-        flush_every_samples=flush_every_samples, overwrite=overwrite, description=description, on_flush=on_flush,
-    )
-    receiver = SkinReceiver(host, port, on_packet=recorder.add, reorder_window=reorder_window,
-                            reorder_timeout_s=reorder_timeout_s)
-    try:
-        bound = await receiver.start()
+    if Path(path).exists() and not overwrite:  # fail before binding, and bind before creating the file
+        raise ConfigError(f"{path}: file exists (choose another --out or allow overwriting)")
+    receiver = SkinReceiver(host, port, reorder_window=reorder_window, reorder_timeout_s=reorder_timeout_s)
+    bound = await receiver.start()
+    try:  # no await between binding and attaching the recorder: no datagram is handled in between
+        recorder = Recorder(
+            path, robot=robot, unit_names=unit_names, flush_every_s=flush_every_s,
+            flush_every_samples=flush_every_samples, overwrite=overwrite, description=description,
+            on_flush=on_flush,
+        )
     except BaseException:
-        recorder.close()
+        await receiver.stop()
         raise
+    receiver.on_packet = recorder.add
     if on_start is not None:
         on_start(bound)
     t_end = None if duration_s is None else time.monotonic() + duration_s
