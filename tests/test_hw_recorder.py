@@ -202,3 +202,27 @@ def test_recorder_refuses_bad_options(tmp_path):
     with pytest.raises(ConfigError):
         Recorder(tmp_path / "x.h5", flush_every_s=0)
     assert not Path(tmp_path / "x.h5").exists()
+
+
+def test_cli_emulate_sends_dataset_with_faults(tmp_path, capsys):
+    from skincal.cli import main
+    from skincal.data.hdf5 import write_dataset
+    from skincal.hw.receiver import SkinReceiver
+
+    data = tmp_path / "syn.h5"
+    write_dataset(traffic_dataset(2, 0.5, np.random.default_rng(13)), data)
+
+    async def go():
+        async with SkinReceiver(reorder_timeout_s=0.05) as rx:
+            argv = ["emulate", str(data), "--port", str(rx.port), "--loss", "0.1", "--corrupt", "0.05",
+                    "--speed", "5", "--seed", "3"]
+            code = await asyncio.to_thread(main, argv)
+            await asyncio.sleep(0.2)
+        return code, rx.stats()
+
+    code, st = asyncio.run(asyncio.wait_for(go(), 30))
+    out = capsys.readouterr().out
+    assert code == 0 and "sending" in out and "sent" in out
+    planned = int(out.split("sending ")[1].split()[0])
+    assert st.datagrams == planned and st.malformed_total > 0 and sum(s.lost for s in st.streams.values()) > 0
+    assert main(["emulate", str(data), "--port", "1", "--loss", "2"]) == 2  # bad probability: one-line error

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import signal
+import threading
 from pathlib import Path
 
 import typer
@@ -103,14 +104,13 @@ def emulate(
     plan = emu.plan
     console.print(f"sending {plan.datagrams_planned} datagrams to {host}:{port} at speed {speed:g} "
                   f"(units {', '.join(f'{n}={i}' for n, i in plan.unit_ids.items())})", highlight=False)
-    previous = signal.signal(signal.SIGTERM, lambda *_: emu.stop())
+    main_thread = threading.current_thread() is threading.main_thread()  # signals only work there
+    previous = signal.signal(signal.SIGTERM, lambda *_: emu.stop()) if main_thread else None
     try:
         report = emu.run()
-    except KeyboardInterrupt:
-        emu.stop()
-        raise
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
     table = Table(title=f"sent {report.datagrams_sent} datagrams in {report.wall_s:.2f} s", title_justify="left")
     for col in ("stream", "packets", "dropped", "duplicated", "corrupted"):
         table.add_column(col, justify="left" if col == "stream" else "right")
