@@ -226,3 +226,14 @@ def test_cli_emulate_sends_dataset_with_faults(tmp_path, capsys):
     planned = int(out.split("sending ")[1].split()[0])
     assert st.datagrams == planned and st.malformed_total > 0 and sum(s.lost for s in st.streams.values()) > 0
     assert main(["emulate", str(data), "--port", "1", "--loss", "2"]) == 2  # bad probability: one-line error
+
+
+def test_final_remap_only_since_device_restart(tmp_path):
+    rec = Recorder(tmp_path / "r.h5", t_origin_s=0.0, host_clock=lambda: 0.0)
+    rec.add(_delivery(encode_packet(1, 0, [5_000_000, 5_010_000], range=[1.0, 1.0]), 1.0))
+    rec.flush({("skin", 1): ClockFit(-4.0, 0.0, 5.0)})  # before the reboot: host = device - 4 s
+    rec.add(_delivery(encode_packet(1, 0, [0, 10_000], range=[2.0, 2.0]), 2.0))  # rebooted clock
+    summary = rec.finish({("skin", 1): ClockFit(2.0, 0.0, 0.0)})  # the fit after the reboot
+    assert summary.samples == {"tof/su1": 4}
+    with h5py.File(tmp_path / "r.h5", "r") as f:
+        np.testing.assert_allclose(f["tof/su1/t"][...], [1.0, 1.01, 2.0, 2.01], atol=1e-9)

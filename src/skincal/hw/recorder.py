@@ -13,11 +13,13 @@ Layout (``shared/interfaces.md``, dataset version 1) plus recording fields, per 
 ``t`` is on the host clock, seconds since the recording started (root attr ``t_origin_host_s`` on
 ``host_clock``): ``t = fit.to_host(device_t_us * 1e-6) - t_origin`` with the stream's clock fit
 (:mod:`skincal.hw.clock`). While recording, ``t`` uses the fit known at each flush (so it can step
-by the change of that fit between flushes, normally well under a sample period); :meth:`Recorder.finish`
-recomputes every ``t`` with the final fits, writes ``/clock/<stream>`` attrs and replaces the file
-atomically. Datasets are chunked and resizable and the file is flushed every ``flush_every_samples``
-samples or ``flush_every_s`` seconds; after a kill the file opens with h5py and holds everything up
-to the last completed flush (root attr ``recording_complete`` stays false). A kill *during* a flush
+by the change of that fit between flushes, normally well under a sample period);
+:meth:`Recorder.finish` recomputes ``t`` with the final fits (since the device clock's last restart,
+if it restarted), writes ``/clock/<stream>`` attrs and replaces the file atomically.
+
+Datasets are chunked and resizable and the file is flushed every ``flush_every_samples`` samples or
+``flush_every_s`` seconds; after a kill the file opens with h5py and holds everything up to the last
+completed flush (root attr ``recording_complete`` stays false). A kill *during* a flush
 (milliseconds) can leave the newest flush partly written: trust each group up to its shortest dataset.
 """
 
@@ -223,8 +225,11 @@ class Recorder:
                 for group, key in self._group_stream.items():
                     g = dst[group]
                     fit = fits.get(key)
-                    if fit is not None:
-                        g["t"][...] = fit.to_host(g["device_t_us"][...] * 1e-6) - self.t_origin_s
+                    if fit is not None:  # the final fit covers the device clock since its last restart
+                        device_us = g["device_t_us"][...]
+                        back = np.flatnonzero(np.diff(device_us) < 0)
+                        since = int(back[-1]) + 1 if back.size else 0
+                        g["t"][since:] = fit.to_host(device_us[since:] * 1e-6) - self.t_origin_s
                         c = dst.require_group(f"clock/{key[0]}_{key[1]}")
                         c.attrs.update(offset_s=fit.offset_s, drift=fit.drift, device_ref_s=fit.device_ref_s,
                                        n_points=fit.n_points, span_s=fit.span_s)
