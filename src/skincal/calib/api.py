@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
 
 from skincal.calib.links import LinkAssignment, discover_link
-from skincal.calib.preprocess import JointInterpolator, UnitSamples, unit_samples
+from skincal.calib.preprocess import JointInterpolator, UnitSamples, screen_readings, unit_samples
 from skincal.data.dataset import Dataset
 from skincal.data.result import CalibrationResult, UnitResult
 from skincal.errors import CalibrationError, ConfigError
@@ -198,4 +198,8 @@ def calibrate_unit(
         shared=shared,
         options=dict(options or {}),
     )
-    return spec.run_unit(problem)
+    result = spec.run_unit(problem)
+    _, screening = screen_readings(unit, np.asarray(dataset.imu[unit].accel, dtype=float))
+    if screening:
+        result = replace(result, warnings=tuple(screening) + tuple(result.warnings))
+    return result

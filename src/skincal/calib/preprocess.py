@@ -203,6 +203,9 @@ def unit_samples(
     keep = finite & (t >= tj[0]) & (t <= tj[-1])
     t, accel = t[keep], accel[keep]
     gyro = None if imu.gyro is None else np.asarray(imu.gyro, dtype=float)[keep]
+    usable, _ = screen_readings(unit, accel)
+    t, accel = t[usable], accel[usable]
+    gyro = None if gyro is None else gyro[usable]
     if interpolator is None:
         interpolator = JointInterpolator(dataset.joints, use_dataset_qdd=use_dataset_qdd)
     q, qd, qdd = interpolator(t)
@@ -222,6 +225,33 @@ def unit_samples(
         joint=pick(dataset.segments.joint, -1).astype(np.int32),
         pose=pick(dataset.segments.pose, -1).astype(np.int32),
     )
+
+
+SATURATION_FRACTION = 0.002
+"""An axis whose extreme value repeats in more than this fraction of samples is saturating..."""
+SATURATION_MIN = 11.0
+"""...if that value is beyond this magnitude, m/s^2 (above 1 g plus any bias: a unit at rest
+repeats its reading too, but never saturates there)."""
+
+
+def screen_readings(unit: str, accel: FloatArray) -> tuple[np.ndarray, list[str]]:
+    """Reject what no method can use: a stuck accelerometer axis (an error) and saturated samples
+    (dropped, with a warning). Returns the mask of usable samples and the warnings."""
+    keep = np.ones(len(accel), dtype=bool)
+    warnings: list[str] = []
+    for k, axis in enumerate("xyz"):
+        a = accel[:, k]
+        if a.size > 10 and np.ptp(a) < 1e-9:
+            raise CalibrationError(f"unit '{unit}': accelerometer {axis} axis is stuck at {a[0]:.4g} m/s^2")
+        for extreme in (a.max(), a.min()):
+            hits = a == extreme
+            if abs(extreme) > SATURATION_MIN and hits.mean() > SATURATION_FRACTION and np.count_nonzero(hits) > 3:
+                keep &= ~hits
+                warnings.append(
+                    f"accelerometer {axis} axis saturates at {extreme:+.4g} m/s^2 in {100 * hits.mean():.1f}% "
+                    "of samples; those samples are ignored"
+                )
+    return keep, warnings
 
 
 @dataclass(frozen=True)

@@ -185,6 +185,16 @@ def _joint_axis_in_link(chain: SerialChain, link: int) -> FloatArray:
     return T[link, :3, :3].T @ z
 
 
+def _distinct_orientations(u_link: FloatArray, min_angle_deg: float = 5.0) -> int:
+    """Number of static gravity directions (link frame) at least ``min_angle_deg`` apart."""
+    dirs = u_link / np.linalg.norm(u_link, axis=1, keepdims=True)
+    chosen: list[FloatArray] = []
+    for d in dirs:
+        if all(np.degrees(np.arccos(np.clip(d @ c, -1, 1))) >= min_angle_deg for c in chosen):
+            chosen.append(d)
+    return len(chosen)
+
+
 def run_unit(problem: UnitProblem) -> UnitResult:
     """Calibrate one unit with the default method (module docstring)."""
     warnings: list[str] = []
@@ -198,6 +208,12 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     else:
         link = problem.link
     p = _arrange(problem, link)
+    n_orient = _distinct_orientations(p.data.static_u)
+    if n_orient < 3:
+        warnings.append(
+            f"only {n_orient} distinct static orientation(s) (3 or more recommended): rotation, bias and scale "
+            "rest on the moving data"
+        )
     opts = problem.options
     want_scale = bool(opts.get("scale", True))
     blocks = Blocks(scale=want_scale, time_offset=bool(opts.get("time_offset", True)))
@@ -227,6 +243,7 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         {
             "accel_bias_mps2": st.b,
             "accel_scale_misalignment": st.A,
+            "accel_bias_std_mps2": np.sqrt(np.maximum(np.diag(cov)[6:9], 0.0)),
             "time_offset_s": st.tau,
             "time_offset_std_s": float(np.sqrt(cov[col, col])) if fit.blocks.time_offset else None,
             "residual_std_mps2": fit.sigma,
@@ -238,6 +255,8 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         }
     )
     if fit.blocks.scale:
+        std_e = np.sqrt(np.maximum(np.diag(cov)[9:15], 0.0))
+        extras["accel_scale_misalignment_std"] = sym_from_e(std_e)
         extras["accel_scale"] = np.diag(st.A).copy()
         extras["accel_misalignment_sym"] = sym_from_e(st.e) - np.diag(np.diag(sym_from_e(st.e)))
     return UnitResult(
