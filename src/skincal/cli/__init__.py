@@ -12,6 +12,7 @@ import sys
 
 from skincal.cli import benchmark as _benchmark  # noqa: E402,F401
 from skincal.cli import calibrate as _calibrate  # noqa: E402,F401
+from skincal.cli import demo as _demo  # noqa: E402,F401
 from skincal.cli import hw as _hw  # noqa: E402,F401
 
 # Command modules register themselves on import (one line each).

@@ -1,0 +1,63 @@
+"""``skincal demo``: the main job end to end on a simulated robot, in well under two minutes."""
+
+from __future__ import annotations
+
+import time
+
+import typer
+
+from skincal.cli.app import app, console
+
+
+@app.command()
+def demo(
+    noise: str = typer.Option("realistic", help="IMU preset: none, datasheet or realistic"),
+    method: str = typer.Option("mle", help="calibration method (mle default; om is the paper's, minutes)"),
+    seed: int = typer.Option(0, help="random seed"),
+    protocol: str = typer.Option("paper-sim", help="protocol preset"),
+) -> None:
+    """Simulate the paper's Panda with six skin units, calibrate, and compare with the truth."""
+    from rich.table import Table
+
+    from skincal.calib import calibrate, evaluate
+    from skincal.cli.simulate import simulate_dataset
+
+    console.print(
+        f"[bold]skincal demo[/]: Panda, the paper's six skin units (Table II), '{noise}' IMUs, "
+        f"'{protocol}' protocol, method '{method}'"
+    )
+    start = time.perf_counter()
+    with console.status("simulating the calibration session..."):
+        ds = simulate_dataset("panda", "paper", None, noise, protocol, seed)
+    t_sim = time.perf_counter() - start
+    console.print(f"simulated {ds.duration:.0f} s of robot motion in {t_sim:.2f} s")
+    with console.status(f"calibrating with '{method}' (links found from the data)..."):
+        result = calibrate(ds, method, seed=seed)
+    doc = evaluate(result, ds)
+    table = Table(title=f"{method}: calibrated {len(result.units)} units in {result.runtime_s:.2f} s")
+    for col in ("unit", "link true/found", "pos. err [mm]", "rot. err [deg]", "std [mm]", "notes"):
+        table.add_column(col, justify="right" if "[" in col else "left")
+    for name, u in doc["units"].items():
+        unit = result.units[name]
+        std = "-" if unit.position_std_m is None else f"{1e3 * max(unit.position_std_m):.3f}"
+        table.add_row(
+            name,
+            f"{u['link_true']}/{u['link_estimated']}",
+            f"{u['position_error_mm']:.3f}",
+            f"{u['rotation_error_deg']:.4f}",
+            std,
+            "; ".join(unit.warnings),
+        )
+    table.add_row(
+        "mean", f"{doc['links_correct']}/{doc['units_total']} correct",
+        f"{doc['mean_position_error_mm']:.3f}", f"{doc['mean_rotation_error_deg']:.4f}", "", "", style="bold",
+    )
+    console.print(table)
+    console.print(
+        "the paper (OM, noise-free simulation): 6.6 mm and 0.5 deg mean error, 433 s of optimisation; "
+        f"this run: {doc['mean_position_error_mm']:.3f} mm, {doc['mean_rotation_error_deg']:.4f} deg in "
+        f"{result.runtime_s:.2f} s with '{noise}' sensors"
+    )
+    for name, reason in result.extras.get("failed_units", {}).items():
+        console.print(f"[yellow]warning[/]: unit {name} not calibrated: {reason}", highlight=False)
+    console.print(f"total {time.perf_counter() - start:.1f} s")
