@@ -229,7 +229,7 @@ def test_impossible_protocols_raise_protocol_error_naming_the_joint(chain):
 
 
 def test_config_validation_and_presets():
-    assert set(PROTOCOLS) == {"paper-sim", "paper-real"}
+    assert set(PROTOCOLS) == {"paper-sim", "paper-real", "fast"}
     real = get_protocol("paper-real")
     assert real.frequency == REAL_F and real.rest_duration == 10.0 and real.n_poses == 12
     sim = get_protocol("paper-sim")
@@ -295,3 +295,15 @@ def test_failed_export_keeps_old_file(real_like, tmp_path, monkeypatch):
         export_trajectory(real_like, target)
     assert target.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["traj.csv"]
+
+
+def test_fast_protocol_fits_every_preset_robot_under_two_minutes():
+    """The fast preset scales its amplitudes to each robot's velocity limits."""
+    from skincal.kinematics import panda, sawyer, ur5e
+
+    config = get_protocol("fast")
+    for chain in (panda(), sawyer(), ur5e()):
+        traj = build_trajectory(chain, config, np.random.default_rng(0))
+        assert traj.duration < 120.0
+        assert np.all(np.abs(traj.qd).max(axis=0) <= chain.velocity_limit + 1e-9)
+        assert np.abs(traj.qd).max() > 0.85 * chain.velocity_limit.min()

@@ -50,6 +50,9 @@ class ProtocolConfig:
         move_duration: fixed duration of every move between poses, s, or ``None`` (automatic).
         poses: optional user-given static poses ``(P, n)``, rad; sampled when ``None``.
         name: label of the protocol (preset name or ``"custom"``).
+        velocity_fraction: when set, the amplitude of every joint is this fraction of the robot's
+            velocity limit (replacing ``amplitude``; see :meth:`for_chain`), so that one preset fits
+            any robot.
     """
 
     n_poses: int = 16
@@ -66,6 +69,7 @@ class ProtocolConfig:
     move_duration: float | None = None
     poses: FloatArray | None = None
     name: str = "custom"
+    velocity_fraction: float | None = None
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
@@ -102,9 +106,25 @@ class ProtocolConfig:
             poses.setflags(write=False)
             set_("poses", poses)
             set_("n_poses", int(poses.shape[0]))
+        if self.velocity_fraction is not None and not (0 < self.velocity_fraction <= 1):
+            raise ConfigError(f"protocol: velocity_fraction must be in (0, 1], got {self.velocity_fraction!r}")
         if not (isinstance(self.n_poses, (int, np.integer)) and self.n_poses >= 1):
             raise ConfigError(f"protocol: n_poses must be a positive integer, got {self.n_poses!r}")
         set_("n_poses", int(self.n_poses))
+
+    def for_chain(self, chain) -> ProtocolConfig:
+        """This config with robot-relative settings resolved (``velocity_fraction`` -> amplitudes)."""
+        if self.velocity_fraction is None:
+            return self
+        if chain.velocity_limit is None:
+            raise ConfigError(
+                f"protocol '{self.name}' sets amplitudes as a fraction of the velocity limits, "
+                f"but robot '{chain.name}' has none"
+            )
+        from dataclasses import replace
+
+        amplitude = tuple(float(v) for v in self.velocity_fraction * chain.velocity_limit)
+        return replace(self, amplitude=amplitude, velocity_fraction=None)
 
     # ------------------------------------------------------------------ per-joint views
     def _per_joint(self, value: float | tuple[float, ...], n: int, name: str) -> FloatArray:

@@ -181,6 +181,7 @@ def build_trajectory(
     a velocity limit or the motion leaves the margin-shrunk position limits (joint and time named).
     """
     n = chain.n_joints
+    config = config.for_chain(chain)
     check_amplitudes(chain, config)
     if poses is None:
         poses = config.poses
