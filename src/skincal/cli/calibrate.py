@@ -58,6 +58,7 @@ def calibrate(
     use_truth_links: bool = typer.Option(False, help="take each unit's link from the dataset truth"),
     use_dataset_qdd: bool = typer.Option(False, help="use the dataset's qdd instead of estimating it"),
     unit: list[str] | None = typer.Option(None, help="calibrate only this unit (repeatable)"),
+    workers: int = typer.Option(2, help="units calibrated at once (threads)"),
 ) -> None:
     """Calibrate the skin units of a dataset and write the result JSON."""
     from rich.progress import Progress
@@ -74,7 +75,7 @@ def calibrate(
         result = run(
             ds, method, seed=seed, links=link_map, use_truth_links=use_truth_links,
             use_dataset_qdd=use_dataset_qdd, units=list(names), dataset_sha256=sha256_file(dataset),
-            progress=lambda _name: progress.advance(task),
+            progress=lambda _name: progress.advance(task), workers=workers,
         )
     write_result(result, out)
     console.print(_unit_table(result, f"{method}: {len(result.units)} units in {result.runtime_s:.2f} s"))

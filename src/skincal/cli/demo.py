@@ -32,7 +32,7 @@ def demo(
     t_sim = time.perf_counter() - start
     console.print(f"simulated {ds.duration:.0f} s of robot motion in {t_sim:.2f} s")
     with console.status(f"calibrating with '{method}' (links found from the data)..."):
-        result = calibrate(ds, method, seed=seed)
+        result = calibrate(ds, method, seed=seed, workers=2)
     doc = evaluate(result, ds)
     table = Table(title=f"{method}: calibrated {len(result.units)} units in {result.runtime_s:.2f} s")
     for col in ("unit", "link true/found", "pos. err [mm]", "rot. err [deg]", "std [mm]", "notes"):

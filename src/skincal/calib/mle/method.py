@@ -117,11 +117,12 @@ def _residual_level(problem: UnitProblem, link: int, state: State) -> float:
     return float(np.median(np.linalg.norm(pred - s.accel[keep], axis=1)))
 
 
-def choose_link(problem: UnitProblem) -> tuple[int, float, list[str], dict[int, float], State]:
+def choose_link(problem: UnitProblem) -> tuple[int, float, list[str], dict[int, float], State | None]:
     """Link discovery by activity, then model comparison among neighbouring links.
 
-    Returns the link, its confidence, warnings, the residual level of each candidate and the
-    winner's quick-fit state (a start for the full fit).
+    Returns the link, its confidence, warnings, the residual level of each candidate fitted and
+    the winner's quick-fit state (a start for the full fit; ``None`` when the activity alone was
+    decisive and no candidate had to be fitted).
     """
     n = problem.chain.n_joints
     activity = discover_link(problem.samples, n, use_gyro=True)
@@ -131,10 +132,8 @@ def choose_link(problem: UnitProblem) -> tuple[int, float, list[str], dict[int, 
     levels: dict[int, float] = {}
     states: dict[int, State] = {}
     if activity.confidence >= DECISIVE_ACTIVITY:
-        candidates = [activity.link]  # the activity leaves no doubt: fit the one link only
-    else:
-        candidates = list(range(max(1, activity.link - 1), min(n, activity.link + 1) + 1))
-    for link in candidates:
+        return activity.link, activity.confidence, warnings, levels, None  # no doubt: nothing to compare
+    for link in range(max(1, activity.link - 1), min(n, activity.link + 1) + 1):
         try:
             fit = _fit(_arrange(problem, link, decimate=10), Blocks(scale=False, time_offset=True), max_outer=2)
         except CalibrationError:
