@@ -1,0 +1,139 @@
+"""``skincal import`` (ROS bag -> dataset), ``skincal segment`` and ``skincal export``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from skincal.cli.app import app, console
+
+
+def segmentation_tables(report, verbose: bool = False) -> list:
+    """Rich tables of a :class:`~skincal.data.segment.SegmentationReport`: what was found (per pose:
+    static segments, excited joints), what was rejected and why, and (``verbose``) every segment."""
+    import numpy as np
+    from rich.table import Table
+
+    from skincal.data.dataset import DYNAMIC, STATIC
+
+    seg = report.segments
+    kind, pose, joint = (np.asarray(x) for x in (seg.kind, seg.pose, seg.joint))
+    dur = np.asarray(seg.t_end) - np.asarray(seg.t_start)
+    found = Table(title=f"segments found: {report.n_static} static, {report.n_dynamic} dynamic, "
+                        f"{report.n_poses} poses")
+    for col in ("pose", "static", "static [s]", "dynamic joints (1-based)", "dynamic [s]"):
+        found.add_column(col)
+    for p in range(report.n_poses):
+        s, d = (pose == p) & (kind == STATIC), (pose == p) & (kind == DYNAMIC)
+        found.add_row(str(p), str(int(s.sum())), f"{dur[s].sum():.1f}",
+                      " ".join(str(j + 1) for j in joint[d]) or "-", f"{dur[d].sum():.1f}")
+    tables = [found]
+    if report.rejected:
+        rej = Table(title=f"rejected: {len(report.rejected)} interval(s)")
+        for col in ("t start [s]", "t end [s]", "reason", "detail"):
+            rej.add_column(col)
+        for r in report.rejected:
+            rej.add_row(f"{r.t_start:.2f}", f"{r.t_end:.2f}", r.reason, r.detail)
+        tables.append(rej)
+    if verbose:
+        every = Table(title="all segments")
+        for col in ("#", "kind", "pose", "joint", "t start [s]", "t end [s]"):
+            every.add_column(col)
+        for i in range(len(seg)):
+            every.add_row(str(i), "static" if kind[i] == STATIC else "dynamic", str(pose[i]),
+                          "-" if joint[i] < 0 else str(joint[i] + 1), f"{seg.t_start[i]:.3f}", f"{seg.t_end[i]:.3f}")
+        tables.append(every)
+    return tables
+
+
+def _segmentation_config(rest_velocity: float, min_static: float, min_dynamic: float):
+    from skincal.data.segment import SegmentationConfig
+
+    return SegmentationConfig(rest_velocity=rest_velocity, min_static_s=min_static, min_dynamic_s=min_dynamic)
+
+
+_REST = typer.Option(0.01, help="a joint is at rest below this speed, rad/s")
+_MIN_STATIC = typer.Option(0.5, help="shortest static segment, s")
+_MIN_DYNAMIC = typer.Option(1.0, help="shortest dynamic segment, s")
+
+
+@app.command("import")
+def import_bag(
+    bag: Path = typer.Argument(..., help="ROS 1 .bag file, ROS 2 bag directory, or .db3/.mcap file"),
+    out: Path = typer.Option(..., "--out", "-o", help="dataset file to write (.h5)"),
+    robot: str = typer.Option("panda", help="robot preset (panda, sawyer, ur5e) or a chain .yaml/.json"),
+    map_file: Path | None = typer.Option(None, "--map", help="YAML topic map (imu, joints, range, joint_names)"),
+    imu_topic: list[str] | None = typer.Option(None, help="sensor_msgs/Imu topic, TOPIC or TOPIC=UNIT (repeatable)"),
+    joint_topic: str | None = typer.Option(None, help="sensor_msgs/JointState topic"),
+    range_topic: list[str] | None = typer.Option(None, help="Range/LaserScan topic, TOPIC or TOPIC=UNIT (repeatable)"),
+    accel_unit: str = typer.Option("auto", help="accelerometer unit: auto, g or mps2"),
+    gyro_unit: str = typer.Option("auto", help="gyroscope unit: auto, rad or deg (per second)"),
+    segment: bool = typer.Option(True, help="segment the recording automatically"),
+    rest_velocity: float = _REST,
+    min_static: float = _MIN_STATIC,
+    min_dynamic: float = _MIN_DYNAMIC,
+) -> None:
+    """Import a ROS bag (no ROS install needed), segment it and write a dataset."""
+    from dataclasses import replace
+
+    from skincal.data.hdf5 import write_dataset
+    from skincal.data.rosbag import read_bag, topic_map
+    from skincal.data.segment import segment_dataset
+
+    tmap = topic_map(imu_topic, joint_topic, range_topic, path=map_file)
+    ds, report = read_bag(bag, robot, tmap, accel_unit=accel_unit, gyro_unit=gyro_unit)
+    units = ", ".join(f"{u} <- {t}" for t, u in report.imu_topics.items())
+    ranges = ", ".join(f"{u} <- {t}" for t, u in report.range_topics.items())
+    console.print(f"read {bag} (ROS {report.ros_version}): joints from {report.joint_topic} "
+                  f"({len(ds.joints.t)} samples), units {units}" + (f"; ranges {ranges}" if ranges else ""),
+                  highlight=False)
+    for note in report.notes:
+        console.print(f"  note: {note}", highlight=False, markup=False)
+    if segment:
+        ds, seg_report = segment_dataset(ds, _segmentation_config(rest_velocity, min_static, min_dynamic))
+        for table in segmentation_tables(seg_report):
+            console.print(table)
+    else:
+        ds = replace(ds, segments=None)
+    write_dataset(ds, out)
+    console.print(f"wrote {out}: {len(ds.units)} units, {ds.duration:.1f} s", highlight=False)
+
+
+@app.command("segment")
+def segment_cmd(
+    dataset: Path = typer.Argument(..., help="dataset file (.h5)"),
+    out: Path = typer.Option(..., "--out", "-o", help="dataset file to write with /segments (.h5)"),
+    rest_velocity: float = _REST,
+    min_static: float = _MIN_STATIC,
+    min_dynamic: float = _MIN_DYNAMIC,
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="list every segment"),
+) -> None:
+    """Find static and single-joint dynamic segments in a recording and write them to /segments."""
+    from skincal.data.hdf5 import read_dataset, write_dataset
+    from skincal.data.segment import segment_dataset
+
+    ds = read_dataset(dataset)
+    had = ds.segments is not None and len(ds.segments) > 0
+    ds, report = segment_dataset(ds, _segmentation_config(rest_velocity, min_static, min_dynamic))
+    for table in segmentation_tables(report, verbose):
+        console.print(table)
+    write_dataset(ds, out)
+    console.print(f"wrote {out}" + (" (its previous /segments were replaced)" if had else ""), highlight=False)
+
+
+@app.command("export")
+def export_cmd(
+    result: Path = typer.Argument(..., help="calibration result (.json)"),
+    fmt: str = typer.Option(..., "--format", "-f", help="urdf, yaml, tf (ROS 2 launch file) or csv"),
+    out: Path = typer.Option(..., "--out", "-o", help="file to write"),
+    robot_links: Path | None = typer.Option(None, help="YAML map of link number -> frame (+ xyz/rpy offset)"),
+    prefix: str = typer.Option("", help="prefix of the unit frame names"),
+) -> None:
+    """Export calibrated unit poses onto the robot's link frames (URDF, YAML, static TF launch, CSV)."""
+    from skincal.data.export import export_result
+    from skincal.data.result import read_result
+
+    frames = export_result(read_result(result), fmt, out, link_map=robot_links, prefix=prefix)
+    console.print(f"wrote {out}: {len(frames)} unit(s) as {fmt} onto " + ", ".join(
+        sorted({f.parent for f in frames})), highlight=False)
