@@ -1,0 +1,189 @@
+"""Exports of a calibration result: URDF (checked through Franka's own joint origins), YAML, CSV,
+ROS 2 static-transform launch file (quaternion order checked by name), link maps, CLI."""
+
+from __future__ import annotations
+
+import ast
+import csv
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+import yaml
+
+from skincal.cli import main
+from skincal.data.export import export_result, load_link_map, unit_frames
+from skincal.data.result import CalibrationResult, UnitResult, write_result
+from skincal.errors import ConfigError
+from skincal.kinematics import get_robot
+from skincal.skin.pose import SkinUnitPose
+
+# franka_description (panda_arm.xacro): joint i joins panda_link{i-1} -> panda_link{i},
+# origin (xyz [m], rpy [rad]) then a revolute joint about the child's z axis.
+FRANKA_JOINT_ORIGINS = [
+    ((0, 0, 0.333), (0, 0, 0)),
+    ((0, 0, 0), (-np.pi / 2, 0, 0)),
+    ((0, -0.316, 0), (np.pi / 2, 0, 0)),
+    ((0.0825, 0, 0), (np.pi / 2, 0, 0)),
+    ((-0.0825, 0.384, 0), (-np.pi / 2, 0, 0)),
+    ((0, 0, 0), (np.pi / 2, 0, 0)),
+    ((0.088, 0, 0), (np.pi / 2, 0, 0)),
+]
+
+
+def _rx(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _ry(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def _rz(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def _urdf_origin(xyz, rpy) -> np.ndarray:
+    """URDF <origin>: translation then fixed-axis roll, pitch, yaw: R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    T = np.eye(4)
+    T[:3, :3] = _rz(rpy[2]) @ _ry(rpy[1]) @ _rx(rpy[0])
+    T[:3, 3] = xyz
+    return T
+
+
+def _franka_link_frames(q: np.ndarray) -> list[np.ndarray]:
+    """T_base_panda_link{i}, i = 0..7, from Franka's URDF joint origins."""
+    frames = [np.eye(4)]
+    for (xyz, rpy), qi in zip(FRANKA_JOINT_ORIGINS, q, strict=True):
+        Rq = np.eye(4)
+        Rq[:3, :3] = _rz(qi)
+        frames.append(frames[-1] @ _urdf_origin(xyz, rpy) @ Rq)
+    return frames
+
+
+def _result(robot: str = "panda", links=range(1, 8), seed: int = 0) -> CalibrationResult:
+    rng = np.random.default_rng(seed)
+    units = {}
+    for k, link in enumerate(links):
+        q = rng.normal(size=4)
+        pose = SkinUnitPose.from_quaternion(link, rng.uniform(-0.1, 0.1, 3), q / np.linalg.norm(q))
+        units[f"su{k + 1}"] = UnitResult(pose=pose, observable=link != 1)
+    return CalibrationResult(method="mle", robot=robot, dataset_sha256="", runtime_s=0.1, units=units)
+
+
+def test_panda_urdf_link_frames_are_our_modified_dh_frames():
+    chain = get_robot("panda")
+    rng = np.random.default_rng(4)
+    for q in rng.uniform(-2.5, 2.5, size=(5, 7)):
+        ours = chain.link_frames(q[None])[0]
+        franka = _franka_link_frames(q)
+        for i in range(8):
+            np.testing.assert_allclose(ours[i], franka[i], atol=1e-12)
+
+
+def test_urdf_parses_and_encodes_the_pose_through_the_franka_chain(tmp_path):
+    result = _result()
+    out = tmp_path / "skin.urdf"
+    export_result(result, "urdf", out)
+    root = ET.parse(out).getroot()
+    assert root.tag == "robot"
+    joints = {j.find("child").get("link"): j for j in root.findall("joint")}
+    assert set(joints) == set(result.units) and {link.get("name") for link in root.findall("link")} == set(result.units)
+    q = np.random.default_rng(9).uniform(-2, 2, 7)
+    franka = _franka_link_frames(q)
+    chain_frames = get_robot("panda").link_frames(q[None])[0]
+    for unit, res in result.units.items():
+        j = joints[unit]
+        assert j.get("type") == "fixed"
+        parent = j.find("parent").get("link")
+        assert parent == f"panda_link{res.pose.link}"
+        origin = j.find("origin")
+        T = _urdf_origin([float(v) for v in origin.get("xyz").split()], [float(v) for v in origin.get("rpy").split()])
+        np.testing.assert_allclose(T, res.pose.T_link_su, atol=1e-12)
+        # base -> unit through Franka's URDF chain equals our kinematics with our pose
+        np.testing.assert_allclose(franka[res.pose.link] @ T, chain_frames[res.pose.link] @ res.pose.T_link_su,
+                                   atol=1e-12)
+    assert "not fully observable" in out.read_text()  # su1 on link 1
+
+
+def test_yaml_and_csv_round_trip_values(tmp_path):
+    result = _result()
+    export_result(result, "yaml", tmp_path / "s.yaml", prefix="skin_")
+    export_result(result, "csv", tmp_path / "s.csv")
+    doc = yaml.safe_load((tmp_path / "s.yaml").read_text())
+    rows = {r["unit"]: r for r in csv.DictReader((tmp_path / "s.csv").open())}
+    assert doc["robot"] == "panda" and set(doc["units"]) == set(rows) == set(result.units)
+    assert list(next(iter(rows.values())))[7:11] == ["qw", "qx", "qy", "qz"]
+    for unit, res in result.units.items():
+        y, c = doc["units"][unit], rows[unit]
+        assert y["parent"] == c["parent"] == f"panda_link{res.pose.link}" and y["child"] == f"skin_{unit}"
+        assert y["link"] == int(c["link"]) == res.pose.link
+        assert y["observable"] == (c["observable"] == "true") == res.observable
+        np.testing.assert_allclose(y["xyz"], res.pose.p_link_su, rtol=0, atol=1e-15)
+        np.testing.assert_allclose([float(c[k]) for k in ("x_m", "y_m", "z_m")], res.pose.p_link_su, atol=1e-15)
+        q_ref = res.pose.quaternion_wxyz
+        for q in (np.array(y["quaternion_wxyz"]), np.array([float(c[k]) for k in ("qw", "qx", "qy", "qz")])):
+            assert min(np.abs(q - q_ref).max(), np.abs(q + q_ref).max()) < 1e-12
+
+
+def _launch_nodes(text: str) -> list[dict]:
+    """Node(...) calls of a launch file: keyword args with literal values (the file is not run)."""
+    nodes = []
+    for call in ast.walk(ast.parse(text)):
+        if isinstance(call, ast.Call) and getattr(call.func, "id", None) == "Node":
+            nodes.append({kw.arg: ast.literal_eval(kw.value) for kw in call.keywords})
+    return nodes
+
+
+def test_tf_launch_passes_ros_quaternion_order_by_name(tmp_path):
+    # 60 deg about x: (w, x, y, z) = (cos 30, sin 30, 0, 0): w and x differ, so a swap shows.
+    pose = SkinUnitPose(3, _rx(np.pi / 3), [0.01, 0.02, 0.03])
+    result = CalibrationResult("mle", "panda", "", 0.0, {"su1": UnitResult(pose=pose)})
+    export_result(result, "tf", tmp_path / "skin.launch.py")
+    (node,) = _launch_nodes((tmp_path / "skin.launch.py").read_text())
+    assert node["package"] == "tf2_ros" and node["executable"] == "static_transform_publisher"
+    args = node["arguments"]
+    named = {args[i]: args[i + 1] for i in range(0, len(args), 2)}
+    assert named["--frame-id"] == "panda_link3" and named["--child-frame-id"] == "su1"
+    assert float(named["--qw"]) == pytest.approx(np.cos(np.pi / 6), abs=1e-12)
+    assert float(named["--qx"]) == pytest.approx(np.sin(np.pi / 6), abs=1e-12)
+    assert float(named["--qy"]) == float(named["--qz"]) == 0.0
+    assert [float(named[k]) for k in ("--x", "--y", "--z")] == [0.01, 0.02, 0.03]
+    # ROS (x, y, z, w) as a positional order of the named values
+    assert args.index("--qx") < args.index("--qy") < args.index("--qz") < args.index("--qw")
+
+
+def test_user_link_map_with_offset(tmp_path):
+    result = _result("ur5e", links=(2, 4))
+    with pytest.raises(ConfigError, match="--robot-links"):
+        unit_frames(result)
+    (tmp_path / "map.yaml").write_text(
+        "links:\n  2: upper_arm_link\n  4: {frame: wrist_1_link, xyz: [0.1, 0, -0.2], rpy: [0.3, -0.2, 1.0]}\n")
+    links = load_link_map(tmp_path / "map.yaml")
+    frames = {f.unit: f for f in unit_frames(result, links)}
+    offset = _urdf_origin([0.1, 0, -0.2], [0.3, -0.2, 1.0])
+    for unit, res in result.units.items():
+        f = frames[unit]
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = f.R_parent_su, f.p_parent_su
+        expect = (offset if res.pose.link == 4 else np.eye(4)) @ res.pose.T_link_su
+        np.testing.assert_allclose(T, expect, atol=1e-12)
+    assert frames["su2"].parent == "wrist_1_link"
+    (tmp_path / "bad.yaml").write_text("links:\n  3: {frame: x, xyz: [1, 2]}\n")
+    with pytest.raises(ConfigError, match="links.3"):
+        load_link_map(tmp_path / "bad.yaml")
+
+
+def test_cli_export_atomic_and_one_line_errors(tmp_path, capsys):
+    write_result(_result(), tmp_path / "r.json")
+    for fmt, name in (("urdf", "s.urdf"), ("yaml", "s.yaml"), ("tf", "s.launch.py"), ("csv", "s.csv")):
+        assert main(["export", str(tmp_path / "r.json"), "--format", fmt, "--out", str(tmp_path / name)]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "s.csv", "s.launch.py", "s.urdf", "s.yaml"]
+    capsys.readouterr()
+    assert main(["export", str(tmp_path / "r.json"), "--format", "sdf", "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: unknown export format 'sdf'") and "\n" not in err
+    assert not (tmp_path / "x").exists()
