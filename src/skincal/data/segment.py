@@ -5,8 +5,11 @@ A recording without ``/segments`` (a ROS bag, a live skin recording) is cut from
 * a joint sample is *at rest* when every joint speed is below ``rest_velocity`` (rad/s);
 * runs of rest shorter than ``bridge_s`` inside a motion are zero crossings of an oscillating
   joint (``qd_j = A sin(2 pi f t)`` passes 0 twice a period) and belong to the motion;
-* a run of rest lasting at least ``min_static_s`` (after trimming ``static_margin_s`` at both
-  ends, where the IMUs may still settle or lag) is a STATIC segment; shorter ones are rejected;
+* a run of rest is trimmed to the samples whose configuration stays within ``static_tolerance``
+  (rad, max-abs) of the run's median (a rest-to-rest move creeps in and out below any speed
+  threshold: its speed grows as the square of time), then by ``static_margin_s`` at both ends
+  (where the IMUs may still settle or lag); if it still lasts ``min_static_s`` it is a STATIC
+  segment, else it is rejected;
 * a run of motion in which exactly one joint moves (position range above ``min_excursion`` and
   peak speed above ``rest_velocity``; every other joint stays within ``min_excursion``) and lasting
   at least ``min_dynamic_s`` is a DYNAMIC segment of that joint; motions of several joints (moves
@@ -41,6 +44,7 @@ class SegmentationConfig:
     min_dynamic_s: float = 1.0
     bridge_s: float = 0.1
     static_margin_s: float = 0.05
+    static_tolerance: float = 1e-3
     min_excursion: float = 0.01
     pose_tolerance: float = 0.02
     gap_factor: float = 5.0
@@ -177,7 +181,12 @@ def segment_dataset(ds: Dataset, config: SegmentationConfig | None = None) -> tu
     for r in range(starts.shape[0]):  # loop over runs (tens to hundreds), not samples
         t0, t1 = float(t[starts[r]]), float(t[ends[r]])
         if rest[starts[r]]:
-            a, b = t0 + cfg.static_margin_s, t1 - cfg.static_margin_s
+            q_run = q[starts[r]:ends[r] + 1]
+            still = np.flatnonzero(np.max(np.abs(q_run - np.median(q_run, axis=0)), axis=1) <= cfg.static_tolerance)
+            if still.size == 0:
+                still = np.array([0, q_run.shape[0] - 1])
+            a = float(t[starts[r] + still[0]]) + cfg.static_margin_s
+            b = float(t[starts[r] + still[-1]]) - cfg.static_margin_s
             if b - a >= cfg.min_static_s and b > a:
                 rows.append((a, b, STATIC, -1, q_mean[r]))
             else:
