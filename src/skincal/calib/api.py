@@ -18,7 +18,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from skincal.calib.links import LinkAssignment, discover_link
-from skincal.calib.preprocess import JointInterpolator, UnitSamples, screen_readings, unit_samples
+from skincal.calib.preprocess import DEFAULT_QDD_WINDOW_S, JointInterpolator, UnitSamples, screen_readings, unit_samples
 from skincal.data.dataset import Dataset
 from skincal.data.result import CalibrationResult, UnitResult
 from skincal.errors import CalibrationError, ConfigError
@@ -107,6 +107,7 @@ def calibrate(
     links: Mapping[str, int] | None = None,
     use_truth_links: bool = False,
     use_dataset_qdd: bool = False,
+    qdd_window_s: float | None = None,
     units: list[str] | None = None,
     dataset_sha256: str = "",
     progress: Callable[[str], None] | None = None,
@@ -123,6 +124,8 @@ def calibrate(
         links: user-given 1-based link per unit (others are discovered).
         use_truth_links: take links from the dataset truth (simulation).
         use_dataset_qdd: use the dataset's ``/joints/qdd`` instead of estimating it.
+        qdd_window_s: Savitzky-Golay window of the qdd estimate (default
+            :data:`~skincal.calib.preprocess.DEFAULT_QDD_WINDOW_S`).
         units: calibrate only these units (default: all).
         dataset_sha256: recorded in the result.
         progress: called with each unit's name when it is done.
@@ -139,7 +142,9 @@ def calibrate(
         if u not in dataset.imu:
             raise ConfigError(f"unknown unit '{u}' (dataset has: {', '.join(dataset.units)})")
     start = time.perf_counter()
-    interpolator = JointInterpolator(dataset.joints, use_dataset_qdd=use_dataset_qdd)
+    interpolator = JointInterpolator(
+        dataset.joints, use_dataset_qdd=use_dataset_qdd, qdd_window_s=qdd_window_s or DEFAULT_QDD_WINDOW_S
+    )
     shared = spec.prepare(dataset, interpolator) if spec.prepare is not None else None
     results: dict[str, UnitResult] = {}
     failed: dict[str, str] = {}

@@ -35,6 +35,7 @@ def simulate_dataset(
     seed: int = 0,
     backend: str = "analytic",
     description: str | None = None,
+    mujoco_mode: str = "kinematic",
 ):
     """Build a simulated :class:`~skincal.data.Dataset` from preset names (used by the CLI and demo)."""
     import numpy as np
@@ -55,12 +56,14 @@ def simulate_dataset(
     trajectory = build_trajectory(chain, config, rng)
     text = description or (
         f"simulated: robot={chain.name} placement={placement} noise={noise} protocol={protocol} "
-        f"seed={seed} backend={backend}"
+        f"seed={seed} backend={backend}" + (f" mode={mujoco_mode}" if backend == "mujoco" else "")
     )
     if backend == "mujoco":
         from skincal.sim.mujoco_backend import simulate_mujoco
 
-        return simulate_mujoco(chain, placements, trajectory, imu_model, rng, description=text)
+        if mujoco_mode not in ("kinematic", "dynamic"):
+            raise ConfigError(f"unknown MuJoCo mode '{mujoco_mode}' (use kinematic or dynamic)")
+        return simulate_mujoco(chain, placements, trajectory, imu_model, rng, mode=mujoco_mode, description=text)
     from skincal.sim.analytic import simulate
 
     return simulate(chain, placements, trajectory, imu_model, rng, description=text)
@@ -76,12 +79,15 @@ def simulate(
     protocol: str = typer.Option("paper-sim", help="protocol preset: paper-sim, paper-real, ..."),
     seed: int = typer.Option(0, help="random seed (placements, poses, noise)"),
     backend: str = typer.Option("analytic", help="analytic (exact, fast) or mujoco (independent physics)"),
+    mujoco_mode: str = typer.Option(
+        "kinematic", help="mujoco backend: kinematic (imposed motion) or dynamic (1 kHz velocity servos)"
+    ),
 ) -> None:
     """Simulate a calibration session and write it as a dataset file."""
     from skincal.data.hdf5 import write_dataset
 
     start = time.perf_counter()
-    ds = simulate_dataset(robot, placement, units, noise, protocol, seed, backend)
+    ds = simulate_dataset(robot, placement, units, noise, protocol, seed, backend, mujoco_mode=mujoco_mode)
     write_dataset(ds, out)
     n = sum(len(s.t) for s in ds.imu.values())
     console.print(

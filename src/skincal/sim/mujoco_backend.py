@@ -138,8 +138,9 @@ def servo_run(
     """Simulate the velocity-servoed robot from ``trajectory``'s start state to ``t_end`` s.
 
     ``model`` must have one velocity actuator per joint (``build_model(..., velocity_gain=...)``).
-    Each step records the state, then ``mj_step`` (Euler: ``qacc`` and the sensors belong to
-    that recorded state) integrates it by ``model.opt.timestep``.
+    Each step records the state, then ``mj_step`` integrates it by ``model.opt.timestep``; the
+    acceleration actually undergone over the step, ``(qvel_{k+1} - qvel_k) / dt``, is recorded and
+    the sensors are read at the recorded state with it imposed (``mj_inverse``).
     """
     mujoco = require_mujoco()
     n = model.nq
@@ -155,14 +156,22 @@ def servo_run(
     S = t.size
     q, qd, qdd = np.empty((S, n)), np.empty((S, n)), np.empty((S, n))
     sensors = _empty_trace(t, idx)
+    probe = mujoco.MjData(model)
     for k in range(S):  # the physics is sequential
         q[k], qd[k] = data.qpos, data.qvel
         data.ctrl[:] = qd_ref[k] + position_gain * (q_ref[k] - data.qpos)
         if mocap is not None:
             data.mocap_pos[:] = mocap[k]
+            probe.mocap_pos[:] = mocap[k]
         mujoco.mj_step(model, data)
-        qdd[k] = data.qacc
-        sensors.accel[k], sensors.gyro[k], sensors.range[k] = _read(data, idx)
+        # The acceleration the robot actually undergoes over the step. With the implicit(fast)
+        # integrator the actuators' velocity gains are integrated implicitly, so data.qacc (and
+        # the accelerometers MuJoCo computes from it) differs from (qvel_{k+1} - qvel_k) / dt;
+        # the sensors are therefore read at the recorded state with this acceleration imposed.
+        qdd[k] = (data.qvel - qd[k]) / dt
+        probe.qpos[:], probe.qvel[:], probe.qacc[:] = q[k], qd[k], qdd[k]
+        mujoco.mj_inverse(model, probe)
+        sensors.accel[k], sensors.gyro[k], sensors.range[k] = _read(probe, idx)
     return ServoRun(t, q, qd, qdd, q_ref, qd_ref, _no_hit_to_nan(sensors))
 
 

@@ -3,8 +3,8 @@
 Per unit:
 
 1. **Link** (unless given): the activity matrix (accelerometer and gyroscope) proposes link
-   ``n*``; the links ``n* - 1, n*, n* + 1`` are each fitted quickly and the one whose model
-   explains every sample best wins. Its confidence compares the residual levels; two links that
+   ``n*``; unless that is decisive, the links ``1 .. n* + 1`` are each fitted quickly and the one
+   whose model explains every sample best wins. Its confidence compares the residual levels; two links that
    explain the data about equally are reported as ambiguous, never silently chosen.
 2. **Start** (no bounds, no seed): rotation and bias from the stationary runs (Wahba's problem,
    :mod:`skincal.calib.closed_form`), position and bias by linear least squares on the moving
@@ -133,7 +133,9 @@ def choose_link(problem: UnitProblem) -> tuple[int, float, list[str], dict[int, 
     states: dict[int, State] = {}
     if activity.confidence >= DECISIVE_ACTIVITY:
         return activity.link, activity.confidence, warnings, levels, None  # no doubt: nothing to compare
-    for link in range(max(1, activity.link - 1), min(n, activity.link + 1) + 1):
+    # Not decisive: a joint's motion can shake earlier links through the servos' finite stiffness
+    # (the activity then points too far out), so every link up to one past the suggestion competes.
+    for link in range(1, min(n, activity.link + 1) + 1):
         try:
             fit = _fit(_arrange(problem, link, decimate=10), Blocks(scale=False, time_offset=True), max_outer=2)
         except CalibrationError:
