@@ -1,0 +1,87 @@
+"""``skincal view`` (browser 3D viewer, loopback by default) and ``skincal report`` (HTML / markdown)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from skincal.cli.app import app, console
+from skincal.errors import ConfigError
+
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+@app.command()
+def view(
+    result: Path = typer.Argument(..., help="calibration result (.json)"),
+    truth: Path | None = typer.Option(None, help="simulated dataset with /truth: show the true poses too"),
+    play: Path | None = typer.Option(None, help="dataset to play back (joint motion, ToF rays and points)"),
+    robot: str | None = typer.Option(None, help="robot preset or chain file when no dataset is given"),
+    port: int = typer.Option(0, help="TCP port (0: any free port)"),
+    host: str = typer.Option("127.0.0.1", help="interface to serve on; anything but loopback needs --public"),
+    public: bool = typer.Option(False, "--public", help="allow a non-loopback --host (the viewer has no login)"),
+    duration: float | None = typer.Option(None, help="stop after this many seconds (default: until Ctrl-C)"),
+) -> None:
+    """Show a calibration result on the robot in the browser (viser)."""
+    import time
+
+    from skincal.data.hdf5 import read_dataset
+    from skincal.data.result import read_result
+    from skincal.viz.model import Recording
+    from skincal.viz.viewer import serve_forever, start_viewer
+
+    if host not in LOOPBACK_HOSTS and not public:
+        raise ConfigError(f"--host {host} is not a loopback address; add --public to serve beyond this machine")
+    res = read_result(result)
+    truth_ds = read_dataset(truth) if truth is not None else None
+    play_ds = read_dataset(play) if play is not None else None
+    source = play_ds or truth_ds
+    if source is not None:
+        chain = source.robot
+    else:
+        from skincal.kinematics import get_robot
+
+        chain = get_robot(robot or res.robot)
+    recording = Recording.from_dataset(play_ds) if play_ds is not None else None
+    viewer = start_viewer(
+        res, chain, truth=None if truth_ds is None else truth_ds.truth, recording=recording, host=host, port=port,
+        q0=None if truth_ds is None or recording is not None else truth_ds.joints.q[0],
+    )
+    console.print(f"skincal viewer: [bold]{viewer.url}[/]  (Ctrl-C to stop)", highlight=False)
+    if duration is not None:
+        try:
+            time.sleep(duration)
+        finally:
+            viewer.close()
+        return
+    serve_forever(viewer)
+
+
+@app.command()
+def report(
+    result: Path = typer.Argument(..., help="calibration result (.json)"),
+    dataset: Path = typer.Option(..., help="the dataset the result was computed from (.h5)"),
+    out: Path | None = typer.Option(None, "--out", "-o", help="file to write (default: print markdown)"),
+    fmt: str = typer.Option("html", "--format", help="html (one self-contained file) or md (markdown summary)"),
+    use_dataset_qdd: bool = typer.Option(False, help="predict with the dataset's qdd (as calibrate --use-dataset-qdd)"),
+) -> None:
+    """Write a calibration report: per-unit table, residuals, sensor parameters, coverage, errors."""
+    from skincal.data.hdf5 import read_dataset
+    from skincal.data.result import read_result, sha256_file
+    from skincal.viz.content import collect
+    from skincal.viz.summary import render_markdown
+
+    if fmt not in ("html", "md"):
+        raise ConfigError(f"--format must be 'html' or 'md', got '{fmt}'")
+    res = read_result(result)
+    ds = read_dataset(dataset)
+    if out is None:
+        if fmt != "md":
+            raise ConfigError("--out is required for --format html")
+        typer.echo(render_markdown(collect(res, ds, use_dataset_qdd=use_dataset_qdd)), nl=False)
+        return
+    from skincal.viz.report import write_report
+
+    write_report(res, ds, out, fmt, dataset_sha256=sha256_file(dataset), use_dataset_qdd=use_dataset_qdd)
+    console.print(f"wrote {out}", highlight=False)

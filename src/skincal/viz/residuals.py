@@ -1,0 +1,106 @@
+"""Accelerometer residuals of a calibration result and the data coverage, for plots and reports.
+
+The model (the ``mle`` calibrator's, :mod:`skincal.calib.mle.solver`): the sample stamped ``t``
+measured the motion at ``t - tau`` (``tau`` = ``time_offset_s``), and
+
+    f_pred = A R_link_su^T (u + K p_link_su) + b,
+
+with ``u``, ``K`` the link signals of :func:`skincal.calib.mle.signals.link_signals` (``u`` =
+specific force of the link origin, ``K`` = angular-velocity terms, both in link frame),
+``A`` = ``accel_scale_misalignment`` ``(3, 3)`` (identity when absent) and ``b`` =
+``accel_bias_mps2`` ``(3,)`` m/s^2 (zero when absent). Residual ``e = f_meas - f_pred`` in the
+unit frame, m/s^2.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from skincal.calib.links import discover_link
+from skincal.calib.mle.signals import link_signals
+from skincal.calib.preprocess import JointInterpolator, unit_samples
+from skincal.data.dataset import Dataset
+from skincal.data.result import UnitResult
+from skincal.kinematics.transforms import FloatArray
+
+
+@dataclass(frozen=True)
+class UnitResiduals:
+    """One unit's measured and predicted specific force.
+
+    Attributes:
+        unit: unit name.
+        t: ``(M,)`` motion instants ``t_stamp - tau``, s.
+        measured, predicted, residual: ``(M, 3)`` in the unit frame, m/s^2.
+        segment: ``(M,)`` segment index, -1 outside every segment.
+        kind: ``(M,)`` 0 static, 1 dynamic, -1 outside.
+        joint: ``(M,)`` 0-based excited joint, -1 when static or outside.
+        segment_rms: ``(S,)`` RMS residual norm per dataset segment, m/s^2 (NaN: no samples).
+    """
+
+    unit: str
+    t: FloatArray
+    measured: FloatArray
+    predicted: FloatArray
+    residual: FloatArray
+    segment: np.ndarray
+    kind: np.ndarray
+    joint: np.ndarray
+    segment_rms: FloatArray
+
+    @property
+    def rms(self) -> float:
+        """RMS residual norm over every sample, m/s^2."""
+        return float(np.sqrt(np.mean(np.sum(self.residual**2, axis=1)))) if len(self.t) else float("nan")
+
+
+def sensor_model(unit: UnitResult) -> tuple[FloatArray, FloatArray, float]:
+    """``(A (3, 3), b (3,) m/s^2, tau s)`` from a unit's extras, defaults where a method gave none."""
+    ex = unit.extras
+    A = np.asarray(ex.get("accel_scale_misalignment", np.eye(3)), dtype=float).reshape(3, 3)
+    b = np.asarray(ex.get("accel_bias_mps2", np.zeros(3)), dtype=float).reshape(3)
+    tau = ex.get("time_offset_s")
+    tau = float(tau) if tau is not None and np.isfinite(tau) else 0.0
+    if not np.all(np.isfinite(A)):
+        A = np.eye(3)
+    return A, np.nan_to_num(b), tau
+
+
+def unit_residuals(
+    dataset: Dataset, name: str, unit: UnitResult, interpolator: JointInterpolator | None = None
+) -> UnitResiduals:
+    """Residuals of one unit (module docstring). Pass one ``interpolator`` for several units."""
+    A, b, tau = sensor_model(unit)
+    if interpolator is None:
+        interpolator = JointInterpolator(dataset.joints)
+    s = unit_samples(dataset, name, time_offset_s=tau, interpolator=interpolator)
+    pose = unit.pose
+    sig = link_signals(dataset.robot, pose.link, s.q, s.qd, s.qdd, np.asarray(dataset.gravity, dtype=float))
+    v_link = sig.u + np.einsum("mij,j->mi", sig.K, pose.p_link_su)
+    predicted = (v_link @ pose.R_link_su) @ A.T + b
+    residual = s.accel - predicted
+    n_seg = len(dataset.segments) if dataset.segments is not None else 0
+    sq = np.zeros(n_seg)
+    count = np.zeros(n_seg)
+    inside = s.segment >= 0
+    np.add.at(sq, s.segment[inside], np.sum(residual[inside] ** 2, axis=1))
+    np.add.at(count, s.segment[inside], 1.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        seg_rms = np.where(count > 0, np.sqrt(sq / np.maximum(count, 1.0)), np.nan)
+    return UnitResiduals(name, s.t, s.accel, predicted, residual, s.segment, s.kind, s.joint, seg_rms)
+
+
+def activity_matrix(dataset: Dataset, units: list[str], interpolator: JointInterpolator | None = None) -> FloatArray:
+    """Data coverage: ``(len(units), n)`` activity of each joint on each unit, as a multiple of the
+    motion threshold of :func:`skincal.calib.links.discover_link` (>= 1: the joint moved the unit;
+    NaN: joint never excited). Uses the gyroscope too when the dataset has it."""
+    if interpolator is None:
+        interpolator = JointInterpolator(dataset.joints)
+    n = dataset.robot.n_joints
+    rows = []
+    for name in units:
+        s = unit_samples(dataset, name, interpolator=interpolator)
+        rows.append(discover_link(s, n, use_gyro=True).activity)
+    return np.array(rows).reshape(len(units), n)

@@ -1,0 +1,65 @@
+"""Markdown summary of a calibration for terminals and CI logs (GitHub-flavoured tables, no images)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from skincal.viz.content import ReportContent
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def _vec(values, fmt: str, scale: float = 1.0) -> str:
+    if values is None:
+        return "-"
+    return " ".join("n/a" if not np.isfinite(v) else format(scale * v, fmt) for v in np.asarray(values, dtype=float))
+
+
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(_cell(c) for c in row) + " |" for row in rows]
+    return lines
+
+
+def render_markdown(content: ReportContent) -> str:
+    """The summary: header line, per-unit table (pose, std, residual, sensor parameters, warnings),
+    errors against the truth when available, data coverage (joints that moved each unit)."""
+    res, ds = content.result, content.dataset
+    out = [f"# skincal calibration: {res.method} on {res.robot}", ""]
+    out.append(f"{len(res.units)} unit(s), runtime {res.runtime_s:.2f} s; dataset {ds.duration:.1f} s"
+               + (f" ({ds.description})" if ds.description else ""))
+    out += ["", "## Units", ""]
+    rows = []
+    for r in content.rows:
+        notes = ([] if r.observable else ["UNOBSERVABLE"]) + list(r.warnings)
+        rows.append([
+            r.name, str(r.link), _vec(r.position_m, "+.4f"), _vec(r.quaternion_wxyz, "+.4f"),
+            _vec(r.position_std_m, ".3f", 1e3), _vec(r.rotation_std_deg, ".3f"), f"{r.residual_rms_mps2:.4f}",
+            _vec(r.bias_mps2, "+.4f"), _vec(None if r.scale is None else r.scale - 1.0, "+.0f", 1e6),
+            "-" if r.time_offset_s is None else f"{1e3 * r.time_offset_s:+.2f}",
+            "; ".join(notes) or "-",
+        ])
+    out += _table(["unit", "link", "position [m]", "quaternion wxyz", "pos std [mm]", "rot std [deg]",
+                   "resid RMS [m/s2]", "bias [m/s2]", "scale-1 [ppm]", "offset [ms]", "warnings"], rows)
+    if content.failed:
+        out += ["", "## Not calibrated", ""] + [f"- {k}: {v}" for k, v in content.failed.items()]
+    ev = content.evaluation
+    if ev is not None:
+        out += ["", "## Errors against truth", ""]
+        erows = [[name, f"{u['link_true']}/{u['link_estimated']}", f"{u['position_error_mm']:.3f}",
+                  f"{u['rotation_error_deg']:.4f}", f"{u['quaternion_distance']:.5f}"]
+                 for name, u in ev["units"].items()]
+        if ev["mean_position_error_mm"] is not None:
+            erows.append(["**mean**", f"{ev['links_correct']}/{ev['units_total']} ok",
+                          f"**{ev['mean_position_error_mm']:.3f}**", f"**{ev['mean_rotation_error_deg']:.4f}**",
+                          f"**{ev['mean_quaternion_distance']:.5f}**"])
+        out += _table(["unit", "link true/est", "position error [mm]", "rotation error [deg]", "quat. distance"], erows)
+    out += ["", "## Data coverage", "", "Joints whose motion moved each unit (activity >= threshold; `.` = no, "
+            "`?` = joint never excited).", ""]
+    n = ds.robot.n_joints
+    crow = [[r.name] + ["?" if not np.isfinite(a) else ("x" if a >= 1 else ".") for a in content.activity[i]]
+            for i, r in enumerate(content.rows)]
+    out += _table(["unit"] + [f"j{j + 1}" for j in range(n)], crow)
+    return "\n".join(out) + "\n"

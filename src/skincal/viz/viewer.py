@@ -1,0 +1,272 @@
+"""Browser 3D viewer of a calibration result (viser), served on the loopback interface by default.
+
+Scene graph (names are viser paths; a child moves with its parent):
+
+* ``/robot/link{i}`` (i = 0..n): link frame ``T_base_link_i`` at the current joint angles; under it
+  the link's capsules (a cylinder and two spheres each), the units on that link (estimated box
+  and axes, the true box beside it when truth is given, coloured green..red by position error) and
+  the units' uncertainty ellipsoids (``ELLIPSOID_SIGMA`` x ``position_std_m`` along the link axes,
+  with a visible floor).
+* ``/play/rays``, ``/play/points``, ``/play/obstacles/*``: playback of a recording in the base
+  frame: ToF rays and the obstacle points they see, computed with the *calibrated* poses.
+
+GUI: one slider per joint (deg), and with a recording a time slider and a play checkbox. viser is
+an optional dependency (``pip install skincal[viz]``); it is imported only when a viewer starts.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from skincal.calib.metrics import pose_errors
+from skincal.data.result import CalibrationResult
+from skincal.errors import ConfigError
+from skincal.kinematics.chain import SerialChain
+from skincal.kinematics.geometry import link_capsules
+from skincal.kinematics.transforms import FloatArray, quat_wxyz_from_matrix
+from skincal.skin.pose import SkinUnitPose
+from skincal.viz.model import (
+    UNIT_BOX_M,
+    Recording,
+    check_result_robot,
+    cylinder_pose,
+    ellipsoid_semi_axes,
+    error_color,
+    tof_points_base,
+)
+
+ROBOT_COLOR = (175, 180, 190)
+ESTIMATE_COLOR = (40, 110, 230)
+ELLIPSOID_COLOR = (120, 60, 220)
+RAY_COLOR = (250, 150, 30)
+POINT_COLOR = (230, 30, 30)
+OBSTACLE_COLOR = (200, 60, 160)
+POINT_TRAIL_S = 0.5
+"""Obstacle points of the last this many seconds stay visible during playback, s."""
+PLAYBACK_FPS = 30.0
+CAMERA_POSITION = (1.3, -1.3, 1.0)
+"""Initial camera position in the base frame, m."""
+CAMERA_LOOK_AT = (0.0, 0.0, 0.4)
+CAMERA_FOV_DEG = 50.0
+"""Initial vertical field of view, deg."""
+
+
+def _viser():
+    try:
+        import viser
+    except ImportError:
+        raise ConfigError("the 3D viewer needs viser: pip install 'skincal[viz]'") from None
+    return viser
+
+
+def _wxyz(R: FloatArray) -> tuple[float, float, float, float]:
+    return tuple(float(x) for x in quat_wxyz_from_matrix(R))  # type: ignore[return-value]
+
+
+@dataclass
+class Viewer:
+    """A running viewer: the viser server, its URL and the handles the GUI updates."""
+
+    server: Any
+    chain: SerialChain
+    url: str
+    link_frames: list[Any]
+    sliders: list[Any]
+    recording: Recording | None = None
+    poses: dict[str, SkinUnitPose] = field(default_factory=dict)
+    _stop: threading.Event = field(default_factory=threading.Event)
+    _quiet: bool = False
+
+    def set_joints(self, q: FloatArray) -> None:
+        """Move the robot (and its units) to joint angles ``q`` ``(n,)``, rad."""
+        T = self.chain.link_frames(np.asarray(q, dtype=float)[None, :])[0]
+        with self.server.atomic():
+            for handle, T_i in zip(self.link_frames, T, strict=True):
+                handle.position = T_i[:3, 3]
+                handle.wxyz = _wxyz(T_i[:3, :3])
+
+    def close(self) -> None:
+        """Stop playback and the server."""
+        self._stop.set()
+        with contextlib.redirect_stdout(io.StringIO()):  # viser announces the stop on stdout
+            self.server.stop()
+
+
+def _add_robot(server: Any, chain: SerialChain) -> list[Any]:
+    frames = []
+    for i in range(chain.n_joints + 1):
+        frames.append(server.scene.add_frame(f"/robot/link{i}", show_axes=False))
+    for k, cap in enumerate(link_capsules(chain)):
+        base = f"/robot/link{cap.link}/capsule{k}"
+        T, length = cylinder_pose(cap)
+        if length > 0:
+            server.scene.add_cylinder(
+                f"{base}/cyl", radius=cap.radius, height=length, color=ROBOT_COLOR, opacity=0.55,
+                wxyz=_wxyz(T[:3, :3]), position=T[:3, 3], cast_shadow=False,
+            )
+        for j, p in enumerate((cap.p0, cap.p1) if length > 0 else (cap.p0,)):
+            server.scene.add_icosphere(
+                f"{base}/end{j}", radius=cap.radius, color=ROBOT_COLOR, opacity=0.55, position=p, cast_shadow=False,
+            )
+    return frames
+
+
+def _add_unit(server: Any, name: str, pose: SkinUnitPose, color: tuple[int, int, int], tag: str, axes: float) -> None:
+    base = f"/robot/link{pose.link}/{tag}_{name}"
+    q = _wxyz(pose.R_link_su)
+    server.scene.add_frame(base, axes_length=axes, axes_radius=0.0025, wxyz=q, position=pose.p_link_su)
+    server.scene.add_box(f"{base}/board", color=color, dimensions=UNIT_BOX_M, position=(0.0, 0.0, -UNIT_BOX_M[2] / 2))
+
+
+def build_scene(
+    server: Any,
+    result: CalibrationResult,
+    chain: SerialChain,
+    truth: dict[str, SkinUnitPose] | None = None,
+    q0: FloatArray | None = None,
+) -> tuple[list[Any], dict[str, float]]:
+    """Draw the robot, the units and their uncertainty on ``server``; return the link-frame handles
+    and the position error (mm) of each unit with truth."""
+    check_result_robot(result, chain)
+    server.scene.set_up_direction("+z")
+    server.scene.add_grid("/ground", width=2.0, height=2.0, cell_size=0.1, section_size=0.5)
+    frames = _add_robot(server, chain)
+    q_ref = np.zeros(chain.n_joints) if q0 is None else np.asarray(q0, dtype=float)
+    errors: dict[str, float] = {}
+    for name, unit in result.units.items():
+        _add_unit(server, name, unit.pose, ESTIMATE_COLOR, "est", 0.04)
+        semi, unknown = ellipsoid_semi_axes(unit.position_std_m)
+        server.scene.add_icosphere(
+            f"/robot/link{unit.pose.link}/sigma_{name}", radius=1.0, scale=tuple(semi), subdivisions=2,
+            color=(230, 120, 30) if unknown.any() else ELLIPSOID_COLOR, opacity=0.3, position=unit.pose.p_link_su,
+            cast_shadow=False,
+        )
+        if truth is not None and name in truth:
+            err_mm, _, _ = pose_errors(chain, q_ref, unit.pose, truth[name])
+            errors[name] = err_mm
+            _add_unit(server, name, truth[name], error_color(err_mm), "true", 0.025)
+    return frames, errors
+
+
+def _add_playback(viewer: Viewer) -> None:
+    server, rec = viewer.server, viewer.recording
+    assert rec is not None
+    folder = server.gui.add_folder("Playback")
+    with folder:
+        t_slider = server.gui.add_slider("time [s]", rec.t_start, rec.t_end, 0.01, rec.t_start)
+        playing = server.gui.add_checkbox("play", False)
+        speed = server.gui.add_slider("speed", 0.1, 4.0, 0.1, 1.0)
+    spheres = {
+        name: server.scene.add_icosphere(f"/play/obstacles/{name}", radius=tr.radius, color=OBSTACLE_COLOR, opacity=0.6)
+        for name, tr in rec.obstacles.items()
+    }
+
+    def show(t: float) -> None:
+        q = rec.q_at(t)
+        viewer._quiet = True  # move the sliders along without each one redrawing the robot
+        try:
+            for s, value in zip(viewer.sliders, np.degrees(q), strict=True):
+                s.value = float(value)
+        finally:
+            viewer._quiet = False
+        viewer.set_joints(q)
+        origins, points, _ = tof_points_base(viewer.chain, viewer.poses, rec, t - POINT_TRAIL_S, t)
+        latest = tof_points_base(viewer.chain, viewer.poses, rec, t - 0.05, t)
+        with server.atomic():
+            if len(points):
+                server.scene.add_point_cloud("/play/points", points, POINT_COLOR, point_size=0.012)
+            if len(latest[0]):
+                segs = np.stack([latest[0], latest[1]], axis=1)
+                server.scene.add_line_segments("/play/rays", segs, RAY_COLOR, thickness=0.003)
+            for name, p in rec.obstacle_positions(t).items():
+                spheres[name].position = p
+
+    t_slider.on_update(lambda _e: show(float(t_slider.value)))
+
+    def loop() -> None:
+        period = 1.0 / PLAYBACK_FPS
+        while not viewer._stop.wait(period):
+            if playing.value:
+                t = float(t_slider.value) + period * float(speed.value)
+                t_slider.value = rec.t_start if t > rec.t_end else t
+
+    threading.Thread(target=loop, name="skincal-viewer-playback", daemon=True).start()
+    show(rec.t_start)
+
+
+def start_viewer(
+    result: CalibrationResult,
+    chain: SerialChain,
+    *,
+    truth: dict[str, SkinUnitPose] | None = None,
+    recording: Recording | None = None,
+    host: str = "127.0.0.1",
+    port: int = 0,
+    q0: FloatArray | None = None,
+) -> Viewer:
+    """Start a viser server on ``host:port`` (``port=0``: any free port) showing ``result`` on
+    ``chain``; returns at once (the server runs in its own threads). ``q0`` ``(n,)`` rad is the
+    initial posture (default: the recording's first sample, else zeros)."""
+    viser = _viser()
+    with contextlib.redirect_stdout(io.StringIO()):  # viser prints a banner; the CLI prints the URL
+        server = viser.ViserServer(host=host, port=port, verbose=False)
+    try:
+        server.gui.configure_theme(show_share_button=False)  # sharing would tunnel through a public relay
+        server.scene.configure_environment_map(hdri=None)
+        if q0 is None:
+            q0 = recording.q[0] if recording is not None else np.zeros(chain.n_joints)
+        frames, errors = build_scene(server, result, chain, truth, q0)
+        server.initial_camera.position = CAMERA_POSITION
+        server.initial_camera.look_at = CAMERA_LOOK_AT
+        server.initial_camera.fov = np.radians(CAMERA_FOV_DEG)
+        url = f"http://{host}:{server.get_port()}"
+        viewer = Viewer(server, chain, url, frames, [], recording, {n: u.pose for n, u in result.units.items()})
+        _add_gui(viewer, result, errors, np.asarray(q0, dtype=float))
+        if recording is not None:
+            _add_playback(viewer)
+    except BaseException:
+        server.stop()
+        raise
+    return viewer
+
+
+def _add_gui(viewer: Viewer, result: CalibrationResult, errors: dict[str, float], q0: FloatArray) -> None:
+    server, chain = viewer.server, viewer.chain
+    lines = [f"**{result.method}** on {chain.name}: {len(result.units)} units", ""]
+    lines.append("blue = estimate; beside it the truth, green (0 mm) .. red (10 mm); violet = 3-sigma ellipsoid")
+    if errors:
+        lines.append("")
+        lines += [f"- {n}: {e:.2f} mm" for n, e in errors.items()]
+    server.gui.add_markdown("\n".join(lines))
+    lower = chain.joint_lower if chain.joint_lower is not None else np.full(chain.n_joints, -np.pi)
+    upper = chain.joint_upper if chain.joint_upper is not None else np.full(chain.n_joints, np.pi)
+    with server.gui.add_folder("Joints [deg]"):
+        for j in range(chain.n_joints):
+            lo, hi = round(float(np.degrees(lower[j])), 1), round(float(np.degrees(upper[j])), 1)
+            init = float(np.clip(np.degrees(q0[j]), lo, hi))
+            viewer.sliders.append(server.gui.add_slider(f"q{j + 1}", lo, hi, 0.5, init))
+
+    def on_slider(_event: Any) -> None:
+        if viewer._quiet:
+            return
+        viewer.set_joints(np.radians([s.value for s in viewer.sliders]))
+
+    for s in viewer.sliders:
+        s.on_update(on_slider)
+    viewer.set_joints(q0)
+
+
+def serve_forever(viewer: Viewer, poll_s: float = 0.5) -> None:
+    """Block until interrupted (Ctrl-C), then stop the server."""
+    try:
+        while True:
+            time.sleep(poll_s)
+    finally:
+        viewer.close()
