@@ -323,7 +323,7 @@ def read_bag(path: str | Path, robot: SerialChain | str = "panda", tmap: TopicMa
     if np.any(no_velocity):
         if len(t_j) < 3:
             raise DatasetError(f"{source}: topic {used.joints}: {len(t_j)} samples, too few to differentiate")
-        qd = np.gradient(q, t_j * 1e-9, axis=0)
+        qd = np.gradient(q, (t_j - t_j[0]) * 1e-9, axis=0)  # relative: epoch seconds lose precision
         notes.append(f"{used.joints}: no velocities in {int(np.sum(no_velocity))} message(s); joint velocities "
                      "from central differences of the positions")
     origin = int(t_j[0])

@@ -1,0 +1,291 @@
+"""ROS bag import: real ROS 1 and ROS 2 (sqlite3, mcap) bags written with rosbags in the tests."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag1 import Writer as Writer1
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Writer2
+from rosbags.typesys import Stores, get_typestore
+
+from skincal.calib import calibrate, evaluate
+from skincal.cli import main
+from skincal.data.dataset import TofStream
+from skincal.data.hdf5 import read_dataset, write_dataset
+from skincal.data.rosbag import STANDARD_GRAVITY, read_bag, topic_map, write_bag
+from skincal.data.segment import segment_dataset
+from skincal.errors import DatasetError
+from skincal.kinematics import get_robot
+from skincal.protocol import ProtocolConfig, build_trajectory
+from skincal.sim.analytic import simulate
+from skincal.skin.imu import get_imu_model
+from skincal.skin.placement import paper_placement
+
+T0_NS = 1_700_000_000_000_000_000
+PANDA_JOINTS = [f"panda_joint{i}" for i in range(1, 8)]
+
+
+def _session(n_poses: int, excited_joints: tuple[int, ...] | None, seed: int = 7):
+    """A realistic session: Panda, 3 units (links 3-5), 100 Hz joints, 100 Hz IMUs, ToF on 2 units."""
+    chain = get_robot("panda")
+    rng = np.random.default_rng(seed)
+    cfg = ProtocolConfig(n_poses=n_poses, rest_duration=2.0, static_duration=1.0, rate_hz=100.0,
+                         excited_joints=excited_joints)
+    placements = dict(list(paper_placement(chain).items())[2:5])
+    ds = simulate(chain, placements, build_trajectory(chain, cfg, rng), get_imu_model("realistic"), rng)
+    units = ds.units
+    t = np.arange(0.01, ds.duration, 0.02)
+    r = 0.3 + 0.1 * np.sin(t)
+    r[::7] = np.nan  # no target
+    return replace(ds, tof={units[0]: TofStream(t, r), units[2]: TofStream(t + 0.005, r + 0.2)})
+
+
+@pytest.fixture(scope="module")
+def small():
+    return _session(2, (1, 3, 4))
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return _session(4, (1, 2, 3, 4, 5))
+
+
+BAGS = [(1, "sqlite3", "rec.bag", "g", "deg"), (2, "sqlite3", "rec_sqlite", "mps2", "rad"),
+        (2, "mcap", "rec_mcap", "g", "rad")]
+
+
+@pytest.mark.parametrize("ros,storage,name,accel_unit,gyro_unit", BAGS)
+def test_bag_round_trip_equals_hdf5_path(small, tmp_path, ros, storage, name, accel_unit, gyro_unit):
+    sim = small
+    bag = tmp_path / name
+    write_bag(sim, bag, ros_version=ros, storage=storage, accel_unit=accel_unit, gyro_unit=gyro_unit)
+    ds, report = read_bag(bag, "panda")
+    write_dataset(replace(sim, segments=None), tmp_path / "ref.h5")
+    ref = read_dataset(tmp_path / "ref.h5")
+    assert report.ros_version == ros and report.joint_topic == "/joint_states"
+    assert ds.units == ref.units and set(ds.tof) == set(ref.tof)
+    assert report.time_origin_ns == T0_NS + round(ref.joints.t[0] * 1e9)
+    np.testing.assert_allclose(ds.joints.t, ref.joints.t - ref.joints.t[0], atol=1e-9)
+    np.testing.assert_array_equal(ds.joints.q, ref.joints.q)
+    np.testing.assert_array_equal(ds.joints.qd, ref.joints.qd)
+    for u in ref.units:
+        np.testing.assert_allclose(ds.imu[u].t, ref.imu[u].t, atol=1e-9)
+        np.testing.assert_allclose(ds.imu[u].accel, ref.imu[u].accel, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(ds.imu[u].gyro, ref.imu[u].gyro, rtol=1e-12, atol=1e-12)
+    for u, tof in ref.tof.items():
+        np.testing.assert_allclose(ds.tof[u].t, tof.t, atol=1e-9)
+        np.testing.assert_array_equal(np.isnan(ds.tof[u].range), np.isnan(tof.range))
+        np.testing.assert_allclose(ds.tof[u].range, tof.range, rtol=1e-6, equal_nan=True)  # float32 field
+    notes = " | ".join(report.notes)
+    assert notes.count("accelerometer in g") == (3 if accel_unit == "g" else 0)
+    assert notes.count("gyroscope in deg/s") == (3 if gyro_unit == "deg" else 0)
+    # segmentation of the imported bag equals that of the HDF5 recording
+    seg_bag, seg_ref = segment_dataset(ds)[1].segments, segment_dataset(ref)[1].segments
+    for a, b in zip((seg_bag.t_start, seg_bag.t_end), (seg_ref.t_start, seg_ref.t_end), strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-9)
+    np.testing.assert_array_equal(seg_bag.joint, seg_ref.joint)
+
+
+def test_written_bag_holds_standard_messages(small, tmp_path):
+    """Read the raw messages back with rosbags alone: g units, frame ids, stamps, REP 117 +inf."""
+    sim = small
+    write_bag(sim, tmp_path / "b.bag", ros_version=1, accel_unit="g")
+    unit = sim.units[0]
+    with AnyReader([tmp_path / "b.bag"]) as reader:
+        conns = {c.topic: c for c in reader.connections}
+        assert conns[f"/skin/{unit}/imu"].msgtype == "sensor_msgs/msg/Imu"
+        _, ns, raw = next(reader.messages(connections=[conns[f"/skin/{unit}/imu"]]))
+        msg = reader.deserialize(raw, "sensor_msgs/msg/Imu")
+        assert msg.header.frame_id == unit
+        assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == ns == T0_NS + round(sim.imu[unit].t[0] * 1e9)
+        np.testing.assert_allclose(msg.linear_acceleration.x * STANDARD_GRAVITY, sim.imu[unit].accel[0, 0], rtol=1e-14)
+        ranges = [reader.deserialize(r, c.msgtype).range for c, _, r in
+                  reader.messages(connections=[conns[f"/skin/{unit}/range"]])]
+        assert np.isposinf(ranges[0]) and np.isnan(sim.tof[unit].range[0])
+
+
+def test_bag_then_mle_matches_hdf5_accuracy(sim, tmp_path):
+    """The benchmark target in small: bag -> import -> auto segments -> mle vs HDF5 + protocol segments."""
+    write_bag(sim, tmp_path / "b", ros_version=2, storage="mcap", accel_unit="g", gyro_unit="deg")
+    imported, _ = read_bag(tmp_path / "b")
+    imported, _ = segment_dataset(imported)
+    write_dataset(sim, tmp_path / "ref.h5")
+    ev_ref = evaluate(calibrate(read_dataset(tmp_path / "ref.h5"), "mle"), sim)
+    shifted = replace(sim, joints=replace(sim.joints, t=sim.joints.t - sim.joints.t[0]))  # same time origin
+    ev_bag = evaluate(calibrate(imported, "mle"), shifted)
+    assert ev_bag["links_correct"] == ev_ref["links_correct"] == 3
+    for key in ("mean_position_error_mm", "mean_rotation_error_deg"):
+        assert ev_bag[key] <= 1.1 * ev_ref[key] + 1e-6, (key, ev_bag[key], ev_ref[key])
+    assert ev_ref["mean_position_error_mm"] < 2.0
+
+
+# ---------------------------------------------------------------- small hand-made bags
+def _write(path: Path, ros: int, topics: dict[str, tuple[str, list]], storage: str = "sqlite3") -> Path:
+    """Write ``{topic: (msgtype, [(bag_ns, msg), ...])}`` with the rosbags writers."""
+    ts = _store(ros)
+    writer = Writer1(path) if ros == 1 else Writer2(
+        path, version=9, storage_plugin=StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3)
+    ser = ts.serialize_ros1 if ros == 1 else ts.serialize_cdr
+    with writer:
+        for topic, (kind, msgs) in topics.items():
+            conn = writer.add_connection(topic, kind, typestore=ts)
+            for ns, msg in msgs:
+                writer.write(conn, ns, ser(msg, kind))
+    return path
+
+
+def _store(ros: int):
+    return get_typestore(Stores.ROS1_NOETIC if ros == 1 else Stores.ROS2_HUMBLE)
+
+
+def _header(ts, ns: int, frame: str = "", ros: int = 2):
+    stamp = ts.types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+    return ts.types["std_msgs/msg/Header"](stamp=stamp, frame_id=frame, **({"seq": 0} if ros == 1 else {}))
+
+
+def _joint_msgs(ts, t: np.ndarray, names=PANDA_JOINTS, velocity: bool = True, ros: int = 2, zero_stamp=False):
+    """JointState with q_j = 0.1 sin(t + j) (in ``names`` order by the joint number in the name)."""
+    idx = [int(n[-1]) - 1 if n in PANDA_JOINTS else -1 for n in names]
+    out = []
+    for tk in t:
+        ns = T0_NS + round(tk * 1e9)
+        q = np.array([0.1 * np.sin(tk + j) if j >= 0 else 0.04 for j in idx])
+        qd = np.array([0.1 * np.cos(tk + j) if j >= 0 else 0.0 for j in idx])
+        out.append((ns, ts.types["sensor_msgs/msg/JointState"](
+            header=_header(ts, 0 if zero_stamp else ns, "", ros), name=list(names), position=q,
+            velocity=qd if velocity else np.zeros(0), effort=np.zeros(0))))
+    return "sensor_msgs/msg/JointState", out
+
+
+def _imu_msgs(ts, t: np.ndarray, accel: np.ndarray, frame: str = "su1", ros: int = 2):
+    V = ts.types["geometry_msgs/msg/Vector3"]
+    out = []
+    for tk, a in zip(t, accel, strict=True):
+        ns = T0_NS + round(tk * 1e9)
+        out.append((ns, ts.types["sensor_msgs/msg/Imu"](
+            header=_header(ts, ns, frame, ros),
+            orientation=ts.types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+            orientation_covariance=np.zeros(9), angular_velocity=V(x=0.0, y=0.0, z=0.0),
+            angular_velocity_covariance=np.zeros(9), linear_acceleration=V(x=a[0], y=a[1], z=a[2]),
+            linear_acceleration_covariance=np.zeros(9))))
+    return "sensor_msgs/msg/Imu", out
+
+
+T = np.arange(0, 2.0, 0.01)
+UP_G = np.tile([0.0, 0.0, 1.0], (len(T), 1))
+
+
+@pytest.mark.parametrize("ros", [1, 2])
+def test_bag_without_joint_states(tmp_path, ros):
+    ts = _store(ros)
+    bag = _write(tmp_path / ("b.bag" if ros == 1 else "b"), ros, {"/su1/imu": _imu_msgs(ts, T, UP_G, ros=ros)})
+    with pytest.raises(DatasetError, match=r"no sensor_msgs/JointState topic.*/su1/imu \(sensor_msgs/msg/Imu\)"):
+        read_bag(bag)
+
+
+def test_nan_samples_dropped_with_count_or_error_when_all_nan(tmp_path):
+    ts = _store(2)
+    accel = UP_G.copy()
+    accel[[5, 50, 51], 1] = np.nan
+    bag = _write(tmp_path / "b", 2, {"/joint_states": _joint_msgs(ts, T), "/su1/imu": _imu_msgs(ts, T, accel)})
+    ds, report = read_bag(bag)
+    assert "/su1/imu: dropped 3 sample(s) containing NaN" in report.notes
+    assert len(ds.imu["su1"].t) == len(T) - 3
+    np.testing.assert_allclose(ds.imu["su1"].accel, np.delete(UP_G, [5, 50, 51], axis=0) * STANDARD_GRAVITY)
+    bag2 = _write(tmp_path / "c", 2, {"/joint_states": _joint_msgs(ts, T),
+                                      "/su1/imu": _imu_msgs(ts, T, np.full_like(UP_G, np.nan))})
+    with pytest.raises(DatasetError, match=f"topic /su1/imu: all {len(T)} samples contain NaN"):
+        read_bag(bag2)
+
+
+def test_unknown_topic_wrong_type_and_empty_bag(tmp_path):
+    ts = _store(2)
+    bag = _write(tmp_path / "b", 2, {"/joint_states": _joint_msgs(ts, T), "/su1/imu": _imu_msgs(ts, T, UP_G)})
+    with pytest.raises(DatasetError, match="IMU topic '/nope' is not in the bag"):
+        read_bag(bag, tmap=topic_map(imu=["/nope"]))
+    with pytest.raises(DatasetError, match="topic '/joint_states' is sensor_msgs/msg/JointState, expected"):
+        read_bag(bag, tmap=topic_map(imu=["/joint_states"]))
+    empty = _write(tmp_path / "e.bag", 1, {"/joint_states": ("sensor_msgs/msg/JointState", [])})
+    with pytest.raises(DatasetError, match="the bag is empty"):
+        read_bag(empty)
+    with pytest.raises(DatasetError, match="no such bag"):
+        read_bag(tmp_path / "missing.bag")
+
+
+@pytest.mark.parametrize("ros,storage,name", [(1, "", "b.bag"), (2, "mcap", "b"), (2, "sqlite3", "b")])
+def test_truncated_bag_is_one_clear_error(tmp_path, ros, storage, name):
+    ts = _store(ros)
+    bag = _write(tmp_path / name, ros, {"/joint_states": _joint_msgs(ts, T, ros=ros),
+                                        "/su1/imu": _imu_msgs(ts, T, UP_G, ros=ros)}, storage=storage)
+    files = [bag] if ros == 1 else [p for p in bag.iterdir() if p.suffix in (".mcap", ".db3")]
+    data = files[0].read_bytes()
+    files[0].write_bytes(data[: len(data) // 2])
+    with pytest.raises(DatasetError, match=r"cannot (open|read) the bag .*truncated") as info:
+        read_bag(bag)
+    assert "\n" not in str(info.value)
+
+
+def test_joint_names_mapped_velocity_differentiated_stamps_fallback(tmp_path):
+    ts = _store(1)
+    shuffled = ["panda_finger_joint1", *PANDA_JOINTS[::-1], "panda_finger_joint2"]
+    _, joints = _joint_msgs(ts, T, names=shuffled, velocity=False, ros=1, zero_stamp=True)
+    _, gripper = _joint_msgs(ts, T[:10] + 0.005, names=["panda_finger_joint1"], ros=1)
+    bag = _write(tmp_path / "b.bag", 1, {"/joint_states": ("sensor_msgs/msg/JointState", joints + gripper),
+                                         "/su1/imu": _imu_msgs(ts, T, UP_G * STANDARD_GRAVITY, ros=1)})
+    ds, report = read_bag(bag, "panda")
+    notes = " | ".join(report.notes)
+    assert "skipped 10 message(s) without the robot's joints" in notes
+    assert "header.stamp is zero" in notes and "central differences" in notes
+    assert "accelerometer in g" not in notes  # m/s^2 stays as is
+    np.testing.assert_allclose(ds.imu["su1"].accel[:, 2], STANDARD_GRAVITY)
+    t = ds.joints.t
+    j = np.arange(7)
+    np.testing.assert_allclose(ds.joints.q, 0.1 * np.sin(t[:, None] + j), atol=1e-12)
+    inner = slice(1, -1)  # central differences: error h^2/6 max|q'''| = 1.7e-6 rad/s
+    np.testing.assert_allclose(ds.joints.qd[inner], 0.1 * np.cos(t[inner, None] + j), atol=3e-6)
+
+
+def test_range_and_laserscan_to_tof(tmp_path):
+    ts = _store(2)
+    R, S = ts.types["sensor_msgs/msg/Range"], ts.types["sensor_msgs/msg/LaserScan"]
+    values = [0.5, np.inf, 5.0, np.nan, 0.7]
+    rng_msgs = [(T0_NS + k * 10**7, R(header=_header(ts, T0_NS + k * 10**7, "tof_a"), radiation_type=1,
+                                       field_of_view=0.47, min_range=0.01, max_range=4.0, range=v))
+                for k, v in enumerate(values)]
+    beams = [[0.9, 0.4, np.inf], [np.inf, np.inf, np.inf], [0.005, 2.0, 3.0]]
+    scan_msgs = [(T0_NS + k * 10**7, S(header=_header(ts, T0_NS + k * 10**7, "other"), angle_min=-0.1, angle_max=0.1,
+                                       angle_increment=0.1, time_increment=0.0, scan_time=0.0, range_min=0.01,
+                                       range_max=4.0, ranges=np.array(b, np.float32),
+                                       intensities=np.zeros(0, np.float32)))
+                 for k, b in enumerate(beams)]
+    bag = _write(tmp_path / "b", 2, {
+        "/joint_states": _joint_msgs(ts, T), "/skin/a/imu": _imu_msgs(ts, T, UP_G, frame="a"),
+        "/skin/b/imu": _imu_msgs(ts, T, UP_G, frame="b"), "/skin/a/range": ("sensor_msgs/msg/Range", rng_msgs),
+        "/scanner": ("sensor_msgs/msg/LaserScan", scan_msgs)})
+    ds, report = read_bag(bag, tmap=topic_map(range_=["/skin/a/range", "/scanner=b"]))
+    assert report.range_topics == {"/skin/a/range": "a", "/scanner": "b"}  # namespace match, explicit name
+    np.testing.assert_allclose(ds.tof["a"].range, [0.5, np.nan, np.nan, 0.7], equal_nan=True)  # NaN reading dropped
+    np.testing.assert_allclose(ds.tof["a"].t, [0.0, 0.01, 0.02, 0.04], atol=1e-9)
+    np.testing.assert_allclose(ds.tof["b"].range, [0.4, np.nan, 2.0], equal_nan=True)
+    assert "/skin/a/range: dropped 1 sample(s) containing NaN" in report.notes
+
+
+def test_cli_import(small, tmp_path, capsys):
+    sim = small
+    write_bag(sim, tmp_path / "b.bag", ros_version=1)
+    assert main(["import", str(tmp_path / "b.bag"), "--out", str(tmp_path / "d.h5")]) == 0
+    out = capsys.readouterr().out
+    assert "segments found" in out and "multi-joint motion" in out
+    ds = read_dataset(tmp_path / "d.h5")
+    assert ds.segments is not None and len(ds.segments) > 0 and ds.units == sim.units
+    ts = _store(1)
+    _write(tmp_path / "nj.bag", 1, {"/su1/imu": _imu_msgs(ts, T, UP_G, ros=1)})
+    assert main(["import", str(tmp_path / "nj.bag"), "--out", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and "no sensor_msgs/JointState" in err and "\n" not in err
+    assert not (tmp_path / "x.h5").exists()
