@@ -221,7 +221,7 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     # Converge on every 8th moving sample, then polish on all of them (Gauss-Newton needs one or
     # two full iterations from there) and take the covariance from the full data.
     coarse = _fit(_arrange(problem, link, decimate=8), blocks, state=start)
-    fit = _fit(p, blocks, state=coarse.state, max_outer=3, max_inner=2)
+    fit = _fit(p, blocks, state=coarse.state, max_outer=2, max_inner=1)
     if want_scale:
         std_e = np.sqrt(np.maximum(np.diag(fit.covariance)[9:15], 0.0))
         if fit.null_space.size and np.any(np.abs(fit.null_space[9:15]) > 0.1) or np.any(std_e > SCALE_STD_LIMIT):
