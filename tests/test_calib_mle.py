@@ -172,3 +172,20 @@ def test_too_few_static_orientations():
         return
     for unit in result_or_error.units.values():
         assert any("distinct static orientation" in w for w in unit.warnings)
+
+
+@pytest.mark.slow
+def test_covariance_calibration_monte_carlo():
+    """Over 10 independent sessions the reported stds match the spread of the errors (factor 2)."""
+    chain = panda()
+    z_pos, z_tau = [], []
+    for seed in range(10):
+        ds = session(chain, "realistic", seed=50 + seed, n_units=3)
+        result = calibrate(ds, "mle")
+        for name, unit in result.units.items():
+            z_pos.extend((unit.pose.p_link_su - ds.truth[name].p_link_su) / unit.position_std_m)
+            tau_err = unit.extras["time_offset_s"] - ds.truth_sensor[name]["time_offset_s"]
+            z_tau.append(tau_err / unit.extras["time_offset_std_s"])
+    for z in (z_pos, z_tau):
+        rms = float(np.sqrt(np.mean(np.square(z))))
+        assert 0.5 < rms < 2.0, rms
