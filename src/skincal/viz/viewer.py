@@ -81,6 +81,8 @@ class Viewer:
     sliders: list[Any]
     recording: Recording | None = None
     poses: dict[str, SkinUnitPose] = field(default_factory=dict)
+    time_slider: Any = None
+    play_checkbox: Any = None
     _stop: threading.Event = field(default_factory=threading.Event)
     _quiet: bool = False
 
@@ -118,11 +120,15 @@ def _add_robot(server: Any, chain: SerialChain) -> list[Any]:
     return frames
 
 
-def _add_unit(server: Any, name: str, pose: SkinUnitPose, color: tuple[int, int, int], tag: str, axes: float) -> None:
+def _add_unit(
+    server: Any, name: str, pose: SkinUnitPose, color: tuple[int, int, int], tag: str, axes: float, wireframe: bool
+) -> None:
+    """A unit board (its top face at the unit origin, +z out of the skin) with its axes."""
     base = f"/robot/link{pose.link}/{tag}_{name}"
     q = _wxyz(pose.R_link_su)
     server.scene.add_frame(base, axes_length=axes, axes_radius=0.0025, wxyz=q, position=pose.p_link_su)
-    server.scene.add_box(f"{base}/board", color=color, dimensions=UNIT_BOX_M, position=(0.0, 0.0, -UNIT_BOX_M[2] / 2))
+    server.scene.add_box(f"{base}/board", color=color, dimensions=UNIT_BOX_M, position=(0.0, 0.0, -UNIT_BOX_M[2] / 2),
+                         wireframe=wireframe)
 
 
 def build_scene(
@@ -141,7 +147,7 @@ def build_scene(
     q_ref = np.zeros(chain.n_joints) if q0 is None else np.asarray(q0, dtype=float)
     errors: dict[str, float] = {}
     for name, unit in result.units.items():
-        _add_unit(server, name, unit.pose, ESTIMATE_COLOR, "est", 0.04)
+        _add_unit(server, name, unit.pose, ESTIMATE_COLOR, "est", 0.04, wireframe=False)
         semi, unknown = ellipsoid_semi_axes(unit.position_std_m)
         server.scene.add_icosphere(
             f"/robot/link{unit.pose.link}/sigma_{name}", radius=1.0, scale=tuple(semi), subdivisions=2,
@@ -151,7 +157,7 @@ def build_scene(
         if truth is not None and name in truth:
             err_mm, _, _ = pose_errors(chain, q_ref, unit.pose, truth[name])
             errors[name] = err_mm
-            _add_unit(server, name, truth[name], error_color(err_mm), "true", 0.025)
+            _add_unit(server, name, truth[name], error_color(err_mm), "true", 0.025, wireframe=True)
     return frames, errors
 
 
@@ -189,6 +195,7 @@ def _add_playback(viewer: Viewer) -> None:
                 spheres[name].position = p
 
     t_slider.on_update(lambda _e: show(float(t_slider.value)))
+    viewer.time_slider, viewer.play_checkbox = t_slider, playing
 
     def loop() -> None:
         period = 1.0 / PLAYBACK_FPS
@@ -219,7 +226,11 @@ def start_viewer(
         server = viser.ViserServer(host=host, port=port, verbose=False)
     try:
         server.gui.configure_theme(show_share_button=False)  # sharing would tunnel through a public relay
+        # No image-based lighting: plain lights render at once (also in software WebGL) and look the same
+        # on every machine.
         server.scene.configure_environment_map(hdri=None)
+        server.scene.add_light_hemisphere("/light", sky_color=(255, 255, 255), ground_color=(120, 120, 130),
+                                          intensity=1.6)
         if q0 is None:
             q0 = recording.q[0] if recording is not None else np.zeros(chain.n_joints)
         frames, errors = build_scene(server, result, chain, truth, q0)
@@ -240,7 +251,8 @@ def start_viewer(
 def _add_gui(viewer: Viewer, result: CalibrationResult, errors: dict[str, float], q0: FloatArray) -> None:
     server, chain = viewer.server, viewer.chain
     lines = [f"**{result.method}** on {chain.name}: {len(result.units)} units", ""]
-    lines.append("blue = estimate; beside it the truth, green (0 mm) .. red (10 mm); violet = 3-sigma ellipsoid")
+    lines.append("blue box = estimate; wire box = truth, green (0 mm) .. red (10 mm) by position error; "
+                 "violet = 3-sigma ellipsoid (orange: unobservable)")
     if errors:
         lines.append("")
         lines += [f"- {n}: {e:.2f} mm" for n, e in errors.items()]
