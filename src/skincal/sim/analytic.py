@@ -26,6 +26,7 @@ from skincal.errors import ConfigError
 from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
 from skincal.protocol import Trajectory
 from skincal.skin.imu import (
+    ImuErrors,
     ImuModel,
     angular_rate,
     apply_imu_model,
@@ -94,12 +95,7 @@ def simulate(
         f_su, w_su, _, _ = unit_kinematics(chain, pose, trajectory, t_true, gravity)
         accel, gyro = apply_imu_model(imu_model, errors, f_su, w_su, unit_rng)
         imu[name] = ImuStream(t=t_stamp, accel=accel, gyro=gyro)
-        truth_sensor[name] = {
-            "accel_bias": errors.accel_bias,
-            "accel_scale": errors.accel_scale,
-            "accel_misalignment": errors.accel_misalignment,
-            "time_offset_s": float(errors.latency_s),
-        }
+        truth_sensor[name] = sensor_truth(errors)
         if scene is not None:
             tof[name] = _simulate_tof(chain, pose, trajectory, tof_model, scene, unit_rng, t0, t1)
     joints = JointStates(t=trajectory.t, q=trajectory.q, qd=trajectory.qd, qdd=trajectory.qdd)
@@ -116,11 +112,27 @@ def simulate(
     )
 
 
+def sensor_truth(errors: ImuErrors) -> dict[str, np.ndarray | float]:
+    """The ``Dataset.truth_sensor`` entry of one unit's drawn IMU errors."""
+    return {
+        "accel_bias": errors.accel_bias,
+        "accel_scale": errors.accel_scale,
+        "accel_misalignment": errors.accel_misalignment,
+        "gyro_bias": errors.gyro_bias,
+        "time_offset_s": float(errors.latency_s),
+    }
+
+
+def tof_instants(t0: float, t1: float, rate_hz: float, rng: np.random.Generator) -> np.ndarray:
+    """A ToF sensor's sample instants over ``[t0, t1]``: its rate with a random phase, s."""
+    phase = rng.uniform(0.0, 1.0 / rate_hz)
+    return t0 + phase + np.arange(int(np.floor((t1 - t0 - phase) * rate_hz)) + 1) / rate_hz
+
+
 def _simulate_tof(chain, pose, trajectory, tof_model, scene, rng, t0: float, t1: float) -> TofStream:
     from skincal.skin.tof import TofModel, tof_range
 
     model = tof_model if tof_model is not None else TofModel()
-    phase = rng.uniform(0.0, 1.0 / model.rate_hz)
-    t = t0 + phase + np.arange(int(np.floor((t1 - t0 - phase) * model.rate_hz)) + 1) / model.rate_hz
+    t = tof_instants(t0, t1, model.rate_hz, rng)
     _, _, x_base, R_base_su = unit_kinematics(chain, pose, trajectory, t)
     return TofStream(t=t, range=tof_range(x_base, R_base_su, scene, model, rng))

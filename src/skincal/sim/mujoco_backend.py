@@ -39,6 +39,7 @@ from skincal.errors import ConfigError
 from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
 from skincal.kinematics.transforms import FloatArray
 from skincal.protocol import Trajectory
+from skincal.sim.analytic import sensor_truth, tof_instants
 from skincal.sim.mujoco_model import SensorIndex, build_model, require_mujoco
 from skincal.sim.scene import Scene
 from skincal.skin.imu import ImuModel, apply_imu_model, draw_imu_errors, sample_instants, true_sample_times
@@ -304,15 +305,9 @@ def simulate_mujoco(
         trace = sense(true_t[u])
         accel, gyro = apply_imu_model(imu_model, errors[u], trace.accel[:, u], trace.gyro[:, u], unit_rng)
         imu[name] = ImuStream(t=stamps[u], accel=accel, gyro=gyro)
-        truth_sensor[name] = {
-            "accel_bias": errors[u].accel_bias,
-            "accel_scale": errors[u].accel_scale,
-            "accel_misalignment": errors[u].accel_misalignment,
-            "time_offset_s": float(errors[u].latency_s),
-        }
+        truth_sensor[name] = sensor_truth(errors[u])
         if scene is not None:
-            phase = unit_rng.uniform(0.0, 1.0 / tof_model.rate_hz)
-            t_tof = t0 + phase + np.arange(int(np.floor((t1 - t0 - phase) * tof_model.rate_hz)) + 1) / tof_model.rate_hz
+            t_tof = tof_instants(t0, t1, tof_model.rate_hz, unit_rng)
             rays = sense(t_tof).range[:, u]  # (M, K), NaN = ray hit nothing
             nearest = np.where(np.isnan(rays), np.inf, rays).min(axis=1)
             tof[name] = TofStream(t=t_tof, range=_apply_tof(tof_model, nearest, unit_rng))
