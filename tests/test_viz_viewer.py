@@ -200,7 +200,7 @@ def test_viewer_screenshot_in_headless_chromium(viewer, tmp_path: Path):
         pytest.skip("no Chromium: apt-get install chromium (Debian package) to run the screenshot test")
     width, height = 1280, 800
     shot = capture_page(
-        viewer.url, width=width, height=height, chromium=exe, settle_s=1.5,
+        viewer.url, width=width, height=height, chromium=exe, settle_s=2.5,
         ready_js="!!document.querySelector('canvas') && document.body.innerText.includes('Joints')",
     )
     assert shot.errors == [], shot.errors
