@@ -62,13 +62,15 @@ class MethodSpec:
     """A registered method: its per-unit function, a one-line description, whether it uses the
     gyroscope for link discovery and takes care of link discovery itself, and an optional
     ``prepare(dataset, interpolator)`` run once per dataset whose result reaches every unit as
-    ``UnitProblem.shared``."""
+    ``UnitProblem.shared``; ``exact_joint_states=False`` when the method only needs the joint
+    states of the samples to find rest periods (see :func:`unit_samples`)."""
 
     run_unit: UnitMethod
     description: str
     discovers_links: bool = False
     use_gyro_for_links: bool = False
     prepare: Callable[[Dataset, JointInterpolator], Any] | None = None
+    exact_joint_states: bool = True
 
 
 METHODS: dict[str, MethodSpec] = {}
@@ -204,7 +206,7 @@ def calibrate_unit(
         interpolator = JointInterpolator(dataset.joints)
     if shared is None and spec.prepare is not None:
         shared = spec.prepare(dataset, interpolator)
-    samples = unit_samples(dataset, unit, interpolator=interpolator)
+    samples = unit_samples(dataset, unit, interpolator=interpolator, exact_joint_states=spec.exact_joint_states)
     if not np.any(samples.kind == 0):
         raise CalibrationError(f"unit '{unit}': no samples in static segments")
     assignment = None

@@ -70,6 +70,7 @@ class JointInterpolator:
         self.t_start, self.t_end = float(tj[0]), float(tj[-1])
         self._tj, self._q, self._qd_j = tj, np.asarray(joints.q, dtype=float), np.asarray(joints.qd, dtype=float)
         self._t_acc, self._qd, self._qdd = t_acc, qd_acc, qdd
+        self._uniform = t_acc is tj or (t_acc.shape == tj.shape and np.array_equal(t_acc, tj))
 
     def __call__(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """``(q, qd, qdd)`` at instants ``t`` (M,), each ``(M, n)``."""
@@ -86,6 +87,32 @@ class JointInterpolator:
         w = ((t - t0) / (t1 - t0))[:, None]
         qdd = (1.0 - w) * self._qdd[i] + w * self._qdd[i + 1]
         return q, qd, qdd
+
+
+    @property
+    def dt(self) -> float:
+        """Period of the uniform joint grid, s."""
+        return float(self._t_acc[1] - self._t_acc[0])
+
+    def nearest(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``(q, qd, qdd)`` of the joint sample nearest to each instant (no interpolation).
+
+        Good enough to tell whether the robot is at rest and where; exact kinematics need
+        :meth:`__call__`. Falls back to interpolation for unevenly sampled joint streams.
+        """
+        if not self._uniform:
+            return self(t)
+        g = self._t_acc
+        i = np.clip(np.searchsorted(g, t), 1, g.size - 1)
+        i -= (t - g[i - 1]) < (g[i] - t)
+        return self._q[i], self._qd_j[i], self._qdd[i]
+
+    def on_grid(self, step: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Every ``step``-th sample of the (uniform) joint grid: ``(t, q, qd, qdd)``."""
+        t = self._t_acc[::step]
+        if self._uniform:
+            return t, self._q[::step], self._qd_j[::step], self._qdd[::step]
+        return (t, *self(t))
 
 
 def cubic_hermite(t_knots: FloatArray, y: FloatArray, dy: FloatArray, t: FloatArray) -> FloatArray:
@@ -184,12 +211,15 @@ def unit_samples(
     time_offset_s: float = 0.0,
     interpolator: JointInterpolator | None = None,
     use_dataset_qdd: bool = False,
+    exact_joint_states: bool = True,
 ) -> UnitSamples:
     """Gather one unit's samples with joint states interpolated to its instants.
 
     ``time_offset_s`` is the IMU's latency: the sample stamped ``t`` measured the motion at
     ``t - time_offset_s``. Samples whose shifted instant lies outside the joint stream are dropped.
     Pass the dataset's ``interpolator`` when gathering several units (it is built once).
+    ``exact_joint_states=False`` takes the nearest joint sample instead of interpolating (for
+    methods that evaluate the kinematics themselves and only need to know where the robot rests).
     """
     if unit not in dataset.imu:
         raise CalibrationError(f"unknown unit '{unit}' (dataset has: {', '.join(dataset.units)})")
@@ -208,7 +238,7 @@ def unit_samples(
     gyro = None if gyro is None else gyro[usable]
     if interpolator is None:
         interpolator = JointInterpolator(dataset.joints, use_dataset_qdd=use_dataset_qdd)
-    q, qd, qdd = interpolator(t)
+    q, qd, qdd = interpolator(t) if exact_joint_states else interpolator.nearest(t)
     seg = tag_segments(t, dataset.segments)
     inside = seg >= 0
     pick = lambda arr, fill: np.where(inside, np.asarray(arr)[np.clip(seg, 0, None)], fill)  # noqa: E731

@@ -278,5 +278,6 @@ register(
         discovers_links=True,
         use_gyro_for_links=True,
         prepare=prepare,
+        exact_joint_states=False,
     ),
 )

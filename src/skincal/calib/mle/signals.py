@@ -67,9 +67,7 @@ class SignalTable:
     def __init__(
         self, chain: SerialChain, interpolator: JointInterpolator, gravity: FloatArray, rate_hz: float = 250.0
     ) -> None:
-        t0, t1 = interpolator.t_start, interpolator.t_end
-        grid = t0 + np.arange(int(np.floor((t1 - t0) * rate_hz)) + 1) / rate_hz
-        q, qd, qdd = interpolator(grid)
+        grid, q, qd, qdd = interpolator.on_grid(max(1, int(round(1.0 / (rate_hz * interpolator.dt)))))
         # Keep the grid where some joint moves (plus a margin): elsewhere units are stationary and
         # use exact static rows instead. Gaps are bridged by the interpolation only at their ends.
         moving = np.any(np.abs(qd) >= STATIONARY_QD, axis=1) | np.any(np.abs(qdd) >= STATIONARY_QDD, axis=1)
