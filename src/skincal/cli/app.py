@@ -14,6 +14,8 @@ app = typer.Typer(
 )
 
 console = Console()
+if not console.is_terminal:  # pipes and CI logs: tables wider than rich's 80-column default
+    console = Console(width=140)
 err_console = Console(stderr=True)
 
 

@@ -38,7 +38,7 @@ def core(
         f"link motion (frames, velocities, accelerations): {doc['link_motion']['samples_per_s']:.3g} /s"
     )
     table = Table(title=f"analytic simulation, {doc['protocol']} ({doc['protocol_duration_s']:.0f} s of motion)")
-    for col in ("units", "wall time [s]", "IMU samples", "samples/s"):
+    for col in ("units", "wall time (s)", "IMU samples", "samples/s"):
         table.add_column(col, justify="right")
     for row in doc["simulation"]:
         table.add_row(

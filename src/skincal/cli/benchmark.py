@@ -37,9 +37,9 @@ def table1_table(config, summary: dict[str, Any]):
     for k in range(n_units):
         table.add_column(f"SU{k + 1} (link {config.links[k]})", justify="right")
     table.add_column("average", justify="right")
-    table.add_column("wall time / set [s]", justify="right")
-    metrics = (("position_cm", "position [cm]", 1.0, 2), ("quaternion_distance", "quat. dist. x10", 10.0, 3),
-               ("rotation_deg", "rotation [deg]", 1.0, 2))
+    table.add_column("wall time / set (s)", justify="right")
+    metrics = (("position_cm", "position (cm)", 1.0, 2), ("quaternion_distance", "quat. dist. x10", 10.0, 3),
+               ("rotation_deg", "rotation (deg)", 1.0, 2))
     for key, label, scale, digits in metrics:
         for method in config.methods:
             s = summary["methods"][method]

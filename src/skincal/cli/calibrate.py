@@ -27,23 +27,24 @@ def read_links_file(path: Path) -> dict[str, int]:
 
 
 def _unit_table(result, title: str):
+    from rich.markup import escape
     from rich.table import Table
 
     table = Table(title=title)
-    for col in ("unit", "link", "position [m]", "quaternion (w,x,y,z)", "pos std [mm]", "rot std [deg]", "notes"):
+    for col in ("unit", "link", "position (m)", "quaternion (w,x,y,z)", "pos std (mm)", "rot std (deg)", "notes"):
         table.add_column(col)
     for name, unit in result.units.items():
         std_p = "-" if unit.position_std_m is None else f"{1e3 * max(unit.position_std_m):.3f}"
         std_r = "-" if unit.rotation_std_deg is None else f"{max(unit.rotation_std_deg):.3f}"
         notes = ("unobservable; " if not unit.observable else "") + "; ".join(unit.warnings)
         table.add_row(
-            name,
+            escape(name),
             str(unit.pose.link),
             " ".join(f"{x:+.4f}" for x in unit.pose.p_link_su),
             " ".join(f"{x:+.4f}" for x in unit.pose.quaternion_wxyz),
             std_p,
             std_r,
-            notes or "",
+            escape(notes or ""),
         )
     return table
 
@@ -102,7 +103,7 @@ def evaluate(
         typer.echo(json.dumps(doc, indent=2))
         return
     table = Table(title=f"{result.name} vs truth")
-    for col in ("unit", "link true/est", "position error [mm]", "rotation error [deg]", "quat. distance"):
+    for col in ("unit", "link true/est", "position error (mm)", "rotation error (deg)", "quat. distance"):
         table.add_column(col, justify="right")
     for name, u in doc["units"].items():
         mark = "" if u["observable"] else " (unobservable)"

@@ -17,6 +17,7 @@ def demo(
     protocol: str = typer.Option("paper-sim", help="protocol preset"),
 ) -> None:
     """Simulate the paper's Panda with six skin units, calibrate, and compare with the truth."""
+    from rich.markup import escape
     from rich.table import Table
 
     from skincal.calib import calibrate, evaluate
@@ -35,7 +36,7 @@ def demo(
         result = calibrate(ds, method, seed=seed, workers=2)
     doc = evaluate(result, ds)
     table = Table(title=f"{method}: calibrated {len(result.units)} units in {result.runtime_s:.2f} s")
-    for col in ("unit", "link true/found", "pos. err [mm]", "rot. err [deg]", "std [mm]", "notes"):
+    for col in ("unit", "link true/found", "pos. err (mm)", "rot. err (deg)", "std (mm)", "notes"):
         table.add_column(col, justify="right" if "[" in col else "left")
     for name, u in doc["units"].items():
         unit = result.units[name]
@@ -46,7 +47,7 @@ def demo(
             f"{u['position_error_mm']:.3f}",
             f"{u['rotation_error_deg']:.4f}",
             std,
-            "; ".join(unit.warnings),
+            escape("; ".join(unit.warnings)),
         )
     table.add_row(
         "mean", f"{doc['links_correct']}/{doc['units_total']} correct",

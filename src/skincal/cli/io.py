@@ -22,7 +22,7 @@ def segmentation_tables(report, verbose: bool = False) -> list:
     dur = np.asarray(seg.t_end) - np.asarray(seg.t_start)
     found = Table(title=f"segments found: {report.n_static} static, {report.n_dynamic} dynamic, "
                         f"{report.n_poses} poses")
-    for col in ("pose", "static", "static [s]", "dynamic joints (1-based)", "dynamic [s]"):
+    for col in ("pose", "static", "static (s)", "dynamic joints (1-based)", "dynamic (s)"):
         found.add_column(col)
     for p in range(report.n_poses):
         s, d = (pose == p) & (kind == STATIC), (pose == p) & (kind == DYNAMIC)
@@ -31,14 +31,14 @@ def segmentation_tables(report, verbose: bool = False) -> list:
     tables = [found]
     if report.rejected:
         rej = Table(title=f"rejected: {len(report.rejected)} interval(s)")
-        for col in ("t start [s]", "t end [s]", "reason", "detail"):
+        for col in ("t start (s)", "t end (s)", "reason", "detail"):
             rej.add_column(col)
         for r in report.rejected:
             rej.add_row(f"{r.t_start:.2f}", f"{r.t_end:.2f}", r.reason, r.detail)
         tables.append(rej)
     if verbose:
         every = Table(title="all segments")
-        for col in ("#", "kind", "pose", "joint", "t start [s]", "t end [s]"):
+        for col in ("#", "kind", "pose", "joint", "t start (s)", "t end (s)"):
             every.add_column(col)
         for i in range(len(seg)):
             every.add_row(str(i), "static" if kind[i] == STATIC else "dynamic", str(pose[i]),

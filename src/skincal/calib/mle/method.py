@@ -126,9 +126,10 @@ def choose_link(problem: UnitProblem) -> tuple[int, float, list[str], dict[int, 
     """
     n = problem.chain.n_joints
     activity = discover_link(problem.samples, n, use_gyro=True)
-    warnings = list(activity.warnings)
     if activity.link == 0:
-        raise CalibrationError("; ".join(warnings) or "no joint motion excites this unit")
+        raise CalibrationError("; ".join(activity.warnings) or "no joint motion excites this unit")
+    # The model comparison below settles ambiguity; keep only the activity's other notes.
+    warnings = [w for w in activity.warnings if "ambiguous" not in w]
     levels: dict[int, float] = {}
     states: dict[int, State] = {}
     if activity.confidence >= DECISIVE_ACTIVITY:
@@ -146,7 +147,7 @@ def choose_link(problem: UnitProblem) -> tuple[int, float, list[str], dict[int, 
         raise CalibrationError("no candidate link could be fitted")
     ranked = sorted(levels, key=levels.get)
     best = ranked[0]
-    confidence = activity.confidence
+    confidence = 1.0
     if len(ranked) > 1:
         ratio = levels[ranked[1]] / max(levels[best], 1e-12)
         confidence = float(np.clip(1.0 - 1.0 / ratio, 0.0, 1.0))
@@ -155,8 +156,6 @@ def choose_link(problem: UnitProblem) -> tuple[int, float, list[str], dict[int, 
                 f"link is ambiguous: links {best} and {ranked[1]} explain the data almost equally "
                 f"(residual {levels[best]:.3g} vs {levels[ranked[1]]:.3g} m/s^2); chose {best}"
             )
-    if best != activity.link:
-        warnings.append(f"activity suggested link {activity.link}, the model fit prefers link {best}")
     return best, confidence, warnings, levels, states[best]
 
 
