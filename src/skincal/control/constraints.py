@@ -1,0 +1,135 @@
+"""Constraint rows of the avoidance QP: obstacle approach velocity and joint limits.
+
+Obstacle constraint (paper Sec. V-C, after Escobedo et al. 2021): for obstacle point ``x_i`` let
+``c_i`` be the closest point of the robot (on a link capsule's core segment, link ``l_i``),
+``d_i = |x_i - c_i| - r`` the distance to the (padded) capsule surface and ``n_i = (x_i - c_i) / |x_i - c_i|``
+the unit normal from robot to obstacle, all in the base frame. The robot point's velocity toward
+the obstacle is ``n_i^T J_i qd`` with ``J_i`` the ``3 x n`` position Jacobian of ``c_i`` as a point
+fixed to link ``l_i``; since ``d/dt d_i = -n_i^T J_i qd`` (envelope theorem: the closest point only
+slides along the segment, perpendicular to ``n_i``), the row
+
+    n_i^T J_i qd <= b(d_i)
+
+bounds the approach speed by ``b(d_i)`` (:func:`approach_speed_bound`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from skincal.kinematics.chain import SerialChain, cross
+from skincal.kinematics.transforms import FloatArray
+from skincal.perception.body import RobotBody, body_proximity
+
+SATURATION = 0.99
+"""Fraction of ``v_max`` the bound reaches at the notice distance."""
+
+
+def approach_speed_bound(distance: ArrayLike, critical: float, notice: float, v_max: float) -> FloatArray:
+    """Allowed approach speed ``b(d)`` [m/s] at distance ``d`` [m]: a smooth sigmoid (tanh) ramp,
+
+        b(d) = v_max tanh((d - d_c) / w),    w = (d_n - d_c) / atanh(0.99),
+
+    zero at the critical distance ``d_c``, 99 % of ``v_max`` at the notice distance ``d_n`` (and
+    ``v_max`` beyond), negative below ``d_c`` (the robot must retreat, at up to ``v_max``).
+    With the paper's values ``d_c = 0.12 m``, ``d_n = 0.3 m``, ``v_max = 0.3 m/s``.
+    """
+    w = (notice - critical) / np.arctanh(SATURATION)
+    return v_max * np.tanh((np.asarray(distance, dtype=float) - critical) / w)
+
+
+class FrameCache:
+    """Link frames of one configuration, fast: ``T_{i-1,i}(q) = A_i Rz(q_i)`` (modified DH) or
+    ``Rz(q_i) A_i`` (standard DH) with the constant ``A_i = T_{i-1,i}(0)`` computed once.
+
+    Same result as :meth:`SerialChain.link_frames` for one sample, without its batching overhead
+    (the control loop evaluates one configuration per millisecond).
+    """
+
+    def __init__(self, chain: SerialChain) -> None:
+        self.chain = chain
+        self._A = chain.dh_transforms(np.zeros(chain.n_joints))[0]
+        self._modified = chain.convention == "modified"
+
+    def frames(self, q: ArrayLike) -> FloatArray:
+        """``T_base_link`` ``(n + 1, 4, 4)`` at joint angles ``q`` ``(n,)`` rad."""
+        q = np.asarray(q, dtype=float).reshape(-1)
+        n = q.size
+        cq, sq = np.cos(q), np.sin(q)
+        Rz = np.zeros((n, 4, 4))
+        Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = cq, -sq, sq, cq
+        Rz[:, 2, 2] = Rz[:, 3, 3] = 1.0
+        steps = self._A @ Rz if self._modified else Rz @ self._A
+        T = np.empty((n + 1, 4, 4))
+        T[0] = np.eye(4)
+        for i in range(n):
+            T[i + 1] = T[i] @ steps[i]
+        return T
+
+
+def point_jacobians(chain: SerialChain, T_base_link: FloatArray, links: ArrayLike, p_base: ArrayLike) -> FloatArray:
+    """Position Jacobians ``(K, 3, n)`` of points ``p_base`` ``(K, 3)`` (base frame, m) fixed to ``links`` ``(K,)``.
+
+    Column ``j`` (0-based) of a point on link ``l`` is ``z_j x (p - c_j)`` for ``j < l`` and 0 otherwise,
+    with joint axis ``z_j`` through ``c_j`` (:meth:`SerialChain.joint_axes`); a point on the base
+    (link 0) has a zero Jacobian. ``T_base_link``: ``(n + 1, 4, 4)`` at one configuration.
+    """
+    c, z = chain.joint_axes(np.asarray(T_base_link)[None])
+    c, z = c[0], z[0]  # (n, 3)
+    p = np.asarray(p_base, dtype=float).reshape(-1, 3)
+    links = np.asarray(links, dtype=int).reshape(-1)
+    cols = cross(z[None, :, :], p[:, None, :] - c[None, :, :])  # (K, n, 3)
+    mask = np.arange(chain.n_joints)[None, :] < links[:, None]
+    return np.swapaxes(cols * mask[..., None], 1, 2)
+
+
+@dataclass(frozen=True)
+class ObstacleRows:
+    """Obstacle constraints ``G qd <= h`` for ``K`` points.
+
+    Attributes:
+        G: ``(K, n)`` rows ``n_i^T J_i``.
+        h: ``(K,)`` bounds ``b(d_i)``, m/s.
+        distance: ``(K,)`` distance of each point to the padded robot surface, m.
+        link: ``(K,)`` link of the closest robot point.
+        normal: ``(K, 3)`` unit normals, robot -> obstacle, base frame.
+        p_base_robot: ``(K, 3)`` closest robot points (on the capsule core segments), m.
+    """
+
+    G: FloatArray
+    h: FloatArray
+    distance: FloatArray
+    link: np.ndarray
+    normal: FloatArray
+    p_base_robot: FloatArray
+
+
+def obstacle_rows(
+    body: RobotBody, T_base_link: FloatArray, points: ArrayLike, critical: float, notice: float, v_max: float
+) -> ObstacleRows:
+    """One row ``n_i^T J_i qd <= b(d_i)`` per obstacle point ``(K, 3)`` at one configuration."""
+    prox = body_proximity(body, T_base_link, points)
+    J = point_jacobians(body.chain, T_base_link, prox.link, prox.p_base_robot)
+    G = np.einsum("ki,kij->kj", prox.normal, J)
+    h = approach_speed_bound(prox.distance, critical, notice, v_max)
+    return ObstacleRows(G, h, prox.distance, prox.link, prox.normal, prox.p_base_robot)
+
+
+def joint_velocity_bounds(chain: SerialChain, q: ArrayLike, dt: float, scale: float = 1.0, margin: float = 0.0):
+    """Box bounds ``lb <= qd <= ub`` ``(n,)`` [rad/s] from velocity limits and position limits over one step.
+
+    ``ub = min(scale v_max, (q_upper - margin - q) / dt)``, ``lb = max(-scale v_max, (q_lower + margin - q) / dt)``,
+    then widened to contain 0 (a joint already past a limit may stop or move back, never further).
+    Joints without limits get ``+-inf`` (velocity) or no position term.
+    """
+    q = np.asarray(q, dtype=float).reshape(-1)
+    n = chain.n_joints
+    v = np.full(n, np.inf) if chain.velocity_limit is None else scale * chain.velocity_limit
+    lb, ub = -v.copy(), v.copy()
+    if chain.joint_lower is not None and chain.joint_upper is not None:
+        ub = np.minimum(ub, (chain.joint_upper - margin - q) / dt)
+        lb = np.maximum(lb, (chain.joint_lower + margin - q) / dt)
+    return np.minimum(lb, 0.0), np.maximum(ub, 0.0)

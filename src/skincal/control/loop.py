@@ -1,0 +1,178 @@
+"""Closed loop in MuJoCo: 1 kHz control, skin sensed at 50 Hz through MuJoCo rangefinders.
+
+Two sets of unit poses take part: the TRUE poses place the rangefinder sites in the simulated robot
+(what the sensors really see); the BELIEVED poses (a calibration result, the truth, or a degraded
+truth) are what perception uses to turn readings into obstacle points. The difference is what bad
+calibration costs.
+
+Per step ``k`` (``t = k dt``, ``dt = 1 ms``):
+
+1. obstacles move (mocap bodies along their time tables);
+2. units whose turn it is (each unit reads every ``1 / rate_hz`` s, phases staggered over the units)
+   read their range: MuJoCo rangefinders along the ToF cone rays at the current ``q``, nearest hit
+   among the obstacles (the robot's own capsule hull is hidden from the rays, see below),
+   then :class:`~skincal.skin.tof.TofModel` window, noise and rounding; perception gets the reading
+   with the joint state of its instant;
+3. the controller solves its QP with the live filtered points and the circle reference;
+4. the robot integrates the commanded velocity kinematically, ``q <- q + qd dt`` (an ideal velocity
+   interface, as a Panda under joint-velocity control at 1 kHz).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from skincal.control.qp import AvoidanceController, ControllerConfig
+from skincal.control.scenarios import Scenario
+from skincal.errors import ConfigError
+from skincal.kinematics.chain import SerialChain
+from skincal.kinematics.geometry import DEFAULT_LINK_RADIUS
+from skincal.kinematics.transforms import FloatArray
+from skincal.perception.body import RobotBody
+from skincal.perception.points import PerceptionConfig, ProximityTracker
+from skincal.sim.mujoco_model import SensorIndex, build_model, link_body_ids, require_mujoco
+from skincal.skin.pose import SkinUnitPose
+from skincal.skin.tof import TofModel, cone_directions, get_tof_model
+
+
+@dataclass(frozen=True)
+class RunLog:
+    """Everything one closed-loop run recorded.
+
+    Attributes:
+        scenario: the scenario run.
+        t: ``(S,)`` control instants, s.
+        q: ``(S, n)`` joint angles at each instant (before the step), rad.
+        qd: ``(S, n)`` commanded joint velocities, rad/s.
+        x, x_des: ``(S, 3)`` flange position and reference, base frame, m.
+        feasible: ``(S,)`` the QP had a solution (else the safe stop was commanded).
+        violation: ``(S,)`` obstacle-row violation of the command, m/s.
+        n_obstacles: ``(S,)`` obstacle rows in the QP.
+        min_distance: ``(S,)`` smallest perceived distance to the padded robot, m (inf: none).
+        solve_time_s: ``(S,)`` QP solver time; step_time_s ``(S,)`` whole controller step (perception
+            query, QP set-up and solve); loop_time_s ``(S,)`` the whole loop iteration incl. sensing.
+        units: unit names (true placement order); tof_t, tof_range: ``(M, U)`` reading instants (s)
+            and readings (m, NaN = none) of each unit.
+    """
+
+    scenario: Scenario
+    t: FloatArray
+    q: FloatArray
+    qd: FloatArray
+    x: FloatArray
+    x_des: FloatArray
+    feasible: np.ndarray
+    violation: FloatArray
+    n_obstacles: np.ndarray
+    min_distance: FloatArray
+    solve_time_s: FloatArray
+    step_time_s: FloatArray
+    loop_time_s: FloatArray
+    units: tuple[str, ...]
+    tof_t: FloatArray
+    tof_range: FloatArray
+
+    @property
+    def tracking_error(self) -> FloatArray:
+        """``(S,)`` flange position error ``|x_des - x|``, m."""
+        return np.linalg.norm(self.x_des - self.x, axis=1)
+
+
+def sensor_reading(model: TofModel, nearest: FloatArray, rng: np.random.Generator) -> FloatArray:
+    """ToF output for true nearest distances ``(U,)`` m: window ``[min_range, max_range]`` (else NaN),
+    Gaussian noise of std ``noise_std + noise_std_per_m d``, rounding to ``resolution_m``."""
+    valid = np.isfinite(nearest) & (nearest >= model.min_range) & (nearest <= model.max_range)
+    out = np.where(valid, nearest, np.nan)
+    out = out + rng.normal(size=out.shape) * model.noise_std_at(np.where(valid, nearest, 0.0))
+    if model.resolution_m > 0:
+        out = np.round(out / model.resolution_m) * model.resolution_m
+    return out
+
+
+def run_scenario(
+    chain: SerialChain,
+    scenario: Scenario,
+    true_poses: Mapping[str, SkinUnitPose],
+    believed_poses: Mapping[str, SkinUnitPose],
+    rng: np.random.Generator,
+    *,
+    controller: ControllerConfig = ControllerConfig(),
+    perception: PerceptionConfig = PerceptionConfig(),
+    tof_model: TofModel | None = None,
+    link_radius: float = DEFAULT_LINK_RADIUS,
+) -> RunLog:
+    """Run ``scenario`` in closed loop (see the module docstring) and log it.
+
+    ``believed_poses`` may lack units (their readings are then unused) but not name unknown ones.
+    ``tof_model``: default the VL53L1X preset (27 deg cone of 37 rays, 5 mm + 0.5 % noise).
+    """
+    mujoco = require_mujoco()
+    unknown = set(believed_poses) - set(true_poses)
+    if unknown:
+        raise ConfigError(f"calibrated unit(s) {', '.join(sorted(unknown))} are not on the simulated robot")
+    tof_model = tof_model if tof_model is not None else get_tof_model("vl53l1x")
+    dt = controller.dt
+    units = tuple(true_poses)
+    rays = cone_directions(tof_model.fov_deg, tof_model.n_rays)
+    model = build_model(chain, true_poses, scene=scenario.scene, range_directions=rays, board_geoms=False,
+                        link_radius=link_radius)
+    model.opt.timestep = dt
+    # Rays ignore transparent geoms: hide the robot's own capsule hull from the rangefinders (a unit
+    # near a joint sits inside the neighbouring link's capsule, which the real arm does not have).
+    robot_geoms = np.isin(model.geom_bodyid, link_body_ids(model, chain.n_joints))
+    model.geom_rgba[robot_geoms, 3] = 0.0
+    idx = SensorIndex.of(model, units, len(rays))
+    data = mujoco.MjData(model)
+
+    S = int(round(scenario.duration / dt))
+    t = dt * np.arange(S)
+    x_des, xd_des = scenario.circle.at(t)
+    mocap = scenario.scene.mocap_positions(t) if scenario.scene.obstacles else None
+    period = max(1, int(round(1.0 / (tof_model.rate_hz * dt))))
+    phase = (np.arange(len(units)) * period) // max(len(units), 1)
+    M = S // period + 1
+    tof_t = np.full((M, len(units)), np.nan)
+    tof_range = np.full((M, len(units)), np.nan)
+    count = np.zeros(len(units), dtype=int)
+
+    body = RobotBody.of(chain, link_radius)
+    tracker = ProximityTracker(chain, {u: p for u, p in believed_poses.items()}, perception, body)
+    ctl = AvoidanceController(chain, controller, body, q_posture=scenario.q0)
+    n = chain.n_joints
+    q = scenario.q0.astype(float).copy()
+    log_q, log_qd, log_x = np.empty((S, n)), np.empty((S, n)), np.empty((S, 3))
+    feasible = np.ones(S, dtype=bool)
+    violation, min_dist = np.zeros(S), np.full(S, np.inf)
+    n_obs = np.zeros(S, dtype=int)
+    solve_t, step_t, loop_t = np.zeros(S), np.zeros(S), np.zeros(S)
+    for k in range(S):  # the closed loop is sequential
+        t0 = time.perf_counter()
+        reading = np.flatnonzero((k - phase) % period == 0)
+        if reading.size:
+            data.qpos[:] = q
+            if mocap is not None:
+                data.mocap_pos[:] = mocap[k]
+            mujoco.mj_fwdPosition(model, data)
+            mujoco.mj_sensorPos(model, data)
+            hits = data.sensordata[idx.range[reading]]  # (R, K), -1 = no hit
+            nearest = np.where(hits < 0, np.inf, hits).min(axis=1)
+            r = sensor_reading(tof_model, nearest, rng)
+            tof_t[count[reading], reading] = t[k]
+            tof_range[count[reading], reading] = r
+            count[reading] += 1
+            tracker.update(t[k], q, {units[u]: float(ru) for u, ru in zip(reading, r, strict=True)})
+        t1 = time.perf_counter()
+        pts = tracker.points(t[k])
+        res = ctl.step(q, x_des[k], xd_des[k], pts.positions)
+        step_t[k] = time.perf_counter() - t1
+        log_q[k], log_qd[k], log_x[k] = q, res.qd, res.x
+        feasible[k], violation[k], n_obs[k] = res.feasible, res.violation, res.n_obstacles
+        min_dist[k], solve_t[k] = res.min_distance, res.solve_time_s
+        q = q + res.qd * dt
+        loop_t[k] = time.perf_counter() - t0
+    return RunLog(scenario, t, log_q, log_qd, log_x, x_des, feasible, violation, n_obs, min_dist, solve_t, step_t,
+                  loop_t, units, tof_t[: count.max()], tof_range[: count.max()])

@@ -1,0 +1,138 @@
+"""Metrics of a closed-loop run: clearance, contacts, tracking error and recovery, QP timing.
+
+Clearance at each control instant is the smallest surface-to-surface distance between the robot's
+TRUE link capsules (no padding) and the obstacle solids, in closed form: capsule-capsule
+``|seg1 - seg2| - r1 - r2`` and capsule-sphere (a zero-length segment), via
+:func:`skincal.perception.body.segment_distance`. A contact is an interval of clearance < 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from skincal.control.loop import RunLog
+from skincal.errors import ConfigError
+from skincal.kinematics.transforms import FloatArray
+from skincal.perception.body import RobotBody, segment_distance
+from skincal.skin import tof
+
+RECOVERY_THRESHOLD = 0.005
+"""Tracking error below which the task counts as recovered, m."""
+
+_CHUNK = 2000
+
+
+def obstacle_segments(log: RunLog, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Obstacle solids at instants ``t`` ``(M,)`` as segments: ends ``(M, P, 3)`` each and radii ``(P,)``, m.
+
+    Spheres are zero-length segments; other solids (boxes, planes) are not supported here.
+    """
+    prims = log.scenario.scene.tof_primitives(t) if log.scenario.scene.obstacles else []
+    a, b, r = [], [], []
+    for p in prims:
+        if isinstance(p, tof.Sphere):
+            a.append(p.center)
+            b.append(p.center)
+        elif isinstance(p, tof.Capsule):
+            a.append(p.p0)
+            b.append(p.p1)
+        else:
+            raise ConfigError(f"clearance: obstacle solid {type(p).__name__} is not supported (spheres and capsules)")
+        r.append(float(np.asarray(p.radius)))
+    M = np.atleast_1d(t).size
+    if not a:
+        return np.zeros((M, 0, 3)), np.zeros((M, 0, 3)), np.zeros(0)
+    stack = lambda xs: np.stack([np.broadcast_to(x, (M, 3)) for x in xs], axis=1)  # noqa: E731
+    return stack(a), stack(b), np.array(r)
+
+
+def clearance(log: RunLog, body: RobotBody) -> FloatArray:
+    """``(S,)`` smallest distance between the robot capsules and the obstacle solids at each step, m (inf: none)."""
+    S = log.t.size
+    out = np.full(S, np.inf)
+    for k0 in range(0, S, _CHUNK):
+        sl = slice(k0, min(S, k0 + _CHUNK))
+        oa, ob, orad = obstacle_segments(log, log.t[sl])
+        if orad.size == 0:
+            continue
+        ra, rb = body.segments(body.chain.link_frames(log.q[sl]))  # (M, C, 3)
+        d = segment_distance(ra[:, :, None], rb[:, :, None], oa[:, None], ob[:, None])  # (M, C, P)
+        d = d - body.radius[None, :, None] - orad[None, None, :]
+        out[sl] = d.reshape(d.shape[0], -1).min(axis=1)
+    return out
+
+
+def count_contacts(clear: FloatArray) -> int:
+    """Number of contact intervals (runs of clearance < 0)."""
+    touching = np.concatenate([[False], clear < 0])
+    return int(np.sum(touching[1:] & ~touching[:-1]))
+
+
+def recovery_time(t: FloatArray, error: FloatArray, t_leave: float, threshold: float = RECOVERY_THRESHOLD) -> float:
+    """Time after ``t_leave`` until the error falls below ``threshold`` for good, s (NaN: never; 0: never above)."""
+    after = t >= t_leave
+    if not np.any(after):
+        return float("nan")
+    above = np.flatnonzero(after & (error >= threshold))
+    if above.size == 0:
+        return 0.0
+    last = above[-1]
+    if last + 1 >= t.size:
+        return float("nan")
+    return float(t[last + 1] - t_leave)
+
+
+@dataclass(frozen=True)
+class AvoidMetrics:
+    """Summary of one run (lengths m, times s unless the name says ms)."""
+
+    scenario: str
+    poses: str
+    min_clearance_m: float
+    contacts: int
+    contact_time_s: float
+    max_tracking_error_m: float
+    rms_tracking_error_m: float
+    final_tracking_error_m: float
+    recovery_s: float
+    active_time_s: float
+    infeasible_steps: int
+    qp_median_ms: float
+    qp_p95_ms: float
+    step_median_ms: float
+    loop_median_ms: float
+    loop_p95_ms: float
+    steps: int
+
+    def to_dict(self) -> dict:
+        """Plain JSON-ready dict (NaN/inf -> None)."""
+        return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in asdict(self).items()}
+
+
+def summarize(log: RunLog, body: RobotBody, poses: str = "") -> AvoidMetrics:
+    """All metrics of a run; ``body`` is the TRUE robot geometry (as simulated)."""
+    clear = clearance(log, body)
+    err = log.tracking_error
+    dt = float(log.t[1] - log.t[0]) if log.t.size > 1 else 0.0
+    ms = 1e3
+    return AvoidMetrics(
+        scenario=log.scenario.name,
+        poses=poses,
+        min_clearance_m=float(clear.min()),
+        contacts=count_contacts(clear),
+        contact_time_s=float(np.sum(clear < 0) * dt),
+        max_tracking_error_m=float(err.max()),
+        rms_tracking_error_m=float(np.sqrt(np.mean(err**2))),
+        final_tracking_error_m=float(err[-1]),
+        recovery_s=recovery_time(log.t, err, log.scenario.t_leave),
+        active_time_s=float(np.sum(log.n_obstacles > 0) * dt),
+        infeasible_steps=int(np.sum(~log.feasible)),
+        qp_median_ms=float(np.median(log.solve_time_s) * ms),
+        qp_p95_ms=float(np.percentile(log.solve_time_s, 95) * ms),
+        step_median_ms=float(np.median(log.step_time_s) * ms),
+        loop_median_ms=float(np.median(log.loop_time_s) * ms),
+        loop_p95_ms=float(np.percentile(log.loop_time_s, 95) * ms),
+        steps=int(log.t.size),
+    )

@@ -1,0 +1,161 @@
+"""Human-approach scenarios for the avoidance controller: the task (a circle) and who comes close.
+
+Robot and skin: the Panda at ``Q_START`` with the paper's Table II placement
+(:func:`skincal.skin.placement.paper_placement`, units on links 2..7), the same placement the
+simulated calibration datasets use. At ``Q_START`` its units look: su1 forward (+x) from low on the
+upper arm, su2 sideways (-y) from the upper arm, su3 up, su4 sideways (+y) from the forearm, su5
+backward from the wrist, su6 forward-right (+x -y) from the hand. People come from where units look.
+
+Task (paper Sec. V-C): the flange tracks a circle of radius 0.1 m in the vertical y-z plane in front of
+the robot, starting where the flange is at ``Q_START`` (period 5 s, 0.126 m/s).
+
+Scenarios (all positions in the base frame, m; obstacles are :mod:`skincal.sim.scene` objects):
+
+* ``none``: nobody; the task alone.
+* ``arm``: a person's forearm (capsule, r = 4.5 cm) reaches in from +y toward the robot's forearm
+  (seen by su4), holds, and withdraws.
+* ``hand``: a hand (sphere, r = 5 cm) comes toward the flange from +x -y (seen by su6), holds inside
+  the circle's reach, and withdraws: the task itself must give way.
+* ``walk``: a standing person (:func:`skincal.sim.scene.human`) walks past in front of the robot along y.
+* ``fast``: the hand of ``hand`` comes in at 1 m/s.
+
+Each has ``t_leave``, the instant the person has fully left (the tracking error should recover after it).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from skincal.errors import ConfigError
+from skincal.kinematics.chain import SerialChain
+from skincal.kinematics.transforms import FloatArray
+from skincal.sim.scene import Obstacle, Primitive, Scene, TimeTable, human
+
+Q_START = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
+"""Start configuration of the Panda, rad (flange about 0.47 m in front of the base, 0.52 m high)."""
+
+
+@dataclass(frozen=True)
+class Circle:
+    """Flange reference ``x(t) = center + radius (u cos(w t) + v sin(w t))``, ``w = 2 pi / period``.
+
+    ``center``, ``u``, ``v``: ``(3,)`` base frame (``u``, ``v`` orthonormal), m; ``period`` s.
+    """
+
+    center: FloatArray
+    radius: float
+    u: FloatArray
+    v: FloatArray
+    period: float
+
+    @classmethod
+    def through(cls, start: ArrayLike, radius: float = 0.1, period: float = 5.0, plane: str = "yz") -> Circle:
+        """The circle whose ``t = 0`` point is ``start`` ``(3,)`` m, in the vertical ``yz`` or horizontal ``xy`` plane."""
+        axes = {"yz": (np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])),
+                "xy": (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))}
+        if plane not in axes:
+            raise ConfigError(f"circle plane must be 'yz' or 'xy', got '{plane}'")
+        if radius <= 0 or period <= 0:
+            raise ConfigError(f"circle needs radius > 0 m and period > 0 s, got {radius}, {period}")
+        u, v = axes[plane]
+        return cls(np.asarray(start, dtype=float) - radius * u, float(radius), u, v, float(period))
+
+    def at(self, t: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Position ``(M, 3)`` m and velocity ``(M, 3)`` m/s at instants ``t`` ``(M,)`` s."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))[:, None]
+        w = 2 * np.pi / self.period
+        c, s = np.cos(w * t), np.sin(w * t)
+        return self.center + self.radius * (c * self.u + s * self.v), self.radius * w * (-s * self.u + c * self.v)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One closed-loop run: start configuration, task, obstacles, duration and when the person has left.
+
+    Attributes:
+        name, description: labels.
+        q0: ``(n,)`` start configuration, rad.
+        circle: the flange reference.
+        scene: obstacles with their time tables.
+        duration: s.
+        t_leave: instant (s) after which nobody is near any more (``0`` when nobody comes).
+    """
+
+    name: str
+    description: str
+    q0: FloatArray
+    circle: Circle
+    scene: Scene
+    duration: float
+    t_leave: float
+
+
+def _mover(name: str, prims: tuple[Primitive, ...], waypoints: list[tuple[float, ArrayLike]]) -> Obstacle:
+    t = [w[0] for w in waypoints]
+    p = np.array([w[1] for w in waypoints], dtype=float)
+    return Obstacle(name, prims, p[0], path=TimeTable(t, p))
+
+
+def _approach(name: str, prims, far, near, t_in: float, speed: float, hold: float) -> tuple[Obstacle, float]:
+    """Come from ``far`` to ``near`` at ``speed`` m/s starting at ``t_in``, hold ``hold`` s, go back at 0.5 m/s."""
+    far, near = np.asarray(far, dtype=float), np.asarray(near, dtype=float)
+    L = float(np.linalg.norm(near - far))
+    t1 = t_in + L / speed
+    t2 = t1 + hold
+    t3 = t2 + L / 0.5
+    return _mover(name, prims, [(0.0, far), (t_in, far), (t1, near), (t2, near), (t3, far)]), t3
+
+
+def _arm(chain: SerialChain, q0: FloatArray) -> tuple[Scene, float, float, str]:
+    # A horizontal forearm along x, reaching in from +y toward the robot's forearm (x ~ 0.2-0.35, z ~ 0.65).
+    prims = (Primitive("capsule", [0.045, 0.13], [0.0, 0.0, 0.0], _rot_y_90()),)
+    arm, t_out = _approach("arm", prims, [0.25, 1.2, 0.68], [0.25, 0.22, 0.68], 2.0, 0.2, 3.0)
+    return Scene((arm,)), t_out, t_out + 4.0, "a person's forearm reaches toward the robot's forearm from +y"
+
+
+def _hand(chain: SerialChain, q0: FloatArray, speed: float = 0.2) -> tuple[Scene, float, float, str]:
+    prims = (Primitive("sphere", [0.05]),)
+    hand, t_out = _approach("hand", prims, [1.3, -0.9, 0.6], [0.68, -0.24, 0.55], 2.0, speed, 3.0)
+    return Scene((hand,)), t_out, t_out + 4.0, f"a hand comes toward the end effector at {speed} m/s"
+
+
+def _walk(chain: SerialChain, q0: FloatArray) -> tuple[Scene, float, float, str]:
+    person = human("walker", (0.85, -2.0, 0.0), np.pi / 2, path=TimeTable([1.0, 6.0], [[0.85, -2.0, 0.0], [0.85, 2.0, 0.0]]))
+    return Scene((person,)), 6.0, 10.0, "a person walks past in front of the robot (0.8 m/s)"
+
+
+def _none(chain: SerialChain, q0: FloatArray) -> tuple[Scene, float, float, str]:
+    return Scene(()), 0.0, 5.0, "nobody near: the task alone"
+
+
+def _rot_y_90() -> FloatArray:
+    return np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+
+
+SCENARIOS: dict[str, Callable[[SerialChain, FloatArray], tuple[Scene, float, float, str]]] = {
+    "none": _none,
+    "arm": _arm,
+    "hand": _hand,
+    "walk": _walk,
+    "fast": lambda chain, q0: _hand(chain, q0, speed=0.6),
+}
+"""Scenario builders by name: ``(chain, q0) -> (scene, t_leave, duration, description)``."""
+
+
+def get_scenario(name: str, chain: SerialChain, duration: float | None = None) -> Scenario:
+    """The scenario ``name`` (:data:`SCENARIOS`) for ``chain`` (the Panda: ``Q_START``), optionally shortened."""
+    if name not in SCENARIOS:
+        raise ConfigError(f"unknown scenario '{name}' (known: {', '.join(SCENARIOS)})")
+    if chain.n_joints != Q_START.size:
+        raise ConfigError(f"scenarios are set up for a 7-joint arm (the Panda), got '{chain.name}'")
+    q0 = Q_START.copy()
+    scene, t_leave, default_duration, text = SCENARIOS[name](chain, q0)
+    start = chain.flange_pose(q0)[0, :3, 3]
+    T = default_duration if duration is None else float(duration)
+    if T <= 0:
+        raise ConfigError(f"scenario duration must be positive s, got {T}")
+    return Scenario(name, text, q0, Circle.through(start), scene, T, t_leave)
