@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import sys
 
+from skincal.cli import avoid as _avoid  # noqa: E402,F401
 from skincal.cli import bench_more as _bench_more  # noqa: E402,F401
 from skincal.cli import benchmark as _benchmark  # noqa: E402,F401
 from skincal.cli import calibrate as _calibrate  # noqa: E402,F401

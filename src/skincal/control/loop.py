@@ -118,8 +118,9 @@ def run_scenario(
     dt = controller.dt
     units = tuple(true_poses)
     rays = cone_directions(tof_model.fov_deg, tof_model.n_rays)
-    model = build_model(chain, true_poses, scene=scenario.scene, range_directions=rays, board_geoms=False,
-                        link_radius=link_radius)
+    model = build_model(
+        chain, true_poses, scene=scenario.scene, range_directions=rays, board_geoms=False, link_radius=link_radius
+    )
     model.opt.timestep = dt
     # Rays ignore transparent geoms: hide the robot's own capsule hull from the rangefinders (a unit
     # near a joint sits inside the neighbouring link's capsule, which the real arm does not have).
@@ -174,5 +175,21 @@ def run_scenario(
         min_dist[k], solve_t[k] = res.min_distance, res.solve_time_s
         q = q + res.qd * dt
         loop_t[k] = time.perf_counter() - t0
-    return RunLog(scenario, t, log_q, log_qd, log_x, x_des, feasible, violation, n_obs, min_dist, solve_t, step_t,
-                  loop_t, units, tof_t[: count.max()], tof_range[: count.max()])
+    return RunLog(
+        scenario,
+        t,
+        log_q,
+        log_qd,
+        log_x,
+        x_des,
+        feasible,
+        violation,
+        n_obs,
+        min_dist,
+        solve_t,
+        step_t,
+        loop_t,
+        units,
+        tof_t[: count.max()],
+        tof_range[: count.max()],
+    )

@@ -13,11 +13,11 @@ Scenarios (all positions in the base frame, m; obstacles are :mod:`skincal.sim.s
 
 * ``none``: nobody; the task alone.
 * ``arm``: a person's forearm (capsule, r = 4.5 cm) reaches in from +y toward the robot's forearm
-  (seen by su4), holds, and withdraws.
-* ``hand``: a hand (sphere, r = 5 cm) comes toward the flange from +x -y (seen by su6), holds inside
-  the circle's reach, and withdraws: the task itself must give way.
+  (seen by su4) at 0.2 m/s, holds 3 s, and withdraws.
+* ``hand``: a hand (sphere, r = 5 cm) comes toward the flange from +x -y (seen by su6) at 0.2 m/s,
+  holds near the circle, and withdraws: the task itself must give way.
 * ``walk``: a standing person (:func:`skincal.sim.scene.human`) walks past in front of the robot along y.
-* ``fast``: the hand of ``hand`` comes in at 1 m/s.
+* ``fast``: the hand of ``hand`` comes in at 0.6 m/s.
 
 Each has ``t_leave``, the instant the person has fully left (the tracking error should recover after it).
 """
@@ -54,9 +54,11 @@ class Circle:
 
     @classmethod
     def through(cls, start: ArrayLike, radius: float = 0.1, period: float = 5.0, plane: str = "yz") -> Circle:
-        """The circle whose ``t = 0`` point is ``start`` ``(3,)`` m, in the vertical ``yz`` or horizontal ``xy`` plane."""
-        axes = {"yz": (np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])),
-                "xy": (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))}
+        """The circle whose ``t = 0`` point is ``start`` ``(3,)`` m, in the vertical ``yz`` or flat ``xy`` plane."""
+        axes = {
+            "yz": (np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])),
+            "xy": (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])),
+        }
         if plane not in axes:
             raise ConfigError(f"circle plane must be 'yz' or 'xy', got '{plane}'")
         if radius <= 0 or period <= 0:
@@ -124,7 +126,8 @@ def _hand(chain: SerialChain, q0: FloatArray, speed: float = 0.2) -> tuple[Scene
 
 
 def _walk(chain: SerialChain, q0: FloatArray) -> tuple[Scene, float, float, str]:
-    person = human("walker", (0.85, -2.0, 0.0), np.pi / 2, path=TimeTable([1.0, 6.0], [[0.85, -2.0, 0.0], [0.85, 2.0, 0.0]]))
+    path = TimeTable([1.0, 6.0], [[0.85, -2.0, 0.0], [0.85, 2.0, 0.0]])
+    person = human("walker", (0.85, -2.0, 0.0), np.pi / 2, path=path)
     return Scene((person,)), 6.0, 10.0, "a person walks past in front of the robot (0.8 m/s)"
 
 
@@ -159,3 +162,22 @@ def get_scenario(name: str, chain: SerialChain, duration: float | None = None) -
     if T <= 0:
         raise ConfigError(f"scenario duration must be positive s, got {T}")
     return Scenario(name, text, q0, Circle.through(start), scene, T, t_leave)
+
+
+def degrade_poses(poses: dict, position_m: float, angle_deg: float, rng: np.random.Generator) -> dict:
+    """Mis-calibrated copies of ``poses`` (name -> :class:`SkinUnitPose`): each unit's position moved by
+    exactly ``position_m`` m in a random direction and its orientation turned by exactly ``angle_deg``
+    about a random axis (link frame), seeded by ``rng``."""
+    from scipy.spatial.transform import Rotation
+
+    from skincal.skin.pose import SkinUnitPose
+
+    if position_m < 0 or angle_deg < 0:
+        raise ConfigError(f"degradation must be non-negative, got {position_m} m, {angle_deg} deg")
+    out = {}
+    for name, pose in poses.items():
+        d = rng.normal(size=3)
+        axis = rng.normal(size=3)
+        R_err = Rotation.from_rotvec(np.deg2rad(angle_deg) * axis / np.linalg.norm(axis)).as_matrix()
+        out[name] = SkinUnitPose(pose.link, R_err @ pose.R_link_su, pose.p_link_su + position_m * d / np.linalg.norm(d))
+    return out

@@ -1,0 +1,135 @@
+"""Controller: barrier shape, Jacobians, the approach-velocity bound checked by finite differences of the
+resulting motion, safe stop on infeasible problems, joint limits, metrics helpers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from skincal.control import (
+    AvoidanceController,
+    ControllerConfig,
+    FrameCache,
+    approach_speed_bound,
+    joint_velocity_bounds,
+    point_jacobians,
+)
+from skincal.control.metrics import count_contacts, recovery_time
+from skincal.kinematics import panda, sawyer
+from skincal.perception import RobotBody
+
+Q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
+CFG = ControllerConfig()
+
+
+def sampled_distance(body: RobotBody, q: np.ndarray, p: np.ndarray) -> float:
+    """Independent distance from ``p`` to the robot surface: dense samples of every capsule core."""
+    a, b = body.segments(body.chain.link_frames(q))
+    s = np.linspace(0.0, 1.0, 20001)
+    best = np.inf
+    for ai, bi, r in zip(a[0], b[0], body.radius, strict=True):
+        best = min(best, np.min(np.linalg.norm(ai + s[:, None] * (bi - ai) - p, axis=1)) - r)
+    return float(best)
+
+
+def test_barrier_shape():
+    d = np.linspace(0.0, 1.0, 1001)
+    b = approach_speed_bound(d, 0.12, 0.3, 0.3)
+    assert approach_speed_bound(0.12, 0.12, 0.3, 0.3) == pytest.approx(0.0, abs=1e-15)
+    assert approach_speed_bound(0.3, 0.12, 0.3, 0.3) == pytest.approx(0.99 * 0.3)
+    assert np.all(np.diff(b) > 0) and np.all(b[d < 0.12] < 0) and np.all(b <= 0.3)
+    assert b[-1] == pytest.approx(0.3, rel=1e-6)
+
+
+@pytest.mark.parametrize("make", [panda, sawyer])
+def test_frames_and_jacobians_match_the_chain(make, rng):
+    chain = make()
+    q = rng.uniform(-1, 1, chain.n_joints)
+    T = FrameCache(chain).frames(q)
+    np.testing.assert_allclose(T, chain.link_frames(q)[0], atol=1e-12)
+    for link in (2, 5, chain.n_joints):
+        p_link = rng.normal(size=3) * 0.1
+        p_base = T[link, :3, :3] @ p_link + T[link, :3, 3]
+        J = point_jacobians(chain, T, [link], p_base)[0]
+        np.testing.assert_allclose(J, chain.point_jacobian(q, link, p_link)[0, :3], atol=1e-12)
+
+
+def _toward_obstacle_problem(distance_to_padded: float):
+    """An obstacle point straight out (+y) from the forearm and a reference pushing the flange toward it."""
+    chain = panda()
+    ctl = AvoidanceController(chain, CFG)
+    # the middle of the forearm (the long capsule of link 4, in the x-z plane at Q0) and the obstacle beside it
+    a, b = ctl.body.segments(chain.link_frames(Q0))
+    k = int(np.argmax(np.where(ctl.body.link == 4, np.linalg.norm(b[0] - a[0], axis=1), 0.0)))
+    mid = 0.5 * (a[0, k] + b[0, k])
+    radius = ctl.body.radius[0]
+    p_obs = mid + np.array([0.0, 1.0, 0.0]) * (radius + distance_to_padded)
+    x = chain.flange_pose(Q0)[0, :3, 3]
+    return chain, ctl, p_obs, x
+
+
+@pytest.mark.parametrize("d_padded", [0.2, 0.05])  # between critical and notice; below critical
+def test_constraint_bounds_the_approach_velocity_finite_differences(d_padded):
+    chain, ctl, p_obs, x = _toward_obstacle_problem(d_padded)
+    xd_des = np.array([0.0, 1.0, 0.0])  # drive the flange (and forearm) toward +y fast
+    free = AvoidanceController(chain, CFG).step(Q0, x, xd_des, np.zeros((0, 3)))
+    res = ctl.step(Q0, x, xd_des, p_obs[None])
+    assert res.feasible and res.n_obstacles == 1
+    true_body = RobotBody.of(chain).inflated(CFG.padding)
+    h = 1e-5
+    d0 = sampled_distance(true_body, Q0, p_obs)
+    assert d0 == pytest.approx(d_padded, abs=1e-6)
+    rate = (sampled_distance(true_body, Q0 + h * res.qd, p_obs) - d0) / h
+    rate_free = (sampled_distance(true_body, Q0 + h * free.qd, p_obs) - d0) / h
+    b = float(approach_speed_bound(d_padded, CFG.critical, CFG.notice, CFG.v_max))
+    assert rate_free < -b - 0.01  # without the row the robot would approach faster than allowed
+    assert rate >= -b - 1e-3  # with it, d(distance)/dt >= -b
+    assert rate == pytest.approx(-b, abs=1e-3)  # and the row is active
+    if d_padded < CFG.critical:
+        assert rate > 0  # below the critical distance the robot retreats
+
+
+def test_infeasible_pinch_stops_and_says_so():
+    chain, ctl, p_obs, x = _toward_obstacle_problem(0.03)
+    mirror = p_obs - 2 * np.array([0.0, 1.0, 0.0]) * (ctl.body.radius[0] + 0.03)
+    res = ctl.step(Q0, x, np.array([0.0, 0.2, 0.0]), np.array([p_obs, mirror]))
+    assert not res.feasible and res.violation > 0
+    assert np.max(np.abs(res.qd)) < 0.05  # (nearly) still: no task motion while pinched
+    # the least-violating stop violates no more than standing still does
+    prob = ctl.problem(Q0, x, np.array([0.0, 0.2, 0.0]), np.array([p_obs, mirror]))
+    assert res.violation <= np.max(-prob.h) + 1e-9
+
+
+def test_unreachable_point_at_the_base_stops():
+    chain = panda()
+    ctl = AvoidanceController(chain, CFG)
+    x = chain.flange_pose(Q0)[0, :3, 3]
+    res = ctl.step(Q0, x, np.array([0.0, 0.2, 0.0]), np.array([[0.0, 0.1 + CFG.padding + 0.06, 0.1]]))
+    assert not res.feasible
+    np.testing.assert_allclose(res.qd, 0.0, atol=1e-6)
+    ok = ctl.step(Q0, x, np.array([0.0, 0.2, 0.0]), np.array([[0.0, 0.9, 0.1]]))
+    assert ok.feasible and np.linalg.norm(ok.qd) > 0.1
+
+
+def test_joint_position_limits_over_one_step():
+    chain = panda()
+    q = Q0.copy()
+    q[3] = chain.joint_upper[3] - 0.05  # at the margin
+    lb, ub = joint_velocity_bounds(chain, q, 0.001, margin=0.05)
+    assert ub[3] == pytest.approx(0.0, abs=1e-9) and lb[3] == -chain.velocity_limit[3]
+    q[3] = chain.joint_upper[3] + 0.01  # beyond: may only come back
+    lb, ub = joint_velocity_bounds(chain, q, 0.001, margin=0.05)
+    assert ub[3] == 0.0 and lb[3] < 0
+    ctl = AvoidanceController(chain, CFG)
+    x = chain.flange_pose(q)[0, :3, 3]
+    res = ctl.step(q, x + [0.0, 0.0, 0.05], np.zeros(3), np.zeros((0, 3)))
+    assert res.qd[3] <= 1e-9 and np.all(np.abs(res.qd) <= chain.velocity_limit + 1e-9)
+
+
+def test_contacts_and_recovery_helpers():
+    assert count_contacts(np.array([0.1, -0.01, -0.02, 0.1, -0.1, 0.2])) == 2
+    t = np.arange(10.0)
+    err = np.array([0, 0, 0.1, 0.1, 0.01, 0.004, 0.003, 0.002, 0.001, 0.0])
+    assert recovery_time(t, err, 3.0) == pytest.approx(2.0)
+    assert recovery_time(t, np.zeros(10), 3.0) == 0.0
+    assert np.isnan(recovery_time(t, np.full(10, 1.0), 3.0))

@@ -1,0 +1,127 @@
+"""Perception: known obstacles placed where they are, time alignment, validity, filter, expiry, distances."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from skincal.kinematics import panda
+from skincal.perception import (
+    PerceptionConfig,
+    ProximityTracker,
+    RobotBody,
+    body_proximity,
+    interpolate_joints,
+    points_from_streams,
+    segment_distance,
+    unit_points,
+    unit_rays,
+)
+from skincal.skin.placement import paper_placement
+from skincal.skin.tof import Plane, Sphere, TofModel, tof_range
+
+Q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
+
+
+def test_sphere_in_front_of_unit_is_placed_within_noise(rng):
+    chain, poses = panda(), paper_placement(panda())
+    model = TofModel(noise_std=0.005, noise_std_per_m=0.005)  # full 27 deg cone, VL53L1X-like noise
+    q = np.repeat(Q0[None], 200, axis=0)
+    for name in ("su4", "su6"):
+        origin, axis = unit_rays(chain, poses[name], Q0[None])
+        centre = origin[0] + 0.5 * axis[0]  # sphere of 0.1 m radius, its near surface 0.4 m ahead
+        r = tof_range(np.repeat(origin, 200, axis=0), np.repeat(axis, 200, axis=0), [Sphere(centre, 0.1)], model, rng)
+        p, ok = unit_points(chain, poses[name], q, r)
+        assert ok.all()
+        expected = origin[0] + 0.4 * axis[0]
+        err = np.linalg.norm(p - expected, axis=1)
+        sigma = model.noise_std_at(0.4)
+        assert np.max(err) < 4 * sigma
+        assert abs(np.mean(p @ axis[0] - expected @ axis[0])) < 4 * sigma / np.sqrt(200)
+
+
+def test_moving_robot_time_alignment_puts_points_on_a_wall(rng):
+    """Joints at 1 kHz, ToF at 50 Hz on another clock: points land on the true plane within the noise."""
+    chain, poses = panda(), paper_placement(panda())
+    pose = poses["su4"]  # looks along +y at Q0
+    t_j = np.arange(0.0, 2.0, 0.001)
+    q_j = Q0 + np.outer(np.sin(2 * np.pi * 0.5 * t_j), [0.4, 0.1, 0.2, 0.1, 0.3, 0.1, 0.0])
+    t_tof = 0.0137 + np.arange(0.0, 1.95, 0.02)
+    # the true joint angles at the ToF instants (the exact motion, not the 1 kHz samples)
+    q_true = Q0 + np.outer(np.sin(2 * np.pi * 0.5 * t_tof), [0.4, 0.1, 0.2, 0.1, 0.3, 0.1, 0.0])
+    wall = Plane([0.0, 0.6, 0.0], [0.0, -1.0, 0.0])
+    origin, axis = unit_rays(chain, pose, q_true)
+    model = TofModel(noise_std=0.003, n_rays=1)
+    r = tof_range(origin, axis, [wall], model, rng)
+    pts = points_from_streams(chain, {"su4": pose}, t_j, q_j, {"su4": (t_tof, r)}, PerceptionConfig(max_range=2.0))
+    assert len(pts) == t_tof.size
+    assert np.max(np.abs(pts.positions[:, 1] - 0.6)) < 4 * 0.003
+    # without time alignment (latest joint sample 20 ms late) the points miss the wall by more
+    q_late = interpolate_joints(t_j, q_j, t_tof + 0.02)
+    p_late, _ = unit_points(chain, pose, q_late, r, PerceptionConfig(max_range=2.0))
+    assert np.max(np.abs(p_late[:, 1] - 0.6)) > 0.01
+
+
+def test_interpolation_is_linear_and_holds_ends():
+    t = np.array([0.0, 1.0, 2.0])
+    q = np.array([[0.0, 1.0], [1.0, 3.0], [3.0, 3.0]])
+    out = interpolate_joints(t, q, [-1.0, 0.5, 1.5, 5.0])
+    np.testing.assert_allclose(out, [[0, 1], [0.5, 2], [2, 3], [3, 3]])
+
+
+def test_validity_drops_nan_out_of_range_and_self():
+    chain, poses = panda(), paper_placement(panda())
+    cfg = PerceptionConfig(min_range=0.01, max_range=1.0, self_margin=0.02)
+    q = np.repeat(Q0[None], 4, axis=0)
+    _, ok = unit_points(chain, poses["su4"], q, [np.nan, 0.005, 1.5, 0.5], cfg)
+    np.testing.assert_array_equal(ok, [False, False, False, True])
+    # su5 looks back along the arm: a reading that ends inside the robot's own capsules is the robot
+    origin, axis = unit_rays(chain, poses["su5"], Q0[None])
+    body = RobotBody.of(chain)
+    r = np.linspace(0.02, 0.6, 60)
+    p, ok = unit_points(chain, poses["su5"], np.repeat(Q0[None], 60, axis=0), r, cfg, body)
+    d = body_proximity(body, chain.link_frames(Q0), origin + r[:, None] * axis).distance
+    np.testing.assert_array_equal(ok, d > cfg.self_margin)
+    assert (~ok).any() and ok.any()
+
+
+def test_tracker_median_and_expiry():
+    chain, poses = panda(), paper_placement(panda())
+    tracker = ProximityTracker(chain, {"su4": poses["su4"]}, PerceptionConfig(window=3, max_age_s=0.1))
+    for k, r in enumerate([0.40, 0.41, 0.90, 0.40]):  # one outlier
+        tracker.update(0.02 * k, Q0, {"su4": r})
+    pts = tracker.points(0.06)
+    origin, axis = unit_rays(chain, poses["su4"], Q0[None])
+    np.testing.assert_allclose(pts.ranges, [0.41])
+    assert np.linalg.norm(pts.positions[0] - (origin[0] + 0.41 * axis[0])) < 1e-9
+    tracker.update(0.08, Q0, {"su4": np.nan})  # no target: old points stay until they expire
+    assert len(tracker.points(0.15)) == 1
+    assert len(tracker.points(0.061 + 0.1)) == 0
+
+
+def test_segment_distance_against_brute_force(rng):
+    s = np.linspace(0.0, 1.0, 801)
+    for _ in range(30):
+        a1, b1, a2, b2 = rng.normal(size=(4, 3))
+        if rng.random() < 0.2:
+            b2 = a2.copy()  # a point (sphere core)
+        if rng.random() < 0.2:
+            b2 = a2 + 0.5 * (b1 - a1)  # parallel
+        brute = np.linalg.norm((a1 + s[:, None] * (b1 - a1))[:, None] - (a2 + s[:, None] * (b2 - a2))[None], axis=-1)
+        assert segment_distance(a1, b1, a2, b2) == pytest.approx(brute.min(), abs=2e-3)
+        assert segment_distance(a1, b1, a2, b2) <= brute.min() + 1e-12
+
+
+def test_body_proximity_against_sampled_surface(rng):
+    chain = panda()
+    body = RobotBody.of(chain)
+    T = chain.link_frames(Q0)
+    a, b = body.segments(T)
+    pts = rng.uniform([-0.3, -0.5, 0.0], [0.8, 0.5, 1.0], size=(50, 3))
+    prox = body_proximity(body, T, pts)
+    s = np.linspace(0, 1, 400)
+    core = a[0][:, None] + s[None, :, None] * (b[0] - a[0])[:, None]  # (C, 400, 3)
+    brute = (np.linalg.norm(pts[:, None, None] - core[None], axis=-1).min(axis=2) - body.radius).min(axis=1)
+    np.testing.assert_allclose(prox.distance, brute, atol=2e-3)
+    assert np.all(prox.distance <= brute + 1e-12)
+    np.testing.assert_allclose(np.linalg.norm(prox.normal, axis=1), 1.0)
