@@ -61,11 +61,13 @@ class SignalTable:
     All units share the robot's motion, so ``u``, ``K`` (and their time derivatives, by central
     differences on the grid) are evaluated once for every link with one forward-kinematics pass
     and then interpolated to each unit's (shifted) sample instants: cubic Hermite for ``u`` and
-    ``K`` (using their derivatives), linear for the derivatives themselves.
+    ``K`` (using their derivatives), linear for the derivatives themselves. The default 125 Hz
+    grid changes the paper-protocol result by under 1 % of its error (checked against 250 Hz)
+    while halving the cost: the signals are smooth between the protocol's acceleration steps.
     """
 
     def __init__(
-        self, chain: SerialChain, interpolator: JointInterpolator, gravity: FloatArray, rate_hz: float = 250.0
+        self, chain: SerialChain, interpolator: JointInterpolator, gravity: FloatArray, rate_hz: float = 125.0
     ) -> None:
         grid, q, qd, qdd = interpolator.on_grid(max(1, int(round(1.0 / (rate_hz * interpolator.dt)))))
         # Keep the grid where some joint moves (plus a margin): elsewhere units are stationary and
