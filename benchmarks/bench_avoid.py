@@ -51,11 +51,18 @@ def mle_poses(chain, quick: bool):
 
 
 def qp_step_time(chain, n_points: int = 10, repeats: int = 2000) -> dict:
-    """Median/p95 time of one controller step (perception excluded) and of its QP solve, ms."""
+    """Median/p95 time of one controller step (perception excluded; cone candidates and velocities
+    included) and of its QP solve, ms."""
     rng = np.random.default_rng(0)
     ctl = AvoidanceController(chain, ControllerConfig())
     x = chain.flange_pose(Q_START)[0, :3, 3]
-    pts = x + rng.uniform(-0.4, 0.4, size=(n_points, 3))
+    from skincal.perception import ObstaclePoints
+
+    p = x + rng.uniform(-0.4, 0.4, size=(n_points, 3))
+    axes = rng.normal(size=(n_points, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    r = rng.uniform(0.2, 1.0, n_points)  # moving points with the cone's spread: every row feature is exercised
+    pts = ObstaclePoints(p, ("su1",) * n_points, np.zeros(n_points), r, -0.5 * axes, axes, r * np.sin(np.deg2rad(13.5)))
     step, solve = [], []
     for k in range(repeats):
         q = Q_START + 0.01 * np.sin(0.01 * k)

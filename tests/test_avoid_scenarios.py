@@ -10,11 +10,13 @@ import pytest
 from skincal.cli import main
 from skincal.control.loop import run_scenario
 from skincal.control.metrics import summarize
+from skincal.control.playback import recording_from_run
 from skincal.control.plot import below_intervals, plot_run
 from skincal.control.scenarios import degrade_poses, get_scenario
 from skincal.kinematics import panda, rotation_angle
 from skincal.perception import RobotBody
 from skincal.skin.placement import paper_placement
+from skincal.skin.tof import Sphere
 
 pytest.importorskip("mujoco")
 
@@ -74,14 +76,49 @@ def test_cli_json_and_errors(capsys):
     assert "nowhere" in capsys.readouterr().err
 
 
-@pytest.mark.slow
-def test_hand_scenario_perception_keeps_more_clearance_than_blind():
+def test_recording_from_run_carries_q_readings_and_obstacle_tracks():
     chain = panda()
     poses = paper_placement(chain)
-    sc = get_scenario("hand", chain, duration=8.0)
+    sc = get_scenario("walk", chain, duration=0.5)
+    log = run_scenario(chain, sc, poses, poses, np.random.default_rng(0))
+    rec = recording_from_run(log)
+    np.testing.assert_array_equal(rec.t, log.t)
+    np.testing.assert_array_equal(rec.q, log.q)
+    assert set(rec.tof_t) == set(log.units) and all(rec.tof_t[u].size == 25 for u in log.units)
+    # every capsule of the walker is covered by sphere tracks whose centres lie on its segment, at its radius
+    t = np.array([0.1, 0.37])
+    prims = sc.scene.tof_primitives(t)
+    assert len({name.split(".")[0] for name in rec.obstacles}) == len(prims)
+    for j, prim in enumerate(prims):
+        tracks = [tr for name, tr in rec.obstacles.items() if name.split(".")[0] == f"walker/{j}"]
+        centres = np.stack([[np.interp(t, tr.t, tr.p_base[:, k]) for k in range(3)] for tr in tracks], axis=1).T
+        ends = (prim.center, prim.center) if isinstance(prim, Sphere) else (prim.p0, prim.p1)
+        a, b = (np.broadcast_to(e, (2, 3)) for e in ends)
+        np.testing.assert_allclose(centres[:, 0], a, atol=1e-9)  # from one end ...
+        np.testing.assert_allclose(centres[:, -1], b, atol=1e-9)  # ... to the other
+        gap = np.linalg.norm(np.diff(centres, axis=1), axis=-1)
+        assert np.all(gap <= float(prim.radius) + 1e-9)
+        assert all(tr.radius == pytest.approx(float(prim.radius)) for tr in tracks)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["hand", "fast"])
+def test_perception_keeps_02m_where_blind_comes_within_01m(name):
+    """The scenarios discriminate: unavoided, the hand comes within 0.1 m of the robot; perceived
+    through the true poses, the controller keeps >= 0.2 m and never touches."""
+    chain = panda()
+    poses = paper_placement(chain)
+    sc = get_scenario(name, chain)
     body = RobotBody.of(chain)
     seeing = summarize(run_scenario(chain, sc, poses, poses, np.random.default_rng(0)), body)
     blind = summarize(run_scenario(chain, sc, poses, {}, np.random.default_rng(0)), body)
-    assert seeing.contacts == 0
-    assert seeing.min_clearance_m > blind.min_clearance_m + 0.01
-    assert seeing.active_time_s > 0 and blind.active_time_s == 0
+    assert blind.min_clearance_m < 0.1 and blind.active_time_s == 0
+    assert seeing.contacts == 0 and seeing.min_clearance_m >= 0.2 and seeing.active_time_s > 0
+    assert seeing.recovery_s <= 2.0
+
+
+@pytest.mark.slow
+def test_cli_view_plays_a_scenario(capsys):
+    pytest.importorskip("viser")
+    assert main(["view", "--scenario", "fast", "--duration", "0.2"]) == 0
+    assert "http://127.0.0.1:" in capsys.readouterr().out

@@ -11,6 +11,7 @@ from skincal.control import (
     ControllerConfig,
     FrameCache,
     approach_speed_bound,
+    cap_candidates,
     joint_velocity_bounds,
     point_jacobians,
 )
@@ -133,3 +134,39 @@ def test_contacts_and_recovery_helpers():
     assert recovery_time(t, err, 3.0) == pytest.approx(2.0)
     assert recovery_time(t, np.zeros(10), 3.0) == 0.0
     assert np.isnan(recovery_time(t, np.full(10, 1.0), 3.0))
+
+
+def test_cap_candidates_lie_on_the_cone_edge_at_the_range(rng):
+    origin = rng.normal(size=(4, 3))
+    axis = rng.normal(size=(4, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    r = rng.uniform(0.2, 1.0, 4)
+    half = np.deg2rad(13.5)
+    cand = cap_candidates(origin + r[:, None] * axis, axis, r, r * np.sin(half), n_rim=6)
+    d = cand - origin[:, None]
+    np.testing.assert_allclose(np.linalg.norm(d, axis=-1), r[:, None] * np.ones(7), atol=1e-12)
+    cos = np.einsum("kci,ki->kc", d, axis) / r[:, None]
+    np.testing.assert_allclose(cos[:, 0], 1.0)
+    np.testing.assert_allclose(cos[:, 1:], np.cos(half), atol=1e-12)
+
+
+def test_velocity_aware_row_bounds_the_closing_speed_finite_differences():
+    """A point approaching the forearm at 0.5 m/s: the commanded motion keeps d(distance)/dt >= -b(d)
+    including the point's own motion, so the robot backs away even though the task pulls it closer."""
+    from skincal.perception import ObstaclePoints
+
+    chain, ctl, p_obs, x = _toward_obstacle_problem(0.4)
+    v_obs = np.array([0.0, -0.5, 0.0])  # toward the robot
+    pts = ObstaclePoints(p_obs[None], ("su4",), np.zeros(1), np.zeros(1), v_obs[None], np.zeros((1, 3)), np.zeros(1))
+    res = ctl.step(Q0, x, np.array([0.0, 0.2, 0.0]), pts)
+    still = ctl.step(Q0, x, np.array([0.0, 0.2, 0.0]), p_obs[None])
+    assert res.feasible
+    body = RobotBody.of(chain).inflated(CFG.padding)
+    h = 1e-5
+    d0 = sampled_distance(body, Q0, p_obs)
+    rate = (sampled_distance(body, Q0 + h * res.qd, p_obs + h * v_obs) - d0) / h
+    b = float(approach_speed_bound(d0, CFG.critical, CFG.notice, CFG.v_max))
+    assert rate == pytest.approx(-b, abs=2e-3)  # active: closes exactly at the allowed speed
+    robot_rate = (sampled_distance(body, Q0 + h * res.qd, p_obs) - d0) / h
+    assert robot_rate > 0.5 - b - 2e-3  # the robot itself retreats
+    assert (sampled_distance(body, Q0 + h * still.qd, p_obs) - d0) / h < 0  # a still point lets it approach

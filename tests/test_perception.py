@@ -13,6 +13,7 @@ from skincal.perception import (
     body_proximity,
     interpolate_joints,
     points_from_streams,
+    ray_velocity,
     segment_distance,
     unit_points,
     unit_rays,
@@ -85,18 +86,52 @@ def test_validity_drops_nan_out_of_range_and_self():
     assert (~ok).any() and ok.any()
 
 
-def test_tracker_median_and_expiry():
+def test_tracker_median_velocity_and_extrapolation():
     chain, poses = panda(), paper_placement(panda())
-    tracker = ProximityTracker(chain, {"su4": poses["su4"]}, PerceptionConfig(window=3, max_age_s=0.1))
-    for k, r in enumerate([0.40, 0.41, 0.90, 0.40]):  # one outlier
-        tracker.update(0.02 * k, Q0, {"su4": r})
-    pts = tracker.points(0.06)
     origin, axis = unit_rays(chain, poses["su4"], Q0[None])
-    np.testing.assert_allclose(pts.ranges, [0.41])
-    assert np.linalg.norm(pts.positions[0] - (origin[0] + 0.41 * axis[0])) < 1e-9
-    tracker.update(0.08, Q0, {"su4": np.nan})  # no target: old points stay until they expire
-    assert len(tracker.points(0.15)) == 1
-    assert len(tracker.points(0.061 + 0.1)) == 0
+    cfg = PerceptionConfig(window=3, rate_window_s=0.1, predict_s=0.5, coast_m=0.2)
+    tracker = ProximityTracker(chain, {"su4": poses["su4"]}, cfg)
+    t = 0.02 * np.arange(8)
+    r = 0.8 - 0.5 * t  # a target coming straight down the ray at 0.5 m/s
+    for tk, rk in zip(t, r, strict=True):
+        tracker.update(tk, Q0, {"su4": rk})
+    pts = tracker.points(t[-1])
+    # the median of the last three readings, moved on by the estimated velocity to t_now
+    np.testing.assert_allclose(pts.ranges, [r[-2]])
+    np.testing.assert_allclose(pts.velocities[0], -0.5 * axis[0], atol=1e-9)
+    np.testing.assert_allclose(pts.positions[0], origin[0] + r[-1] * axis[0], atol=1e-9)
+    np.testing.assert_allclose(pts.spread, r[-2] * np.sin(np.deg2rad(13.5)))
+    # unseen, it coasts for at most coast_m, then stands still (no velocity)
+    later = tracker.points(t[-1] + 0.2)
+    np.testing.assert_allclose(later.positions[0], origin[0] + (r[-1] - 0.1) * axis[0], atol=1e-9)
+    still = tracker.points(t[-1] + 0.9)
+    np.testing.assert_allclose(still.positions[0], origin[0] + (r[-2] - 0.2) * axis[0], atol=1e-9)
+    np.testing.assert_allclose(still.velocities, 0.0)
+
+
+def test_tracker_memory_survives_a_jump_and_expires():
+    chain, poses = panda(), paper_placement(panda())
+    cfg = PerceptionConfig(window=1, memory_s=1.0, jump=0.1)
+    tracker = ProximityTracker(chain, {"su4": poses["su4"]}, cfg)
+    for k in range(3):
+        tracker.update(0.02 * k, Q0, {"su4": 0.4})
+    tracker.update(0.06, Q0, {"su4": np.nan})  # nothing: the point stays (no evidence it has gone)
+    assert len(tracker.points(0.5)) == 1
+    tracker.update(0.6, Q0, {"su4": 0.9})  # another, farther target: the near one is remembered
+    pts = tracker.points(0.6)
+    np.testing.assert_allclose(np.sort(pts.ranges), [0.4, 0.9])
+    assert len(tracker.points(0.04 + 1.0 + 1e-3)) == 1  # the memory expires memory_s after its last reading
+    tracker.update(0.7, Q0, {"su4": 0.41})  # lands on the 0.4 memory (cleared); the 0.9 track is remembered
+    np.testing.assert_allclose(np.sort(tracker.points(0.7).ranges), [0.41, 0.9])
+    assert len(tracker.points(0.7 + 1.0 + 1e-3)) == 0  # and every point expires unseen
+
+
+def test_ray_velocity_is_the_slope_along_the_ray(rng):
+    t = np.linspace(0.0, 0.1, 6)
+    a = np.array([0.0, 0.6, 0.8])
+    p = np.outer(t, [0.3, -0.5, 0.2]) + rng.normal(size=(6, 3)) * 1e-12
+    np.testing.assert_allclose(ray_velocity(t, p, a), (0.6 * -0.5 + 0.8 * 0.2) * a, atol=1e-9)
+    np.testing.assert_allclose(ray_velocity(t[:2], p[:2], a), 0.0)
 
 
 def test_segment_distance_against_brute_force(rng):

@@ -14,7 +14,7 @@ LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
 
 @app.command()
 def view(
-    result: Path = typer.Argument(..., help="calibration result (.json)"),
+    result: Path | None = typer.Argument(None, help="calibration result (.json); optional with --scenario"),
     truth: Path | None = typer.Option(None, help="simulated dataset with /truth: show the true poses too"),
     play: Path | None = typer.Option(None, help="dataset to play back (joint motion, ToF rays and points)"),
     robot: str | None = typer.Option(None, help="robot preset or chain file when no dataset is given"),
@@ -22,8 +22,12 @@ def view(
     host: str = typer.Option("127.0.0.1", help="interface to serve on; anything but loopback needs --public"),
     public: bool = typer.Option(False, "--public", help="allow a non-loopback --host (the viewer has no login)"),
     duration: float | None = typer.Option(None, help="stop after this many seconds (default: until Ctrl-C)"),
+    scenario: str | None = typer.Option(
+        None, help="run this avoidance scenario (skincal avoid) with the result's poses (or truth) and play it"
+    ),
+    seed: int = typer.Option(0, help="sensor-noise seed of the --scenario run"),
 ) -> None:
-    """Show a calibration result on the robot in the browser (viser)."""
+    """Show a calibration result on the robot in the browser (viser); with --scenario, play an avoidance run."""
     import time
 
     from skincal.data.hdf5 import read_dataset
@@ -33,6 +37,13 @@ def view(
 
     if host not in LOOPBACK_HOSTS and not public:
         raise ConfigError(f"--host {host} is not a loopback address; add --public to serve beyond this machine")
+    if scenario is not None:
+        if play is not None or truth is not None:
+            raise ConfigError("--scenario plays its own run: give no --play or --truth with it")
+        _view_scenario(scenario, result, seed, host, port, duration)
+        return
+    if result is None:
+        raise ConfigError("give a calibration result (or --scenario NAME)")
     res = read_result(result)
     truth_ds = read_dataset(truth) if truth is not None else None
     play_ds = read_dataset(play) if play is not None else None
@@ -48,6 +59,39 @@ def view(
         res, chain, truth=None if truth_ds is None else truth_ds.truth, recording=recording, host=host, port=port,
         q0=None if truth_ds is None or recording is not None else truth_ds.joints.q[0],
     )
+    console.print(f"skincal viewer: [bold]{viewer.url}[/]  (Ctrl-C to stop)", highlight=False)
+    if duration is not None:
+        try:
+            time.sleep(duration)
+        finally:
+            viewer.close()
+        return
+    serve_forever(viewer)
+
+
+def _view_scenario(name: str, result: Path | None, seed: int, host: str, port: int, duration: float | None) -> None:
+    """Run avoidance scenario ``name`` with the result's poses (truth if none) and serve its playback."""
+    import time
+
+    import numpy as np
+
+    from skincal.cli.avoid import believed_poses
+    from skincal.control.loop import run_scenario
+    from skincal.control.playback import recording_from_run
+    from skincal.control.scenarios import get_scenario
+    from skincal.data.result import CalibrationResult, UnitResult
+    from skincal.kinematics import panda
+    from skincal.skin.placement import paper_placement
+    from skincal.viz.viewer import serve_forever, start_viewer
+
+    chain = panda()
+    true_poses = paper_placement(chain)
+    poses, label = believed_poses(true_poses, result, None, False, seed)
+    sc = get_scenario(name, chain)
+    console.print(f"running scenario {name} ({sc.duration:.1f} s) with poses: {label}", highlight=False)
+    log = run_scenario(chain, sc, true_poses, poses, np.random.default_rng(seed))
+    shown = CalibrationResult(label, chain.name, "", 0.0, {u: UnitResult(p) for u, p in poses.items()})
+    viewer = start_viewer(shown, chain, truth=true_poses, recording=recording_from_run(log), host=host, port=port)
     console.print(f"skincal viewer: [bold]{viewer.url}[/]  (Ctrl-C to stop)", highlight=False)
     if duration is not None:
         try:

@@ -11,6 +11,18 @@ slides along the segment, perpendicular to ``n_i``), the row
     n_i^T J_i qd <= b(d_i)
 
 bounds the approach speed by ``b(d_i)`` (:func:`approach_speed_bound`).
+
+Moving obstacles (velocity-aware barrier): with the point's velocity ``v_i`` the gap changes as
+``d/dt d_i = n_i^T v_i - n_i^T J_i qd``; asking ``d/dt d_i >= -b(d_i)`` gives
+
+    n_i^T J_i qd <= b(d_i) + min(n_i^T v_i, 0)
+
+(only an approaching point tightens the row; a receding one gives no licence to follow it).
+
+Cone-aware placement: a reading ``r`` says the nearest target lies somewhere on the spherical cap of
+radius ``r`` about the unit within the cone, i.e. up to ``spread = r sin(fov/2)`` off the axis point
+``p``. The row uses the candidate nearest to the robot among ``p`` and ``n_rim`` rim points
+``p + spread e_k - (r - sqrt(r^2 - spread^2)) a`` (``e_k`` unit vectors across the ray axis ``a``).
 """
 
 from __future__ import annotations
@@ -22,7 +34,7 @@ from numpy.typing import ArrayLike
 
 from skincal.kinematics.chain import SerialChain, cross
 from skincal.kinematics.transforms import FloatArray
-from skincal.perception.body import RobotBody, body_proximity
+from skincal.perception.body import BodyProximity, RobotBody, body_proximity
 
 SATURATION = 0.99
 """Fraction of ``v_max`` the bound reaches at the notice distance."""
@@ -107,14 +119,58 @@ class ObstacleRows:
     p_base_robot: FloatArray
 
 
+def cap_candidates(
+    points: ArrayLike, axes: ArrayLike, ranges: ArrayLike, spread: ArrayLike, n_rim: int = 6
+) -> FloatArray:
+    """Where a cone reading's target may be: ``(K, 1 + n_rim, 3)`` candidates per point ``(K, 3)`` (m):
+    the axis point and ``n_rim`` points on the rim of the cap (ray axes ``(K, 3)``, ranges ``(K,)`` m,
+    lateral ``spread`` ``(K,)`` m). A point with zero spread repeats itself."""
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    a = np.asarray(axes, dtype=float).reshape(-1, 3)
+    r = np.asarray(ranges, dtype=float).reshape(-1)
+    s = np.minimum(np.asarray(spread, dtype=float).reshape(-1), r)
+    helper = np.where((np.abs(a[:, :1]) < 0.9), [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    e1 = np.cross(a, helper)
+    e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-12)
+    e2 = np.cross(a, e1)
+    phi = 2 * np.pi * np.arange(n_rim) / max(n_rim, 1)
+    e = np.cos(phi)[None, :, None] * e1[:, None] + np.sin(phi)[None, :, None] * e2[:, None]  # (K, R, 3)
+    back = (r - np.sqrt(np.maximum(r**2 - s**2, 0.0)))[:, None, None] * a[:, None]
+    rim = p[:, None] + s[:, None, None] * e - back
+    return np.concatenate([p[:, None], rim], axis=1)
+
+
 def obstacle_rows(
-    body: RobotBody, T_base_link: FloatArray, points: ArrayLike, critical: float, notice: float, v_max: float
+    body: RobotBody,
+    T_base_link: FloatArray,
+    points: ArrayLike,
+    critical: float,
+    notice: float,
+    v_max: float,
+    velocities: ArrayLike | None = None,
+    candidates: ArrayLike | None = None,
 ) -> ObstacleRows:
-    """One row ``n_i^T J_i qd <= b(d_i)`` per obstacle point ``(K, 3)`` at one configuration."""
-    prox = body_proximity(body, T_base_link, points)
+    """One row ``n_i^T J_i qd <= b(d_i) + min(n_i^T v_i, 0)`` per obstacle point ``(K, 3)`` at one configuration.
+
+    ``velocities``: ``(K, 3)`` point velocities, m/s (default still). ``candidates``: ``(K, C, 3)``
+    possible positions of each point (:func:`cap_candidates`); the one nearest the robot makes the row.
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    K = pts.shape[0]
+    if candidates is not None:
+        cand = np.asarray(candidates, dtype=float).reshape(K, -1, 3)
+        C = cand.shape[1]
+        prox_all = body_proximity(body, T_base_link, cand.reshape(-1, 3))
+        best = np.argmin(prox_all.distance.reshape(K, C), axis=1) + C * np.arange(K)
+        prox = BodyProximity(*(getattr(prox_all, f)[best] for f in ("distance", "capsule", "link", "p_base_robot",
+                                                                    "normal")))
+    else:
+        prox = body_proximity(body, T_base_link, pts)
     J = point_jacobians(body.chain, T_base_link, prox.link, prox.p_base_robot)
     G = np.einsum("ki,kij->kj", prox.normal, J)
     h = approach_speed_bound(prox.distance, critical, notice, v_max)
+    if velocities is not None:
+        h = h + np.minimum(np.einsum("ki,ki->k", prox.normal, np.asarray(velocities, dtype=float).reshape(K, 3)), 0.0)
     return ObstacleRows(G, h, prox.distance, prox.link, prox.normal, prox.p_base_robot)
 
 

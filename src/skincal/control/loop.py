@@ -33,7 +33,8 @@ from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.geometry import DEFAULT_LINK_RADIUS
 from skincal.kinematics.transforms import FloatArray
 from skincal.perception.body import RobotBody
-from skincal.perception.points import PerceptionConfig, ProximityTracker
+from skincal.perception.points import PerceptionConfig
+from skincal.perception.tracker import ProximityTracker
 from skincal.sim.mujoco_model import SensorIndex, build_model, link_body_ids, require_mujoco
 from skincal.skin.pose import SkinUnitPose
 from skincal.skin.tof import TofModel, cone_directions, get_tof_model
@@ -168,7 +169,7 @@ def run_scenario(
             tracker.update(t[k], q, {units[u]: float(ru) for u, ru in zip(reading, r, strict=True)})
         t1 = time.perf_counter()
         pts = tracker.points(t[k])
-        res = ctl.step(q, x_des[k], xd_des[k], pts.positions)
+        res = ctl.step(q, x_des[k], xd_des[k], pts)
         step_t[k] = time.perf_counter() - t1
         log_q[k], log_qd[k], log_x[k] = q, res.qd, res.x
         feasible[k], violation[k], n_obs[k] = res.feasible, res.violation, res.n_obstacles

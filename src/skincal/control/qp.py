@@ -5,7 +5,8 @@ reference ``x_des``, ``xdot_des``::
 
     minimise   1/2 qd^T (J^T J + lambda I) qd - (J^T xdot_cmd + lambda qd_post)^T qd
     subject to lb <= qd <= ub                       (velocity limits; position limits over one step)
-               n_i^T J_i qd <= b(d_i)   for every obstacle point i    (:mod:`skincal.control.constraints`)
+               n_i^T J_i qd <= b(d_i) + min(n_i^T v_i, 0)   for every obstacle point i
+                                       (velocity-aware, cone-aware: :mod:`skincal.control.constraints`)
 
 with ``xdot_cmd = xdot_des + K (x_des - x)`` (feed-forward plus proportional feedback, ``K`` in 1/s)
 and an optional weak posture velocity ``qd_post = K_post (q_post - q)`` inside the damping term
@@ -27,11 +28,18 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from skincal.control.constraints import FrameCache, joint_velocity_bounds, obstacle_rows, point_jacobians
+from skincal.control.constraints import (
+    FrameCache,
+    cap_candidates,
+    joint_velocity_bounds,
+    obstacle_rows,
+    point_jacobians,
+)
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray
 from skincal.perception.body import RobotBody
+from skincal.perception.points import ObstaclePoints
 
 _STOP_EPS = 1.0
 _FEAS_TOL = 1e-6
@@ -46,11 +54,15 @@ class ControllerConfig:
         damping: ``lambda`` of the objective, m^2 (regularises singular ``J``).
         gain: ``K``, feedback gain on the Cartesian position error, 1/s.
         posture_gain: ``K_post``, pull toward ``q_post`` inside the damping term, 1/s (0 = off).
-        critical, notice: distances (m) where the approach bound is zero / saturates (paper: 0.12, 0.3).
-        v_max: largest allowed approach speed, m/s (paper: 0.3).
-        padding: the robot model used for distances is the link capsules grown by this, m: a safety
-            margin for perception errors (cone ambiguity, calibration), so the true clearance at the
-            critical distance is ``critical + padding``.
+        critical, notice: distances (m) where the approach bound is zero / saturates. The paper's
+            0.12 / 0.3 m are for a still robot-mounted demo; here the critical distance is the clearance
+            to keep (0.2 m) and the notice distance the demo's 1 m reaction range.
+        v_max: largest allowed approach speed, m/s (paper: 0.3); an approaching obstacle's own speed
+            comes on top (the velocity-aware row), up to the joint velocity limits.
+        padding: the robot model used for distances is the link capsules grown by this, m (a small
+            allowance for the capsule model, not a margin for perception errors: those come from
+            the cone-aware placement and the velocity-aware rows).
+        n_rim: rim points of a reading's cone cap tried for the nearest possible target (0: axis only).
         velocity_scale: fraction of the joint velocity limits used.
         limit_margin: keep this far inside the joint position limits, rad.
         solver: a :mod:`qpsolvers` backend name.
@@ -60,10 +72,11 @@ class ControllerConfig:
     damping: float = 1e-3
     gain: float = 10.0
     posture_gain: float = 0.0
-    critical: float = 0.12
-    notice: float = 0.3
-    v_max: float = 0.3
-    padding: float = 0.15
+    critical: float = 0.2
+    notice: float = 1.0
+    v_max: float = 1.0
+    padding: float = 0.02
+    n_rim: int = 6
     velocity_scale: float = 1.0
     limit_margin: float = 0.05
     solver: str = "daqp"
@@ -74,7 +87,7 @@ class ControllerConfig:
         for name in ("dt", "damping", "v_max", "velocity_scale"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"controller: {name} must be positive, got {getattr(self, name)}")
-        for name in ("gain", "posture_gain", "padding", "limit_margin"):
+        for name in ("gain", "posture_gain", "padding", "limit_margin", "n_rim"):
             if not getattr(self, name) >= 0:
                 raise ConfigError(f"controller: {name} must be non-negative, got {getattr(self, name)}")
 
@@ -137,9 +150,12 @@ class AvoidanceController:
         self._flange = chain.T_link_flange[:3, 3]
         self._frames = FrameCache(chain)
 
-    def problem(self, q: ArrayLike, x_des: ArrayLike, xd_des: ArrayLike, points: ArrayLike) -> QpProblem:
+    def problem(
+        self, q: ArrayLike, x_des: ArrayLike, xd_des: ArrayLike, points: ArrayLike | ObstaclePoints
+    ) -> QpProblem:
         """Assemble the QP at joint angles ``q`` ``(n,)`` for reference ``x_des``, ``xd_des`` ``(3,)`` (m, m/s)
-        and obstacle points ``(K, 3)`` (base frame, m)."""
+        and obstacle points: :class:`ObstaclePoints` (velocities and cone spread used) or still
+        points ``(K, 3)`` exactly where given (base frame, m)."""
         cfg = self.config
         q = np.asarray(q, dtype=float).reshape(-1)
         n = self.chain.n_joints
@@ -152,9 +168,13 @@ class AvoidanceController:
         if cfg.posture_gain > 0 and self.q_posture is not None:
             c -= cfg.damping * cfg.posture_gain * (self.q_posture - q)
         lb, ub = joint_velocity_bounds(self.chain, q, cfg.dt, cfg.velocity_scale, cfg.limit_margin)
-        pts = np.asarray(points, dtype=float).reshape(-1, 3)
+        obs = points if isinstance(points, ObstaclePoints) else ObstaclePoints.still(points)
+        pts = obs.positions
         if pts.shape[0]:
-            rows = obstacle_rows(self.body, T, pts, cfg.critical, cfg.notice, cfg.v_max)
+            cand = None
+            if cfg.n_rim > 0 and np.any(obs.spread > 0):
+                cand = cap_candidates(pts, obs.axes, obs.ranges, obs.spread, int(cfg.n_rim))
+            rows = obstacle_rows(self.body, T, pts, cfg.critical, cfg.notice, cfg.v_max, obs.velocities, cand)
             # A row with no lever on the robot (point at the base) and a non-negative bound is void.
             keep = (np.abs(rows.G).max(axis=1) > 1e-9) | (rows.h < 0)
             G, h, dist = rows.G[keep], rows.h[keep], rows.distance
@@ -194,7 +214,9 @@ class AvoidanceController:
         violation = float(np.max(prob.G @ qd - prob.h, initial=0.0))
         return qd, max(violation, 0.0), elapsed
 
-    def step(self, q: ArrayLike, x_des: ArrayLike, xd_des: ArrayLike, points: ArrayLike) -> StepResult:
+    def step(
+        self, q: ArrayLike, x_des: ArrayLike, xd_des: ArrayLike, points: ArrayLike | ObstaclePoints
+    ) -> StepResult:
         """Joint velocities for this step (see :meth:`problem`)."""
         prob = self.problem(q, x_des, xd_des, points)
         qd, feasible, violation, elapsed = self.solve(prob)

@@ -9,15 +9,19 @@ backward from the wrist, su6 forward-right (+x -y) from the hand. People come fr
 Task (paper Sec. V-C): the flange tracks a circle of radius 0.1 m in the vertical y-z plane in front of
 the robot, starting where the flange is at ``Q_START`` (period 5 s, 0.126 m/s).
 
-Scenarios (all positions in the base frame, m; obstacles are :mod:`skincal.sim.scene` objects):
+Scenarios (all positions in the base frame, m; obstacles are :mod:`skincal.sim.scene` objects). Each
+is built to discriminate: unavoided (a blind robot just tracking its circle) the person comes within
+a few centimetres of the robot or touches it, and the approach runs along a unit's line of sight
+(at the arrival instant ``T_ARRIVE``), so good perception can see it coming:
 
 * ``none``: nobody; the task alone.
-* ``arm``: a person's forearm (capsule, r = 4.5 cm) reaches in from +y toward the robot's forearm
-  (seen by su4) at 0.2 m/s, holds 3 s, and withdraws.
-* ``hand``: a hand (sphere, r = 5 cm) comes toward the flange from +x -y (seen by su6) at 0.2 m/s,
-  holds near the circle, and withdraws: the task itself must give way.
-* ``walk``: a standing person (:func:`skincal.sim.scene.human`) walks past in front of the robot along y.
-* ``fast``: the hand of ``hand`` comes in at 0.6 m/s.
+* ``arm``: a person's forearm (capsule, r = 4.5 cm) comes along su4's line of sight (+y) onto the
+  robot's forearm at 0.3 m/s, holds 3 s and withdraws at 0.5 m/s.
+* ``hand``: a hand (sphere, r = 5 cm) comes along su6's line of sight (+x -y) into the space the
+  flange sweeps at 0.3 m/s, holds 3 s and withdraws: the task itself must give way.
+* ``walk``: a standing person (:func:`skincal.sim.scene.human`) walks at 0.8 m/s diagonally from the
+  front right, where su6 and su1 look, close past the flange and off to the left.
+* ``fast``: the hand of ``hand`` at 1 m/s.
 
 Each has ``t_leave``, the instant the person has fully left (the tracking error should recover after it).
 """
@@ -37,6 +41,18 @@ from skincal.sim.scene import Obstacle, Primitive, Scene, TimeTable, human
 
 Q_START = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
 """Start configuration of the Panda, rad (flange about 0.47 m in front of the base, 0.52 m high)."""
+
+SU6_VIEW = (np.array([0.466, -0.22, 0.686]), np.array([0.408, -0.898, 0.164]))
+SU4_VIEW = (np.array([0.306, -0.02, 0.68]), np.array([0.329, 0.944, 0.034]))
+"""Origin (m) and axis of su6 and su4 at ``T_ARRIVE`` while tracking the circle (base frame)."""
+T_ARRIVE = 7.0
+"""Instant the hand and the arm reach their hold points, s."""
+HAND_FAR, HAND_NEAR = SU6_VIEW[0] + 1.6 * SU6_VIEW[1], SU6_VIEW[0] + 0.1 * SU6_VIEW[1]
+"""The hand comes along su6's line of sight at arrival, into the space the flange sweeps, m."""
+ARM_FAR, ARM_NEAR = SU4_VIEW[0] + 1.6 * SU4_VIEW[1], SU4_VIEW[0] + 0.12 * SU4_VIEW[1]
+"""The person's forearm (centre of a capsule along x) comes along su4's line of sight onto the robot's forearm, m."""
+WALK_PATH = np.array([[1.6, -1.9, 0.0], [0.74, -0.1, 0.0], [0.9, 1.8, 0.0]])
+"""The walker's feet: start, closest pass, end, m."""
 
 
 @dataclass(frozen=True)
@@ -102,33 +118,38 @@ def _mover(name: str, prims: tuple[Primitive, ...], waypoints: list[tuple[float,
     return Obstacle(name, prims, p[0], path=TimeTable(t, p))
 
 
-def _approach(name: str, prims, far, near, t_in: float, speed: float, hold: float) -> tuple[Obstacle, float]:
-    """Come from ``far`` to ``near`` at ``speed`` m/s starting at ``t_in``, hold ``hold`` s, go back at 0.5 m/s."""
+def _approach(name: str, prims, far, near, t1: float, speed: float, hold: float) -> tuple[Obstacle, float]:
+    """Come from ``far`` to ``near`` at ``speed`` m/s arriving at ``t1``, hold ``hold`` s, go back at 0.5 m/s."""
     far, near = np.asarray(far, dtype=float), np.asarray(near, dtype=float)
     L = float(np.linalg.norm(near - far))
-    t1 = t_in + L / speed
+    t_in = t1 - L / speed
     t2 = t1 + hold
     t3 = t2 + L / 0.5
     return _mover(name, prims, [(0.0, far), (t_in, far), (t1, near), (t2, near), (t3, far)]), t3
 
 
 def _arm(chain: SerialChain, q0: FloatArray) -> tuple[Scene, float, float, str]:
-    # A horizontal forearm along x, reaching in from +y toward the robot's forearm (x ~ 0.2-0.35, z ~ 0.65).
+    # A horizontal forearm along x, reaching in from +y (along su4's line of sight) to rest on the
+    # robot's forearm (x ~ 0.1-0.35, z ~ 0.62-0.74): unavoided, it touches.
     prims = (Primitive("capsule", [0.045, 0.13], [0.0, 0.0, 0.0], _rot_y_90()),)
-    arm, t_out = _approach("arm", prims, [0.25, 1.2, 0.68], [0.25, 0.22, 0.68], 2.0, 0.2, 3.0)
-    return Scene((arm,)), t_out, t_out + 4.0, "a person's forearm reaches toward the robot's forearm from +y"
+    arm, t_out = _approach("arm", prims, ARM_FAR, ARM_NEAR, T_ARRIVE, 0.3, 3.0)
+    return Scene((arm,)), t_out, t_out + 4.0, "a person's forearm reaches onto the robot's forearm from +y (0.3 m/s)"
 
 
-def _hand(chain: SerialChain, q0: FloatArray, speed: float = 0.2) -> tuple[Scene, float, float, str]:
+def _hand(chain: SerialChain, q0: FloatArray, speed: float = 0.3) -> tuple[Scene, float, float, str]:
+    # Along su6's line of sight (it looks +x -y from the hand) into the flange's circle: unavoided, it touches.
     prims = (Primitive("sphere", [0.05]),)
-    hand, t_out = _approach("hand", prims, [1.3, -0.9, 0.6], [0.68, -0.24, 0.55], 2.0, speed, 3.0)
-    return Scene((hand,)), t_out, t_out + 4.0, f"a hand comes toward the end effector at {speed} m/s"
+    hand, t_out = _approach("hand", prims, HAND_FAR, HAND_NEAR, T_ARRIVE, speed, 3.0)
+    return Scene((hand,)), t_out, t_out + 4.0, f"a hand reaches into the end effector's path at {speed} m/s"
 
 
 def _walk(chain: SerialChain, q0: FloatArray) -> tuple[Scene, float, float, str]:
-    path = TimeTable([1.0, 6.0], [[0.85, -2.0, 0.0], [0.85, 2.0, 0.0]])
-    person = human("walker", (0.85, -2.0, 0.0), np.pi / 2, path=path)
-    return Scene((person,)), 6.0, 10.0, "a person walks past in front of the robot (0.8 m/s)"
+    # Diagonally from the front right (where su6 and su1 look) close past the flange, off to the left.
+    t = [1.0, 1.0 + np.linalg.norm(WALK_PATH[1] - WALK_PATH[0]) / 0.8]
+    t.append(t[1] + np.linalg.norm(WALK_PATH[2] - WALK_PATH[1]) / 0.8)
+    heading = WALK_PATH[1] - WALK_PATH[0]
+    person = human("walker", WALK_PATH[0], float(np.arctan2(heading[1], heading[0])), path=TimeTable(t, WALK_PATH))
+    return Scene((person,)), t[-1], t[-1] + 4.0, "a person walks close past the robot's hand (0.8 m/s)"
 
 
 def _none(chain: SerialChain, q0: FloatArray) -> tuple[Scene, float, float, str]:
@@ -144,7 +165,7 @@ SCENARIOS: dict[str, Callable[[SerialChain, FloatArray], tuple[Scene, float, flo
     "arm": _arm,
     "hand": _hand,
     "walk": _walk,
-    "fast": lambda chain, q0: _hand(chain, q0, speed=0.6),
+    "fast": lambda chain, q0: _hand(chain, q0, speed=1.0),
 }
 """Scenario builders by name: ``(chain, q0) -> (scene, t_leave, duration, description)``."""
 

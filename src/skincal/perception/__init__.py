@@ -4,13 +4,13 @@ from skincal.perception.body import BodyProximity, RobotBody, body_proximity, cl
 from skincal.perception.points import (
     ObstaclePoints,
     PerceptionConfig,
-    ProximityTracker,
     interpolate_joints,
     points_from_streams,
     unit_points,
     unit_rays,
     valid_ranges,
 )
+from skincal.perception.tracker import ProximityTracker, ray_velocity
 
 __all__ = [
     "BodyProximity",
@@ -22,6 +22,7 @@ __all__ = [
     "closest_on_segments",
     "interpolate_joints",
     "points_from_streams",
+    "ray_velocity",
     "segment_distance",
     "unit_points",
     "unit_rays",

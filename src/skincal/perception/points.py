@@ -6,7 +6,9 @@ calibration result) at instant ``t`` becomes::
     p_base_obs = T_base_link(q(t)) T_link_su [0, 0, r, 1]^T
 
 (the VL53L1X reports the nearest target in its 27 deg cone; the point is placed on the unit's +z
-axis, so a target at the cone's edge is misplaced sideways by up to ``r tan(13.5 deg)``).
+axis and carries the cone's lateral uncertainty ``spread = r sin(13.5 deg)``: the target lies on the
+spherical cap of radius ``r`` about the unit). The streaming tracker with velocities and memory is
+:mod:`skincal.perception.tracker`.
 Joint states come at 1 kHz and readings at 50 Hz on their own clocks: ``q(t)`` is linearly
 interpolated to each reading's instant (:func:`interpolate_joints`).
 
@@ -25,7 +27,7 @@ from numpy.typing import ArrayLike
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray
-from skincal.perception.body import RobotBody, body_proximity, closest_on_segments
+from skincal.perception.body import RobotBody, closest_on_segments
 from skincal.skin.pose import SkinUnitPose
 
 
@@ -34,25 +36,47 @@ class PerceptionConfig:
     """How readings become obstacle points; SI units.
 
     Attributes:
-        min_range, max_range: readings outside this window are dropped, m. ``max_range`` is the
-            avoidance threshold: the paper's demo reacts to targets within 1 m of a unit.
+        min_range, max_range: readings outside this window are dropped, m. Tracking reaches beyond
+            the controller's notice distance (1 m) so that an approach speed is known when it matters.
         self_margin: drop points closer than this to the robot's own link capsules, m.
-        window: temporal filter length: per unit, the median of the last ``window`` valid points.
-        max_age_s: a unit's point expires when its newest valid reading is older than this, s;
-            older readings also leave the median window.
+        window: per unit, the published position is the median of the last ``window`` valid points.
+        max_age_s: readings older than this leave the median window, s.
+        fov_deg: full cone angle of the sensor, deg (VL53L1X: 27).
+        rate_window_s: the ray velocity is the least-squares slope over this span of readings, s.
+        predict_s, coast_m: a point is extrapolated along its velocity at most ``predict_s`` after its
+            filter instant and at most ``coast_m`` far (then it stands still), s and m.
+        max_speed: velocity estimates are clipped to this, m/s.
+        memory_s: a point no unit has seen for this long is forgotten, s.
+        jump: a reading this far from a track's prediction starts a new track (the old one is
+            remembered), and a reading passing a memory point by this much clears it, m.
+        n_memory: memory points kept at most.
     """
 
     min_range: float = 0.01
-    max_range: float = 1.0
+    max_range: float = 1.5
     self_margin: float = 0.02
     window: int = 3
-    max_age_s: float = 0.5
+    max_age_s: float = 0.1
+    fov_deg: float = 27.0
+    rate_window_s: float = 0.1
+    predict_s: float = 1.0
+    coast_m: float = 0.3
+    max_speed: float = 2.5
+    memory_s: float = 4.0
+    jump: float = 0.1
+    n_memory: int = 4
 
     def __post_init__(self) -> None:
         if not (0 <= self.min_range < self.max_range) or not np.isfinite(self.max_range):
             raise ConfigError(f"perception: need 0 <= min_range < max_range, got {self.min_range}, {self.max_range} m")
         if self.self_margin < 0 or self.max_age_s <= 0 or int(self.window) != self.window or self.window < 1:
             raise ConfigError("perception: self_margin >= 0 m, max_age_s > 0 s and an integer window >= 1 are needed")
+        if not (0 < self.fov_deg < 180) or self.memory_s < self.max_age_s or self.rate_window_s <= 0:
+            raise ConfigError("perception: need 0 < fov_deg < 180, memory_s >= max_age_s s and rate_window_s > 0 s")
+        if min(self.predict_s, self.coast_m) < 0 or min(self.max_speed, self.jump) <= 0:
+            raise ConfigError("perception: need predict_s >= 0 s, coast_m >= 0 m, max_speed > 0 m/s and jump > 0 m")
+        if int(self.n_memory) != self.n_memory or self.n_memory < 0:
+            raise ConfigError(f"perception: n_memory must be a non-negative integer, got {self.n_memory}")
 
 
 @dataclass(frozen=True)
@@ -64,17 +88,31 @@ class ObstaclePoints:
         units: ``(K,)`` name of the unit that saw each point.
         stamps: ``(K,)`` reading instants, s (for filtered points: the newest reading used).
         ranges: ``(K,)`` the (filtered) range readings, m.
+        velocities: ``(K, 3)`` estimated point velocities, m/s (zero: unknown or still).
+        axes: ``(K, 3)`` unit +z axis (the ray) of the reading unit, base frame.
+        spread: ``(K,)`` lateral uncertainty of the point across the ray, m (the cone: ``r sin(fov/2)``;
+            0: on the axis).
     """
 
     positions: FloatArray
     units: tuple[str, ...]
     stamps: FloatArray
     ranges: FloatArray
+    velocities: FloatArray
+    axes: FloatArray
+    spread: FloatArray
 
     @classmethod
     def empty(cls) -> ObstaclePoints:
         """No points."""
-        return cls(np.zeros((0, 3)), (), np.zeros(0), np.zeros(0))
+        return cls(np.zeros((0, 3)), (), np.zeros(0), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+
+    @classmethod
+    def still(cls, positions: ArrayLike) -> ObstaclePoints:
+        """Still points ``(K, 3)`` m exactly where given (no velocity, no cone), e.g. for tests."""
+        p = np.asarray(positions, dtype=float).reshape(-1, 3)
+        K = p.shape[0]
+        return cls(p, ("",) * K, np.zeros(K), np.zeros(K), np.zeros((K, 3)), np.zeros((K, 3)), np.zeros(K))
 
     def __len__(self) -> int:
         return int(self.positions.shape[0])
@@ -158,13 +196,14 @@ def points_from_streams(
     ``(s.t, s.range)``); units without a pose are an error. Joints ``(N,)``/``(N, n)`` are
     interpolated to each reading's instant. Points are sorted by stamp.
     """
-    pos, units, stamps, rng_ = [], [], [], []
+    pos, units, stamps, rng_, axes = [], [], [], [], []
     for name, (t, r) in tof.items():
         if name not in poses:
             raise ConfigError(f"ToF stream of unit '{name}' has no calibrated pose")
         t = np.asarray(t, dtype=float)
         q = interpolate_joints(t_joints, q_joints, t)
         p, ok = unit_points(chain, poses[name], q, r, config, body)
+        axes.append(unit_rays(chain, poses[name], q[ok])[1])
         pos.append(p[ok])
         stamps.append(t[ok])
         rng_.append(np.asarray(r, dtype=float)[ok])
@@ -174,67 +213,13 @@ def points_from_streams(
     stamps_all = np.concatenate(stamps)
     order = np.argsort(stamps_all, kind="stable")
     names = tuple(np.array(units, dtype=object)[order])
-    return ObstaclePoints(np.concatenate(pos)[order], names, stamps_all[order], np.concatenate(rng_)[order])
-
-
-class ProximityTracker:
-    """Streaming perception: readings of all units at one instant in, filtered live points out.
-
-    Per unit it keeps the last ``config.window`` valid points (base frame); :meth:`points` publishes,
-    per unit, the component-wise median of those not older than ``max_age_s`` (none if all expired).
-    """
-
-    def __init__(
-        self,
-        chain: SerialChain,
-        poses: Mapping[str, SkinUnitPose],
-        config: PerceptionConfig = PerceptionConfig(),
-        body: RobotBody | None = None,
-    ) -> None:
-        self.chain = chain
-        self.poses = dict(poses)
-        self.config = config
-        self.body = body if body is not None else RobotBody.of(chain)
-        self.units = tuple(self.poses)
-        W = int(config.window)
-        self._p = np.full((len(self.units), W, 3), np.nan)
-        self._t = np.full((len(self.units), W), -np.inf)
-        self._r = np.full((len(self.units), W), np.nan)
-        self._links = np.array([self.poses[u].link for u in self.units], dtype=int)
-        self._T_link_su = np.stack([self.poses[u].T_link_su for u in self.units]) if self.units else np.zeros((0, 4, 4))
-
-    def update(self, t: float, q: ArrayLike, ranges: Mapping[str, float]) -> None:
-        """Add the readings ``unit -> range`` (m, NaN = none) taken at instant ``t`` s with joints ``q`` ``(n,)``."""
-        idx = [self.units.index(u) for u in ranges if u in self.poses]
-        if not idx:
-            return
-        r = np.array([ranges[self.units[i]] for i in idx], dtype=float)
-        ok = valid_ranges(r, self.config)
-        if not np.any(ok):
-            return
-        T = self.chain.link_frames(q)[0]
-        sel = np.array(idx)[ok]
-        T_base_su = T[self._links[sel]] @ self._T_link_su[sel]
-        p = T_base_su[:, :3, 3] + r[ok, None] * T_base_su[:, :3, 2]
-        prox = body_proximity(self.body, T, p)
-        keep = prox.distance > self.config.self_margin
-        for i, pi, ri in zip(sel[keep], p[keep], r[ok][keep], strict=True):
-            self._p[i] = np.roll(self._p[i], -1, axis=0)
-            self._t[i] = np.roll(self._t[i], -1)
-            self._r[i] = np.roll(self._r[i], -1)
-            self._p[i, -1], self._t[i, -1], self._r[i, -1] = pi, t, ri
-
-    def points(self, t_now: float) -> ObstaclePoints:
-        """Live filtered points at ``t_now`` s: per unit the median of its unexpired window."""
-        fresh = (t_now - self._t) <= self.config.max_age_s  # (U, W)
-        live = fresh.any(axis=1)
-        if not np.any(live):
-            return ObstaclePoints.empty()
-        p = np.where(fresh[live][..., None], self._p[live], np.nan)
-        r = np.where(fresh[live], self._r[live], np.nan)
-        return ObstaclePoints(
-            np.nanmedian(p, axis=1),
-            tuple(u for u, ok in zip(self.units, live, strict=True) if ok),
-            self._t[live].max(axis=1),
-            np.nanmedian(r, axis=1),
-        )
+    r_all = np.concatenate(rng_)[order]
+    return ObstaclePoints(
+        np.concatenate(pos)[order],
+        names,
+        stamps_all[order],
+        r_all,
+        np.zeros((r_all.size, 3)),
+        np.concatenate(axes)[order],
+        r_all * np.sin(np.deg2rad(config.fov_deg) / 2),
+    )
