@@ -103,8 +103,7 @@ class JointInterpolator:
         if not self._uniform:
             return self(t)
         g = self._t_acc
-        i = np.clip(np.searchsorted(g, t), 1, g.size - 1)
-        i -= (t - g[i - 1]) < (g[i] - t)
+        i = np.clip(np.rint((np.asarray(t, dtype=float) - g[0]) / self.dt).astype(np.intp), 0, g.size - 1)
         return self._q[i], self._qd_j[i], self._qdd[i]
 
     def on_grid(self, step: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:

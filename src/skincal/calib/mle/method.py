@@ -61,6 +61,16 @@ def prepare(dataset: Dataset, interpolator: JointInterpolator) -> SignalTable:
     return SignalTable(dataset.robot, interpolator, np.asarray(dataset.gravity, dtype=float))
 
 
+def _decimated(p: _Problem, step: int) -> _Problem:
+    """The same problem keeping every ``step``-th moving sample (stationary rows all kept)."""
+    d = p.data
+    data = UnitData(
+        d.link, d.static_u, d.static_f, d.static_weight, d.static_q,
+        d.moving_t[::step], d.moving_f[::step], None if d.moving_gyro is None else d.moving_gyro[::step],
+    )
+    return _Problem(p.table, data)
+
+
 def _arrange(problem: UnitProblem, link: int, decimate: int = 1) -> _Problem:
     s = problem.samples
     interp = problem.interpolator
@@ -71,13 +81,8 @@ def _arrange(problem: UnitProblem, link: int, decimate: int = 1) -> _Problem:
         problem.chain, link, s.t[keep], s.accel[keep], None if s.gyro is None else s.gyro[keep],
         (s.q[keep], s.qd[keep], s.qdd[keep]), problem.gravity,
     )
-    if decimate > 1:
-        data = UnitData(
-            data.link, data.static_u, data.static_f, data.static_weight, data.static_q,
-            data.moving_t[::decimate], data.moving_f[::decimate],
-            None if data.moving_gyro is None else data.moving_gyro[::decimate],
-        )
-    return _Problem(problem.shared, data)
+    p = _Problem(problem.shared, data)
+    return _decimated(p, decimate) if decimate > 1 else p
 
 
 def _start(p: _Problem) -> State:
@@ -217,10 +222,10 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     opts = problem.options
     want_scale = bool(opts.get("scale", True))
     blocks = Blocks(scale=want_scale, time_offset=bool(opts.get("time_offset", True)))
-    # Converge on every 8th moving sample, then polish on all of them (Gauss-Newton needs one or
-    # two full iterations from there) and take the covariance from the full data.
-    coarse = _fit(_arrange(problem, link, decimate=8), blocks, state=start)
-    fit = _fit(p, blocks, state=coarse.state, max_outer=2, max_inner=1)
+    # Converge on every 8th moving sample (time offset included), then one Gauss-Newton step on
+    # all of them, whose normal matrix also gives the covariance.
+    coarse = _fit(_decimated(p, 8), blocks, state=start)
+    fit = _fit(p, blocks, state=coarse.state, max_outer=1, max_inner=1)
     if want_scale:
         std_e = np.sqrt(np.maximum(np.diag(fit.covariance)[9:15], 0.0))
         if fit.null_space.size and np.any(np.abs(fit.null_space[9:15]) > 0.1) or np.any(std_e > SCALE_STD_LIMIT):

@@ -185,10 +185,12 @@ def solve(
         blocks = replace(blocks, time_offset=False)
     sw_static = np.sqrt(static_weight)
     lin = linearise(state.tau) if linearise is not None else None
-    robust_w = None
     sigma = 1.0
     iterations = 0
     null = np.zeros((blocks.size, 0))
+    H = np.zeros((blocks.size, blocks.size))
+    r = np.zeros((0, 3))
+    w = np.zeros(0)
     for _outer in range(max_outer):
         for _inner in range(max_inner):
             iterations += 1
@@ -199,7 +201,8 @@ def solve(
             sigma = max(_robust_sigma(norm[len(sw_static) :] if len(r) > len(sw_static) else norm), 1e-12)
             scaled = norm / (HUBER_K * sigma)
             robust_w = np.where(scaled <= 1.0, 1.0, 1.0 / np.maximum(scaled, 1e-300))
-            H, g = _normal_equations(J, r, (base**2) * robust_w)
+            w = (base**2) * robust_w
+            H, g = _normal_equations(J, r, w)
             delta, null = _pinv_step(H, g)
             state = _apply(state, blocks, delta)
             if np.max(np.abs(delta)) < tol:
@@ -208,10 +211,7 @@ def solve(
         if lin is None or not blocks.time_offset or abs(state.tau - lin.tau_k) < 1e-7:
             break
         lin = linearise(state.tau)
-    r, J = _jacobian_and_residual(state, blocks, lin, static_u, static_f, moving_f)
-    base = np.concatenate([sw_static, np.ones(len(r) - len(sw_static))])
-    w = (base**2) * (robust_w if robust_w is not None else 1.0)
-    H, _ = _normal_equations(J, r, w)
+    # Covariance from the last iteration's normal matrix (the final step changes it negligibly).
     rho = _residual_correlation(r[len(sw_static) :])
     cov = (sigma**2) * rho * _pinv(H)
     cost = float(np.sum(w * np.sum(r * r, axis=1)))
