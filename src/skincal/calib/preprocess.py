@@ -13,7 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import savgol_filter
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy.signal import savgol_coeffs, savgol_filter
 
 from skincal.data.dataset import DYNAMIC, STATIC, Dataset, JointStates, Segments
 from skincal.errors import CalibrationError
@@ -63,14 +64,39 @@ class JointInterpolator:
         self, joints: JointStates, *, use_dataset_qdd: bool = False, qdd_window_s: float = DEFAULT_QDD_WINDOW_S
     ) -> None:
         tj = np.asarray(joints.t, dtype=float)
-        if use_dataset_qdd and joints.qdd is not None:
-            t_acc, qd_acc, qdd = tj, np.asarray(joints.qd, dtype=float), np.asarray(joints.qdd, dtype=float)
-        else:
-            t_acc, qd_acc, qdd = estimate_qdd(joints, qdd_window_s)
         self.t_start, self.t_end = float(tj[0]), float(tj[-1])
         self._tj, self._q, self._qd_j = tj, np.asarray(joints.q, dtype=float), np.asarray(joints.qd, dtype=float)
-        self._t_acc, self._qd, self._qdd = t_acc, qd_acc, qdd
-        self._uniform = t_acc is tj or (t_acc.shape == tj.shape and np.array_equal(t_acc, tj))
+        self._joints, self._window_s = joints, qdd_window_s
+        self._qdd_full: FloatArray | None = None
+        self._sg: FloatArray | None = None
+        if tj.shape[0] < 7:
+            raise CalibrationError(f"joint stream has {tj.shape[0]} samples; at least 7 are needed to estimate qdd")
+        dt = float(np.median(np.diff(tj)))
+        if use_dataset_qdd and joints.qdd is not None:
+            self._t_acc, self._qd, self._qdd_full = tj, self._qd_j, np.asarray(joints.qdd, dtype=float)
+        elif np.max(np.abs(np.diff(tj) - dt)) > 0.01 * dt:  # uneven: resample, estimate everything now
+            self._t_acc, self._qd, self._qdd_full = estimate_qdd(joints, qdd_window_s)
+        else:
+            self._t_acc, self._qd = tj, self._qd_j
+            window = min(max(5, int(round(qdd_window_s / dt)) | 1), tj.shape[0] - (1 - tj.shape[0] % 2))
+            self._sg = savgol_coeffs(window, 3, deriv=1, delta=dt, use="dot")
+        self._uniform = self._t_acc is tj
+
+    @property
+    def _qdd(self) -> FloatArray:
+        """Full-rate acceleration estimate on the uniform grid (computed once, on first use)."""
+        if self._qdd_full is None:
+            self._qdd_full = estimate_qdd(self._joints, self._window_s)[2]
+        return self._qdd_full
+
+    def _qdd_at(self, i: np.ndarray) -> FloatArray:
+        """Acceleration estimate at grid indices ``i`` only (the same local fit as :attr:`_qdd`)."""
+        if self._qdd_full is not None or self._sg is None:
+            return self._qdd[i]
+        half = self._sg.size // 2
+        centre = np.clip(i, half, self._qd.shape[0] - 1 - half)
+        windows = sliding_window_view(self._qd, self._sg.size, axis=0)  # (N - w + 1, n, w)
+        return windows[centre - half] @ self._sg
 
     def __call__(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """``(q, qd, qdd)`` at instants ``t`` (M,), each ``(M, n)``."""
@@ -104,13 +130,13 @@ class JointInterpolator:
             return self(t)
         g = self._t_acc
         i = np.clip(np.rint((np.asarray(t, dtype=float) - g[0]) / self.dt).astype(np.intp), 0, g.size - 1)
-        return self._q[i], self._qd_j[i], self._qdd[i]
+        return self._q[i], self._qd_j[i], self._qdd_at(i)
 
     def on_grid(self, step: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Every ``step``-th sample of the (uniform) joint grid: ``(t, q, qd, qdd)``."""
         t = self._t_acc[::step]
         if self._uniform:
-            return t, self._q[::step], self._qd_j[::step], self._qdd[::step]
+            return t, self._q[::step], self._qd_j[::step], self._qdd_at(np.arange(0, t.size * step, step))
         return (t, *self(t))
 
 
