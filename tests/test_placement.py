@@ -9,7 +9,13 @@ from skincal.errors import ConfigError
 from skincal.kinematics import panda, sawyer, ur5e
 from skincal.kinematics.geometry import link_capsules
 from skincal.skin import SkinUnitPose
-from skincal.skin.placement import PAPER_TABLE_II, frame_from_normal, paper_placement, random_placement
+from skincal.skin.placement import (
+    PAPER_TABLE_II,
+    frame_from_normal,
+    paper_placement,
+    random_placement,
+    ring_placement,
+)
 
 
 def _wrap(a):
@@ -146,3 +152,49 @@ def test_random_placement_per_link_radius_and_errors():
         random_placement(chain, 2, np.random.default_rng(0), links=[8])
     with pytest.raises(ConfigError, match="n_units"):
         random_placement(chain, 0, np.random.default_rng(0))
+
+
+def test_ring_placement_on_surfaces_outward_interleaved_and_tip():
+    chain = panda()
+    radius = 0.06
+    units = ring_placement(chain, per_ring=6, spacing=0.2, radius=radius)
+    capsules = [c for c in link_capsules(chain, radius) if c.link >= 2 and c.length >= 0.05]
+    # rings: round(L / 0.2) (at least one) per capsule of 5 cm or more, 6 units each, plus the tip unit
+    rings = sum(max(1, int(round(c.length / 0.2))) for c in capsules)
+    assert len(units) == 6 * rings + 1 and list(units)[:2] == ["su1", "su2"]
+    flange = [c for c in capsules if c.link == chain.n_joints][-1]
+    by_ring: dict[tuple, list] = {}
+    for name, pose in units.items():
+        R, p = pose.R_link_su, pose.p_link_su
+        np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+        if name == list(units)[-1]:  # the tip: on the flange capsule's end cap, looking along its axis
+            axis = (flange.p1 - flange.p0) / flange.length
+            np.testing.assert_allclose(p, flange.p1 + radius * axis, atol=1e-12)
+            np.testing.assert_allclose(R[:, 2], axis, atol=1e-12)
+            continue
+        own = [c for c in capsules if c.link == pose.link]
+        feet = [_closest_on_segment(c.p0, c.p1, p) for c in own]
+        k = int(np.argmin([abs(np.linalg.norm(p - f) - radius) for f in feet]))
+        assert np.linalg.norm(p - feet[k]) == pytest.approx(radius, abs=1e-12)
+        np.testing.assert_allclose(R[:, 2], (p - feet[k]) / radius, atol=1e-12)  # z = outward normal
+        by_ring.setdefault((pose.link, k, *np.round(feet[k], 6)), []).append(R[:, 2])
+    assert all(len(v) == 6 for v in by_ring.values()) and len(by_ring) == rings
+    # within a ring the normals are 60 deg apart; a ring and the next one are turned by half a step (30 deg)
+    for normals in by_ring.values():
+        n = np.array(normals)
+        np.testing.assert_allclose(n[:, None, :] @ n[:, :, None], 1.0, atol=1e-12)
+        cos = np.sort(n @ n[0])
+        np.testing.assert_allclose(cos, np.sort(np.cos(np.deg2rad(60 * np.arange(6)))), atol=1e-9)
+    upper_arm = [v for key, v in by_ring.items() if key[0] == 2]
+    assert len(upper_arm) == 2
+    cross = np.max(np.array(upper_arm[0]) @ np.array(upper_arm[1]).T)
+    assert cross == pytest.approx(np.cos(np.deg2rad(30)), abs=1e-9)
+
+
+def test_ring_placement_errors():
+    with pytest.raises(ConfigError, match="per_ring"):
+        ring_placement(panda(), per_ring=0)
+    with pytest.raises(ConfigError, match="spacing"):
+        ring_placement(panda(), spacing=0.0)
+    with pytest.raises(ConfigError, match="5 cm"):
+        ring_placement(panda(), links=[1])

@@ -14,8 +14,9 @@ BACKENDS = ("analytic", "mujoco")
 
 
 def make_placements(chain, placement: str, units: int | None, rng):
-    """Unit poses for ``--placement paper|random`` (``units`` only for random; paper has 6)."""
-    from skincal.skin.placement import paper_placement, random_placement
+    """Unit poses for ``--placement paper|random|ring`` (``units`` only for random; paper has 6, ring
+    is the dense whole-body skin of :func:`skincal.skin.placement.ring_placement`)."""
+    from skincal.skin.placement import paper_placement, random_placement, ring_placement
 
     if placement == "paper":
         if units not in (None, 6):
@@ -23,7 +24,12 @@ def make_placements(chain, placement: str, units: int | None, rng):
         return paper_placement(chain)
     if placement == "random":
         return random_placement(chain, 6 if units is None else units, rng)
-    raise ConfigError(f"unknown placement '{placement}' (use 'paper' or 'random')")
+    if placement == "ring":
+        ring = ring_placement(chain)
+        if units not in (None, len(ring)):
+            raise ConfigError(f"--placement ring has {len(ring)} units on '{chain.name}'; use random for another count")
+        return ring
+    raise ConfigError(f"unknown placement '{placement}' (use 'paper', 'random' or 'ring')")
 
 
 def simulate_dataset(
@@ -73,7 +79,7 @@ def simulate_dataset(
 def simulate(
     out: Path = typer.Option(..., "--out", "-o", help="dataset file to write (.h5)"),
     robot: str = typer.Option("panda", help="robot preset (panda, sawyer, ur5e) or a chain .yaml/.json"),
-    placement: str = typer.Option("paper", help="unit placement: paper (Table II, 6 units) or random"),
+    placement: str = typer.Option("paper", help="paper (Table II, 6 units), random or ring (dense skin)"),
     units: int | None = typer.Option(None, help="number of units (random placement; default 6)"),
     noise: str = typer.Option("none", help="IMU preset: none, datasheet or realistic"),
     protocol: str = typer.Option("paper-sim", help="protocol preset: paper-sim, paper-real, ..."),

@@ -12,7 +12,7 @@ from skincal.skin.imu import (
     specific_force,
     true_sample_times,
 )
-from skincal.skin.placement import PAPER_TABLE_II, paper_placement, random_placement
+from skincal.skin.placement import PAPER_TABLE_II, paper_placement, random_placement, ring_placement
 from skincal.skin.pose import DH6_NAMES, SkinUnitPose, dh6_from_transform, dh6_to_transform
 from skincal.skin.tof import (
     TOF_PRESETS,
@@ -43,6 +43,7 @@ __all__ = [
     "get_imu_model",
     "paper_placement",
     "random_placement",
+    "ring_placement",
     "sample_instants",
     "specific_force",
     "true_sample_times",

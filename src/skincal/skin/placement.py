@@ -99,3 +99,51 @@ def random_placement(
         R = frame_from_normal(normal, rng.uniform(0.0, 2 * np.pi, 1))[0]
         units[f"su{i + 1}"] = SkinUnitPose(link, R, point[0])
     return units
+
+
+def ring_placement(
+    chain: SerialChain,
+    per_ring: int = 6,
+    spacing: float = 0.2,
+    links: Sequence[int] | None = None,
+    radius: float = DEFAULT_LINK_RADIUS,
+    tip: bool = True,
+) -> dict[str, SkinUnitPose]:
+    """A dense whole-body skin: rings of units around the link capsules, z axis outward (deterministic).
+
+    Every capsule of :func:`skincal.kinematics.geometry.link_capsules` on ``links`` (default 2..n)
+    at least 5 cm long gets ``max(1, round(L / spacing))`` rings at ``s = L (k + 1/2) / rings`` along
+    its axis; each ring has ``per_ring`` units on the surface (radius ``radius`` m) at azimuths
+    ``phi_j = 2 pi j / per_ring``, successive rings turned by half a step so their cones interleave.
+    ``tip`` adds one unit on the last link's end cap looking along the capsule's axis (the tool
+    direction). Units are named ``su1, su2, ...`` link by link.
+    """
+    if int(per_ring) != per_ring or per_ring < 1 or not spacing > 0:
+        raise ConfigError(f"ring placement: need an integer per_ring >= 1 and spacing > 0 m, got {per_ring}, {spacing}")
+    links = list(range(2, chain.n_joints + 1)) if links is None else [int(k) for k in links]
+    for k in links:
+        chain.check_link(k)
+    poses: list[SkinUnitPose] = []
+    n_ring = 0
+    for cap in link_capsules(chain, radius):
+        if cap.link not in links or cap.length < 0.05:
+            continue
+        axis = (cap.p1 - cap.p0) / cap.length
+        helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        u = np.cross(axis, helper)
+        u /= np.linalg.norm(u)
+        v = np.cross(axis, u)
+        rings = max(1, int(round(cap.length / spacing)))
+        for k in range(rings):
+            centre = cap.p0 + cap.length * (k + 0.5) / rings * axis
+            phi = 2 * np.pi * (np.arange(per_ring) + 0.5 * (n_ring % 2)) / per_ring
+            normals = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v
+            R = frame_from_normal(normals, np.zeros(per_ring))
+            poses += [SkinUnitPose(cap.link, R[j], centre + radius * normals[j]) for j in range(per_ring)]
+            n_ring += 1
+        if tip and cap.link == max(links) and cap.link == chain.n_joints:
+            R = frame_from_normal(axis[None], np.zeros(1))[0]
+            poses.append(SkinUnitPose(cap.link, R, cap.p1 + radius * axis))
+    if not poses:
+        raise ConfigError(f"robot '{chain.name}': no capsule of 5 cm or more on links {links} to put rings on")
+    return {f"su{i + 1}": p for i, p in enumerate(poses)}
