@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from skincal.kinematics import panda
+from skincal.kinematics.transforms import invert
 from skincal.perception import (
     PerceptionConfig,
     ProximityTracker,
@@ -18,7 +19,8 @@ from skincal.perception import (
     unit_points,
     unit_rays,
 )
-from skincal.skin.placement import paper_placement
+from skincal.skin import SkinUnitPose
+from skincal.skin.placement import frame_from_normal, paper_placement
 from skincal.skin.tof import Plane, Sphere, TofModel, tof_range
 
 Q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
@@ -160,3 +162,55 @@ def test_body_proximity_against_sampled_surface(rng):
     np.testing.assert_allclose(prox.distance, brute, atol=2e-3)
     assert np.all(prox.distance <= brute + 1e-12)
     np.testing.assert_allclose(np.linalg.norm(prox.normal, axis=1), 1.0)
+
+
+def _looking_at(chain, link: int, origin, target) -> SkinUnitPose:
+    """A unit on ``link`` at ``origin`` (base frame at ``Q0``) whose +z axis points at ``target``."""
+
+    origin, target = np.asarray(origin, dtype=float), np.asarray(target, dtype=float)
+    z = (target - origin) / np.linalg.norm(target - origin)
+    T_base_su = np.eye(4)
+    T_base_su[:3, :3], T_base_su[:3, 3] = frame_from_normal(z[None], np.zeros(1))[0], origin
+    T_link_su = invert(chain.link_frames(Q0)[0, link]) @ T_base_su
+    return SkinUnitPose(link, T_link_su[:3, :3], T_link_su[:3, 3])
+
+
+def test_free_space_of_other_cones_clears_stale_points_only_inside_them():
+    """A point one unit saw is dropped when another unit's cone passes through it and finds nothing
+    (or something farther); a cone that misses it, or whose reading stops short of it, leaves it."""
+    chain = panda()
+    target = np.array([0.6, 0.5, 0.7])
+    poses = {
+        "a": _looking_at(chain, 4, [0.3, 0.1, 0.7], target),
+        "b": _looking_at(chain, 6, [0.5, -0.1, 0.6], target),  # its cone passes through the target
+        "c": _looking_at(chain, 6, [0.5, -0.1, 0.6], [1.5, -0.5, 0.6]),  # looks elsewhere
+    }
+    r_a = float(np.linalg.norm(target - [0.3, 0.1, 0.7]))
+    r_b = float(np.linalg.norm(target - [0.5, -0.1, 0.6]))
+    cfg = PerceptionConfig(window=1, max_age_s=0.1, memory_s=2.0, jump=0.1)
+
+    def seen_by_a() -> ProximityTracker:
+        tracker = ProximityTracker(chain, poses, cfg)
+        for k in range(3):
+            tracker.update(0.02 * k, Q0, {"a": r_a})
+        tracker.update(0.06, Q0, {"a": np.nan})  # a loses it: its own silence keeps the point
+        np.testing.assert_allclose(tracker.points(0.3).positions, [target], atol=1e-9)
+        return tracker
+
+    tracker = seen_by_a()
+    tracker.update(0.3, Q0, {"c": np.nan, "b": r_b + 0.05})  # c misses it; b sees something just behind it
+    assert {*tracker.points(0.3).units} == {"a", "b"}  # b's reading is within jump of the point: not free there
+    tracker = seen_by_a()
+    tracker.update(0.3, Q0, {"b": r_b - 0.3})  # something in front of the point hides it from b
+    assert {*tracker.points(0.3).units} == {"a", "b"}
+    tracker = seen_by_a()
+    tracker.update(0.3, Q0, {"b": np.nan})  # b's cone is empty through the point: it has gone
+    assert len(tracker.points(0.3)) == 0
+    tracker = seen_by_a()
+    tracker.update(0.3, Q0, {"b": r_b + 0.5})  # b sees only a farther target: same
+    assert tracker.points(0.3).units == ("b",)
+    # a fresh track (its unit read it within max_age_s) is not carved: its own unit vouches for it
+    fresh = ProximityTracker(chain, poses, cfg)
+    fresh.update(0.0, Q0, {"a": r_a})
+    fresh.update(0.05, Q0, {"b": np.nan})
+    assert fresh.points(0.05).units == ("a",)

@@ -62,7 +62,7 @@ class PerceptionConfig:
     predict_s: float = 1.0
     coast_m: float = 0.3
     max_speed: float = 2.5
-    memory_s: float = 4.0
+    memory_s: float = 1.5
     jump: float = 0.1
     n_memory: int = 4
 

@@ -23,6 +23,12 @@ unit jumps to a different target (range ``jump`` m off the prediction) is kept t
 memory point (at most ``n_memory``, oldest replaced), cleared when a new reading of any unit lands
 on it (within ``jump``) or after ``memory_s``.
 
+**Free space.** The other units' readings also clear points: a unit that reads range ``r`` (or
+nothing within ``max_range``) has seen nothing nearer in its cone, so a memory point, or a stale
+track of another unit (no reading of its own for ``max_age_s``), lying inside that cone nearer than
+``r - jump`` is gone and dropped (:meth:`ProximityTracker._carve`). With a dense skin a person who
+leaves is thus forgotten as soon as a cone sweeps the place, not ``memory_s`` later.
+
 Every published point carries the cone's lateral uncertainty ``spread = r sin(fov / 2)``: the
 VL53L1X reports the nearest target *anywhere* in its cone, so the target lies on the spherical cap of
 radius ``r`` about the unit, not necessarily on its axis (the controller takes the cap point nearest to
@@ -114,6 +120,7 @@ class ProximityTracker:
         if np.any(ok):
             is_self[ok] = body_proximity(self.body, T, p[ok]).distance <= cfg.self_margin
         self._clear_memory(t, o, a, r, ok & ~is_self)
+        self._carve(t, idx, o, a, np.where(ok, r, np.where(np.isnan(r) | (r > cfg.max_range), cfg.max_range, 0.0)))
         for k in np.flatnonzero(ok & ~is_self):  # a few units per instant (the robot itself is no news)
             self._add(int(idx[k]), t, p[k], r[k], o[k], a[k])
 
@@ -159,6 +166,32 @@ class ProximityTracker:
         p = o[ok] + r[ok, None] * a[ok]
         covered = np.any(np.linalg.norm(self._mp[live][:, None, :] - p[None], axis=-1) <= cfg.jump, axis=1)
         self._mt[np.flatnonzero(live)[covered]] = -np.inf
+
+    def _carve(self, t: float, idx: np.ndarray, o: np.ndarray, a: np.ndarray, free: np.ndarray) -> None:
+        """Free-space evidence: unit ``idx[k]`` (origin ``o[k]``, axis ``a[k]``) saw nothing nearer than
+        ``free[k]`` m in its cone. A memory point, or another unit's stale track (no reading of its own
+        for ``max_age_s``), lying inside that cone (angle to the axis < fov / 2) nearer than
+        ``free[k] - jump`` is contradicted (the sensor reports the nearest target in its cone) and dropped.
+        A unit's own track is left alone: when its target leaves the cone it is still near the cone."""
+        cfg = self.config
+        if not np.any(free > cfg.jump):
+            return
+
+        def inside(p: np.ndarray) -> np.ndarray:  # (K, 3) -> (K, R): in reading k's free cone
+            d = p[:, None, :] - o[None]
+            dist = np.linalg.norm(d, axis=-1)
+            cos = np.einsum("krj,rj->kr", d, a) / np.maximum(dist, 1e-12)
+            return (cos > np.cos(self._half)) & (dist < free[None] - cfg.jump)
+
+        mem = np.flatnonzero(np.isfinite(self._mt))
+        if mem.size:
+            self._mt[mem[inside(self._mp[mem]).any(axis=1)]] = -np.inf
+        stale = np.flatnonzero(np.isfinite(self._t_last) & (t - self._t_last > cfg.max_age_s))
+        if stale.size:
+            hit = inside(self._pos[stale])
+            hit &= stale[:, None] != idx[None, :]
+            for i in stale[hit.any(axis=1)]:
+                self._drop(int(i))
 
     # ------------------------------------------------------------------ output
     def points(self, t_now: float) -> ObstaclePoints:
