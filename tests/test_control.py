@@ -69,7 +69,7 @@ def _toward_obstacle_problem(distance_to_padded: float):
     return chain, ctl, p_obs, x
 
 
-@pytest.mark.parametrize("d_padded", [0.2, 0.05])  # between critical and notice; below critical
+@pytest.mark.parametrize("d_padded", [0.3, 0.05])  # between critical and notice; below critical
 def test_constraint_bounds_the_approach_velocity_finite_differences(d_padded):
     chain, ctl, p_obs, x = _toward_obstacle_problem(d_padded)
     xd_des = np.array([0.0, 1.0, 0.0])  # drive the flange (and forearm) toward +y fast

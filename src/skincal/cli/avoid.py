@@ -11,6 +11,16 @@ from skincal.cli.app import app, console
 from skincal.errors import ConfigError
 
 
+def simulated_skin(placement: str, chain) -> dict:
+    """The true unit poses of the skin the avoidance loop simulates: ``ring`` (dense) or ``paper`` (Table II)."""
+    from skincal.skin.placement import paper_placement, ring_placement
+
+    skins = {"ring": ring_placement, "paper": paper_placement}
+    if placement not in skins:
+        raise ConfigError(f"unknown placement '{placement}' (use ring or paper)")
+    return skins[placement](chain)
+
+
 def believed_poses(true_poses: dict, result: Path | None, degrade: str | None, blind: bool, seed: int):
     """The poses the controller believes and their label: a result file's, degraded truth, none, or truth."""
     import numpy as np
@@ -24,7 +34,19 @@ def believed_poses(true_poses: dict, result: Path | None, degrade: str | None, b
         from skincal.data.result import read_result
 
         res = read_result(result)
-        return {u: r.pose for u, r in res.units.items() if u in true_poses}, f"result {result.name} ({res.method})"
+        unknown = sorted(set(res.units) - set(true_poses))
+        if unknown:
+            raise ConfigError(
+                f"result {result.name} has unit(s) {', '.join(unknown[:5])} that the simulated skin lacks "
+                "(calibrate a dataset of the same --placement)"
+            )
+        moved = [u for u, r in res.units.items() if r.pose.link != true_poses[u].link]
+        if moved:
+            raise ConfigError(
+                f"result {result.name} puts {', '.join(moved[:5])} on other links than the simulated skin "
+                "(was it calibrated from a dataset of another --placement?)"
+            )
+        return {u: r.pose for u, r in res.units.items()}, f"result {result.name} ({res.method})"
     if degrade is not None:
         from skincal.control.scenarios import degrade_poses
 
@@ -39,6 +61,7 @@ def believed_poses(true_poses: dict, result: Path | None, degrade: str | None, b
 @app.command()
 def avoid(
     scenario: str = typer.Option("hand", help="none, arm, hand, walk or fast"),
+    placement: str = typer.Option("ring", help="simulated skin: ring (dense, 49 units) or paper (Table II, 6 units)"),
     result: Path | None = typer.Option(None, help="calibration result (JSON) whose poses the controller uses"),
     truth: bool = typer.Option(False, "--truth", help="use the true unit poses (the default)"),
     degrade: str | None = typer.Option(None, help="truth degraded by 'METRES,DEGREES' per unit, e.g. 0.05,5"),
@@ -48,8 +71,9 @@ def avoid(
     plot: Path | None = typer.Option(None, help="write a Fig.-4-like plot (.png also writes .svg)"),
     as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
 ) -> None:
-    """Track a circle with the Panda's flange while a person approaches; the paper's Table II skin
-    (simulated at its true poses) feeds the controller through the chosen calibration."""
+    """Track a circle with the Panda's flange while a person approaches; the skin (simulated at its
+    true poses: the dense ring skin, or the paper's Table II six units) feeds the controller through
+    the chosen calibration (a result file must come from a dataset of the same --placement)."""
     import numpy as np
 
     from skincal.control.loop import run_scenario
@@ -57,10 +81,9 @@ def avoid(
     from skincal.control.scenarios import get_scenario
     from skincal.kinematics import panda
     from skincal.perception.body import RobotBody
-    from skincal.skin.placement import paper_placement
 
     chain = panda()
-    true_poses = paper_placement(chain)
+    true_poses = simulated_skin(placement, chain)
     poses, label = believed_poses(true_poses, result, degrade, blind, seed)
     sc = get_scenario(scenario, chain, duration)
     log = run_scenario(chain, sc, true_poses, poses, np.random.default_rng(seed))

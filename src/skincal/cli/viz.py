@@ -26,6 +26,7 @@ def view(
         None, help="run this avoidance scenario (skincal avoid) with the result's poses (or truth) and play it"
     ),
     seed: int = typer.Option(0, help="sensor-noise seed of the --scenario run"),
+    placement: str = typer.Option("ring", help="the --scenario run's skin: ring (dense) or paper (Table II)"),
 ) -> None:
     """Show a calibration result on the robot in the browser (viser); with --scenario, play an avoidance run."""
     import time
@@ -40,7 +41,7 @@ def view(
     if scenario is not None:
         if play is not None or truth is not None:
             raise ConfigError("--scenario plays its own run: give no --play or --truth with it")
-        _view_scenario(scenario, result, seed, host, port, duration)
+        _view_scenario(scenario, result, seed, placement, host, port, duration)
         return
     if result is None:
         raise ConfigError("give a calibration result (or --scenario NAME)")
@@ -69,23 +70,24 @@ def view(
     serve_forever(viewer)
 
 
-def _view_scenario(name: str, result: Path | None, seed: int, host: str, port: int, duration: float | None) -> None:
+def _view_scenario(
+    name: str, result: Path | None, seed: int, placement: str, host: str, port: int, duration: float | None
+) -> None:
     """Run avoidance scenario ``name`` with the result's poses (truth if none) and serve its playback."""
     import time
 
     import numpy as np
 
-    from skincal.cli.avoid import believed_poses
+    from skincal.cli.avoid import believed_poses, simulated_skin
     from skincal.control.loop import run_scenario
     from skincal.control.playback import recording_from_run
     from skincal.control.scenarios import get_scenario
     from skincal.data.result import CalibrationResult, UnitResult
     from skincal.kinematics import panda
-    from skincal.skin.placement import paper_placement
     from skincal.viz.viewer import serve_forever, start_viewer
 
     chain = panda()
-    true_poses = paper_placement(chain)
+    true_poses = simulated_skin(placement, chain)
     poses, label = believed_poses(true_poses, result, None, False, seed)
     sc = get_scenario(name, chain)
     console.print(f"running scenario {name} ({sc.duration:.1f} s) with poses: {label}", highlight=False)

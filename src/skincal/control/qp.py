@@ -56,7 +56,10 @@ class ControllerConfig:
         posture_gain: ``K_post``, pull toward ``q_post`` inside the damping term, 1/s (0 = off).
         critical, notice: distances (m) where the approach bound is zero / saturates. The paper's
             0.12 / 0.3 m are for a still robot-mounted demo; here the critical distance is the clearance
-            to keep (0.2 m) and the notice distance the demo's 1 m reaction range.
+            to keep (0.2 m) plus 5 cm for what the skin cannot see in time (the part of a person
+            outside every cone, the 50 Hz sampling and filter lag; measured in
+            ``benchmarks/bench_avoid.py``: with 0.2 m the walk-past came to 0.196 m), and the notice
+            distance the demo's 1 m reaction range.
         v_max: largest allowed approach speed, m/s (paper: 0.3); an approaching obstacle's own speed
             comes on top (the velocity-aware row), up to the joint velocity limits.
         padding: the robot model used for distances is the link capsules grown by this, m (a small
@@ -72,7 +75,7 @@ class ControllerConfig:
     damping: float = 1e-3
     gain: float = 10.0
     posture_gain: float = 0.0
-    critical: float = 0.2
+    critical: float = 0.25
     notice: float = 1.0
     v_max: float = 1.0
     padding: float = 0.02

@@ -1,10 +1,13 @@
 """Human-approach scenarios for the avoidance controller: the task (a circle) and who comes close.
 
-Robot and skin: the Panda at ``Q_START`` with the paper's Table II placement
-(:func:`skincal.skin.placement.paper_placement`, units on links 2..7), the same placement the
-simulated calibration datasets use. At ``Q_START`` its units look: su1 forward (+x) from low on the
-upper arm, su2 sideways (-y) from the upper arm, su3 up, su4 sideways (+y) from the forearm, su5
-backward from the wrist, su6 forward-right (+x -y) from the hand. People come from where units look.
+Robot: the Panda at ``Q_START``. The approach lines are laid out along the lines of sight of the
+paper's Table II units (:func:`skincal.skin.placement.paper_placement`, one per link 2..7). At
+``Q_START`` they look: su1 forward (+x) from low on the upper arm, su2 sideways (-y) from the upper
+arm, su3 up, su4 sideways (+y) from the forearm, su5 backward from the wrist, su6 forward-right
+(+x -y) from the hand. The skin the loop simulates is the caller's choice (``skincal avoid
+--placement``): six 27 deg cones leave most directions unseen, so a person's leg or the far side of
+an arm can come within 0.1 m unnoticed; the default is the dense ring skin
+(:func:`skincal.skin.placement.ring_placement`, 49 units), with which every scenario keeps 0.2 m.
 
 Task (paper Sec. V-C): the flange tracks a circle of radius 0.1 m in the vertical y-z plane in front of
 the robot, starting where the flange is at ``Q_START`` (period 5 s, 0.126 m/s).
