@@ -79,9 +79,10 @@ class SignalTable:
         self.t = grid[keep]
         self._motion = chain.link_motion(q[keep], qd[keep], qdd[keep])
         self._gravity = np.asarray(gravity, dtype=float)
-        self._cache: dict[int, tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = {}
+        self._cache: dict[int, FloatArray] = {}
 
-    def _link(self, link: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    def _link(self, link: int) -> FloatArray:
+        """``(N, 24)`` rows ``[u (3), K (9, row-major), du (3), dK (9)]`` of ``link`` on the grid."""
         if link not in self._cache:
             m = self._motion
             R = m.T_base_link[:, link, :3, :3]
@@ -89,29 +90,25 @@ class SignalTable:
             w_l = np.einsum("nji,nj->ni", R, m.omega[:, link])
             dw_l = np.einsum("nji,nj->ni", R, m.omega_dot[:, link])
             W = skew(w_l)
-            K = skew(dw_l) + W @ W
-            self._cache[link] = (u, K, np.gradient(u, self.t, axis=0), np.gradient(K, self.t, axis=0))
+            y = np.concatenate([u, (skew(dw_l) + W @ W).reshape(-1, 9)], axis=1)
+            self._cache[link] = np.ascontiguousarray(np.concatenate([y, np.gradient(y, self.t, axis=0)], axis=1))
         return self._cache[link]
 
     def at(self, link: int, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """``(u, K, du, dK)`` of ``link`` at instants ``t`` (M,) inside the grid."""
+        """``(u, K, du, dK)`` of ``link`` at instants ``t`` (M,) inside the grid: ``(M, 3)``, ``(M, 3, 3)``,
+        ``(M, 3)``, ``(M, 3, 3)``."""
         g = self.t
         i = np.clip(np.searchsorted(g, t) - 1, 0, g.size - 2)
-        h = g[i + 1] - g[i]
-        s = (t - g[i]) / h
+        h = (g[i + 1] - g[i])[:, None]
+        s = (t - g[i])[:, None] / h
         s2, s3 = s * s, s * s * s
-        h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, (s3 - 2 * s2 + s) * h, -2 * s3 + 3 * s2, (s3 - s2) * h
-
-        def herm(y: FloatArray, dy: FloatArray) -> FloatArray:
-            e = (slice(None),) + (None,) * (y.ndim - 1)
-            return h00[e] * y[i] + h10[e] * dy[i] + h01[e] * y[i + 1] + h11[e] * dy[i + 1]
-
-        def lin(y: FloatArray) -> FloatArray:
-            e = (slice(None),) + (None,) * (y.ndim - 1)
-            return (1 - s)[e] * y[i] + s[e] * y[i + 1]
-
-        u, K, du, dK = self._link(link)
-        return herm(u, du), herm(K, dK), lin(du), lin(dK)
+        table = self._link(link)
+        a, b = table[i], table[i + 1]  # (M, 24) each: values then derivatives at both grid ends
+        y = (2 * s3 - 3 * s2 + 1) * a[:, :12] + (s3 - 2 * s2 + s) * h * a[:, 12:]
+        y += (-2 * s3 + 3 * s2) * b[:, :12] + (s3 - s2) * h * b[:, 12:]  # cubic Hermite
+        dy = (1 - s) * a[:, 12:] + s * b[:, 12:]  # linear
+        M = t.shape[0]
+        return y[:, :3], y[:, 3:].reshape(M, 3, 3), dy[:, :3], dy[:, 3:].reshape(M, 3, 3)
 
 
 def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
