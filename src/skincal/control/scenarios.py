@@ -6,7 +6,8 @@ paper's Table II units (:func:`skincal.skin.placement.paper_placement`, one per 
 arm, su3 up, su4 sideways (+y) from the forearm, su5 backward from the wrist, su6 forward-right
 (+x -y) from the hand. The skin the loop simulates is the caller's choice (``skincal avoid
 --placement``): six 27 deg cones leave most directions unseen, so a person's leg or the far side of
-an arm can come within 0.1 m unnoticed; the default is the dense ring skin
+an arm comes within about 0.1 m unnoticed (``arm`` 0.088 m, ``walk`` 0.111 m in
+``benchmarks/bench_avoid.py --placement paper``); the default is the dense ring skin
 (:func:`skincal.skin.placement.ring_placement`, 49 units), with which every scenario keeps 0.2 m.
 
 Task (paper Sec. V-C): the flange tracks a circle of radius 0.1 m in the vertical y-z plane in front of
