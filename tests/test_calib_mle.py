@@ -143,6 +143,17 @@ def test_bad_units_are_reported_and_the_rest_calibrated():
     good = [ev["units"][n]["position_error_mm"] for n in names[2:]]
     assert max(good) < 0.01
     assert names[1] in failed and "x axis is stuck" in failed[names[1]]
+    # the same with two worker processes: identical results, failures reported the same way, in order
+    seen: list[str] = []
+    parallel = calibrate(bad, "mle", workers=2, progress=seen.append)
+    assert seen == names and parallel.extras["failed_units"] == failed
+    for name, unit in result.units.items():
+        np.testing.assert_array_equal(parallel.units[name].pose.p_link_su, unit.pose.p_link_su)
+        np.testing.assert_array_equal(parallel.units[name].pose.R_link_su, unit.pose.R_link_su)
+        assert parallel.units[name].warnings == unit.warnings
+    from skincal.calib import api
+
+    assert api._FORKED == {}  # the closure is released when the run ends
 
 
 def test_saturated_samples_are_dropped_with_a_warning():

@@ -5,7 +5,7 @@
   joint accelerations estimated from q/qd, links found from the data, and the calibration of the
   reported standard deviations (RMS of error / std per axis);
 * the ``fast`` protocol under ``realistic`` sensors;
-* run time for 6 and 100 units (one thread, and two threads as ``skincal calibrate`` uses);
+* run time for 6 and 100 units (one worker, and two workers as ``skincal calibrate`` uses: forked processes on Linux);
 * OM (the paper's method) against ``mle`` on the same data, wall-time ratio and errors.
 """
 
@@ -94,7 +94,7 @@ def run_mle_benchmark(
             out[f"runtime_{n_units}_units_{proto}_s"] = time.perf_counter() - start
             start = time.perf_counter()
             calibrate(ds, "mle", workers=2)
-            out[f"runtime_{n_units}_units_{proto}_2_threads_s"] = time.perf_counter() - start
+            out[f"runtime_{n_units}_units_{proto}_2_workers_s"] = time.perf_counter() - start
             out[f"runtime_{n_units}_units_{proto}_summary"] = _summary(ds, result)
     if with_om:
         note("OM vs mle on the same data")

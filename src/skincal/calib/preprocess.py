@@ -91,6 +91,10 @@ class JointInterpolator:
             self._qdd_full = estimate_qdd(self._joints, self._window_s)[2]
         return self._qdd_full
 
+    def warm(self) -> None:
+        """Compute the lazily built acceleration estimate now (e.g. before forking workers that share it)."""
+        self._qdd_at(np.zeros(1, dtype=np.intp))
+
     def _qdd_at(self, i: np.ndarray) -> FloatArray:
         """Acceleration estimate at grid indices ``i`` only (the same local fit as :attr:`_qdd`)."""
         if self._qdd_full is not None or self._sg is None:

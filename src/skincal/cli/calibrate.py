@@ -59,7 +59,7 @@ def calibrate(
     use_truth_links: bool = typer.Option(False, help="take each unit's link from the dataset truth"),
     use_dataset_qdd: bool = typer.Option(False, help="use the dataset's qdd instead of estimating it"),
     unit: list[str] | None = typer.Option(None, help="calibrate only this unit (repeatable)"),
-    workers: int = typer.Option(2, help="units calibrated at once (threads)"),
+    workers: int = typer.Option(2, help="units calibrated at once (forked processes on Linux, else threads)"),
 ) -> None:
     """Calibrate the skin units of a dataset and write the result JSON."""
     from rich.progress import Progress
