@@ -106,6 +106,10 @@ _FORKED: dict[int, Callable[[int, str], tuple[str, UnitResult | None, str | None
 """Per-unit closures of the running :func:`calibrate` calls by token, inherited by forked workers."""
 
 
+_BLAS_LIMIT: Any = None
+"""The BLAS thread limit of a worker process (kept alive for the worker's life)."""
+
+
 def _one_blas_thread() -> None:
     """Worker initializer: one BLAS thread per worker process (``workers`` processes already fill
     the cores; more threads each would oversubscribe them)."""
@@ -113,9 +117,6 @@ def _one_blas_thread() -> None:
 
     global _BLAS_LIMIT
     _BLAS_LIMIT = threadpool_limits(limits=1, user_api="blas")
-
-
-_BLAS_LIMIT: Any = None
 
 
 def _forked_unit(token: int, k: int, name: str) -> tuple[str, UnitResult | None, str | None]:

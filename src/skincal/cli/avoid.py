@@ -13,12 +13,11 @@ from skincal.errors import ConfigError
 
 def simulated_skin(placement: str, chain) -> dict:
     """The true unit poses of the skin the avoidance loop simulates: ``ring`` (dense) or ``paper`` (Table II)."""
-    from skincal.skin.placement import paper_placement, ring_placement
+    from skincal.cli.simulate import make_placements
 
-    skins = {"ring": ring_placement, "paper": paper_placement}
-    if placement not in skins:
+    if placement not in ("ring", "paper"):
         raise ConfigError(f"unknown placement '{placement}' (use ring or paper)")
-    return skins[placement](chain)
+    return make_placements(chain, placement, None, None)
 
 
 def believed_poses(true_poses: dict, result: Path | None, degrade: str | None, blind: bool, seed: int):

@@ -85,20 +85,26 @@ def link_capsules(chain: SerialChain, radius: float | FloatArray = DEFAULT_LINK_
     return capsules
 
 
+def capsule_frame(capsule: Capsule) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Unit axis ``p0 -> p1`` (``+z`` of the link frame for a sphere) and an orthonormal pair ``(u, v)``
+    perpendicular to it, ``v = axis x u``; each ``(3,)`` in the capsule's link frame."""
+    L = capsule.length
+    axis = (capsule.p1 - capsule.p0) / L if L > 0 else np.array([0.0, 0.0, 1.0])
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(axis, helper)
+    u /= np.linalg.norm(u)
+    return axis, u, np.cross(axis, u)
+
+
 def sample_capsule_surface(capsule: Capsule, rng: np.random.Generator, size: int) -> tuple[FloatArray, FloatArray]:
     """Points uniformly distributed (by area) on a capsule's surface and the outward unit normals.
 
     Returns ``(points, normals)``, each ``(size, 3)`` in the capsule's link frame.
     """
     r, L = capsule.radius, capsule.length
-    axis = (capsule.p1 - capsule.p0) / L if L > 0 else np.array([0.0, 0.0, 1.0])
+    axis, u, v = capsule_frame(capsule)
     side_area, cap_area = 2 * np.pi * r * L, 4 * np.pi * r * r
     on_side = rng.random(size) < side_area / (side_area + cap_area)
-    # Orthonormal basis (u, v) perpendicular to the axis.
-    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(axis, helper)
-    u /= np.linalg.norm(u)
-    v = np.cross(axis, u)
     phi = rng.uniform(0.0, 2 * np.pi, size)
     radial = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v
     s = rng.uniform(0.0, L, size)

@@ -120,7 +120,9 @@ class ProximityTracker:
         if np.any(ok):
             is_self[ok] = body_proximity(self.body, T, p[ok]).distance <= cfg.self_margin
         self._clear_memory(t, o, a, r, ok & ~is_self)
-        self._carve(t, idx, o, a, np.where(ok, r, np.where(np.isnan(r) | (r > cfg.max_range), cfg.max_range, 0.0)))
+        # free space seen along each cone: up to the reading, up to max_range when there was none
+        nothing = np.isnan(r) | (r > cfg.max_range)
+        self._carve(t, idx, o, a, np.where(ok, r, np.where(nothing, cfg.max_range, 0.0)))
         for k in np.flatnonzero(ok & ~is_self):  # a few units per instant (the robot itself is no news)
             self._add(int(idx[k]), t, p[k], r[k], o[k], a[k])
 

@@ -12,7 +12,13 @@ import numpy as np
 
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
-from skincal.kinematics.geometry import DEFAULT_LINK_RADIUS, Capsule, link_capsules, sample_capsule_surface
+from skincal.kinematics.geometry import (
+    DEFAULT_LINK_RADIUS,
+    Capsule,
+    capsule_frame,
+    link_capsules,
+    sample_capsule_surface,
+)
 from skincal.kinematics.transforms import FloatArray, rot_z
 from skincal.skin.pose import SkinUnitPose
 
@@ -125,14 +131,9 @@ def ring_placement(
         chain.check_link(k)
     poses: list[SkinUnitPose] = []
     n_ring = 0
-    for cap in link_capsules(chain, radius):
-        if cap.link not in links or cap.length < 0.05:
-            continue
-        axis = (cap.p1 - cap.p0) / cap.length
-        helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-        u = np.cross(axis, helper)
-        u /= np.linalg.norm(u)
-        v = np.cross(axis, u)
+    ringed = [c for c in link_capsules(chain, radius) if c.link in links and c.length >= 0.05]
+    for cap in ringed:
+        axis, u, v = capsule_frame(cap)
         rings = max(1, int(round(cap.length / spacing)))
         for k in range(rings):
             centre = cap.p0 + cap.length * (k + 0.5) / rings * axis
@@ -141,9 +142,11 @@ def ring_placement(
             R = frame_from_normal(normals, np.zeros(per_ring))
             poses += [SkinUnitPose(cap.link, R[j], centre + radius * normals[j]) for j in range(per_ring)]
             n_ring += 1
-        if tip and cap.link == max(links) and cap.link == chain.n_joints:
-            R = frame_from_normal(axis[None], np.zeros(1))[0]
-            poses.append(SkinUnitPose(cap.link, R, cap.p1 + radius * axis))
+    last = [c for c in ringed if c.link == chain.n_joints]
+    if tip and last:  # on the far end of the last link's last capsule, looking along it
+        axis = capsule_frame(last[-1])[0]
+        R = frame_from_normal(axis[None], np.zeros(1))[0]
+        poses.append(SkinUnitPose(chain.n_joints, R, last[-1].p1 + radius * axis))
     if not poses:
         raise ConfigError(f"robot '{chain.name}': no capsule of 5 cm or more on links {links} to put rings on")
     return {f"su{i + 1}": p for i, p in enumerate(poses)}
