@@ -1,5 +1,13 @@
 """Skin units: their pose on the chain, the paper's DH form, placements and sensor models."""
 
+from skincal.skin.clock import (
+    CLOCK_PRESETS,
+    ClockModel,
+    UnitClock,
+    draw_clock,
+    get_clock_model,
+    stamp_samples,
+)
 from skincal.skin.imu import (
     IMU_PRESETS,
     ImuErrors,
@@ -29,6 +37,12 @@ from skincal.skin.tof import (
 )
 
 __all__ = [
+    "CLOCK_PRESETS",
+    "ClockModel",
+    "UnitClock",
+    "draw_clock",
+    "get_clock_model",
+    "stamp_samples",
     "DH6_NAMES",
     "IMU_PRESETS",
     "PAPER_TABLE_II",
