@@ -2,17 +2,27 @@
 
 For every unit ``k`` on link ``n`` with pose ``T_link_su = (R, p)``:
 
-1. the IMU stamps samples at its own instants ``t_stamp`` (rate, random phase, jitter, drops);
-2. the physical instants are ``t_true = t_stamp - latency`` (the unit's time offset);
+1. the IMU samples at its own instants (rate, random phase, jitter, drops):
+   ``t_true = t_nominal - latency`` with ``t_nominal`` its stamps on a perfect clock;
 3. the motion is evaluated exactly there: ``q, qd, qdd = trajectory.evaluate(t_true)``; the unit's
    acceleration ``a_base`` and the link's angular velocity ``w_base`` come from
    :meth:`SerialChain.link_motion`; ``R_base_su = R_base_link(q) R``;
 4. the true specific force ``f = R_base_su^T (a_base - g_base)`` and rate ``w = R_base_su^T w_base``
    go through :func:`skincal.skin.imu.apply_imu_model` (scale, misalignment, bias, noise,
-   quantisation, saturation).
+   quantisation, saturation);
+5. the unit's own clock (:mod:`skincal.skin.clock`, drawn once per unit) stamps the samples:
+   ``t_stamp = t_nominal + tau(t_true) + jitter``, quantised; with the ``ideal`` clock
+   ``t_stamp = t_nominal``.
 
-The robot stream is the trajectory at its own rate (1 kHz by default) with exact ``q, qd, qdd``.
-Time-of-flight streams are simulated when a scene is given.
+The robot stream is the true motion as the robot reports it
+(:func:`skincal.sim.joint_states.apply_joint_state_model`); the ``ideal`` joint model gives the
+trajectory at its own rate (1 kHz by default) with exact ``q, qd, qdd``. Time-of-flight streams
+are simulated when a scene is given (on the true time base).
+
+Random streams: each unit draws its IMU errors, instants, noise (and ToF) from its own child of
+``rng``, then its clock from a child of that; the joint stream draws from another child of ``rng``
+spawned after the units'. So the IMU streams of a seed do not change with the joint model, and
+with the ``ideal`` clock they are those of the simulator before clock models, bit for bit.
 """
 
 from __future__ import annotations
@@ -21,10 +31,12 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from skincal.data.dataset import Dataset, ImuStream, JointStates, TofStream
+from skincal.data.dataset import Dataset, ImuStream, TofStream
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
 from skincal.protocol import Trajectory
+from skincal.sim.joint_states import JointStateModel, apply_joint_state_model
+from skincal.skin.clock import ClockModel, UnitClock, draw_clock, stamp_samples
 from skincal.skin.imu import (
     ImuErrors,
     ImuModel,
@@ -63,6 +75,8 @@ def simulate(
     scene: Sequence | None = None,
     gravity: np.ndarray = GRAVITY_BASE,
     description: str = "",
+    joint_model: JointStateModel | None = None,
+    clock_model: ClockModel | None = None,
 ) -> Dataset:
     """Simulate a calibration session (see module docstring).
 
@@ -76,6 +90,8 @@ def simulate(
             is given, each unit also gets a ToF stream at ``tof_model.rate_hz``.
         gravity: ``(3,)`` base-frame gravity, m/s^2.
         description: stored in the dataset.
+        joint_model: how the robot reports its joint states (default: ``ideal``).
+        clock_model: the units' clock type (default: ``ideal``).
     """
     if not placements:
         raise ConfigError("simulate: no skin units to simulate")
@@ -94,11 +110,14 @@ def simulate(
         t_stamp, t_true = t_stamp[inside], t_true[inside]
         f_su, w_su, _, _ = unit_kinematics(chain, pose, trajectory, t_true, gravity)
         accel, gyro = apply_imu_model(imu_model, errors, f_su, w_su, unit_rng)
-        imu[name] = ImuStream(t=t_stamp, accel=accel, gyro=gyro)
-        truth_sensor[name] = sensor_truth(errors)
         if scene is not None:
             tof[name] = _simulate_tof(chain, pose, trajectory, tof_model, scene, unit_rng, t0, t1)
-    joints = JointStates(t=trajectory.t, q=trajectory.q, qd=trajectory.qd, qdd=trajectory.qdd)
+        clock, t_stamp, keep = unit_clock_stamps(clock_model, unit_rng, t_stamp, t_true, t0)
+        imu[name] = ImuStream(t=t_stamp, accel=accel[keep], gyro=gyro[keep])
+        truth_sensor[name] = sensor_truth(errors, clock)
+    joints = apply_joint_state_model(
+        joint_model or JointStateModel(), trajectory.evaluate, trajectory.t, rng.spawn(1)[0]
+    )
     return Dataset(
         robot=chain,
         joints=joints,
@@ -112,15 +131,42 @@ def simulate(
     )
 
 
-def sensor_truth(errors: ImuErrors) -> dict[str, np.ndarray | float]:
-    """The ``Dataset.truth_sensor`` entry of one unit's drawn IMU errors."""
-    return {
+def unit_clock_stamps(
+    clock_model: ClockModel | None,
+    unit_rng: np.random.Generator,
+    t_nominal: np.ndarray,
+    t_true: np.ndarray,
+    t0: float,
+) -> tuple[UnitClock, np.ndarray, np.ndarray]:
+    """One unit's clock, drawn from a child of ``unit_rng`` (so the unit's other draws are untouched),
+    and its stamps of samples at physical instants ``t_true`` ``(M,)`` s with perfect-clock stamps
+    ``t_nominal``: ``(clock, t_stamp (K,), keep (M,) bool)`` (:func:`skincal.skin.clock.stamp_samples`)."""
+    model = clock_model or ClockModel()
+    clock_rng = unit_rng.spawn(1)[0]
+    clock = draw_clock(model, clock_rng)
+    t_stamp, keep = stamp_samples(model, clock, t_nominal, t_true, t0, clock_rng)
+    return clock, t_stamp, keep
+
+
+def sensor_truth(errors: ImuErrors, clock: UnitClock | None = None) -> dict[str, np.ndarray | float]:
+    """The ``Dataset.truth_sensor`` entry of one unit's drawn IMU errors and clock.
+
+    ``time_offset_s`` = latency + clock offset (the stamp error right after a re-sync, or at the
+    session start of a free-running clock); ``clock_drift_ppm``; ``clock_resync_period_s`` only
+    when the clock is re-synced (a dataset attribute must be finite).
+    """
+    clock = clock or UnitClock()
+    truth: dict[str, np.ndarray | float] = {
         "accel_bias": errors.accel_bias,
         "accel_scale": errors.accel_scale,
         "accel_misalignment": errors.accel_misalignment,
         "gyro_bias": errors.gyro_bias,
-        "time_offset_s": float(errors.latency_s),
+        "time_offset_s": float(errors.latency_s) + clock.offset_s,
+        "clock_drift_ppm": clock.drift_ppm,
     }
+    if np.isfinite(clock.resync_period_s):
+        truth["clock_resync_period_s"] = clock.resync_period_s
+    return truth
 
 
 def tof_instants(t0: float, t1: float, rate_hz: float, rng: np.random.Generator) -> np.ndarray:

@@ -5,19 +5,23 @@ Per unit (mirroring the analytic simulator draw for draw, so that one seed gives
 errors and noise in both): constant errors :func:`~skincal.skin.imu.draw_imu_errors`, own stamps
 :func:`~skincal.skin.imu.sample_instants`, physical instants ``t_true = t_stamp - latency``; the
 true specific force ``f = R_base_su^T (a - g)`` and rate ``R_base_su^T w`` come from MuJoCo's
-``accelerometer`` and ``gyro`` at the unit's site; then :func:`~skincal.skin.imu.apply_imu_model`.
+``accelerometer`` and ``gyro`` at the unit's site; then :func:`~skincal.skin.imu.apply_imu_model`
+and the unit's own clock (:func:`~skincal.sim.analytic.unit_clock_stamps`). The joint stream is the
+true motion as the robot reports it (:func:`~skincal.sim.joint_states.apply_joint_state_model`, from
+a child of ``rng`` spawned after the units', as in the analytic simulator).
 
 Modes:
 
 * ``"kinematic"`` (default): at each instant the state is imposed, ``(q, qd, qdd) =
   trajectory.evaluate(t)``, and ``mj_inverse`` evaluates the sensors with that ``qacc`` (unlike
-  ``mj_forward``, which would overwrite ``qacc`` with the free-motion acceleration). The joint
-  stream is the trajectory's own samples.
+  ``mj_forward``, which would overwrite ``qacc`` with the free-motion acceleration). The true
+  joint motion is the trajectory's (``ideal`` joint model: its own samples).
 * ``"dynamic"``: the robot is simulated at 1 kHz (semi-implicit Euler) under gravity with one
   velocity servo per joint, ``tau = kv (u - qd)``, commanded ``u = qd_ref(t) + kp (q_ref(t) - q)``,
-  and, like the real robot's controller, gravity compensation. The joint stream is the state the
-  robot actually reached (``q``, ``qd`` and MuJoCo's ``qacc`` as ``qdd``) interpolated to the
-  trajectory's sample times; IMU readings are linearly interpolated between the 1 kHz steps,
+  and, like the real robot's controller, gravity compensation. The true joint motion is the state
+  the robot actually reached (``q``, ``qd`` and the acceleration undergone over each step as
+  ``qdd``) linearly interpolated between the 1 kHz steps (``ideal`` joint model: at the
+  trajectory's sample times); IMU readings are linearly interpolated between the 1 kHz steps,
   range readings take the latest step (zero-order hold). The tracking error is what a real
   controller adds to the data.
 
@@ -34,14 +38,16 @@ from typing import Any
 
 import numpy as np
 
-from skincal.data.dataset import Dataset, ImuStream, JointStates, TofStream
+from skincal.data.dataset import Dataset, ImuStream, TofStream
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
 from skincal.kinematics.transforms import FloatArray
 from skincal.protocol import Trajectory
-from skincal.sim.analytic import sensor_truth, tof_instants
+from skincal.sim.analytic import sensor_truth, tof_instants, unit_clock_stamps
+from skincal.sim.joint_states import JointStateModel, apply_joint_state_model
 from skincal.sim.mujoco_model import SensorIndex, build_model, require_mujoco
 from skincal.sim.scene import Scene
+from skincal.skin.clock import ClockModel
 from skincal.skin.imu import ImuModel, apply_imu_model, draw_imu_errors, sample_instants, true_sample_times
 from skincal.skin.pose import SkinUnitPose
 
@@ -215,6 +221,8 @@ def simulate_mujoco(
     description: str = "",
     position_gain: float = POSITION_GAIN,
     model_options: Mapping[str, Any] | None = None,
+    joint_model: JointStateModel | None = None,
+    clock_model: ClockModel | None = None,
 ) -> Dataset:
     """Simulate a calibration session with MuJoCo (see the module docstring).
 
@@ -227,6 +235,8 @@ def simulate_mujoco(
         description: stored in the dataset.
         position_gain: ``kp`` of the dynamic mode's velocity command, 1/s.
         model_options: extra keyword arguments of :func:`build_model` (e.g. ``link_radius``).
+        joint_model: how the robot reports its joint states (default: ``ideal``).
+        clock_model: the units' clock type (default: ``ideal``).
     """
     if mode not in MODES:
         raise ConfigError(f"simulate_mujoco: mode must be one of {', '.join(MODES)}, got '{mode}'")
@@ -263,7 +273,7 @@ def simulate_mujoco(
     )
     idx = SensorIndex.of(model, units, None if directions is None else len(directions))
 
-    # 1. Each unit's own clock (same draws as the analytic simulator).
+    # 1. Each unit's sampling instants (same draws as the analytic simulator; stamps come in 3.).
     unit_rngs = rng.spawn(len(units))
     errors, stamps, true_t = [], [], []
     for unit_rng in unit_rngs:
@@ -278,16 +288,14 @@ def simulate_mujoco(
     # 2. Physics.
     run = None
     if mode == "kinematic":
-        joints = JointStates(t=trajectory.t, q=trajectory.q, qd=trajectory.qd, qdd=trajectory.qdd)
+        motion = trajectory.evaluate
     else:
         run = servo_run(model, idx, trajectory, t1, scene, position_gain)
-        tj = trajectory.t
-        joints = JointStates(
-            t=tj,
-            q=_interp_rows(tj, run.t, run.q),
-            qd=_interp_rows(tj, run.t, run.qd),
-            qdd=_interp_rows(tj, run.t, run.qdd),
-        )
+
+        def motion(t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+            return _interp_rows(t, run.t, run.q), _interp_rows(t, run.t, run.qd), _interp_rows(t, run.t, run.qdd)
+
+    joints = apply_joint_state_model(joint_model or JointStateModel(), motion, trajectory.t, rng.spawn(1)[0])
 
     def sense(t: FloatArray) -> SensorTrace:
         if run is None:
@@ -297,20 +305,21 @@ def simulate_mujoco(
             t, _interp_rows(t, run.t, s.accel), _interp_rows(t, run.t, s.gyro), _hold_rows(t, run.t, s.range)
         )
 
-    # 3. Sensor models per unit.
+    # 3. Sensor models and clocks per unit.
     imu: dict[str, ImuStream] = {}
     tof: dict[str, TofStream] = {}
     truth_sensor: dict[str, dict[str, FloatArray | float]] = {}
     for u, (name, unit_rng) in enumerate(zip(units, unit_rngs, strict=True)):
         trace = sense(true_t[u])
         accel, gyro = apply_imu_model(imu_model, errors[u], trace.accel[:, u], trace.gyro[:, u], unit_rng)
-        imu[name] = ImuStream(t=stamps[u], accel=accel, gyro=gyro)
-        truth_sensor[name] = sensor_truth(errors[u])
         if scene is not None:
             t_tof = tof_instants(t0, t1, tof_model.rate_hz, unit_rng)
             rays = sense(t_tof).range[:, u]  # (M, K), NaN = ray hit nothing
             nearest = np.where(np.isnan(rays), np.inf, rays).min(axis=1)
             tof[name] = TofStream(t=t_tof, range=_apply_tof(tof_model, nearest, unit_rng))
+        clock, t_stamp, keep = unit_clock_stamps(clock_model, unit_rng, stamps[u], true_t[u], t0)
+        imu[name] = ImuStream(t=t_stamp, accel=accel[keep], gyro=gyro[keep])
+        truth_sensor[name] = sensor_truth(errors[u], clock)
     return Dataset(
         robot=chain,
         joints=joints,
