@@ -12,6 +12,30 @@ from skincal.errors import ConfigError
 
 BACKENDS = ("analytic", "mujoco")
 
+IDEAL_NOISE = ("none", "datasheet")
+"""IMU presets whose sessions default to ideal joint states (``--joints auto``)."""
+
+DRIVER_CLOCK_NOISE = ("real",)
+"""IMU presets whose units default to the measured driver clock (``--clock auto``)."""
+
+
+def resolve_timing(noise: str, joints: str = "auto", clock: str = "auto") -> tuple[str, str]:
+    """The joint-state and clock preset names for ``--joints``/``--clock`` (``auto`` resolved).
+
+    ``auto``: joints ``ideal`` for the IMU presets none/datasheet and ``controller`` otherwise
+    (realistic, real); clock ``driver`` for real and ``ideal`` otherwise.
+    """
+    from skincal.sim.joint_states import get_joint_model
+    from skincal.skin.clock import get_clock_model
+
+    if joints == "auto":
+        joints = "ideal" if noise in IDEAL_NOISE else "controller"
+    if clock == "auto":
+        clock = "driver" if noise in DRIVER_CLOCK_NOISE else "ideal"
+    get_joint_model(joints)
+    get_clock_model(clock)
+    return joints, clock
+
 
 def make_placements(chain, placement: str, units: int | None, rng):
     """Unit poses for ``--placement paper|random|ring`` (``units`` only for random; paper has 6, ring
@@ -42,12 +66,21 @@ def simulate_dataset(
     backend: str = "analytic",
     description: str | None = None,
     mujoco_mode: str = "kinematic",
+    joints: str = "auto",
+    clock: str = "auto",
 ):
-    """Build a simulated :class:`~skincal.data.Dataset` from preset names (used by the CLI and demo)."""
+    """Build a simulated :class:`~skincal.data.Dataset` from preset names (used by the CLI and demo).
+
+    ``joints``: joint-state preset (:data:`skincal.sim.joint_states.JOINT_PRESETS`) or ``auto``;
+    ``clock``: unit clock preset (:data:`skincal.skin.clock.CLOCK_PRESETS`) or ``auto``; ``auto``
+    as :func:`resolve_timing`.
+    """
     import numpy as np
 
     from skincal.kinematics import get_robot
     from skincal.protocol import build_trajectory, get_protocol
+    from skincal.sim.joint_states import get_joint_model
+    from skincal.skin.clock import get_clock_model
     from skincal.skin.imu import get_imu_model
 
     if backend not in BACKENDS:
@@ -56,23 +89,30 @@ def simulate_dataset(
         raise ConfigError(f"--units must be at least 1, got {units}")
     chain = get_robot(robot)
     imu_model = get_imu_model(noise)
+    joints, clock = resolve_timing(noise, joints, clock)
+    timing = {"joint_model": get_joint_model(joints), "clock_model": get_clock_model(clock)}
     config = get_protocol(protocol)
     rng = np.random.default_rng(seed)
     placements = make_placements(chain, placement, units, rng)
     trajectory = build_trajectory(chain, config, rng)
     text = description or (
         f"simulated: robot={chain.name} placement={placement} noise={noise} protocol={protocol} "
-        f"seed={seed} backend={backend}" + (f" mode={mujoco_mode}" if backend == "mujoco" else "")
+        f"seed={seed} backend={backend}"
+        + (f" mode={mujoco_mode}" if backend == "mujoco" else "")
+        + (f" joints={joints}" if joints != "ideal" else "")
+        + (f" clock={clock}" if clock != "ideal" else "")
     )
     if backend == "mujoco":
         from skincal.sim.mujoco_backend import simulate_mujoco
 
         if mujoco_mode not in ("kinematic", "dynamic"):
             raise ConfigError(f"unknown MuJoCo mode '{mujoco_mode}' (use kinematic or dynamic)")
-        return simulate_mujoco(chain, placements, trajectory, imu_model, rng, mode=mujoco_mode, description=text)
+        return simulate_mujoco(
+            chain, placements, trajectory, imu_model, rng, mode=mujoco_mode, description=text, **timing
+        )
     from skincal.sim.analytic import simulate
 
-    return simulate(chain, placements, trajectory, imu_model, rng, description=text)
+    return simulate(chain, placements, trajectory, imu_model, rng, description=text, **timing)
 
 
 @app.command()
@@ -81,19 +121,27 @@ def simulate(
     robot: str = typer.Option("panda", help="robot preset (panda, sawyer, ur5e) or a chain .yaml/.json"),
     placement: str = typer.Option("paper", help="paper (Table II, 6 units), random or ring (dense skin)"),
     units: int | None = typer.Option(None, help="number of units (random placement; default 6)"),
-    noise: str = typer.Option("none", help="IMU preset: none, datasheet or realistic"),
+    noise: str = typer.Option("none", help="IMU preset: none, datasheet, realistic or real (measured IMUs)"),
     protocol: str = typer.Option("paper-sim", help="protocol preset: paper-sim, paper-real, ..."),
     seed: int = typer.Option(0, help="random seed (placements, poses, noise)"),
     backend: str = typer.Option("analytic", help="analytic (exact, fast) or mujoco (independent physics)"),
     mujoco_mode: str = typer.Option(
         "kinematic", help="mujoco backend: kinematic (imposed motion) or dynamic (1 kHz velocity servos)"
     ),
+    joints: str = typer.Option(
+        "auto", help="joint states: ideal, controller (500 Hz, encoder steps, noisy qd, no qdd) or auto"
+    ),
+    clock: str = typer.Option(
+        "auto", help="unit clocks: ideal, driver, wifi, wifi-resync or auto (driver for --noise real)"
+    ),
 ) -> None:
     """Simulate a calibration session and write it as a dataset file."""
     from skincal.data.hdf5 import write_dataset
 
     start = time.perf_counter()
-    ds = simulate_dataset(robot, placement, units, noise, protocol, seed, backend, mujoco_mode=mujoco_mode)
+    ds = simulate_dataset(
+        robot, placement, units, noise, protocol, seed, backend, mujoco_mode=mujoco_mode, joints=joints, clock=clock
+    )
     write_dataset(ds, out)
     n = sum(len(s.t) for s in ds.imu.values())
     console.print(
