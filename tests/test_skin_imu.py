@@ -206,3 +206,46 @@ def test_bad_model_values_rejected():
         apply_imu_model(get_imu_model("datasheet"), ImuErrors.ideal(), np.zeros((2, 3)))
     with pytest.raises(ConfigError, match="symmetric"):
         ImuErrors(np.zeros(3), np.ones(3), np.eye(3) + np.triu(np.ones((3, 3)), 1) * 0.01, np.zeros(3))
+
+
+def test_real_preset_has_the_measured_figures():
+    real = get_imu_model("real")
+    assert real.rate_hz == 62.5 and real.bandwidth_hz == 31.25
+    assert real.accel_noise_density == 0.014 and real.gyro_noise_density == 2.0e-3
+    assert real.accel_bias_std == 0.35 and real.accel_scale_std == 0.03 and real.misalignment_std == 0.01
+    assert real.gyro_bias_std == pytest.approx(12.0 * DPS)
+    assert real.accel_range == pytest.approx(8 * G) and real.gyro_range == pytest.approx(2000 * DPS)
+    assert real.accel_lsb == pytest.approx(2.39e-3, rel=2e-3) and real.gyro_lsb == pytest.approx(1.07e-3, rel=5e-3)
+    assert real.latency_s == 0.015 and real.drop_probability == 0.01 and real.jitter_s == 0.0
+    assert get_imu_model("realistic").rate_hz == 100.0  # kept
+
+
+def test_real_preset_noise_and_lsb_from_a_rest_simulation():
+    from skincal.data.dataset import STATIC
+    from skincal.kinematics import panda
+    from skincal.protocol import ProtocolConfig, build_trajectory
+    from skincal.sim.analytic import simulate
+    from skincal.skin.placement import paper_placement
+
+    chain = panda()
+    config = ProtocolConfig(n_poses=2, excite_duration=0.5, rest_duration=4.0, static_duration=3.5, excited_joints=(0,))
+    traj = build_trajectory(chain, config, np.random.default_rng(1))
+    model = get_imu_model("real")
+    ds = simulate(chain, paper_placement(chain), traj, model, np.random.default_rng(2))
+    seg = ds.segments
+    accel_res, gyro_res = [], []
+    for name, stream in ds.imu.items():
+        t_true = stream.t - ds.truth_sensor[name]["time_offset_s"]
+        # Digitised: every reading is a whole number of LSBs, and the finest step seen is one LSB.
+        for x, lsb in ((stream.accel, model.accel_lsb), (stream.gyro, model.gyro_lsb)):
+            np.testing.assert_allclose(x / lsb, np.round(x / lsb), atol=1e-6)
+            levels = np.unique(x[:, 0])
+            assert np.diff(levels).min() == pytest.approx(lsb, rel=1e-6)
+        for t0, t1 in zip(seg.t_start[seg.kind == STATIC], seg.t_end[seg.kind == STATIC], strict=True):
+            rest = (t_true > t0) & (t_true < t1)
+            assert rest.sum() > 150
+            accel_res.append(stream.accel[rest] - stream.accel[rest].mean(axis=0))
+            gyro_res.append(stream.gyro[rest] - stream.gyro[rest].mean(axis=0))
+    accel_res, gyro_res = np.vstack(accel_res), np.vstack(gyro_res)
+    assert accel_res.std() == pytest.approx(0.014 * math.sqrt(31.25), rel=0.1)  # 0.078 m/s^2
+    assert gyro_res.std() == pytest.approx(2.0e-3 * math.sqrt(31.25), rel=0.1)  # 0.011 rad/s

@@ -22,6 +22,8 @@ TRUTH_SENSOR_SHAPES: dict[str, tuple[int, ...]] = {
     "accel_misalignment": (3, 3),
     "gyro_bias": (3,),
     "time_offset_s": (),
+    "clock_drift_ppm": (),
+    "clock_resync_period_s": (),
 }
 """Known optional per-unit truth attributes (simulated sensor errors) and their shapes; others may
 be added (any finite numbers)."""
