@@ -4,13 +4,13 @@ For every unit ``k`` on link ``n`` with pose ``T_link_su = (R, p)``:
 
 1. the IMU samples at its own instants (rate, random phase, jitter, drops):
    ``t_true = t_nominal - latency`` with ``t_nominal`` its stamps on a perfect clock;
-3. the motion is evaluated exactly there: ``q, qd, qdd = trajectory.evaluate(t_true)``; the unit's
+2. the motion is evaluated exactly there: ``q, qd, qdd = trajectory.evaluate(t_true)``; the unit's
    acceleration ``a_base`` and the link's angular velocity ``w_base`` come from
    :meth:`SerialChain.link_motion`; ``R_base_su = R_base_link(q) R``;
-4. the true specific force ``f = R_base_su^T (a_base - g_base)`` and rate ``w = R_base_su^T w_base``
+3. the true specific force ``f = R_base_su^T (a_base - g_base)`` and rate ``w = R_base_su^T w_base``
    go through :func:`skincal.skin.imu.apply_imu_model` (scale, misalignment, bias, noise,
    quantisation, saturation);
-5. the unit's own clock (:mod:`skincal.skin.clock`, drawn once per unit) stamps the samples:
+4. the unit's own clock (:mod:`skincal.skin.clock`, drawn once per unit) stamps the samples:
    ``t_stamp = t_nominal + tau(t_true) + jitter``, quantised; with the ``ideal`` clock
    ``t_stamp = t_nominal``.
 
