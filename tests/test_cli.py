@@ -7,9 +7,14 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
+from rich.console import Console
 
 from skincal.cli import main
+from skincal.cli.calibrate import _unit_table, std_cell
+from skincal.data.result import CalibrationResult, UnitResult
+from skincal.skin.pose import SkinUnitPose
 
 
 @pytest.fixture(scope="module")
@@ -74,3 +79,25 @@ def test_console_script_demo_runs():
     )
     assert proc.returncode == 0, proc.stderr
     assert "6/6 correct" in proc.stdout
+
+
+def test_std_cell_leaves_out_undetermined_components():
+    assert std_cell(None) == "-"
+    assert std_cell([1.6e-4, 6.6e-4, 2e-4], 1e3) == "0.660"
+    assert std_cell(np.array([1.6e-4, 6.6e-4, np.nan]), 1e3) == "0.660 (1 undetermined)"
+    assert std_cell([np.nan, np.nan, np.nan]) == "- (3 undetermined)"
+
+
+def test_calibrate_table_with_an_undetermined_std_and_a_failed_unit():
+    pose = SkinUnitPose.from_quaternion(1, [0.05, 0.0, 0.12], [1, 0, 0, 0])
+    su1 = UnitResult(pose, observable=False, position_std_m=[0.00016, 0.00066, np.nan],
+                     rotation_std_deg=[0.02, np.nan, np.nan], warnings=("yaw about joint 1 undetermined",))
+    result = CalibrationResult("mle", "panda", "", 1.0, {"su1": su1}, extras={"failed_units": {"su2": "diverged"}})
+    console = Console(width=250, record=True)
+    console.print(_unit_table(result, "t"))
+    text = console.export_text()
+    row1 = next(line for line in text.splitlines() if "su1" in line)
+    assert "0.660 (1 undetermined)" in row1 and "0.020 (2 undetermined)" in row1 and "unobservable" in row1
+    row2 = next(line for line in text.splitlines() if "su2" in line)
+    assert "not calibrated: diverged" in row2
+    assert "nan" not in text.lower()

@@ -162,6 +162,22 @@ BAD_DOCS = {
     "missing quaternion": (_set("units.su1.quaternion_wxyz", KeyError), "units.su1.quaternion_wxyz is missing"),
     "observable string": (_set("units.su1.observable", "yes"), "units.su1.observable must be true or false"),
     "negative std": (_set("units.su1.position_std_m", [1, -1, 0]), "units.su1.position_std_m must not be negative"),
+    "string in std": (_set("units.su1.position_std_m", [1e-5, "2e-5", None]),
+                      "units.su1.position_std_m must be a list of 3 finite numbers or null (undetermined)"),
+    "negative std beside null": (_set("units.su1.rotation_std_deg", [None, -0.1, 0.0]),
+                                 "units.su1.rotation_std_deg must not be negative"),
+    "bool in std": (_set("units.su1.rotation_std_deg", [True, None, 0.0]), "units.su1.rotation_std_deg must be a list"),
+    "short std with null": (_set("units.su1.position_std_m", [None, None]), "units.su1.position_std_m must be a list"),
+    "null link with a pose": (_set("units.su1.link", None), "units.su1.link must be a positive integer (1-based link), "
+                                                            "got None"),
+    "no pose but observable": (_set("units.su1.position_m", None),
+                               "units.su1.observable must be false for a unit without a pose"),
+    "no pose, link zero": (_set("units.su1", {**json.loads(CONTRACT_EXAMPLE)["units"]["su1"], "link": 0,
+                                              "quaternion_wxyz": None, "observable": False}),
+                           "units.su1.link must be a positive integer (1-based link) or null"),
+    "no pose, bad partial quaternion": (_set("units.su1", {**json.loads(CONTRACT_EXAMPLE)["units"]["su1"],
+                                                           "position_m": None, "quaternion_wxyz": [2, 0, 0, 0],
+                                                           "observable": False}), "is not a unit quaternion"),
     "warnings not list": (_set("units.su1.warnings", "bad"), "units.su1.warnings must be a list of strings"),
     "unit not object": (_set("units.su1", [1, 2]), "units.su1 must be an object"),
 }
@@ -206,9 +222,9 @@ def test_write_validates_and_keeps_old_file(tmp_path: Path) -> None:
     write_result(make_result(), path)
     old = path.read_bytes()
     good = make_result()
-    bad_unit = UnitResult(pose=good.units["su1"].pose, position_std_m=np.array([np.nan, 0.0, 0.0]))
+    bad_unit = UnitResult(pose=good.units["su1"].pose, position_std_m=np.array([np.nan, -1e-3, 0.0]))
     cases = [
-        (CalibrationResult("mle", "panda", "", 1.0, {"su1": bad_unit}), "units.su1.position_std_m must be a list"),
+        (CalibrationResult("mle", "p", "", 1.0, {"su1": bad_unit}), "units.su1.position_std_m must not be negative"),
         (CalibrationResult("", "panda", "", 1.0, {}), "method is empty"),
         (CalibrationResult("mle", "p", "", 1.0, {}, extras={"units": 1}), "may not redefine contract field(s) units"),
         (
@@ -228,3 +244,96 @@ def test_write_validates_and_keeps_old_file(tmp_path: Path) -> None:
 def test_result_to_dict_is_plain_json() -> None:
     doc = result_to_dict(make_result())
     assert json.loads(json.dumps(doc, allow_nan=False)) == doc
+
+
+# ---------------------------------------------------------------------- never lose a result
+def _with_undetermined_and_failed() -> CalibrationResult:
+    pose = SkinUnitPose.from_quaternion(1, [0.05, 0.0, 0.12], [1, 0, 0, 0])
+    su1 = UnitResult(pose, observable=False, position_std_m=np.array([0.00016, 0.00066, np.nan]),
+                     rotation_std_deg=np.array([0.01, np.nan, np.nan]), warnings=("yaw about joint 1 undetermined",))
+    return CalibrationResult("mle", "panda", "", 1.0, {"su1": su1},
+                             extras={"seed": 0, "failed_units": {"su2": "no motion excited it", "su3": "diverged"}})
+
+
+def test_undetermined_std_components_write_as_null_and_read_back_as_nan(tmp_path: Path) -> None:
+    path = tmp_path / "result.json"
+    write_result(_with_undetermined_and_failed(), path)
+    text = path.read_text()
+    assert "NaN" not in text
+    su1 = json.loads(text)["units"]["su1"]
+    assert su1["position_std_m"] == [0.00016, 0.00066, None] and su1["rotation_std_deg"] == [0.01, None, None]
+    back = read_result(path).units["su1"]
+    np.testing.assert_array_equal(back.position_std_m, [0.00016, 0.00066, np.nan])
+    np.testing.assert_array_equal(back.rotation_std_deg, [0.01, np.nan, np.nan])
+    assert back.position_std_m.dtype == np.float64 and not back.observable
+
+
+def test_hand_written_file_with_null_std_components(tmp_path: Path) -> None:
+    doc = _doc()
+    doc["units"]["su1"].update(observable=False, position_std_m=[1e-5, 2e-5, None],
+                               rotation_std_deg=[None, None, None], warnings=["yaw undetermined"])
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps(doc))
+    unit = read_result(path).units["su1"]
+    np.testing.assert_array_equal(unit.position_std_m, [1e-5, 2e-5, np.nan])
+    assert np.isnan(unit.rotation_std_deg).all()
+    write_result(read_result(path), tmp_path / "again.json")
+    assert json.loads((tmp_path / "again.json").read_text()) == doc
+
+
+def test_failed_units_are_listed_under_units(tmp_path: Path) -> None:
+    original = _with_undetermined_and_failed()
+    path = tmp_path / "result.json"
+    write_result(original, path)
+    doc = json.loads(path.read_text())
+    assert list(doc["units"]) == ["su1", "su2", "su3"]
+    assert doc["units"]["su2"] == {"link": None, "position_m": None, "quaternion_wxyz": None, "observable": False,
+                                   "position_std_m": None, "rotation_std_deg": None,
+                                   "warnings": ["no motion excited it"]}
+    assert doc["failed_units"] == {"su2": "no motion excited it", "su3": "diverged"}  # kept (backwards compatible)
+    back = read_result(path)
+    assert list(back.units) == ["su1"]  # units in result.units always have a pose
+    assert back.extras == original.extras
+
+
+def test_hand_written_units_without_a_pose(tmp_path: Path) -> None:
+    doc = _doc()
+    base = {"observable": False, "position_std_m": None, "rotation_std_deg": None}
+    doc["units"]["su2"] = {**base, "link": None, "position_m": None, "quaternion_wxyz": None,
+                           "warnings": ["no data", "IMU silent"]}
+    doc["units"]["su3"] = {**base, "link": 2, "position_m": [0.0, 0.1, 0.0], "quaternion_wxyz": None,
+                           "position_std_m": [1e-3, None, None], "warnings": []}  # best partial pose
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps(doc))
+    result = read_result(path)
+    assert list(result.units) == ["su1"]
+    assert result.extras == {"failed_units": {"su2": "no data; IMU silent",
+                                              "su3": "no pose (the result file gives no reason)"}}
+    # A top-level failed_units is merged (the unit entries' warnings win for units they list).
+    doc["failed_units"] = {"su2": "old reason", "su9": "elsewhere"}
+    path.write_text(json.dumps(doc))
+    assert read_result(path).extras["failed_units"] == {
+        "su2": "no data; IMU silent", "su9": "elsewhere", "su3": "no pose (the result file gives no reason)"}
+    doc["failed_units"] = ["su2"]
+    path.write_text(json.dumps(doc))
+    with pytest.raises(DatasetError) as info:
+        read_result(path)
+    assert "failed_units must be an object of unit name -> reason" in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_old_file_with_only_top_level_failed_units_reads_unchanged(tmp_path: Path) -> None:
+    doc = _doc()
+    doc["failed_units"] = {"su2": "diverged"}
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps(doc))
+    result = read_result(path)
+    assert list(result.units) == ["su1"] and result.extras == {"failed_units": {"su2": "diverged"}}
+
+
+def test_a_failed_unit_that_also_has_a_pose_is_written_once() -> None:
+    result = _with_undetermined_and_failed()
+    result.extras["failed_units"]["su1"] = "partly failed"
+    doc = result_to_dict(result)
+    assert doc["units"]["su1"]["link"] == 1 and doc["units"]["su1"]["observable"] is False
+    assert doc["failed_units"]["su1"] == "partly failed"

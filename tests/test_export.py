@@ -187,3 +187,23 @@ def test_cli_export_atomic_and_one_line_errors(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: unknown export format 'sdf'") and "\n" not in err
     assert not (tmp_path / "x").exists()
+
+
+def test_exports_of_a_result_with_undetermined_std_and_failed_units(tmp_path, capsys):
+    """A NaN std component and a unit without a pose (never lose a result): every format is written,
+    no 'nan' text anywhere, only the units with a pose are exported, the CLI says which were not."""
+    result = _result(links=(1, 3))
+    su1 = result.units["su1"]
+    units = {**result.units, "su1": UnitResult(su1.pose, observable=False, position_std_m=[1e-4, 6e-4, np.nan],
+                                               rotation_std_deg=[0.01, np.nan, np.nan], warnings=("yaw undetermined",))}
+    result = CalibrationResult("mle", "panda", "", 0.1, units, extras={"failed_units": {"su3": "diverged"}})
+    write_result(result, tmp_path / "r.json")
+    capsys.readouterr()
+    for fmt, name in (("urdf", "s.urdf"), ("yaml", "s.yaml"), ("tf", "s.launch.py"), ("csv", "s.csv")):
+        assert main(["export", str(tmp_path / "r.json"), "--format", fmt, "--out", str(tmp_path / name)]) == 0
+        text = (tmp_path / name).read_text()
+        assert "nan" not in text.lower() and "su3" not in text, fmt
+        out = capsys.readouterr().out
+        assert "2 unit(s)" in out and "unit su3 not exported (not calibrated: diverged)" in out
+    rows = list(csv.DictReader((tmp_path / "s.csv").open()))
+    assert [r["unit"] for r in rows] == ["su1", "su2"] and all(v != "" for r in rows for v in r.values())

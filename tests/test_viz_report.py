@@ -203,3 +203,30 @@ def test_report_renders_in_headless_chromium(tmp_path: Path, page: str):
     if save:
         Path(save).mkdir(parents=True, exist_ok=True)
         (Path(save) / "report.png").write_bytes(shot.png)
+
+
+def test_report_of_a_result_with_undetermined_std_and_failed_units(tmp_path: Path, calibrated):
+    """Never lose a result: a unit without a pose (listed under units with null pose fields) and a
+    NaN std component go through the result file into the HTML and markdown reports."""
+    from skincal.data.result import read_result
+
+    ds, result = calibrated
+    names = list(result.units)
+    unit = result.units[names[1]]
+    undetermined = dataclasses.replace(unit, position_std_m=np.array([1.6e-4, 6.6e-4, np.nan]),
+                                       rotation_std_deg=np.array([0.02, np.nan, np.nan]))
+    partial = dataclasses.replace(result, units={names[0]: result.units[names[0]], names[1]: undetermined},
+                                  extras={**result.extras, "failed_units": {names[2]: "diverged <badly>"}})
+    write_result(partial, tmp_path / "r.json")
+    back = read_result(tmp_path / "r.json")
+    assert list(back.units) == names[:2] and back.extras["failed_units"] == {names[2]: "diverged <badly>"}
+    page = render_html(collect(back, ds))
+    text = re.sub(r'src="data:[^"]*"', "", page)
+    assert not re.search(r"\bnan\b", text, re.IGNORECASE)
+    assert "<h2>Units not calibrated</h2>" in page and f"<b>{names[2]}</b>: diverged &lt;badly&gt;" in page
+    row = next(r for r in text.split("<tr") if f">{names[1]}<" in r)
+    assert "0.160 0.660 n/a" in row and "0.020 n/a n/a" in row
+    md = render_markdown(collect(back, ds))
+    assert "## Not calibrated" in md and f"- {names[2]}: diverged <badly>" in md
+    assert not re.search(r"\bnan\b", md, re.IGNORECASE)
+    assert "0.160 0.660 n/a" in md

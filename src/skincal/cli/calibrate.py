@@ -26,16 +26,33 @@ def read_links_file(path: Path) -> dict[str, int]:
     return {str(k): int(v) for k, v in doc.items()}
 
 
+def std_cell(values, scale: float = 1.0) -> str:
+    """The largest std component as text: ``-`` without a std; undetermined (NaN) components are
+    left out and counted, e.g. ``0.660 (1 undetermined)``, or ``- (3 undetermined)``."""
+    import numpy as np
+
+    if values is None:
+        return "-"
+    arr = np.asarray(values, dtype=float).ravel()
+    known = arr[np.isfinite(arr)]
+    text = f"{scale * float(known.max()):.3f}" if known.size else "-"
+    missing = arr.size - known.size
+    return f"{text} ({missing} undetermined)" if missing else text
+
+
 def _unit_table(result, title: str):
+    """The per-unit table; units without a pose (``failed_units``) get a row saying why."""
     from rich.markup import escape
     from rich.table import Table
+
+    from skincal.data.result import failed_units
 
     table = Table(title=title)
     for col in ("unit", "link", "position (m)", "quaternion (w,x,y,z)", "pos std (mm)", "rot std (deg)", "notes"):
         table.add_column(col)
     for name, unit in result.units.items():
-        std_p = "-" if unit.position_std_m is None else f"{1e3 * max(unit.position_std_m):.3f}"
-        std_r = "-" if unit.rotation_std_deg is None else f"{max(unit.rotation_std_deg):.3f}"
+        std_p = std_cell(unit.position_std_m, 1e3)
+        std_r = std_cell(unit.rotation_std_deg)
         notes = ("unobservable; " if not unit.observable else "") + "; ".join(unit.warnings)
         table.add_row(
             escape(name),
@@ -46,6 +63,9 @@ def _unit_table(result, title: str):
             std_r,
             escape(notes or ""),
         )
+    for name, reason in failed_units(result).items():
+        if name not in result.units:
+            table.add_row(escape(str(name)), "-", "-", "-", "-", "-", escape(f"not calibrated: {reason}"))
     return table
 
 

@@ -21,7 +21,9 @@ def demo(
     from rich.table import Table
 
     from skincal.calib import calibrate, evaluate
+    from skincal.cli.calibrate import std_cell
     from skincal.cli.simulate import simulate_dataset
+    from skincal.data.result import failed_units
 
     console.print(
         f"[bold]skincal demo[/]: Panda, the paper's six skin units (Table II), '{noise}' IMUs, "
@@ -40,7 +42,7 @@ def demo(
         table.add_column(col, justify="right" if "[" in col else "left")
     for name, u in doc["units"].items():
         unit = result.units[name]
-        std = "-" if unit.position_std_m is None else f"{1e3 * max(unit.position_std_m):.3f}"
+        std = std_cell(unit.position_std_m, 1e3)
         table.add_row(
             name,
             f"{u['link_true']}/{u['link_estimated']}",
@@ -49,16 +51,18 @@ def demo(
             std,
             escape("; ".join(unit.warnings)),
         )
+    # the means are None when no calibrated unit is observable
+    mean_p = "-" if doc["mean_position_error_mm"] is None else f"{doc['mean_position_error_mm']:.3f}"
+    mean_r = "-" if doc["mean_rotation_error_deg"] is None else f"{doc['mean_rotation_error_deg']:.4f}"
     table.add_row(
-        "mean", f"{doc['links_correct']}/{doc['units_total']} correct",
-        f"{doc['mean_position_error_mm']:.3f}", f"{doc['mean_rotation_error_deg']:.4f}", "", "", style="bold",
+        "mean", f"{doc['links_correct']}/{doc['units_total']} correct", mean_p, mean_r, "", "", style="bold",
     )
     console.print(table)
     console.print(
         "the paper (OM, noise-free simulation): 6.6 mm and 0.5 deg mean error, 433 s of optimisation; "
-        f"this run: {doc['mean_position_error_mm']:.3f} mm, {doc['mean_rotation_error_deg']:.4f} deg in "
+        f"this run: {mean_p} mm, {mean_r} deg in "
         f"{result.runtime_s:.2f} s with '{noise}' sensors"
     )
-    for name, reason in result.extras.get("failed_units", {}).items():
+    for name, reason in failed_units(result).items():
         console.print(f"[yellow]warning[/]: unit {name} not calibrated: {reason}", highlight=False)
     console.print(f"total {time.perf_counter() - start:.1f} s")

@@ -132,8 +132,12 @@ def export_cmd(
 ) -> None:
     """Export calibrated unit poses onto the robot's link frames (URDF, YAML, static TF launch, CSV)."""
     from skincal.data.export import export_result
-    from skincal.data.result import read_result
+    from skincal.data.result import failed_units, read_result
 
-    frames = export_result(read_result(result), fmt, out, link_map=robot_links, prefix=prefix)
+    res = read_result(result)
+    frames = export_result(res, fmt, out, link_map=robot_links, prefix=prefix)
     console.print(f"wrote {out}: {len(frames)} unit(s) as {fmt} onto " + ", ".join(
         sorted({f.parent for f in frames})), highlight=False)
+    for name, reason in failed_units(res).items():
+        if name not in res.units:
+            console.print(f"[yellow]warning[/]: unit {name} not exported (not calibrated: {reason})", highlight=False)

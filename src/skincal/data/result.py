@@ -13,6 +13,17 @@ contract (per unit, e.g. ``link_confidence``, ``accel_bias_mps2``, ``dh6``; at t
 ``options``) are written next to the contract fields and read back into ``extras``. In extras,
 NumPy arrays become JSON lists (non-finite numbers become ``null``) and numeric lists come back as
 float64 arrays (``null`` -> NaN). Floats are written with full (round-trip) precision.
+
+Undetermined std components: a NaN component of ``position_std_m`` / ``rotation_std_deg`` is written
+as ``null`` and read back as NaN (the other components must be finite and >= 0).
+
+Units without a pose ("never lose a result"): each unit of ``extras["failed_units"]`` (name ->
+reason) that is not in ``units`` is also written under ``units`` as ``{"link": null, "position_m":
+null, "quaternion_wxyz": null, "observable": false, "position_std_m": null, "rotation_std_deg":
+null, "warnings": [reason]}``; the top-level ``failed_units`` is written as before. On read, a unit
+entry with a ``null`` ``position_m`` or ``quaternion_wxyz`` must have ``observable: false``; it is
+returned in ``extras["failed_units"]`` (name -> its warnings joined with ``"; "``), not in
+``CalibrationResult.units``, so every unit in ``units`` has a pose.
 """
 
 from __future__ import annotations
@@ -20,6 +31,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,6 +45,8 @@ from skincal.skin.pose import SkinUnitPose
 
 FORMAT = "skincal-result"
 VERSION = 1
+FAILED_UNITS = "failed_units"
+_NO_REASON = "no pose (the result file gives no reason)"
 _TOP_KEYS = ("format", "version", "method", "robot", "dataset_sha256", "runtime_s", "units")
 _UNIT_KEYS = ("link", "position_m", "quaternion_wxyz", "observable", "position_std_m", "rotation_std_deg", "warnings")
 _QUAT_NORM_TOL = 1e-3
@@ -45,8 +59,10 @@ class UnitResult:
     Attributes:
         pose: the estimated pose in its link frame (link, ``R_link_su``, ``p_link_su`` in m).
         observable: False where the data cannot determine the full pose (e.g. a unit on link 1).
-        position_std_m: ``(3,)`` standard deviation of ``p_link_su`` per axis, m, or None.
-        rotation_std_deg: ``(3,)`` standard deviation of the rotation about the link axes, deg, or None.
+        position_std_m: ``(3,)`` standard deviation of ``p_link_su`` per axis, m, or None; NaN in a
+            component the data cannot determine (``null`` in JSON).
+        rotation_std_deg: ``(3,)`` standard deviation of the rotation about the link axes, deg, or
+            None; NaN in an undetermined component.
         warnings: human-readable notes (which part is unobservable and why, poor fit, ...).
         extras: further per-unit fields written next to the contract fields (numbers, strings,
             lists, arrays, nested dicts), e.g. ``link_confidence``, ``accel_bias_mps2``, ``dh6``.
@@ -78,8 +94,10 @@ class CalibrationResult:
         robot: robot name of the dataset.
         dataset_sha256: SHA-256 hex digest of the dataset file (:func:`sha256_file`), or ``""``.
         runtime_s: wall-clock time of the calibration, s.
-        units: per-unit results keyed by unit name.
-        extras: further top-level fields (e.g. ``options``, ``skincal_version``).
+        units: per-unit results keyed by unit name (every one has a pose).
+        extras: further top-level fields (e.g. ``options``, ``skincal_version``); ``failed_units``
+            (unit name -> reason) lists units without a pose, which the JSON file also lists under
+            ``units`` with ``null`` pose fields and ``observable: false``.
     """
 
     method: str
@@ -88,6 +106,17 @@ class CalibrationResult:
     runtime_s: float
     units: dict[str, UnitResult]
     extras: dict[str, Any] = field(default_factory=dict)
+
+
+def failed_units(result: CalibrationResult) -> dict[str, str]:
+    """Units of ``result`` that could not be calibrated, name -> reason (``extras["failed_units"]``;
+    a hand-written list of names gives reason ``"not calibrated"``; anything else gives ``{}``)."""
+    listed = result.extras.get(FAILED_UNITS)
+    if isinstance(listed, Mapping):
+        return {str(k): str(v) for k, v in listed.items()}
+    if isinstance(listed, list | tuple):
+        return {str(k): "not calibrated" for k in listed}
+    return {}
 
 
 def sha256_file(path: str | Path) -> str:
@@ -181,12 +210,18 @@ class _Checker:
             raise self.fail(where, f"must be a string, got {_short(value)}")
         return value
 
-    def vector(self, value: Any, n: int, where: str, *, nonneg: bool = False) -> FloatArray:
-        ok = isinstance(value, list) and len(value) == n
-        ok = ok and all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    def vector(self, value: Any, n: int, where: str, *, nonneg: bool = False, nulls: bool = False) -> FloatArray:
+        """``value`` as a float array of ``n`` finite numbers; with ``nulls``, ``None`` components are
+        allowed and become NaN."""
+
+        def number(v: Any) -> bool:
+            return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+        ok = isinstance(value, list) and len(value) == n and all(number(v) or (nulls and v is None) for v in value)
         if not ok:
-            raise self.fail(where, f"must be a list of {n} finite numbers, got {_short(value)}")
-        arr = np.array(value, dtype=float)
+            what = f"{n} finite numbers or null (undetermined)" if nulls else f"{n} finite numbers"
+            raise self.fail(where, f"must be a list of {what}, got {_short(value)}")
+        arr = np.array([math.nan if v is None else v for v in value], dtype=float)
         if nonneg and np.any(arr < 0):
             raise self.fail(where, f"must not be negative, got {_short(value)}")
         return arr
@@ -222,19 +257,29 @@ class _Checker:
         if not isinstance(unit, dict):
             raise self.fail(where, f"must be an object, got {_short(unit)}")
         link = self.get(unit, "link", where)
-        if isinstance(link, bool) or not isinstance(link, int) or link < 1:
-            raise self.fail(f"{where}.link", f"must be a positive integer (1-based link), got {_short(link)}")
-        self.vector(self.get(unit, "position_m", where), 3, f"{where}.position_m")
-        quat = self.vector(self.get(unit, "quaternion_wxyz", where), 4, f"{where}.quaternion_wxyz")
-        norm = float(np.linalg.norm(quat))
-        if abs(norm - 1.0) > _QUAT_NORM_TOL:
-            raise self.fail(f"{where}.quaternion_wxyz", f"is not a unit quaternion (norm {norm:.6g})")
-        if not isinstance(self.get(unit, "observable", where), bool):
-            raise self.fail(f"{where}.observable", f"must be true or false, got {_short(unit['observable'])}")
+        position = self.get(unit, "position_m", where)
+        quaternion = self.get(unit, "quaternion_wxyz", where)
+        posed = position is not None and quaternion is not None
+        if not (link is None and not posed) and (isinstance(link, bool) or not isinstance(link, int) or link < 1):
+            also = "" if posed else " or null"
+            raise self.fail(f"{where}.link", f"must be a positive integer (1-based link){also}, got {_short(link)}")
+        if position is not None:
+            self.vector(position, 3, f"{where}.position_m")
+        if quaternion is not None:
+            quat = self.vector(quaternion, 4, f"{where}.quaternion_wxyz")
+            norm = float(np.linalg.norm(quat))
+            if abs(norm - 1.0) > _QUAT_NORM_TOL:
+                raise self.fail(f"{where}.quaternion_wxyz", f"is not a unit quaternion (norm {norm:.6g})")
+        observable = self.get(unit, "observable", where)
+        if not isinstance(observable, bool):
+            raise self.fail(f"{where}.observable", f"must be true or false, got {_short(observable)}")
+        if observable and not posed:
+            raise self.fail(f"{where}.observable", "must be false for a unit without a pose "
+                                                   "(position_m or quaternion_wxyz is null)")
         for key in ("position_std_m", "rotation_std_deg"):
             value = self.get(unit, key, where)
             if value is not None:
-                self.vector(value, 3, f"{where}.{key}", nonneg=True)
+                self.vector(value, 3, f"{where}.{key}", nonneg=True, nulls=True)
         warnings = self.get(unit, "warnings", where)
         if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
             raise self.fail(f"{where}.warnings", f"must be a list of strings, got {_short(warnings)}")
@@ -274,6 +319,12 @@ def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[
         }
         entry.update(_to_json(unit.extras, source, f"{where}"))
         units[name] = entry
+    failed = result.extras.get(FAILED_UNITS)
+    if isinstance(failed, Mapping):  # units without a pose are listed too (never lose a unit)
+        for name, reason in failed.items():
+            if isinstance(name, str) and name not in units:
+                units[name] = {"link": None, "position_m": None, "quaternion_wxyz": None, "observable": False,
+                               "position_std_m": None, "rotation_std_deg": None, "warnings": [str(reason)]}
     doc["units"] = units
     _Checker(source).document(doc)
     return doc
@@ -283,12 +334,17 @@ def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
     """Validate a parsed JSON document and build the :class:`CalibrationResult`."""
     _Checker(source).document(doc)
     units = {}
+    unposed: dict[str, str] = {}
     for name, entry in doc["units"].items():
+        if entry["position_m"] is None or entry["quaternion_wxyz"] is None:
+            unposed[name] = "; ".join(entry["warnings"]) or _NO_REASON
+            continue
         try:
             pose = SkinUnitPose.from_quaternion(entry["link"], entry["position_m"], entry["quaternion_wxyz"])
         except ConfigError as exc:
             raise DatasetError(f"{source}: units.{name} is not a valid pose: {exc}") from None
-        stds = {k: None if entry[k] is None else np.array(entry[k], dtype=float) for k in _UNIT_KEYS[4:6]}
+        stds = {k: None if entry[k] is None else np.array(_none_to_nan(entry[k]), dtype=float)
+                for k in _UNIT_KEYS[4:6]}
         units[name] = UnitResult(
             pose=pose,
             observable=entry["observable"],
@@ -296,13 +352,20 @@ def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
             extras={k: _from_json(v) for k, v in entry.items() if k not in _UNIT_KEYS},
             **stds,
         )
+    extras = {k: _from_json(v) for k, v in doc.items() if k not in _TOP_KEYS}
+    if unposed:
+        listed = extras.get(FAILED_UNITS, {})
+        if not isinstance(listed, dict):
+            raise DatasetError(f"{source}: {FAILED_UNITS} must be an object of unit name -> reason, got "
+                               f"{_short(doc[FAILED_UNITS])}")
+        extras[FAILED_UNITS] = {**listed, **unposed}
     return CalibrationResult(
         method=doc["method"],
         robot=doc["robot"],
         dataset_sha256=doc["dataset_sha256"],
         runtime_s=float(doc["runtime_s"]),
         units=units,
-        extras={k: _from_json(v) for k, v in doc.items() if k not in _TOP_KEYS},
+        extras=extras,
     )
 
 

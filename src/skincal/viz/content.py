@@ -10,7 +10,7 @@ import numpy as np
 from skincal.calib.metrics import evaluate
 from skincal.calib.preprocess import JointInterpolator
 from skincal.data.dataset import Dataset
-from skincal.data.result import CalibrationResult
+from skincal.data.result import CalibrationResult, failed_units
 from skincal.errors import DatasetError
 from skincal.kinematics.transforms import FloatArray
 from skincal.viz.residuals import UnitResiduals, activity_matrix, sensor_model, unit_residuals
@@ -91,7 +91,7 @@ def collect(result: CalibrationResult, dataset: Dataset, *, use_dataset_qdd: boo
             )
         )
     evaluation = evaluate(result, dataset) if dataset.truth and all(u in dataset.truth for u in result.units) else None
-    failed = {str(k): str(v) for k, v in result.extras.get("failed_units", {}).items()}
+    failed = failed_units(result)
     return ReportContent(
         result, dataset, rows, residuals, activity_matrix(dataset, list(result.units), interp), evaluation, failed
     )
