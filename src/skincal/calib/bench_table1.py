@@ -180,44 +180,18 @@ def run_local(
     config: Table1Config, workers: int = 1, progress: Callable[[dict[str, Any]], None] | None = None
 ) -> list[dict[str, Any]]:
     """Run every job in ``workers`` local processes (``1``: in this process); ``progress`` gets each record."""
-    todo = jobs(config)
-    records: list[dict[str, Any]] = []
-    if workers <= 1:
-        for job in todo:
-            records.append(run_job(job))
-            if progress is not None:
-                progress(records[-1])
-        return records
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from skincal.bench.runner import map_local
 
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        for fut in as_completed([pool.submit(run_job, job) for job in todo]):
-            records.append(fut.result())
-            if progress is not None:
-                progress(records[-1])
-    return records
+    return map_local(run_job, jobs(config), workers, progress)
 
 
 def run_dask(
     config: Table1Config, address: Any, progress: Callable[[dict[str, Any]], None] | None = None
 ) -> list[dict[str, Any]]:
     """Run every job on an existing ``dask.distributed`` cluster (scheduler address or a ``Client``)."""
-    try:
-        from dask.distributed import Client, as_completed
-    except ImportError:
-        raise ConfigError("--dask needs dask.distributed: pip install 'skincal[dask]'") from None
-    client = address if isinstance(address, Client) else Client(address, set_as_default=False)
-    try:
-        futures = client.map(run_job, jobs(config), pure=False)
-        records = []
-        for fut in as_completed(futures, loop=client.loop):
-            records.append(fut.result())
-            if progress is not None:
-                progress(records[-1])
-        return records
-    finally:
-        if client is not address:
-            client.close()
+    from skincal.bench.runner import map_dask
+
+    return map_dask(run_job, jobs(config), address, progress)
 
 
 def _mean_std(values: Iterable[float]) -> list[float] | None:
