@@ -17,7 +17,7 @@ from skincal.skin.pose import SkinUnitPose
 CELL_FIELDS = {
     "robot", "backend", "fault", "seeds", "mean_position_error_mm", "max_position_error_mm",
     "mean_rotation_error_deg", "max_rotation_error_deg", "links_correct", "units_total", "units_calibrated",
-    "z_rms", "warned", "silent", "silent_units", "targets", "failed_targets", "pass",
+    "z_rms", "warned", "beyond_3sigma", "silent", "silent_units", "targets", "failed_targets", "pass",
 }
 
 

@@ -347,6 +347,7 @@ def judge_unit(unit, truth, errors: Mapping[str, Any]) -> dict[str, Any]:
         "rotation_std_deg": _floats(unit.rotation_std_deg),
         "z": _floats(z),
         "warnings": list(unit.warnings),
+        "beyond_3sigma": bool(beyond),
         "silent": bool(beyond and not unit.warnings),
     }
 
@@ -401,7 +402,8 @@ def summarise_cell(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
 
     Means and maxima are over calibrated observable units; ``z_rms`` over every finite ``z`` of
     those with the right link; ``warned`` counts calibrated units with any warning, ``silent``
-    the silent errors (:data:`SILENT_RULE`). ``pass`` checks :func:`targets`.
+    the silent errors (:data:`SILENT_RULE`), ``beyond_3sigma`` the units wrong beyond their
+    uncertainty by the same rule, warned or not. ``pass`` checks :func:`targets`.
     """
     first = records[0]
     units = [u for r in records for u in r["units"].values()]
@@ -412,6 +414,7 @@ def summarise_cell(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     z = [v for u in seen if u["z"] is not None for v in u["z"] if v is not None]
     links = sum(u["link_estimated"] == u["link_true"] for u in done)
     silent = [f"seed {r['seed']} {n}" for r in records for n, u in r["units"].items() if u.get("silent")]
+    beyond = int(sum(bool(u.get("beyond_3sigma")) for u in done))
     cell: dict[str, Any] = {
         "robot": first["robot"], "backend": first["backend"], "fault": first["fault"],
         "seeds": sorted(r["seed"] for r in records),
@@ -424,6 +427,7 @@ def summarise_cell(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "units_calibrated": len(done),
         "z_rms": float(np.sqrt(np.mean(np.square(z)))) if z else None,
         "warned": int(sum(bool(u["warnings"]) for u in done)),
+        "beyond_3sigma": beyond,
         "silent": len(silent),
         "silent_units": silent,
         "errors": [r["error"] for r in records if r["error"]],
@@ -485,4 +489,5 @@ def config_dict(config: RobustnessConfig) -> dict[str, Any]:
         "silent_error": SILENT_RULE,
         "z": "e_i / sigma_i: position error on link axis i over the reported std (link right, finite std)",
         "warned": "calibrated units with at least one warning",
+        "beyond_3sigma": "calibrated units wrong beyond their reported uncertainty by the silent-error rule, warned or not",
     }
