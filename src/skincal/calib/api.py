@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import multiprocessing
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
@@ -22,7 +22,7 @@ from skincal.calib.links import LinkAssignment, discover_link
 from skincal.calib.preprocess import DEFAULT_QDD_WINDOW_S, JointInterpolator, UnitSamples, screen_readings, unit_samples
 from skincal.data.dataset import Dataset
 from skincal.data.result import CalibrationResult, UnitResult
-from skincal.errors import CalibrationError, ConfigError
+from skincal.errors import CalibrationError, ConfigError, SkincalError
 from skincal.kinematics.chain import SerialChain
 
 
@@ -41,6 +41,9 @@ class UnitProblem:
             instants, e.g. when estimating a time offset).
         shared: what the method's ``prepare`` computed once for the whole dataset, or ``None``.
         options: method options.
+        time_offset_s: the coarse IMU time offset already removed from ``samples.t`` (methods
+            with an ``align`` step), s.
+        alignment: that step's outcome (method-specific), or ``None``.
     """
 
     chain: SerialChain
@@ -52,6 +55,8 @@ class UnitProblem:
     interpolator: JointInterpolator | None = None
     shared: Any = None
     options: Mapping[str, Any] = field(default_factory=dict)
+    time_offset_s: float = 0.0
+    alignment: Any = None
 
 
 class UnitMethod(Protocol):
@@ -64,7 +69,11 @@ class MethodSpec:
     gyroscope for link discovery and takes care of link discovery itself, and an optional
     ``prepare(dataset, interpolator)`` run once per dataset whose result reaches every unit as
     ``UnitProblem.shared``; ``exact_joint_states=False`` when the method only needs the joint
-    states of the samples to find rest periods (see :func:`unit_samples`)."""
+    states of the samples to find rest periods (see :func:`unit_samples`); ``align(shared, imu)``, when
+    given, returns the unit's coarse time alignment (an object with ``offset_s``) applied before
+    the samples are gathered; ``needs_segments=False`` when the method finds rests itself (a
+    dataset without ``/segments`` is then segmented automatically only to tag samples, and a
+    failure to do so is not fatal)."""
 
     run_unit: UnitMethod
     description: str
@@ -72,6 +81,8 @@ class MethodSpec:
     use_gyro_for_links: bool = False
     prepare: Callable[[Dataset, JointInterpolator], Any] | None = None
     exact_joint_states: bool = True
+    align: Callable[[Any, Any], Any] | None = None
+    needs_segments: bool = True
 
 
 METHODS: dict[str, MethodSpec] = {}
@@ -170,6 +181,9 @@ def calibrate(
         if u not in dataset.imu:
             raise ConfigError(f"unknown unit '{u}' (dataset has: {', '.join(dataset.units)})")
     start = time.perf_counter()
+    tagged, notes = dataset, []
+    if dataset.segments is None or len(dataset.segments) == 0:
+        tagged, notes = _segment_automatically(dataset, spec)
     interpolator = JointInterpolator(
         dataset.joints, use_dataset_qdd=use_dataset_qdd, qdd_window_s=qdd_window_s or DEFAULT_QDD_WINDOW_S
     )
@@ -180,17 +194,31 @@ def calibrate(
     def one(k: int, name: str) -> tuple[str, UnitResult | None, str | None]:
         try:
             unit = calibrate_unit(
-                dataset, name, spec, link=given.get(name), rng=np.random.default_rng([seed, k]),
+                tagged, name, spec, link=given.get(name), rng=np.random.default_rng([seed, k]),
                 interpolator=interpolator, shared=shared, options=options,
             )
             return name, unit, None
         except CalibrationError as exc:
             return name, None, str(exc)
+        except SkincalError:
+            raise  # a usage or data error concerns every unit
+        except (ArithmeticError, ValueError, IndexError, np.linalg.LinAlgError) as exc:
+            return name, None, f"internal error ({type(exc).__name__}: {exc})"  # one unit never stops the others
 
     n_workers = max(1, min(int(workers), len(names)))
     pool: Executor | None = None
     if n_workers == 1:
-        outcomes = (one(k, name) for k, name in enumerate(names))
+        # one BLAS thread, as in the worker processes: the small per-unit matrices gain nothing from
+        # more, and results are then identical whatever ``workers`` is
+        from threadpoolctl import threadpool_limits
+
+        def serial() -> Iterator[tuple[str, UnitResult | None, str | None]]:
+            for k, name in enumerate(names):
+                with threadpool_limits(limits=1, user_api="blas"):
+                    outcome = one(k, name)
+                yield outcome
+
+        outcomes = serial()
     elif "fork" in multiprocessing.get_all_start_methods():
         interpolator.warm()  # computed once here, inherited by every child
         _FORKED[id(one)] = one
@@ -217,14 +245,38 @@ def calibrate(
     if not results:
         reasons = "; ".join(f"{u}: {m}" for u, m in failed.items())
         raise CalibrationError(f"no unit could be calibrated ({reasons})")
+    extras: dict[str, Any] = {"failed_units": failed, "seed": seed} if failed else {"seed": seed}
+    if notes:
+        extras["notes"] = notes
     return CalibrationResult(
         method=method,
         robot=dataset.robot.name,
         dataset_sha256=dataset_sha256,
         runtime_s=time.perf_counter() - start,
         units=results,
-        extras={"failed_units": failed, "seed": seed} if failed else {"seed": seed},
+        extras=extras,
     )
+
+
+def _segment_automatically(dataset: Dataset, spec: MethodSpec) -> tuple[Dataset, list[str]]:
+    """Segments for a dataset without ``/segments``, from its joint stream, with the rest speed
+    threshold raised above the stream's own velocity noise (six standard deviations)."""
+    from skincal.calib.rest import second_difference_noise
+    from skincal.data.segment import SegmentationConfig, segment_dataset
+    from skincal.errors import DatasetError
+
+    sigma = float(np.max(second_difference_noise(np.asarray(dataset.joints.qd, dtype=float))))
+    config = SegmentationConfig(rest_velocity=max(SegmentationConfig.rest_velocity, 6.0 * sigma))
+    try:
+        tagged, report = segment_dataset(dataset, config)
+    except DatasetError as exc:
+        if spec.needs_segments:
+            raise CalibrationError(f"dataset has no segments and none could be found: {exc}") from None
+        return dataset, [f"no segments in the dataset and none found automatically ({exc}); rests from the joint data"]
+    return tagged, [
+        f"no segments in the dataset: {report.n_static} static and {report.n_dynamic} dynamic found automatically "
+        f"(rest below {config.rest_velocity:.3g} rad/s)"
+    ]
 
 
 def calibrate_unit(
@@ -243,8 +295,14 @@ def calibrate_unit(
         interpolator = JointInterpolator(dataset.joints)
     if shared is None and spec.prepare is not None:
         shared = spec.prepare(dataset, interpolator)
-    samples = unit_samples(dataset, unit, interpolator=interpolator, exact_joint_states=spec.exact_joint_states)
-    if not np.any(samples.kind == 0):
+    alignment, offset = None, 0.0
+    if spec.align is not None:
+        alignment = spec.align(shared, dataset.imu[unit])
+        offset = float(alignment.offset_s)
+    samples = unit_samples(
+        dataset, unit, time_offset_s=offset, interpolator=interpolator, exact_joint_states=spec.exact_joint_states
+    )
+    if spec.needs_segments and not np.any(samples.kind == 0):
         raise CalibrationError(f"unit '{unit}': no samples in static segments")
     assignment = None
     if link is None and not spec.discovers_links:
@@ -262,6 +320,8 @@ def calibrate_unit(
         interpolator=interpolator,
         shared=shared,
         options=dict(options or {}),
+        time_offset_s=offset,
+        alignment=alignment,
     )
     result = spec.run_unit(problem)
     _, screening = screen_readings(unit, np.asarray(dataset.imu[unit].accel, dtype=float))

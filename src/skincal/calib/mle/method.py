@@ -1,49 +1,118 @@
-"""The default calibrator ``mle``: closed-form start, then robust joint maximum likelihood.
+"""The default calibrator ``mle``: global time alignment, closed-form start, robust joint maximum
+likelihood, and residual tests that keep the reported uncertainty honest.
 
 Per unit:
 
-1. **Link** (unless given): the activity matrix (accelerometer and gyroscope) proposes link
+0. **Time** (before anything else, in :func:`align`): the IMU stream's offset to the joint stream
+   is found globally by cross-correlation (:mod:`skincal.calib.timing`), up to +-0.5 s.
+1. **Rest** (:mod:`skincal.calib.rest`): from ``/segments`` when the dataset has them, else from
+   the joint positions over windows with noise-derived thresholds; every rest run cross-checked
+   against the unit's own IMU (runs in which it moved are dropped and named).
+2. **Link** (unless given): the activity matrix (accelerometer and gyroscope) proposes link
    ``n*``; unless that is decisive, the links ``1 .. n* + 1`` are each fitted quickly and the one
-   whose model explains every sample best wins. Its confidence compares the residual levels; two links that
-   explain the data about equally are reported as ambiguous, never silently chosen.
-2. **Start** (no bounds, no seed): rotation and bias from the stationary runs (Wahba's problem,
-   :mod:`skincal.calib.closed_form`), position and bias by linear least squares on the moving
-   samples.
-3. **Refinement** (:mod:`skincal.calib.mle.solver`): pose, bias, symmetric scale/misalignment
-   and the IMU time offset by robust Gauss-Newton over every sample; scale/misalignment is
-   dropped (with a warning) when the data cannot determine it.
-4. **Uncertainty**: covariance from the Jacobian at the solution, scaled by the robust residual
-   variance and the residuals' autocorrelation; directions the data cannot determine are
-   reported (``observable: false``) and left at the start values.
+   whose model explains every sample best wins. Two links that explain the data about equally
+   are reported as ambiguous, never silently chosen.
+3. **Start** (no bounds, no seed): rotation and bias from the rest runs (Wahba's problem) or, with
+   fewer than two, from the angular velocities; position and bias by linear least squares.
+4. **Refinement** (:mod:`skincal.calib.mle.solver`): pose, accelerometer bias, scale/misalignment,
+   gyroscope bias, time offset and clock drift, and a bias drift when the rest runs span the
+   session, by robust Gauss-Newton over every sample of both sensors.
+5. **Uncertainty**: covariance from the normal matrix with each sensor's robust residual variance
+   and autocorrelation, inflated by the rest runs' disagreement with the model; directions the
+   data cannot determine are reported (``observable: false``, ``null`` std) and left at the start.
+   Warnings name what the model had to absorb ("bias drifts", "clock drifts", "time offset
+   uncertain", "static segment moved", "rest poses disagree").
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from skincal.calib.api import MethodSpec, UnitProblem, register
-from skincal.calib.closed_form import position_and_bias, static_rotation_and_bias
+from skincal.calib.closed_form import position_and_bias, static_rotation_and_bias, wahba
 from skincal.calib.links import discover_link
 from skincal.calib.mle.signals import SignalTable, UnitData, arrange_unit_data
-from skincal.calib.mle.solver import Blocks, Fit, Linearisation, State, solve, sym_from_e
+from skincal.calib.mle.solver import (
+    SCALE_FULL,
+    SCALE_NONE,
+    SCALE_SYM,
+    Blocks,
+    Fit,
+    Linearisation,
+    Rows,
+    State,
+    solve,
+    sym_from_e,
+)
 from skincal.calib.preprocess import JointInterpolator
-from skincal.data.dataset import Dataset
+from skincal.calib.rest import JointRest, joint_rest
+from skincal.calib.timing import MotionProfile, OffsetSearch, coarse_time_offset, motion_profile
+from skincal.data.dataset import Dataset, ImuStream
 from skincal.data.result import UnitResult
 from skincal.errors import CalibrationError
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray
 from skincal.skin.pose import SkinUnitPose
 
-MAX_TIME_OFFSET_S = 0.25
-"""Largest IMU time offset the data are trimmed for, s."""
+MAX_RESIDUAL_OFFSET_S = 0.1
+"""Largest time offset left after the coarse alignment that the data are trimmed for, s."""
 SCALE_STD_LIMIT = 0.01
 """Scale/misalignment is kept only when each of its components is determined to this std."""
 DECISIVE_ACTIVITY = 0.9
 """Activity confidence above which neighbouring links are not fitted for comparison."""
 AMBIGUITY_RATIO = 1.5
 """A second link whose residual level is within this factor of the best makes the link ambiguous."""
+CLOCK_DRIFT_MIN_SPAN_S = 60.0
+"""The clock drift is estimated when the unit's moving samples span at least this long, s."""
+BIAS_DRIFT_MIN_RUNS = 6
+"""The accelerometer bias drift is estimated with at least this many rest runs..."""
+BIAS_DRIFT_MIN_SPAN_S = 60.0
+"""...spanning at least this long, s."""
+DRIFT_WARN_SIGMAS = 4.0
+"""A drift (clock or bias) is reported when it exceeds this many of its standard deviations..."""
+CLOCK_DRIFT_WARN_PPM = 20.0
+"""...and this many ppm (clock)..."""
+BIAS_DRIFT_WARN_MPS2 = 0.01
+"""...or this change over the session, m/s^2 (bias)."""
+STATIC_CHI2_WARN = 4.0
+"""Rest runs whose residuals exceed the rest noise by this factor in variance are flagged."""
+REST_NOISE_FLOOR = 1e-4
+"""Smallest rest noise the rest-pose test assumes, m/s^2 (10 µg, below any real IMU's: noise-free
+simulated data must not count as inconsistent)."""
+OFFSET_SHARPNESS_MIN = 0.02
+"""Coarse-alignment peaks less distinct than this (correlation units) leave the offset uncertain."""
+OFFSET_JUMP_WARN_S = 0.05
+"""A refined offset further than this from the coarse one is flagged as uncertain, s."""
+CORRELATION_WARN = 4.0
+"""Residual autocorrelation factors above this are reported (model error, covariance inflated)."""
+
+
+@dataclass(frozen=True)
+class Shared:
+    """What ``mle`` computes once per dataset: the link-signal table, when each joint rests and the
+    motion profile of the coarse time alignment."""
+
+    table: SignalTable
+    rest: JointRest
+    profile: MotionProfile
+    interpolator: JointInterpolator
+
+
+def prepare(dataset: Dataset, interpolator: JointInterpolator) -> Shared:
+    """Once per dataset: the link signals of every link on a uniform grid and the joint rests."""
+    rest = joint_rest(dataset.joints, dataset.segments)
+    table = SignalTable(dataset.robot, interpolator, np.asarray(dataset.gravity, dtype=float), rest)
+    return Shared(table, rest, motion_profile(table.grid_t, table.angular_speed, table.joint_speed), interpolator)
+
+
+def align(shared: Shared, imu: ImuStream) -> OffsetSearch:
+    """Coarse time offset of one unit's stream (:func:`skincal.calib.timing.coarse_time_offset`)."""
+    accel = np.asarray(imu.accel, dtype=float)
+    finite = np.all(np.isfinite(accel), axis=1)
+    gyro = None if imu.gyro is None else np.asarray(imu.gyro, dtype=float)[finite]
+    return coarse_time_offset(shared.profile, np.asarray(imu.t, dtype=float)[finite], accel[finite], gyro)
 
 
 @dataclass(frozen=True)
@@ -51,73 +120,79 @@ class _Problem:
     table: SignalTable
     data: UnitData
 
-    def linearise(self, tau: float) -> Linearisation:
-        u, K, du, dK = self.table.at(self.data.link, self.data.moving_t - tau)
-        return Linearisation(tau_k=tau, u=u, K=K, du=du, dK=dK)
-
-
-def prepare(dataset: Dataset, interpolator: JointInterpolator) -> SignalTable:
-    """Once per dataset: the link signals of every link on a uniform grid."""
-    return SignalTable(dataset.robot, interpolator, np.asarray(dataset.gravity, dtype=float))
+    def linearise(self, tau: float, d: float) -> Linearisation:
+        rows = self.data.rows
+        s = self.data.moving_t - tau - d * rows.moving_t
+        u, K, du, dK, w, dw, ug = self.table.at(self.data.link, s)
+        return Linearisation(tau_k=tau, d_k=d, u=u, K=K, du=du, dK=dK, w=w, dw=dw, ug=ug)
 
 
 def _decimated(p: _Problem, step: int) -> _Problem:
-    """The same problem keeping every ``step``-th moving sample (stationary rows all kept)."""
-    d = p.data
-    data = UnitData(
-        d.link, d.static_u, d.static_f, d.static_weight, d.static_q,
-        d.moving_t[::step], d.moving_f[::step], None if d.moving_gyro is None else d.moving_gyro[::step],
-    )
-    return _Problem(p.table, data)
+    """The same problem keeping every ``step``-th moving sample (rest rows all kept)."""
+    r = p.data.rows
+    sub = lambda x: None if x is None else x[::step]  # noqa: E731
+    rows = replace(r, moving_t=r.moving_t[::step], moving_f=r.moving_f[::step], moving_g=sub(r.moving_g))
+    return _Problem(p.table, replace(p.data, rows=rows))
+
+
+def _use_gyro(problem: UnitProblem) -> bool:
+    return problem.samples.gyro is not None and bool(problem.options.get("gyro", True))
 
 
 def _arrange(problem: UnitProblem, link: int, decimate: int = 1) -> _Problem:
     s = problem.samples
-    interp = problem.interpolator
-    # Keep samples whose instants stay inside the joint stream for any time offset tried.
-    margin = MAX_TIME_OFFSET_S + 0.01
-    keep = (s.t >= interp.t_start + margin) & (s.t <= interp.t_end - margin)
+    shared: Shared = problem.shared
+    # Keep samples whose instants stay inside the joint stream for any residual offset tried.
+    margin = MAX_RESIDUAL_OFFSET_S + 0.01
+    keep = (s.t >= shared.interpolator.t_start + margin) & (s.t <= shared.interpolator.t_end - margin)
+    gyro = s.gyro[keep] if _use_gyro(problem) else None
     data = arrange_unit_data(
-        problem.chain, link, s.t[keep], s.accel[keep], None if s.gyro is None else s.gyro[keep],
-        (s.q[keep], s.qd[keep], s.qdd[keep]), problem.gravity,
+        problem.chain, link, s.t[keep], s.accel[keep], gyro, shared.rest, shared.interpolator, problem.gravity
     )
-    p = _Problem(problem.shared, data)
+    p = _Problem(shared.table, data)
     return _decimated(p, decimate) if decimate > 1 else p
 
 
 def _start(p: _Problem) -> State:
-    d = p.data
-    if len(d.static_u) < 2:
+    """Closed-form start: rotation from the rest runs (or the angular velocities), then position."""
+    rows = p.data.rows
+    S, M = len(rows.static_u), len(rows.moving_t)
+    bg = np.median(rows.static_g, axis=0) if rows.static_g is not None and S else np.zeros(3)
+    if S >= 2:
+        R, b = static_rotation_and_bias(rows.static_u, rows.static_f, rows.static_weight)
+    elif rows.moving_g is not None and M >= 10:
+        lin = p.linearise(0.0, 0.0)
+        R, b = wahba(lin.w, rows.moving_g - bg), np.zeros(3)
+    else:
         raise CalibrationError(
-            f"only {len(d.static_u)} stationary period(s) for link {d.link}; "
-            "at least 2 distinct static poses are needed"
+            f"only {S} rest period(s) for link {p.data.link} and no gyroscope; at least 2 distinct static "
+            "poses are needed"
         )
-    R, b = static_rotation_and_bias(d.static_u, d.static_f, d.static_weight)
-    if len(d.moving_t) >= 10:
-        lin = p.linearise(0.0)
-        pos, b_dyn = position_and_bias(R, lin.u, lin.K, d.moving_f)
-        return State(R=R, p=pos, b=b_dyn if np.linalg.norm(b) == 0 else b)
-    return State(R=R, p=np.zeros(3), b=b)
+    if M >= 10:
+        lin = p.linearise(0.0, 0.0)
+        pos, b_dyn = position_and_bias(R, lin.u, lin.K, rows.moving_f)
+        return State(R=R, p=pos, b=b_dyn if np.linalg.norm(b) == 0 else b, bg=bg)
+    return State(R=R, p=np.zeros(3), b=b, bg=bg)
 
 
 def _fit(p: _Problem, blocks: Blocks, state: State | None = None, **kw) -> Fit:
-    d = p.data
     state = _start(p) if state is None else state
-    has_moving = len(d.moving_t) >= 10
-    return solve(
-        state, blocks, d.static_u, d.static_f, d.static_weight, d.moving_f if has_moving else np.zeros((0, 3)),
-        p.linearise if has_moving else None, **kw,
-    )
+    rows = p.data.rows
+    if len(rows.moving_t) < 10:
+        rows = replace(rows, moving_t=rows.moving_t[:0], moving_f=rows.moving_f[:0],
+                       moving_g=None if rows.moving_g is None else rows.moving_g[:0])
+        return solve(state, blocks, rows, None, **kw)
+    return solve(state, blocks, rows, p.linearise, **kw)
 
 
 def _residual_level(problem: UnitProblem, link: int, state: State) -> float:
     """Median residual norm of the fitted model over every sample of the unit (m/s^2)."""
     s = problem.samples.select(slice(None, None, 4))
-    table: SignalTable = problem.shared
+    table: SignalTable = problem.shared.table
     t = s.t - state.tau
     keep = (t >= table.t[0]) & (t <= table.t[-1])
-    u, K, _, _ = table.at(link, t[keep])
-    v = u + np.einsum("mij,j->mi", K, state.p)
+    u, K, *_, ug = table.at(link, t[keep])
+    v = u + state.k * ug + np.einsum("mij,j->mi", K, state.p)
     pred = (v @ state.R) @ state.A.T + state.b
     return float(np.median(np.linalg.norm(pred - s.accel[keep], axis=1)))
 
@@ -131,25 +206,27 @@ def choose_link(problem: UnitProblem) -> tuple[int, float, list[str], dict[int, 
     """
     n = problem.chain.n_joints
     activity = discover_link(problem.samples, n, use_gyro=True)
-    if activity.link == 0:
-        raise CalibrationError("; ".join(activity.warnings) or "no joint motion excites this unit")
-    # The model comparison below settles ambiguity; keep only the activity's other notes.
-    warnings = [w for w in activity.warnings if "ambiguous" not in w]
     levels: dict[int, float] = {}
     states: dict[int, State] = {}
-    if activity.confidence >= DECISIVE_ACTIVITY:
+    warnings = [w for w in activity.warnings if "ambiguous" not in w and "never excited" not in w]
+    if activity.link != 0 and activity.confidence >= DECISIVE_ACTIVITY:
         return activity.link, activity.confidence, warnings, levels, None  # no doubt: nothing to compare
+    if activity.link == 0 and np.any(np.isfinite(activity.activity)):  # joints were excited, none moved it
+        raise CalibrationError("; ".join(activity.warnings) or "no joint motion excites this unit")
     # Not decisive: a joint's motion can shake earlier links through the servos' finite stiffness
-    # (the activity then points too far out), so every link up to one past the suggestion competes.
-    for link in range(1, min(n, activity.link + 1) + 1):
+    # (the activity then points too far out), so every link up to one past the suggestion competes;
+    # without any activity (no segments to tell the excited joint), every link does.
+    hint = problem.alignment.link if problem.alignment is not None else n
+    top = n if activity.link == 0 else min(n, max(activity.link, hint) + 1)
+    for link in range(1, top + 1):
         try:
-            fit = _fit(_arrange(problem, link, decimate=10), Blocks(scale=False, time_offset=True), max_outer=2)
+            fit = _fit(_arrange(problem, link, decimate=10), Blocks(scale=SCALE_NONE), max_outer=2)
         except CalibrationError:
             continue
         levels[link] = _residual_level(problem, link, fit.state)
         states[link] = fit.state
     if not levels:
-        raise CalibrationError("no candidate link could be fitted")
+        raise CalibrationError("; ".join(activity.warnings) or "no candidate link could be fitted")
     ranked = sorted(levels, key=levels.get)
     best = ranked[0]
     confidence = 1.0
@@ -164,13 +241,28 @@ def choose_link(problem: UnitProblem) -> tuple[int, float, list[str], dict[int, 
     return best, confidence, warnings, levels, states[best]
 
 
+NULL_POSITION_SCALE_M = 0.1
+"""Positions are compared with rotations in null-space directions in units of this length (a unit
+turned by one radian about an axis 0.1 m away moves by 0.1 m)."""
+
+
+def _physical_null(null: FloatArray) -> FloatArray:
+    """Null-space directions with positions in units of :data:`NULL_POSITION_SCALE_M` and the pose
+    part of each normalised (rows ``0:6`` = rotation, position); sensor-only directions are dropped."""
+    pose = null[0:6].copy()
+    pose[3:6] /= NULL_POSITION_SCALE_M
+    norm = np.linalg.norm(pose, axis=0)
+    keep = norm > 1e-6
+    return pose[:, keep] / norm[keep]
+
+
 def _describe_null(null: FloatArray, R: FloatArray, axis_link: FloatArray, joint: int) -> str:
     parts = []
     for k in range(null.shape[1]):
         v = null[:, k]
         rot = R @ v[0:3]
         pos = v[3:6]
-        if np.linalg.norm(rot) > 0.1 * np.linalg.norm(v):
+        if np.linalg.norm(rot) > 0.3 * np.linalg.norm(v):
             a = rot / np.linalg.norm(rot)
             what = f"joint-{joint} axis" if abs(a @ axis_link) > 0.99 else f"axis {np.round(a, 3).tolist()}"
             parts.append(f"rotation (yaw) about the {what}")
@@ -180,7 +272,7 @@ def _describe_null(null: FloatArray, R: FloatArray, axis_link: FloatArray, joint
             parts.append(f"offset along the {what}")
         else:
             parts.append("a combination of sensor parameters")
-    return "unobservable: " + " and ".join(parts) + " (left at the closed-form start)"
+    return "unobservable: " + " and ".join(dict.fromkeys(parts)) + " (left at the closed-form start)"
 
 
 def _joint_axis_in_link(chain: SerialChain, link: int) -> FloatArray:
@@ -192,12 +284,93 @@ def _joint_axis_in_link(chain: SerialChain, link: int) -> FloatArray:
 
 def _distinct_orientations(u_link: FloatArray, min_angle_deg: float = 5.0) -> int:
     """Number of static gravity directions (link frame) at least ``min_angle_deg`` apart."""
+    if len(u_link) == 0:
+        return 0
     dirs = u_link / np.linalg.norm(u_link, axis=1, keepdims=True)
     chosen: list[FloatArray] = []
     for d in dirs:
         if all(np.degrees(np.arccos(np.clip(d @ c, -1, 1))) >= min_angle_deg for c in chosen):
             chosen.append(d)
     return len(chosen)
+
+
+def _blocks(problem: UnitProblem, p: _Problem) -> Blocks:
+    opts = problem.options
+    rows = p.data.rows
+    gyro = rows.static_g is not None
+    scale = (SCALE_FULL if gyro else SCALE_SYM) if bool(opts.get("scale", True)) else SCALE_NONE
+    time_offset = bool(opts.get("time_offset", True))
+    span = float(np.ptp(rows.moving_t)) if len(rows.moving_t) else 0.0
+    static_span = float(np.ptp(rows.static_t)) if len(rows.static_t) else 0.0
+    return Blocks(
+        scale=scale,
+        gravity=scale != SCALE_NONE and bool(opts.get("gravity", True)) and len(rows.moving_t) >= 10,
+        time_offset=time_offset,
+        clock_drift=time_offset and bool(opts.get("clock_drift", True)) and span >= CLOCK_DRIFT_MIN_SPAN_S,
+        gyro=gyro,
+        bias_drift=bool(opts.get("bias_drift", True))
+        and len(rows.static_t) >= BIAS_DRIFT_MIN_RUNS
+        and static_span >= BIAS_DRIFT_MIN_SPAN_S,
+    )
+
+
+def _static_chi2(fit: Fit, rows: Rows, rest_noise: float) -> float:
+    """Variance ratio of the rest rows' residuals to what the rest noise explains (1 when consistent).
+
+    A rest run of ``n`` samples with white noise ``sigma_r`` has a mean residual of variance
+    ``sigma_r^2 / n`` per axis; the ratio over all runs, ``sum n |r|^2 / (3 sigma_r^2 (S - k))``,
+    exceeds 1 when the runs disagree with the model (bias drift, a moved unit, wrong gravity).
+    """
+    S = len(rows.static_u)
+    if fit.residuals is None or S < 4:
+        return 1.0
+    rest_noise = max(rest_noise, REST_NOISE_FLOOR)
+    r = fit.residuals[:S]
+    dof = max(3 * S - 9, 1)
+    return float(np.sum(rows.static_weight * np.sum(r * r, axis=1)) / (rest_noise**2 * dof))
+
+
+def _honesty(fit: Fit, p: _Problem, alignment: OffsetSearch | None, total_offset: float) -> tuple[FloatArray, list[str]]:
+    """Residual tests: the covariance inflated where the model leaves something out, and warnings."""
+    rows = p.data.rows
+    sl = fit.blocks.slices()
+    cov = fit.covariance
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    st = fit.state
+    warnings: list[str] = []
+    chi2 = _static_chi2(fit, rows, p.data.rest.accel_noise)
+    if chi2 > STATIC_CHI2_WARN:
+        cov = cov * chi2
+        warnings.append(
+            f"rest poses disagree with the model ({np.sqrt(chi2):.1f}x the rest noise; bias drift, gravity or "
+            "a moved unit?): uncertainty inflated accordingly"
+        )
+    if "d" in sl:
+        d, sd = st.d, std[sl["d"].start]
+        if abs(d) > DRIFT_WARN_SIGMAS * sd and abs(d) * 1e6 > CLOCK_DRIFT_WARN_PPM:
+            warnings.append(f"clock drifts: {d * 1e6:+.0f} ppm relative to the robot's clock (estimated and corrected)")
+    if "c" in sl:
+        T = float(np.ptp(rows.static_t))
+        change = np.linalg.norm(st.c) * T
+        sc = np.linalg.norm(std[sl["c"]]) * T
+        if change > DRIFT_WARN_SIGMAS * sc and change > BIAS_DRIFT_WARN_MPS2:
+            warnings.append(
+                f"bias drifts: the accelerometer bias changed by {change:.3g} m/s^2 over {T:.0f} s "
+                "(estimated as a linear drift)"
+            )
+    if alignment is not None and (
+        alignment.sharpness < OFFSET_SHARPNESS_MIN or abs(total_offset - alignment.offset_s) > OFFSET_JUMP_WARN_S
+    ):
+        warnings.append(
+            f"time offset uncertain: coarse alignment {alignment.offset_s * 1e3:.0f} ms (peak sharpness "
+            f"{alignment.sharpness:.2f}), refined {total_offset * 1e3:.0f} ms"
+        )
+    if fit.residual_correlation > CORRELATION_WARN:
+        warnings.append(
+            f"residuals strongly correlated in time (factor {fit.residual_correlation:.1f}: unmodelled dynamics "
+            "or joint-state errors); uncertainty inflated by it"
+        )
+    return cov, warnings
 
 
 def run_unit(problem: UnitProblem) -> UnitResult:
@@ -213,57 +386,86 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     else:
         link = problem.link
     p = _arrange(problem, link)
-    n_orient = _distinct_orientations(p.data.static_u)
+    warnings += list(p.data.rest.warnings)
+    n_orient = _distinct_orientations(p.data.rows.static_u)
     if n_orient < 3:
         warnings.append(
             f"only {n_orient} distinct static orientation(s) (3 or more recommended): rotation, bias and scale "
             "rest on the moving data"
         )
-    opts = problem.options
-    want_scale = bool(opts.get("scale", True))
-    blocks = Blocks(scale=want_scale, time_offset=bool(opts.get("time_offset", True)))
-    # Converge on every 8th moving sample (time offset included), then one Gauss-Newton step on
-    # all of them, whose normal matrix also gives the covariance.
+    blocks = _blocks(problem, p)
+    if start is not None:
+        start = replace(start, E=np.zeros((3, 3)), bg=_start(p).bg)
+    # Converge on every 8th moving sample, then one Gauss-Newton step on all of them, whose
+    # normal matrix also gives the covariance.
     coarse = _fit(_decimated(p, 8), blocks, state=start)
     fit = _fit(p, blocks, state=coarse.state, max_outer=1, max_inner=1)
-    if want_scale:
-        std_e = np.sqrt(np.maximum(np.diag(fit.covariance)[9:15], 0.0))
-        if fit.null_space.size and np.any(np.abs(fit.null_space[9:15]) > 0.1) or np.any(std_e > SCALE_STD_LIMIT):
-            warnings.append("scale/misalignment not estimated: the static poses do not determine it")
-            fit = _fit(p, Blocks(scale=False, time_offset=blocks.time_offset), state=fit.state)
+    e = fit.blocks.slices().get("e")
+    if e is not None:
+        std_e = np.sqrt(np.maximum(np.diag(fit.covariance)[e], 0.0))
+        if np.any(std_e > SCALE_STD_LIMIT):
+            warnings.append(
+                f"scale/misalignment weakly determined by the data (std up to {100 * std_e.max():.1f} %, "
+                "held near zero by a 5 % prior; its uncertainty is in the reported std)"
+            )
     st = fit.state
+    sl = fit.blocks.slices()
+    total_offset = problem.time_offset_s + st.tau
+    cov, honesty = _honesty(fit, p, problem.alignment, total_offset)
+    warnings += honesty
     observable = fit.null_space.shape[1] == 0
-    cov = fit.covariance
-    pos_std = np.sqrt(np.maximum(np.diag(cov)[3:6], 0.0))
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    pos_std = std[3:6].copy()
     rot_cov = st.R @ cov[0:3, 0:3] @ st.R.T
     rot_std = np.degrees(np.sqrt(np.maximum(np.diag(rot_cov), 0.0)))
     if not observable:
-        warnings.append(_describe_null(fit.null_space, st.R, _joint_axis_in_link(problem.chain, link), link))
-        affected_p = np.abs(fit.null_space[3:6]).max(axis=1) > 1e-3
-        affected_r = np.abs(st.R @ fit.null_space[0:3]).max(axis=1) > 1e-3
+        null = _physical_null(fit.null_space)
+        warnings.append(_describe_null(null, st.R, _joint_axis_in_link(problem.chain, link), link))
+        affected_p = np.abs(null[3:6]).max(axis=1) > 0.05
+        affected_r = np.abs(st.R @ null[0:3]).max(axis=1) > 0.05
         pos_std = np.where(affected_p, np.nan, pos_std)
         rot_std = np.where(affected_r, np.nan, rot_std)
-    col = 15 if fit.blocks.scale else 9
+    get_std = lambda name: std[sl[name]] if name in sl else None  # noqa: E731
     extras.update(
         {
             "accel_bias_mps2": st.b,
             "accel_scale_misalignment": st.A,
-            "accel_bias_std_mps2": np.sqrt(np.maximum(np.diag(cov)[6:9], 0.0)),
-            "time_offset_s": st.tau,
-            "time_offset_std_s": float(np.sqrt(cov[col, col])) if fit.blocks.time_offset else None,
+            "accel_bias_std_mps2": std[6:9],
+            "time_offset_s": total_offset,
+            "time_offset_std_s": float(get_std("tau")[0]) if "tau" in sl else None,
+            "time_offset_coarse_s": None if problem.alignment is None else problem.alignment.offset_s,
+            "time_reference_s": p.data.t_c,
+            "clock_drift_ppm": st.d * 1e6 if "d" in sl else None,
+            "clock_drift_std_ppm": float(get_std("d")[0]) * 1e6 if "d" in sl else None,
             "residual_std_mps2": fit.sigma,
             "residual_correlation": fit.residual_correlation,
-            "n_static_runs": int(len(p.data.static_u)),
-            "n_moving_samples": int(len(p.data.moving_t)),
+            "n_static_runs": int(p.data.n_static),
+            "n_static_dropped": int(len(p.data.rest.dropped)),
+            "n_moving_samples": int(len(p.data.rows.moving_t)),
             "iterations": fit.iterations,
-            "scale_estimated": fit.blocks.scale,
+            "scale_estimated": fit.blocks.scale != SCALE_NONE,
+            "rest_source": problem.shared.rest.source,
         }
     )
-    if fit.blocks.scale:
-        std_e = np.sqrt(np.maximum(np.diag(cov)[9:15], 0.0))
-        extras["accel_scale_misalignment_std"] = sym_from_e(std_e)
+    if "bg" in sl:
+        extras["gyro_bias_rps"] = st.bg
+        extras["gyro_bias_std_rps"] = get_std("bg")
+        extras["gyro_residual_std_rps"] = fit.sigma_gyro
+    if "k" in sl:
+        g0 = float(np.linalg.norm(problem.gravity))
+        extras["gravity_mps2"] = g0 * (1.0 + st.k)
+        extras["gravity_std_mps2"] = g0 * float(get_std("k")[0])
+    if "c" in sl:
+        extras["accel_bias_drift_mps3"] = st.c
+        extras["accel_bias_drift_std_mps3"] = get_std("c")
+    if "e" in sl:
+        std_e = get_std("e")
+        extras["accel_scale_misalignment_std"] = (
+            std_e.reshape(3, 3) if fit.blocks.scale == SCALE_FULL else sym_from_e(std_e)
+        )
         extras["accel_scale"] = np.diag(st.A).copy()
-        extras["accel_misalignment_sym"] = sym_from_e(st.e) - np.diag(np.diag(sym_from_e(st.e)))
+        sym = 0.5 * (st.E + st.E.T)
+        extras["accel_misalignment_sym"] = sym - np.diag(np.diag(sym))
     return UnitResult(
         pose=SkinUnitPose(link, st.R, st.p),
         observable=observable,
@@ -278,10 +480,13 @@ register(
     "mle",
     MethodSpec(
         run_unit=run_unit,
-        description="closed-form start + robust joint maximum likelihood (pose, bias, scale, time offset)",
+        description="global time alignment + closed-form start + robust joint maximum likelihood "
+        "(pose, IMU errors, clock) with residual tests",
         discovers_links=True,
         use_gyro_for_links=True,
         prepare=prepare,
         exact_joint_states=False,
+        align=align,
+        needs_segments=False,
     ),
 )

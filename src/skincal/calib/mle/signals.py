@@ -9,8 +9,9 @@ kinematics from :meth:`SerialChain.link_motion`, ``R = R_base_link``)::
 so that a unit's reading is ``f_su = R_link_su^T (u + K p)``. ``u``, ``K`` depend only on the joint
 states, not on the unit: computed once per link and time instant.
 
-Samples during which every joint up to ``n`` is at rest are *stationary* for the unit (``K = 0``,
-``u`` constant); each stationary run is averaged into one weighted measurement.
+The gyroscope reads ``g_su = R_link_su^T w_l``. Samples during which every joint up to ``n`` is at
+rest (:mod:`skincal.calib.rest`) are *stationary* for the unit (``K = 0``, ``w_l = 0``, ``u``
+constant); each stationary run is averaged into one weighted measurement.
 """
 
 from __future__ import annotations
@@ -20,16 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from skincal.calib.preprocess import JointInterpolator
+from skincal.calib.mle.solver import Rows
+from skincal.calib.rest import JointRest, RestRuns, unit_rest_runs
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray, skew
-
-STATIONARY_QD = 5e-3
-"""Joint speed below which a joint counts as at rest, rad/s."""
-STATIONARY_QDD = 5e-2
-"""Joint acceleration below which a joint counts as at rest, rad/s^2."""
-STATIONARY_GUARD_S = 0.06
-"""Samples this close to the start or end of a stationary run are dropped (covers time offsets), s."""
-
 
 @dataclass(frozen=True)
 class LinkSignals:
@@ -67,22 +62,35 @@ class SignalTable:
     """
 
     def __init__(
-        self, chain: SerialChain, interpolator: JointInterpolator, gravity: FloatArray, rate_hz: float = 125.0
+        self,
+        chain: SerialChain,
+        interpolator: JointInterpolator,
+        gravity: FloatArray,
+        rest: JointRest,
+        rate_hz: float = 125.0,
     ) -> None:
         grid, q, qd, qdd = interpolator.on_grid(max(1, int(round(1.0 / (rate_hz * interpolator.dt)))))
+        motion = chain.link_motion(q, qd, qdd)
+        self.grid_t = grid
+        """``(G,)`` the uniform grid, s."""
+        self.angular_speed = np.linalg.norm(motion.omega[:, 1:], axis=2)
+        """``(G, n)`` angular speed of every link frame on the uniform grid, rad/s."""
+        self.joint_speed = np.cumsum(np.abs(qd), axis=1)
+        """``(G, n)`` ``sum_{j <= k} |qd_j|`` on the uniform grid, rad/s."""
         # Keep the grid where some joint moves (plus a margin): elsewhere units are stationary and
         # use exact static rows instead. Gaps are bridged by the interpolation only at their ends.
-        moving = np.any(np.abs(qd) >= STATIONARY_QD, axis=1) | np.any(np.abs(qdd) >= STATIONARY_QDD, axis=1)
+        moving = ~rest.unit_rest(grid, chain.n_joints)
         pad = int(np.ceil(0.5 * rate_hz))
         keep = np.convolve(moving, np.ones(2 * pad + 1), mode="same") > 0
         keep[[0, -1]] = True
         self.t = grid[keep]
-        self._motion = chain.link_motion(q[keep], qd[keep], qdd[keep])
+        self._motion = motion.select(keep)
         self._gravity = np.asarray(gravity, dtype=float)
         self._cache: dict[int, FloatArray] = {}
 
     def _link(self, link: int) -> FloatArray:
-        """``(N, 24)`` rows ``[u (3), K (9, row-major), du (3), dK (9)]`` of ``link`` on the grid."""
+        """``(N, 36)`` rows ``[u (3), K (9, row-major), w (3), u_g (3)]`` and their time derivatives of
+        ``link`` on the grid (``u_g = -R^T g``, the part of ``u`` due to gravity)."""
         if link not in self._cache:
             m = self._motion
             R = m.T_base_link[:, link, :3, :3]
@@ -90,60 +98,61 @@ class SignalTable:
             w_l = np.einsum("nji,nj->ni", R, m.omega[:, link])
             dw_l = np.einsum("nji,nj->ni", R, m.omega_dot[:, link])
             W = skew(w_l)
-            y = np.concatenate([u, (skew(dw_l) + W @ W).reshape(-1, 9)], axis=1)
+            ug = -np.einsum("nji,j->ni", R, self._gravity)  # gravity's part of u
+            y = np.concatenate([u, (skew(dw_l) + W @ W).reshape(-1, 9), w_l, ug], axis=1)
             self._cache[link] = np.ascontiguousarray(np.concatenate([y, np.gradient(y, self.t, axis=0)], axis=1))
         return self._cache[link]
 
-    def at(self, link: int, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """``(u, K, du, dK)`` of ``link`` at instants ``t`` (M,) inside the grid: ``(M, 3)``, ``(M, 3, 3)``,
-        ``(M, 3)``, ``(M, 3, 3)``."""
+    def at(self, link: int, t: FloatArray) -> tuple[FloatArray, ...]:
+        """``(u, K, du, dK, w, dw, u_g)`` of ``link`` at instants ``t`` (M,) inside the grid: ``(M, 3)``,
+        ``(M, 3, 3)``, ``(M, 3)``, ``(M, 3, 3)``, ``(M, 3)``, ``(M, 3)``, ``(M, 3)`` (``w`` the link's
+        angular velocity in link frame, ``dw = R^T dw_base`` its derivative, ``u_g`` gravity's part of ``u``)."""
         g = self.t
         i = np.clip(np.searchsorted(g, t) - 1, 0, g.size - 2)
         h = (g[i + 1] - g[i])[:, None]
         s = (t - g[i])[:, None] / h
         s2, s3 = s * s, s * s * s
         table = self._link(link)
-        a, b = table[i], table[i + 1]  # (M, 24) each: values then derivatives at both grid ends
-        y = (2 * s3 - 3 * s2 + 1) * a[:, :12] + (s3 - 2 * s2 + s) * h * a[:, 12:]
-        y += (-2 * s3 + 3 * s2) * b[:, :12] + (s3 - s2) * h * b[:, 12:]  # cubic Hermite
-        dy = (1 - s) * a[:, 12:] + s * b[:, 12:]  # linear
+        a, b = table[i], table[i + 1]  # (M, 36) each: values then derivatives at both grid ends
+        y = (2 * s3 - 3 * s2 + 1) * a[:, :18] + (s3 - 2 * s2 + s) * h * a[:, 18:]
+        y += (-2 * s3 + 3 * s2) * b[:, :18] + (s3 - s2) * h * b[:, 18:]  # cubic Hermite
+        dy = (1 - s) * a[:, 18:] + s * b[:, 18:]  # linear
         M = t.shape[0]
-        return y[:, :3], y[:, 3:].reshape(M, 3, 3), dy[:, :3], dy[:, 3:].reshape(M, 3, 3)
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """Half-open index ranges ``[start, end)`` of the true runs of a boolean mask."""
-    padded = np.concatenate([[False], mask, [False]])
-    edges = np.flatnonzero(np.diff(padded.astype(np.int8)))
-    return list(zip(edges[::2], edges[1::2], strict=True))
+        return (
+            y[:, :3], y[:, 3:12].reshape(M, 3, 3), dy[:, :3], dy[:, 3:12].reshape(M, 3, 3),
+            y[:, 12:15], dy[:, 12:15], y[:, 15:18],
+        )
 
 
 @dataclass(frozen=True)
 class UnitData:
     """One unit's data arranged for the maximum-likelihood fit on link ``link``.
 
-    Stationary runs are averaged (``static_*``, one row per run, weight = sample count); the
-    moving samples are kept one by one with their instants, to be re-evaluated at shifted times.
+    Rest runs are averaged into ``rows.static_*`` (one row per run, weight = sample count); the
+    moving samples are kept one by one with their stamps, to be re-evaluated at shifted instants.
 
     Attributes:
         link: the link assumed.
-        static_u: ``(S, 3)`` specific force at rest in link frame for each run.
-        static_f: ``(S, 3)`` mean measured specific force per run (unit frame).
-        static_weight: ``(S,)`` samples per run.
-        static_q: ``(S, n)`` joint angles of each run.
-        moving_t: ``(M,)`` stamps of the moving samples, s.
-        moving_f: ``(M, 3)`` measured specific force of the moving samples.
-        moving_gyro: ``(M, 3)`` measured angular rate, or ``None``.
+        rows: the solver's measurements (stamps relative to ``t_c``).
+        t_c: reference instant of the clock model (middle of the unit's samples), s.
+        static_q: ``(S, n)`` joint angles of each rest run.
+        rest: the rest runs and the IMU cross-check (:class:`~skincal.calib.rest.RestRuns`).
     """
 
     link: int
-    static_u: FloatArray
-    static_f: FloatArray
-    static_weight: FloatArray
+    rows: Rows
+    t_c: float
     static_q: FloatArray
-    moving_t: FloatArray
-    moving_f: FloatArray
-    moving_gyro: FloatArray | None
+    rest: RestRuns
+
+    @property
+    def moving_t(self) -> FloatArray:
+        """``(M,)`` absolute stamps of the moving samples, s."""
+        return self.rows.moving_t + self.t_c
+
+    @property
+    def n_static(self) -> int:
+        return len(self.rows.static_u)
 
 
 def arrange_unit_data(
@@ -152,42 +161,42 @@ def arrange_unit_data(
     t: FloatArray,
     accel: FloatArray,
     gyro: FloatArray | None,
-    joint_states: tuple[FloatArray, FloatArray, FloatArray],
+    joint_rest: JointRest,
+    interpolator: JointInterpolator,
     gravity: FloatArray,
 ) -> UnitData:
-    """Split a unit's samples into averaged stationary runs and individual moving samples.
+    """Split a unit's samples ``t`` ``(M,)`` (already shifted to the joint clock), ``accel``/``gyro``
+    ``(M, 3)`` into averaged rest runs and individual moving samples.
 
-    ``joint_states``: ``(q, qd, qdd)`` at the samples' stamps, each ``(M, n)``.
+    A sample is moving when some joint ``<= link`` moves at its instant (:mod:`skincal.calib.rest`);
+    moving samples where the joint accelerations cannot be estimated (at a step of the motion's
+    acceleration, :meth:`JointInterpolator.reliable`) and rest runs the unit's IMU contradicts are
+    not used.
     """
-    q, qd, qdd = joint_states
-    rest = np.all(np.abs(qd[:, :link]) < STATIONARY_QD, axis=1) & np.all(np.abs(qdd[:, :link]) < STATIONARY_QDD, axis=1)
-    moving = ~rest
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.01
-    guard = int(np.ceil(STATIONARY_GUARD_S / dt))
-    static_rows: list[tuple[FloatArray, FloatArray, float, FloatArray]] = []
-    for start, end in _runs(rest):
-        a, b = start + guard, end - guard
-        if b - a < 3:
-            continue
-        f_mean = accel[a:b].mean(axis=0)
-        q_mean = q[a:b].mean(axis=0)
-        static_rows.append((q_mean, f_mean, float(b - a), q_mean))
-    if static_rows:
-        q_s = np.array([r[0] for r in static_rows])
-        sig = link_signals(chain, link, q_s, np.zeros_like(q_s), np.zeros_like(q_s), gravity)
-        static_u = sig.u
-        static_f = np.array([r[1] for r in static_rows])
-        static_w = np.array([r[2] for r in static_rows])
-    else:
-        q_s = np.zeros((0, chain.n_joints))
-        static_u, static_f, static_w = np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
-    return UnitData(
-        link=link,
+    rest_mask = joint_rest.unit_rest(t, link)
+    runs = unit_rest_runs(rest_mask, t, accel, gyro)
+    t_c = 0.5 * (float(t[0]) + float(t[-1])) if t.size else 0.0
+    S = len(runs.bounds)
+    f_s, g_s, w_s, tm_s, q_s = np.zeros((S, 3)), np.zeros((S, 3)), np.zeros(S), np.zeros(S), np.zeros((S, chain.n_joints))
+    for k, (a, b) in enumerate(runs.bounds):
+        f_s[k] = accel[a:b].mean(axis=0)
+        if gyro is not None:
+            g_s[k] = gyro[a:b].mean(axis=0)
+        w_s[k] = b - a
+        tm_s[k] = 0.5 * (t[a] + t[b - 1])
+        q_s[k] = interpolator.nearest(t[a:b])[0].mean(axis=0)
+    static_u = link_signals(chain, link, q_s, np.zeros_like(q_s), np.zeros_like(q_s), gravity).u if S else np.zeros((0, 3))
+    moving = ~rest_mask & interpolator.reliable(t)
+    for t0, t1 in runs.dropped:
+        moving &= ~((t >= t0) & (t <= t1))
+    rows = Rows(
         static_u=static_u,
-        static_f=static_f,
-        static_weight=static_w,
-        static_q=q_s,
-        moving_t=t[moving],
+        static_f=f_s,
+        static_g=None if gyro is None else g_s,
+        static_weight=w_s,
+        static_t=tm_s - t_c,
+        moving_t=t[moving] - t_c,
         moving_f=accel[moving],
-        moving_gyro=None if gyro is None else gyro[moving],
+        moving_g=None if gyro is None else gyro[moving],
     )
+    return UnitData(link, rows, t_c, q_s, runs)

@@ -1,23 +1,37 @@
-"""Robust Gauss-Newton for one unit: pose, accelerometer bias, scale/misalignment, time offset.
+"""Robust Gauss-Newton for one unit: pose, IMU errors and the unit's clock.
 
-Measurement model for sample ``i`` (unit frame)::
+Measurement model (unit frame ``su``, link frame ``n``; ``R = R_link_su``, ``p = p_link_su``)::
 
-    a_i = A R^T v_i + b + noise,    v_i = u(t_i - tau) + K(t_i - tau) p       (link frame)
+    accelerometer:  a_i = A R^T v(s_i) + b + c (t_i - t_c) + noise,   v(s) = u(s) + K(s) p
+    gyroscope:      g_i = R^T w(s_i) + b_g + noise
+    physical instant of the sample stamped t_i:  s_i = t_i - tau - d (t_i - t_c)
 
-with ``R = R_link_su``, ``p = p_link_su``, ``b`` the bias, ``A = I + E`` a symmetric
-scale/misalignment matrix (the antisymmetric part of a misalignment is a rotation and is
-absorbed in ``R``: the unit frame is the accelerometer's polar frame) and ``tau`` the IMU's
-latency. ``u``, ``K`` come from :mod:`skincal.calib.mle.signals`.
+``u``, ``K``, ``w`` (link-frame specific force of the origin, rigid-body matrix, angular velocity)
+come from :mod:`skincal.calib.mle.signals`; at rest ``K = 0``, ``w = 0``. Parameters:
 
-The solver works on the manifold (``R <- R Exp(dtheta)``, ``dtheta`` in the unit frame), linearises
-the time dependence around the current ``tau_k`` (``v(tau) ~ v_k - (tau - tau_k) dv/dt``) and
-re-evaluates the signals at the new ``tau`` in an outer loop. Outliers are handled by Huber
-iteratively re-weighted least squares on the residual norm; directions the data cannot
-determine (a unit on link 1) are left at their start values (pseudo-inverse on the scaled normal
-equations) and reported.
+* ``b`` accelerometer bias; ``c`` its drift rate (m/s^2 per s, optional); ``b_g`` gyroscope bias;
+* ``A = I + E``: ``E`` symmetric (6) when only the accelerometer is used (an antisymmetric part
+  would be a rotation: the unit frame is then the accelerometer's polar frame), or full (9) when
+  the gyroscope is fitted too (the unit frame is then the gyroscope's frame and the accelerometer's
+  misalignment to it is estimated);
+* ``tau`` the IMU's time offset at ``t_c`` (the middle of the unit's samples) and ``d`` the clock
+  drift (dimensionless, 1e-6 = 1 ppm; optional).
 
-Parameter vector order: ``dtheta (3), p (3), b (3), e (6: xx, yy, zz, xy, xz, yz), tau (1)``;
-``e`` and ``tau`` only when estimated.
+The solver works on the manifold (``R <- R Exp(dtheta)``, ``dtheta`` in the unit frame),
+linearises the time dependence around the current ``tau_k, d_k``
+(``v(s) ~ v(s_k) - (s_k - s) dv/dt``) and re-evaluates the signals in an outer loop. Each sensor's
+rows are weighted by its own robust residual variance (times the residuals' autocorrelation
+factor); outliers get Huber weights; directions the data cannot determine (a unit on link 1) are
+left at their start values (pseudo-inverse on the scaled normal equations) and reported.
+
+Parameter vector order: ``dtheta (3), p (3), b (3)``, then the optional blocks in this order:
+``e (6: xx, yy, zz, xy, xz, yz, or 9: row-major E)``, ``tau (1)``, ``d (1)``, ``b_g (3)``, ``c (3)``,
+``k (1)``.
+
+Gravity: the link-frame specific force splits as ``u = u_a + u_g`` (``u_g = -R_base_link^T g``) and
+the dataset's gravity may be wrong by a factor: ``u = u_a + (1 + k) u_g`` (``k`` optional; the
+accelerometer scale cannot absorb it because it scales the motion's acceleration too).
+The sensor blocks have wide zero-mean priors (:data:`PRIOR_STD`).
 """
 
 from __future__ import annotations
@@ -30,10 +44,26 @@ from scipy.spatial.transform import Rotation
 
 from skincal.kinematics.transforms import FloatArray, skew
 
+PRIOR_STD = {"e": 0.05, "d": 1e-3, "c": 1e-3, "k": 0.01}
+"""Zero-mean Gaussian priors of the sensor blocks (a MAP estimate): scale/misalignment 5 % (real
+IMUs: 1-3 %), clock drift 1000 ppm, bias drift 1e-3 m/s^3 (0.6 m/s^2 over ten minutes), gravity
+1 %. Far wider than any real value, so data that determine a block are not biased; where the data
+do not, the block stays near zero and its prior std enters the covariance instead of an
+arbitrary null-space value."""
+MAX_STEP = {"theta": 0.5, "p": 0.5}
+"""Largest Gauss-Newton step of the rotation (rad) and position (m); a larger one is scaled down."""
 HUBER_K = 3.0
 """Huber threshold in robust standard deviations of the residual norm."""
-NULL_RATIO = 1e-9
-"""Eigenvalues of the scaled normal matrix below this fraction of the largest are unobservable."""
+NULL_RATIO = 1e-12
+"""Eigenvalues of the scaled normal matrix below this fraction of the largest are unobservable
+(exactly unobservable directions sit at ~1e-16, round-off; a direction that only a prior
+determines sits far above, ~1e-10 for noise-free data, and is kept with the prior's uncertainty)."""
+SIGMA_FLOOR = 1e-3
+"""Smallest residual std the weights assume, m/s^2 (0.1 mg, below any real accelerometer's noise;
+a tenth of it for the gyroscope, rad/s): noise-free data must not make the data's information so
+large that the priors vanish below round-off."""
+
+SCALE_NONE, SCALE_SYM, SCALE_FULL = "none", "sym", "full"
 
 
 def sym_from_e(e: FloatArray) -> FloatArray:
@@ -43,49 +73,102 @@ def sym_from_e(e: FloatArray) -> FloatArray:
 
 @dataclass(frozen=True)
 class State:
-    """Estimate of one unit: ``R_link_su``, ``p_link_su`` (m), bias (m/s^2), ``e`` (scale and
-    misalignment, dimensionless), ``tau`` (s)."""
+    """Estimate of one unit: ``R_link_su``, ``p_link_su`` (m), accelerometer bias ``b`` (m/s^2),
+    ``E`` (scale and misalignment, ``A = I + E``), ``tau`` (s at ``t_c``), clock drift ``d``,
+    gyroscope bias ``bg`` (rad/s) and bias drift ``c`` (m/s^3)."""
 
     R: FloatArray
     p: FloatArray
     b: FloatArray
-    e: FloatArray = field(default_factory=lambda: np.zeros(6))
+    E: FloatArray = field(default_factory=lambda: np.zeros((3, 3)))
     tau: float = 0.0
+    d: float = 0.0
+    bg: FloatArray = field(default_factory=lambda: np.zeros(3))
+    c: FloatArray = field(default_factory=lambda: np.zeros(3))
+    k: float = 0.0
 
     @property
     def A(self) -> FloatArray:
-        return np.eye(3) + sym_from_e(self.e)
+        return np.eye(3) + self.E
 
 
 @dataclass(frozen=True)
 class Blocks:
-    """Which parameter blocks are estimated."""
+    """Which parameter blocks are estimated (see the module docstring)."""
 
-    scale: bool = True
+    scale: str = SCALE_SYM
     time_offset: bool = True
+    clock_drift: bool = False
+    gyro: bool = False
+    bias_drift: bool = False
+    gravity: bool = False
+
+    @property
+    def n_scale(self) -> int:
+        return {SCALE_NONE: 0, SCALE_SYM: 6, SCALE_FULL: 9}[self.scale]
+
+    def slices(self) -> dict[str, slice]:
+        """Column ranges of every estimated block in the parameter vector."""
+        out = {"theta": slice(0, 3), "p": slice(3, 6), "b": slice(6, 9)}
+        col = 9
+        for name, size in (
+            ("e", self.n_scale), ("tau", int(self.time_offset)), ("d", int(self.clock_drift)),
+            ("bg", 3 * self.gyro), ("c", 3 * self.bias_drift), ("k", int(self.gravity)),
+        ):
+            if size:
+                out[name] = slice(col, col + size)
+                col += size
+        return out
 
     @property
     def size(self) -> int:
-        return 9 + 6 * self.scale + self.time_offset
+        return max(s.stop for s in self.slices().values())
 
 
 @dataclass(frozen=True)
 class Linearisation:
-    """Signals at ``tau_k`` for the moving samples: ``u, du`` ``(M, 3)``, ``K, dK`` ``(M, 3, 3)``
-    (``d`` = time derivative) and the stationary rows ``u_s`` ``(S, 3)``."""
+    """Signals of the moving samples at their physical instants ``s_k`` under ``(tau_k, d_k)``:
+    ``u, du, w, dw`` ``(M, 3)``, ``K, dK`` ``(M, 3, 3)`` (``d`` = time derivative)."""
 
     tau_k: float
+    d_k: float
     u: FloatArray
     K: FloatArray
     du: FloatArray
     dK: FloatArray
+    w: FloatArray | None = None
+    dw: FloatArray | None = None
+    ug: FloatArray | None = None
+
+
+@dataclass(frozen=True)
+class Rows:
+    """The measurements of one unit.
+
+    Attributes:
+        static_u: ``(S, 3)`` link-frame specific force of each rest run; ``static_f`` ``(S, 3)`` its
+            mean accelerometer reading; ``static_g`` ``(S, 3)`` mean gyroscope reading or ``None``;
+            ``static_weight`` ``(S,)`` samples per run; ``static_t`` ``(S,)`` mid instant, s.
+        moving_t: ``(M,)`` stamps of the moving samples relative to ``t_c``, s; ``moving_f`` ``(M, 3)``;
+            ``moving_g`` ``(M, 3)`` or ``None``.
+    """
+
+    static_u: FloatArray
+    static_f: FloatArray
+    static_g: FloatArray | None
+    static_weight: FloatArray
+    static_t: FloatArray
+    moving_t: FloatArray
+    moving_f: FloatArray
+    moving_g: FloatArray | None
 
 
 @dataclass(frozen=True)
 class Fit:
     """Solver output: the state, the covariance of the estimated parameters (parameter-vector
-    order), the robust residual std (m/s^2), the null-space directions (columns, parameter
-    order), per-sample robust weights and the final weighted cost."""
+    order), robust residual std per sensor (m/s^2, rad/s), the null-space directions (unit columns,
+    parameter order),
+    the blocks, the final weighted cost, iterations and the autocorrelation factors applied."""
 
     state: State
     covariance: FloatArray
@@ -95,60 +178,136 @@ class Fit:
     cost: float
     iterations: int
     residual_correlation: float
+    sigma_gyro: float = 0.0
+    residuals: FloatArray | None = None
+    """``(S + M, 3)`` accelerometer residuals (static rows first) at the solution."""
 
 
-def _jacobian_and_residual(
-    state: State,
-    blocks: Blocks,
-    lin: Linearisation | None,
-    static_u: FloatArray,
-    f_static: FloatArray,
-    f_moving: FloatArray,
+def _scale_columns(J: FloatArray, f: FloatArray, scale: str, sl: slice) -> None:
+    """d(E f)/de into ``J[:, :, sl]`` for ``f`` ``(N, 3)``."""
+    if scale == SCALE_FULL:
+        for a in range(3):
+            J[:, a, sl.start + 3 * a : sl.start + 3 * a + 3] = f
+        return
+    fx, fy, fz = f[:, 0], f[:, 1], f[:, 2]
+    c = sl.start
+    J[:, 0, c + 0] = fx
+    J[:, 1, c + 1] = fy
+    J[:, 2, c + 2] = fz
+    J[:, 0, c + 3], J[:, 1, c + 3] = fy, fx
+    J[:, 0, c + 4], J[:, 2, c + 4] = fz, fx
+    J[:, 1, c + 5], J[:, 2, c + 5] = fz, fy
+
+
+def _accel_rows(
+    state: State, blocks: Blocks, lin: Linearisation | None, rows: Rows
 ) -> tuple[FloatArray, FloatArray]:
-    """Stacked residuals ``(S + M, 3)`` and Jacobian ``(S + M, 3, P)`` (static rows first)."""
+    """Accelerometer residuals ``(S + M, 3)`` and Jacobian ``(S + M, 3, P)`` (static rows first)."""
+    sl = blocks.slices()
     R, A = state.R, state.A
+    S = len(rows.static_u)
+    # static rows are pure gravity: u_s = u_g; moving rows' u already holds (1 + k_lin) u_g
     if lin is not None:
-        dtau = state.tau - lin.tau_k
-        v_m = lin.u - dtau * lin.du + np.einsum("mij,j->mi", lin.K - dtau * lin.dK, state.p)
-        v = np.concatenate([static_u, v_m])
+        dtau = (state.tau - lin.tau_k) + (state.d - lin.d_k) * rows.moving_t  # s_k - s per sample
+        Kd = lin.K - dtau[:, None, None] * lin.dK
+        v_m = lin.u - dtau[:, None] * lin.du + np.einsum("mij,j->mi", Kd, state.p)
+        ug = np.concatenate([rows.static_u, lin.ug]) if lin.ug is not None else None
+        v = np.concatenate([(1.0 + state.k) * rows.static_u, v_m + (state.k * lin.ug if lin.ug is not None else 0.0)])
+        t_rel = np.concatenate([rows.static_t, rows.moving_t])
+        meas = np.concatenate([rows.static_f, rows.moving_f])
     else:
-        v = static_u
+        ug = rows.static_u
+        v, t_rel, meas = (1.0 + state.k) * rows.static_u, rows.static_t, rows.static_f
     f = v @ R  # rows: (R^T v)^T
-    pred = f @ A.T + state.b
-    meas = np.concatenate([f_static, f_moving]) if lin is not None else f_static
+    pred = f @ A.T + state.b + np.outer(t_rel, state.c)
     r = pred - meas
-    S = len(static_u)
     J = np.zeros((len(v), 3, blocks.size))
-    J[:, :, 0:3] = A @ skew(f)  # d/d dtheta of A R^T v with R <- R Exp(dtheta): A [f]x
+    J[:, :, sl["theta"]] = A @ skew(f)  # d/d dtheta of A R^T v with R <- R Exp(dtheta): A [f]x
     if lin is not None:
-        ART = A @ R.T
-        J[S:, :, 3:6] = np.einsum("ij,mjk->mik", ART, lin.K - dtau * lin.dK)
-    J[:, :, 6:9] = np.eye(3)
-    col = 9
-    if blocks.scale:
-        fx, fy, fz = f[:, 0], f[:, 1], f[:, 2]
-        J[:, 0, col + 0] = fx
-        J[:, 1, col + 1] = fy
-        J[:, 2, col + 2] = fz
-        J[:, 0, col + 3], J[:, 1, col + 3] = fy, fx
-        J[:, 0, col + 4], J[:, 2, col + 4] = fz, fx
-        J[:, 1, col + 5], J[:, 2, col + 5] = fz, fy
-        col += 6
-    if blocks.time_offset and lin is not None:
+        J[S:, :, sl["p"]] = np.einsum("ij,mjk->mik", A @ R.T, Kd)
+    J[:, :, sl["b"]] = np.eye(3)
+    if "e" in sl:
+        _scale_columns(J, f, blocks.scale, sl["e"])
+    if lin is not None and ("tau" in sl or "d" in sl):
         dv = lin.du + np.einsum("mij,j->mi", lin.dK, state.p)
-        J[S:, :, col] = -(dv @ R) @ A.T
+        col = -(dv @ R) @ A.T
+        if "tau" in sl:
+            J[S:, :, sl["tau"].start] = col
+        if "d" in sl:
+            J[S:, :, sl["d"].start] = col * rows.moving_t[:, None]
+    if "c" in sl:
+        J[:, :, sl["c"]] = np.eye(3) * t_rel[:, None, None]
+    if "k" in sl and ug is not None:
+        J[:, :, sl["k"].start] = (ug @ R) @ A.T
+    return r, J
+
+
+def _gyro_rows(
+    state: State, blocks: Blocks, lin: Linearisation | None, rows: Rows
+) -> tuple[FloatArray, FloatArray]:
+    """Gyroscope residuals ``(S + M, 3)`` and Jacobian (static rows: ``w = 0``)."""
+    sl = blocks.slices()
+    R = state.R
+    parts_w = [np.zeros_like(rows.static_u)]
+    meas = [rows.static_g]
+    if lin is not None:
+        dtau = (state.tau - lin.tau_k) + (state.d - lin.d_k) * rows.moving_t
+        parts_w.append(lin.w - dtau[:, None] * lin.dw)
+        meas.append(rows.moving_g)
+    w = np.concatenate(parts_w)
+    g = w @ R
+    r = g + state.bg - np.concatenate(meas)
+    J = np.zeros((len(w), 3, blocks.size))
+    J[:, :, sl["theta"]] = skew(g)
+    J[:, :, sl["bg"]] = np.eye(3)
+    if lin is not None and ("tau" in sl or "d" in sl):
+        S = len(rows.static_u)
+        col = -(lin.dw @ R)
+        if "tau" in sl:
+            J[S:, :, sl["tau"].start] = col
+        if "d" in sl:
+            J[S:, :, sl["d"].start] = col * rows.moving_t[:, None]
     return r, J
 
 
 def _apply(state: State, blocks: Blocks, delta: FloatArray) -> State:
-    R = state.R @ Rotation.from_rotvec(delta[0:3]).as_matrix()
-    col = 9
-    e = state.e
-    if blocks.scale:
-        e = e + delta[col : col + 6]
-        col += 6
-    tau = state.tau + (delta[col] if blocks.time_offset else 0.0)
-    return replace(state, R=R, p=state.p + delta[3:6], b=state.b + delta[6:9], e=e, tau=float(tau))
+    sl = blocks.slices()
+    R = state.R @ Rotation.from_rotvec(delta[sl["theta"]]).as_matrix()
+    E = state.E
+    if "e" in sl:
+        de = delta[sl["e"]]
+        E = E + (de.reshape(3, 3) if blocks.scale == SCALE_FULL else sym_from_e(de))
+    get = lambda name, old: old + delta[sl[name]] if name in sl else old  # noqa: E731
+    return replace(
+        state, R=R, p=state.p + delta[sl["p"]], b=state.b + delta[sl["b"]], E=E,
+        tau=float(get("tau", np.array([state.tau]))[0]), d=float(get("d", np.array([state.d]))[0]),
+        bg=get("bg", state.bg), c=get("c", state.c), k=float(get("k", np.array([state.k]))[0]),
+    )
+
+
+def _prior(state: State, blocks: Blocks) -> tuple[FloatArray, FloatArray]:
+    """Information ``(P, P)`` and gradient ``(P,)`` of the zero-mean priors (:data:`PRIOR_STD`)."""
+    sl = blocks.slices()
+    H = np.zeros((blocks.size, blocks.size))
+    g = np.zeros(blocks.size)
+    values = {
+        "e": state.E.reshape(-1) if blocks.scale == SCALE_FULL
+        else np.array([state.E[0, 0], state.E[1, 1], state.E[2, 2], state.E[0, 1], state.E[0, 2], state.E[1, 2]]),
+        "d": np.array([state.d]), "c": state.c, "k": np.array([state.k]),
+    }
+    for name, std in PRIOR_STD.items():
+        if name in sl:
+            idx = np.arange(sl[name].start, sl[name].stop)
+            H[idx, idx] = 1.0 / std**2
+            g[idx] = values[name] / std**2
+    return H, g
+
+
+def _limit_step(delta: FloatArray, blocks: Blocks) -> FloatArray:
+    """Scale a step down so that no rotation or position change exceeds :data:`MAX_STEP`."""
+    sl = blocks.slices()
+    ratio = max(np.linalg.norm(delta[sl[name]]) / limit for name, limit in MAX_STEP.items())
+    return delta / ratio if ratio > 1.0 else delta
 
 
 def _robust_sigma(r_norm: FloatArray) -> float:
@@ -159,63 +318,91 @@ def _robust_sigma(r_norm: FloatArray) -> float:
     return float(np.median(r_norm) / 1.5382)
 
 
+def _huber(norm: FloatArray, sigma: float) -> FloatArray:
+    scaled = norm / (HUBER_K * sigma)
+    return np.where(scaled <= 1.0, 1.0, 1.0 / np.maximum(scaled, 1e-300))
+
+
 def solve(
     state: State,
     blocks: Blocks,
-    static_u: FloatArray,
-    static_f: FloatArray,
-    static_weight: FloatArray,
-    moving_f: FloatArray,
-    linearise: Callable[[float], Linearisation] | None,
+    rows: Rows,
+    linearise: Callable[[float, float], Linearisation] | None,
     *,
     max_outer: int = 6,
     max_inner: int = 8,
     tol: float = 1e-9,
+    sigma_floor: float = SIGMA_FLOOR,
 ) -> Fit:
     """Robust Gauss-Newton (see module docstring).
 
     Args:
         state: start.
-        blocks: which optional blocks (scale/misalignment, time offset) are estimated.
-        static_u, static_f, static_weight: averaged stationary rows ``(S, 3)``, ``(S, 3)``, ``(S,)``.
-        moving_f: ``(M, 3)`` measured specific force of the moving samples.
-        linearise: ``tau -> Linearisation`` for the moving samples (``None``: static data only).
+        blocks: which optional blocks are estimated.
+        rows: the unit's measurements.
+        linearise: ``(tau, d) -> Linearisation`` of the moving samples (``None``: static data only).
     """
     if linearise is None:
-        blocks = replace(blocks, time_offset=False)
-    sw_static = np.sqrt(static_weight)
-    lin = linearise(state.tau) if linearise is not None else None
-    sigma = 1.0
+        blocks = replace(blocks, time_offset=False, clock_drift=False)
+    use_gyro = blocks.gyro and rows.static_g is not None
+    blocks = replace(blocks, gyro=use_gyro)
+    sw_static = np.sqrt(rows.static_weight)
+    S = len(rows.static_u)
+    lin = linearise(state.tau, state.d) if linearise is not None else None
+    sigma = sigma_g = 1.0
     iterations = 0
     null = np.zeros((blocks.size, 0))
     H = np.zeros((blocks.size, blocks.size))
-    r = np.zeros((0, 3))
-    w = np.zeros(0)
+    r = r_g = np.zeros((0, 3))
+    rho = rho_g = 1.0
+    cost = 0.0
     for _outer in range(max_outer):
         for _inner in range(max_inner):
             iterations += 1
-            r, J = _jacobian_and_residual(state, blocks, lin, static_u, static_f, moving_f)
-            # Row weights: static means count sqrt(n) times; Huber IRLS on the residual norm.
-            base = np.concatenate([sw_static, np.ones(len(r) - len(sw_static))])
+            r, J = _accel_rows(state, blocks, lin, rows)
+            base = np.concatenate([sw_static, np.ones(len(r) - S)])
             norm = np.linalg.norm(r, axis=1) * base
-            sigma = max(_robust_sigma(norm[len(sw_static) :] if len(r) > len(sw_static) else norm), 1e-12)
-            scaled = norm / (HUBER_K * sigma)
-            robust_w = np.where(scaled <= 1.0, 1.0, 1.0 / np.maximum(scaled, 1e-300))
-            w = (base**2) * robust_w
+            sigma = max(_robust_sigma(norm[S:] if len(r) > S else norm), sigma_floor)
+            w = (base**2) * _huber(norm, sigma) / sigma**2
             H, g = _normal_equations(J, r, w)
+            cost = float(np.sum(w * np.sum(r * r, axis=1)))
+            if use_gyro:
+                r_g, J_g = _gyro_rows(state, blocks, lin, rows)
+                norm_g = np.linalg.norm(r_g, axis=1) * base
+                sigma_g = max(_robust_sigma(norm_g[S:] if len(r_g) > S else norm_g), 0.1 * sigma_floor)
+                w_g = (base**2) * _huber(norm_g, sigma_g) / sigma_g**2
+                H_g, g_g = _normal_equations(J_g, r_g, w_g)
+                H, g = H + H_g, g + g_g
+                cost += float(np.sum(w_g * np.sum(r_g * r_g, axis=1)))
+            H_p, g_p = _prior(state, blocks)
+            H, g = H + H_p, g + g_p
             delta, null = _pinv_step(H, g)
-            state = _apply(state, blocks, delta)
+            state = _apply(state, blocks, _limit_step(delta, blocks))
             if np.max(np.abs(delta)) < tol:
                 break
         max_inner = min(max_inner, 3)  # later outer loops only follow the small change of tau
-        if lin is None or not blocks.time_offset or abs(state.tau - lin.tau_k) < 1e-7:
+        if lin is None or not (blocks.time_offset or blocks.clock_drift):
             break
-        lin = linearise(state.tau)
-    # Covariance from the last iteration's normal matrix (the final step changes it negligibly).
-    rho = _residual_correlation(r[len(sw_static) :])
-    cov = (sigma**2) * rho * _pinv(H)
-    cost = float(np.sum(w * np.sum(r * r, axis=1)))
-    return Fit(state, cov, sigma, null, blocks, cost, iterations, rho)
+        if abs(state.tau - lin.tau_k) < 1e-7 and abs(state.d - lin.d_k) * (np.ptp(rows.moving_t) + 1e-9) < 1e-7:
+            break
+        lin = linearise(state.tau, state.d)
+    # Covariance from the last iteration's normal matrix (the final step changes it negligibly),
+    # each sensor's information divided by its residuals' autocorrelation factor.
+    rho = _residual_correlation(r[S:])
+    info = H
+    if use_gyro:
+        rho_g = _residual_correlation(r_g[S:])
+        _, J_g = _gyro_rows(state, blocks, lin, rows)
+        base = np.concatenate([sw_static, np.ones(len(r_g) - S)])
+        w_g = (base**2) * _huber(np.linalg.norm(r_g, axis=1) * base, sigma_g) / sigma_g**2
+        H_g, _ = _normal_equations(J_g, r_g, w_g)
+        H_p, _ = _prior(state, blocks)
+        info = (H - H_g - H_p) / rho + H_g / rho_g + H_p
+    else:
+        H_p, _ = _prior(state, blocks)
+        info = (H - H_p) / rho + H_p
+    cov = _pinv(info)
+    return Fit(state, cov, sigma, null, blocks, cost, iterations, max(rho, rho_g), sigma_g if use_gyro else 0.0, r)
 
 
 def _normal_equations(J: FloatArray, r: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -226,7 +413,10 @@ def _normal_equations(J: FloatArray, r: FloatArray, w: FloatArray) -> tuple[Floa
 
 
 def _scaled_eig(H: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    d = np.sqrt(np.maximum(np.diag(H), 1e-300))
+    """Eigen-decomposition of ``D^-1 H D^-1`` with ``D = sqrt(diag H)`` floored at ``1e-7`` of its
+    largest entry (a parameter without information must not be divided by ~0)."""
+    diag = np.maximum(np.diag(H), 0.0)
+    d = np.sqrt(np.maximum(diag, 1e-14 * max(diag.max(), 1e-300)))
     Hs = H / np.outer(d, d)
     lam, V = np.linalg.eigh(Hs)
     return d, lam, V

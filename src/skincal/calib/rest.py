@@ -1,0 +1,229 @@
+"""When is a unit at rest? Rest detection that survives the noise of real joint states and IMUs.
+
+A unit on link ``L`` is at rest when joints ``1 .. L`` are (joints after ``L`` may move: they do not
+move the unit). Two sources say when a joint rests:
+
+* **the protocol segments** (``/segments``), when the dataset has them: joint ``j`` rests inside a
+  static segment and inside a dynamic segment that excites another joint;
+* **the joint positions**, otherwise: over a window of ``REST_WINDOW_S`` the mean speed from the
+  position change, ``|q(t + W/2) - q(t - W/2)| / W``, and the mean reported speed must both lie below
+  a threshold derived from the stream's own noise (encoder step and velocity noise, estimated from
+  second differences, which cancel any smooth motion), never below ``REST_SPEED_FLOOR``.
+
+No constant compares a single sample's ``qd`` or an estimated ``qdd`` with a fixed level: a
+controller's velocity noise of a few mrad/s would break that.
+
+Every rest run of a unit is then **cross-checked against the unit's own IMU**: its accelerometer
+(and gyroscope) spread inside the run must stay within ``STILL_FACTOR`` times the noise level
+measured over all of the unit's runs. A run in which the unit moved (a knock, a misdeclared
+segment, a joint that crept) is dropped and named in a warning.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from skincal.data.dataset import DYNAMIC, STATIC, JointStates, Segments
+from skincal.kinematics.transforms import FloatArray
+
+REST_WINDOW_S = 0.2
+"""Window over which a joint's mean speed is judged, s."""
+REST_SPEED_FLOOR = 2e-3
+"""Mean joint speed always counted as rest, rad/s (0.1 deg/s: 0.1 mrad in a 50 ms guard)."""
+NOISE_FACTOR = 5.0
+"""A joint moves when its windowed mean speed exceeds this many standard deviations of its noise."""
+GUARD_S = 0.06
+"""Samples this close to the edges of a rest run are not used (settling, stamp error), s."""
+MIN_RUN_SAMPLES = 5
+"""A rest run needs at least this many IMU samples after the guard."""
+STILL_FACTOR = 4.0
+"""A run whose IMU spread exceeds this multiple of the unit's typical rest spread moved."""
+STILL_FLOOR_ACCEL = 0.01
+"""Spread (std, m/s^2) of the accelerometer inside a run always accepted as still."""
+STILL_FLOOR_GYRO = 2e-3
+"""Spread (std, rad/s) of the gyroscope inside a run always accepted as still."""
+
+
+def second_difference_noise(x: FloatArray) -> FloatArray:
+    """Robust white-noise std per column of ``x`` ``(N, k)`` from its second differences.
+
+    ``d_i = x_{i+1} - 2 x_i + x_{i-1}`` cancels any locally linear signal and has variance
+    ``6 sigma^2`` for white noise; the MAD makes the estimate ignore the samples where the signal
+    curves (motion starts and stops): ``sigma = 1.4826 MAD(d) / sqrt(6)``.
+    """
+    x = np.asarray(x, dtype=float)
+    if x.shape[0] < 3:
+        return np.zeros(x.shape[1:])
+    d = x[2:] - 2.0 * x[1:-1] + x[:-2]
+    mad = np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+    return 1.4826 * mad / np.sqrt(6.0)
+
+
+@dataclass(frozen=True)
+class JointRest:
+    """Which joint rests when, on the joint stream's instants.
+
+    Attributes:
+        t: ``(N,)`` joint-stream instants, s.
+        rest: ``(N, n)`` True where joint ``j`` (0-based column) is at rest.
+        source: ``"segments"`` or ``"joint positions"``.
+        speed_threshold: ``(n,)`` windowed mean speed above which a joint moves, rad/s (data source).
+        velocity_noise: ``(n,)`` estimated white-noise std of the reported velocities, rad/s.
+        position_noise: ``(n,)`` estimated noise std of the reported positions (encoder step
+            included), rad.
+    """
+
+    t: FloatArray
+    rest: np.ndarray
+    source: str
+    speed_threshold: FloatArray
+    velocity_noise: FloatArray
+    position_noise: FloatArray
+
+    def unit_rest(self, t: FloatArray, link: int) -> np.ndarray:
+        """``(M,)`` True where joints ``1 .. link`` all rest at instants ``t`` (nearest joint sample)."""
+        tj = self.t
+        i = np.clip(np.searchsorted(tj, t), 1, tj.size - 1)
+        i -= (t - tj[i - 1]) < (tj[i] - t)
+        return np.all(self.rest[i, :link], axis=1)
+
+
+def _windowed_speed(t: FloatArray, x: FloatArray, window_s: float) -> FloatArray:
+    """``|x(t + W/2) - x(t - W/2)| / W`` per column at every instant (ends clamped), ``(N, k)``."""
+    lo = np.searchsorted(t, t - window_s / 2)
+    hi = np.clip(np.searchsorted(t, t + window_s / 2, side="right") - 1, 0, t.size - 1)
+    span = np.maximum(t[hi] - t[lo], 1e-12)[:, None]
+    return np.abs(x[hi] - x[lo]) / span
+
+
+def _windowed_mean(t: FloatArray, x: FloatArray, window_s: float) -> tuple[FloatArray, FloatArray]:
+    """Mean of ``x`` over ``[t - W/2, t + W/2]`` per column and the sample count, by cumulative sums."""
+    lo = np.searchsorted(t, t - window_s / 2)
+    hi = np.searchsorted(t, t + window_s / 2, side="right")
+    c = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
+    n = np.maximum(hi - lo, 1)
+    return (c[hi] - c[lo]) / n[:, None], n
+
+
+def joint_rest_from_data(joints: JointStates, window_s: float = REST_WINDOW_S) -> JointRest:
+    """Rest of each joint from its positions and velocities over windows (module docstring)."""
+    t = np.asarray(joints.t, dtype=float)
+    q = np.asarray(joints.q, dtype=float)
+    qd = np.asarray(joints.qd, dtype=float)
+    sigma_v = second_difference_noise(qd)
+    sigma_q = second_difference_noise(q)
+    # An encoder step shows as the smallest non-zero position change; its rounding error is step / sqrt(12).
+    dq = np.abs(np.diff(q, axis=0))
+    step = np.array([np.min(c[c > 1e-12]) if np.any(c > 1e-12) else 0.0 for c in dq.T])
+    sigma_q = np.maximum(sigma_q, step / np.sqrt(12.0))
+    speed_from_q = _windowed_speed(t, q, window_s)
+    mean_qd, n = _windowed_mean(t, qd, window_s)
+    # Std of each windowed estimate under pure noise: sqrt(2) sigma_q / W and sigma_v / sqrt(n).
+    thr_q = np.maximum(REST_SPEED_FLOOR, NOISE_FACTOR * np.sqrt(2.0) * sigma_q / window_s)
+    thr_v = np.maximum(REST_SPEED_FLOOR, NOISE_FACTOR * sigma_v[None, :] / np.sqrt(n)[:, None])
+    rest = (speed_from_q < thr_q) & (np.abs(mean_qd) < thr_v)
+    return JointRest(t, rest, "joint positions", thr_q, sigma_v, sigma_q)
+
+
+def joint_rest_from_segments(joints: JointStates, segments: Segments) -> JointRest:
+    """Rest of each joint from the protocol segments (module docstring); noise figures from the data."""
+    t = np.asarray(joints.t, dtype=float)
+    n = np.asarray(joints.q).shape[1]
+    rest = np.zeros((t.size, n), dtype=bool)
+    kind = np.asarray(segments.kind)
+    joint = np.asarray(segments.joint)
+    for a, b, k, j in zip(np.asarray(segments.t_start), np.asarray(segments.t_end), kind, joint, strict=True):
+        inside = (t >= a) & (t <= b)
+        if k == STATIC:
+            rest[inside] = True
+        elif k == DYNAMIC and 0 <= j < n:
+            others = np.ones(n, dtype=bool)
+            others[j] = False
+            rest[np.ix_(inside, others)] = True
+    data = joint_rest_from_data(joints)
+    return JointRest(t, rest, "segments", data.speed_threshold, data.velocity_noise, data.position_noise)
+
+
+def joint_rest(joints: JointStates, segments: Segments | None) -> JointRest:
+    """From the segments when there are any, else from the joint data."""
+    if segments is not None and len(segments) > 0:
+        return joint_rest_from_segments(joints, segments)
+    return joint_rest_from_data(joints)
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Half-open index ranges ``[start, end)`` of the true runs of a boolean mask."""
+    padded = np.concatenate([[False], np.asarray(mask, dtype=bool), [False]])
+    edges = np.flatnonzero(np.diff(padded.astype(np.int8)))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
+@dataclass(frozen=True)
+class RestRuns:
+    """A unit's rest runs after the guard and the IMU cross-check.
+
+    Attributes:
+        bounds: ``(S, 2)`` half-open sample index ranges into the unit's samples.
+        rest: ``(M,)`` True for the samples inside a kept run (guard applied).
+        moving: ``(M,)`` True for samples during which some joint ``<= link`` moves.
+        dropped: ``(D, 2)`` start/end times (s) of runs dropped because the unit moved in them.
+        accel_noise: typical accelerometer std inside a run, m/s^2.
+        gyro_noise: typical gyroscope std inside a run, rad/s (0 without a gyroscope).
+        warnings: one per dropped run (or a summary when there are many).
+    """
+
+    bounds: np.ndarray
+    rest: np.ndarray
+    moving: np.ndarray
+    dropped: FloatArray
+    accel_noise: float
+    gyro_noise: float
+    warnings: tuple[str, ...]
+
+
+def _spread(x: FloatArray, a: int, b: int) -> float:
+    return float(np.max(np.std(x[a:b], axis=0)))
+
+
+def unit_rest_runs(
+    rest_mask: np.ndarray, t: FloatArray, accel: FloatArray, gyro: FloatArray | None, guard_s: float = GUARD_S
+) -> RestRuns:
+    """Rest runs of one unit: the joint-derived ``rest_mask`` ``(M,)`` at its instants ``t``, shrunk by
+    the guard, then checked against the unit's own accelerometer ``(M, 3)`` and gyroscope."""
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.01
+    guard = int(np.ceil(guard_s / dt))
+    candidates = []
+    for start, end in runs(rest_mask):
+        a, b = start + guard, end - guard
+        if b - a >= MIN_RUN_SAMPLES:
+            candidates.append((a, b))
+    if not candidates:
+        empty = np.zeros(t.size, dtype=bool)
+        return RestRuns(np.zeros((0, 2), dtype=np.intp), empty, ~rest_mask, np.zeros((0, 2)), 0.0, 0.0, ())
+    sa = np.array([_spread(accel, a, b) for a, b in candidates])
+    level_a = max(float(np.median(sa)), 1e-12)
+    limit_a = max(STILL_FACTOR * level_a, STILL_FLOOR_ACCEL)
+    still = sa <= limit_a
+    level_g = 0.0
+    if gyro is not None:
+        sg = np.array([_spread(gyro, a, b) for a, b in candidates])
+        level_g = max(float(np.median(sg)), 1e-12)
+        still &= sg <= max(STILL_FACTOR * level_g, STILL_FLOOR_GYRO)
+    keep = [c for c, s in zip(candidates, still, strict=True) if s]
+    gone = [c for c, s in zip(candidates, still, strict=True) if not s]
+    rest = np.zeros(t.size, dtype=bool)
+    for a, b in keep:
+        rest[a:b] = True
+    dropped = np.array([[t[a], t[b - 1]] for a, b in gone]).reshape(-1, 2)
+    warnings: list[str] = []
+    if gone:
+        where = ", ".join(f"{t0:.1f}-{t1:.1f} s" for t0, t1 in dropped[:5]) + (" ..." if len(gone) > 5 else "")
+        warnings.append(
+            f"static segment moved: {len(gone)} of {len(candidates)} rest period(s) dropped because the unit's "
+            f"IMU moved in them ({where}; accelerometer spread above {limit_a:.3g} m/s^2)"
+        )
+    return RestRuns(
+        np.array(keep, dtype=np.intp).reshape(-1, 2), rest, ~rest_mask, dropped, level_a, level_g, tuple(warnings)
+    )

@@ -1,0 +1,164 @@
+"""Time alignment of a unit's IMU stream with the robot's joint stream, found globally.
+
+A unit stamped by its own clock (WiFi skin without time sync, a driver's buffering) can be off by
+a large fraction of a second. Gauss-Newton on the time offset converges only within about a
+quarter period of the excitation, so a **coarse search** runs first: the cross-correlation, over
+lags up to ``+-max_offset_s``, of a rotation-invariant motion signal measured by the unit with the
+same signal predicted from the joint states for each candidate link ``k``:
+
+* with a gyroscope: ``m(t) = |w_meas(t) - b|`` (``b`` the median reading, the bias at rest) against
+  ``p_k(t) = |w_k(t)|``, the angular speed of link frame ``k`` (forward kinematics; independent of
+  the unit's unknown pose);
+* accelerometer only: ``m(t)`` = the accelerometer's spread over a short window against
+  ``p_k(t) = sum_{j <= k} |qd_j(t)|``.
+
+Both are mean-removed and compared on a uniform grid by FFT; the lag of the highest normalised
+correlation (refined by a parabola through its neighbours) is the offset, the link whose signal
+correlates best a hint for link discovery.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from skincal.kinematics.transforms import FloatArray
+
+COARSE_RATE_HZ = 100.0
+"""Grid of the coarse search, Hz (10 ms lags, refined below a millisecond by the parabola)."""
+MAX_OFFSET_S = 0.5
+"""Largest time offset searched, s."""
+SPREAD_WINDOW_S = 0.1
+"""Window of the accelerometer-spread signal (no gyroscope), s."""
+
+
+@dataclass(frozen=True)
+class MotionProfile:
+    """Predicted motion signals of every link on a uniform grid (computed once per dataset), with
+    their mean-removed spectra for the correlation (computed once, shared by every unit).
+
+    Attributes:
+        t: ``(G,)`` grid instants, s (uniform).
+        angular_speed: ``(G, n)`` ``|w_k|`` of link frame ``k`` (column ``k - 1``), rad/s.
+        joint_speed: ``(G, n)`` cumulative ``sum_{j <= k} |qd_j|``, rad/s.
+        fft_size: length of the zero-padded transforms (room for every lag searched).
+        spectra: ``{"gyroscope": (F, n), "accelerometer": (F, n)}`` conjugate real FFTs of the two
+            predicted signals.
+    """
+
+    t: FloatArray
+    angular_speed: FloatArray
+    joint_speed: FloatArray
+    fft_size: int
+    spectra: dict[str, FloatArray]
+
+
+def motion_profile(t: FloatArray, angular_speed: FloatArray, joint_speed: FloatArray) -> MotionProfile:
+    """:class:`MotionProfile` from predicted signals on a uniform grid ``t`` ``(G,)``."""
+    size = 1 << int(np.ceil(np.log2(2 * t.size)))
+    spectra = {
+        name: np.conj(np.fft.rfft(x - x.mean(axis=0), size, axis=0))
+        for name, x in (("gyroscope", angular_speed), ("accelerometer", joint_speed))
+    }
+    return MotionProfile(t, angular_speed, joint_speed, size, spectra)
+
+
+@dataclass(frozen=True)
+class OffsetSearch:
+    """Outcome of :func:`coarse_time_offset`.
+
+    Attributes:
+        offset_s: the IMU latency found: the sample stamped ``t`` measured the motion at ``t - offset_s``.
+        link: the 1-based link whose predicted signal correlates best.
+        correlation: ``(n,)`` peak normalised correlation per candidate link.
+        sharpness: peak correlation minus the best correlation more than ``0.25 s`` away from it
+            (small: the offset is uncertain).
+        source: ``"gyroscope"`` or ``"accelerometer"``.
+    """
+
+    offset_s: float
+    link: int
+    correlation: FloatArray
+    sharpness: float
+    source: str
+
+
+def _normalised_xcorr(m: FloatArray, spectrum: FloatArray, p: FloatArray, size: int, max_lag: int) -> FloatArray:
+    """Normalised correlation ``c[L]`` of ``m(t)`` with ``p(t - L)`` for ``L = -max_lag .. max_lag``
+    (``spectrum`` the conjugate FFT of the mean-removed ``p``)."""
+    m = m - m.mean()
+    full = np.fft.irfft(np.fft.rfft(m, size) * spectrum, size)
+    lags = np.arange(-max_lag, max_lag + 1)
+    c = full[lags % size]
+    denom = np.linalg.norm(m) * np.linalg.norm(p - p.mean())
+    return c / denom if denom > 0 else np.zeros_like(c)
+
+
+def _parabola_peak(c: FloatArray, i: int) -> float:
+    if 0 < i < c.size - 1:
+        den = c[i - 1] - 2 * c[i] + c[i + 1]
+        if den < 0:
+            return float(i + 0.5 * (c[i - 1] - c[i + 1]) / den)
+    return float(i)
+
+
+def _spread_signal(t: FloatArray, accel: FloatArray, window_s: float) -> FloatArray:
+    lo = np.searchsorted(t, t - window_s / 2)
+    hi = np.searchsorted(t, t + window_s / 2, side="right")
+    c1 = np.concatenate([np.zeros((1, 3)), np.cumsum(accel, axis=0)])
+    c2 = np.concatenate([np.zeros((1, 3)), np.cumsum(accel * accel, axis=0)])
+    n = np.maximum(hi - lo, 1)[:, None]
+    mean = (c1[hi] - c1[lo]) / n
+    var = np.maximum((c2[hi] - c2[lo]) / n - mean * mean, 0.0)
+    return np.sqrt(var.sum(axis=1))
+
+
+def coarse_time_offset(
+    profile: MotionProfile,
+    t: FloatArray,
+    accel: FloatArray,
+    gyro: FloatArray | None,
+    links: range | list[int] | None = None,
+    max_offset_s: float = MAX_OFFSET_S,
+) -> OffsetSearch:
+    """Coarse IMU time offset by cross-correlation (module docstring).
+
+    Args:
+        profile: the dataset's :class:`MotionProfile`.
+        t: ``(M,)`` the unit's stamps, s; ``accel`` ``(M, 3)`` m/s^2, ``gyro`` ``(M, 3)`` rad/s or ``None``.
+        links: candidate 1-based links (default: all).
+    """
+    g = profile.t
+    n = profile.angular_speed.shape[1]
+    candidates = list(range(1, n + 1)) if links is None else list(links)
+    if gyro is not None:
+        b = np.median(gyro, axis=0)
+        measured = np.linalg.norm(gyro - b, axis=1)
+        predicted = profile.angular_speed
+        source = "gyroscope"
+    else:
+        measured = _spread_signal(t, accel, SPREAD_WINDOW_S)
+        predicted = profile.joint_speed
+        source = "accelerometer"
+    # The unit's signal on the grid (zero-order where it has gaps: dropped samples are rare).
+    inside = (g >= t[0]) & (g <= t[-1])
+    m = np.zeros(g.size)
+    m[inside] = np.interp(g[inside], t, measured)
+    m[~inside] = np.median(measured)
+    dt = float(g[1] - g[0])
+    max_lag = max(1, int(np.ceil(max_offset_s / dt)))
+    best = (-np.inf, 0.0, candidates[0], np.zeros(0))
+    corr = np.full(n, np.nan)
+    spectra = profile.spectra[source]
+    for k in candidates:
+        c = _normalised_xcorr(m, spectra[:, k - 1], predicted[:, k - 1], profile.fft_size, max_lag)
+        i = int(np.argmax(c))
+        corr[k - 1] = float(c[i])
+        if c[i] > best[0]:
+            best = (float(c[i]), (_parabola_peak(c, i) - max_lag) * dt, k, c)
+    peak, offset, link, c = best
+    lags = (np.arange(c.size) - max_lag) * dt
+    far = np.abs(lags - offset) > 0.25
+    sharpness = peak - float(c[far].max()) if np.any(far) else peak
+    return OffsetSearch(float(offset), int(link), corr, float(sharpness), source)
