@@ -101,3 +101,18 @@ def test_jobs_and_local_runner_order():
     seen = []
     assert map_local(abs, [-3, 1, -2], workers=2, progress=seen.append) == [3, 1, 2]
     assert sorted(seen) == [1, 2, 3]
+
+
+def test_dask_cluster_on_loopback_repeats_local_run(tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    job = rb.Job("sawyer", "analytic", "clock-offset", 0, "fast")
+    local = rb.run_job(job)
+    out = tmp_path / "dask.json"
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, protocol="tcp", host="127.0.0.1", dashboard_address=None
+    ) as cluster:
+        assert main(["benchmark", "robustness", "--quick", "--robots", "sawyer", "--backends", "analytic",
+                     "--faults", "clock-offset", "--dask", cluster.scheduler_address, "--out", str(out)]) == 0
+    (rec,) = json.loads(out.read_text())["records"]
+    for name, unit in local["units"].items():
+        assert rec["units"][name]["position_error_mm"] == pytest.approx(unit["position_error_mm"])

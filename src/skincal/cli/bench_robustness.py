@@ -34,7 +34,7 @@ def robustness_table(config, cells: list[dict[str, Any]]):
                          ("rot mean/max deg", "right"), ("links", "right"), ("z rms", "right"),
                          ("calibrated", "right"), ("warned", "right"), ("beyond", "right"), ("silent", "right"),
                          ("targets", "left")):
-        table.add_column(col, justify=justify)
+        table.add_column(col, justify=justify, no_wrap=col in ("backend", "fault"))
     previous = None
     for c in cells:
         if previous is not None and (c["robot"], c["backend"]) != previous:
