@@ -70,8 +70,8 @@ class MethodSpec:
     ``prepare(dataset, interpolator)`` run once per dataset whose result reaches every unit as
     ``UnitProblem.shared``; ``exact_joint_states=False`` when the method only needs the joint
     states of the samples to find rest periods (see :func:`unit_samples`); ``align(shared, imu)``, when
-    given, returns the unit's coarse time alignment (an object with ``offset_s``) applied before
-    the samples are gathered; ``needs_segments=False`` when the method finds rests itself (a
+    given, returns the unit's coarse time alignment (an object with ``offset_s`` and, when its
+    stamps had to be corrected, ``stamps``) applied before the samples are gathered; ``needs_segments=False`` when the method finds rests itself (a
     dataset without ``/segments`` is then segmented automatically only to tag samples, and a
     failure to do so is not fatal)."""
 
@@ -221,6 +221,8 @@ def calibrate(
         outcomes = serial()
     elif "fork" in multiprocessing.get_all_start_methods():
         interpolator.warm()  # computed once here, inherited by every child
+        if hasattr(shared, "warm"):
+            shared.warm()
         _FORKED[id(one)] = one
         pool = ProcessPoolExecutor(
             max_workers=n_workers, mp_context=multiprocessing.get_context("fork"), initializer=_one_blas_thread
@@ -299,6 +301,9 @@ def calibrate_unit(
     if spec.align is not None:
         alignment = spec.align(shared, dataset.imu[unit])
         offset = float(alignment.offset_s)
+        stamps = getattr(alignment, "stamps", None)  # the unit's stamps corrected by the alignment
+        if stamps is not None:
+            dataset = replace(dataset, imu={**dataset.imu, unit: replace(dataset.imu[unit], t=stamps)})
     samples = unit_samples(
         dataset, unit, time_offset_s=offset, interpolator=interpolator, exact_joint_states=spec.exact_joint_states
     )

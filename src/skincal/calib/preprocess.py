@@ -15,6 +15,7 @@ import threading
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import maximum_filter1d, uniform_filter1d
 from scipy.signal import savgol_coeffs, savgol_filter
 
 from skincal.data.dataset import DYNAMIC, STATIC, Dataset, JointStates, Segments
@@ -93,16 +94,28 @@ def _kinks(x: FloatArray, window: int, sigma: FloatArray, floor: float) -> np.nd
     There an acceleration step (a protocol's excitation starting at full acceleration, a stop)
     makes any smoothed derivative wrong for about half a window on each side."""
     r = x - savgol_filter(x, window, 3, axis=0, mode="interp")
-    kernel = np.ones(window) / window
-    rms = np.sqrt(np.stack([np.convolve(c * c, kernel, mode="same") for c in r.T], axis=1))
+    rms = np.sqrt(np.maximum(uniform_filter1d(r * r, window, axis=0, mode="nearest"), 0.0))
     bad = np.any(rms > KINK_FACTOR * sigma + floor, axis=1)
-    return np.convolve(bad, np.ones(window), mode="same") > 0
+    return maximum_filter1d(bad.astype(np.int8), window, mode="nearest") > 0
 
 
-def _robust_noise(x: FloatArray, order: int) -> FloatArray:
-    """White-noise std per column from ``order``-th differences (they cancel a polynomial signal of
-    lower degree): ``sigma = 1.4826 MAD(diff) / sqrt(C(2 order, order))``."""
-    d = np.diff(np.asarray(x, dtype=float), n=order, axis=0)
+NOISE_SAMPLES = 50_000
+"""Differences used by :func:`white_noise_std` (evenly strided over the stream): the MAD of 50 000
+samples is within 0.5 % of the full stream's."""
+
+
+def white_noise_std(x: FloatArray, order: int = 2) -> FloatArray:
+    """Robust white-noise std per column of ``x`` ``(N, k)`` from its ``order``-th differences.
+
+    They cancel any polynomial signal of lower degree and have variance ``C(2 order, order)
+    sigma^2`` for white noise; the MAD makes the estimate ignore the samples where the signal
+    curves more (motion starts and stops): ``sigma = 1.4826 MAD(diff) / sqrt(C(2 order, order))``.
+    """
+    x = np.asarray(x, dtype=float)
+    if x.shape[0] <= order:
+        return np.zeros(x.shape[1:])
+    d = np.diff(x, n=order, axis=0)
+    d = d[:: max(1, d.shape[0] // NOISE_SAMPLES)]  # a median needs no more: strided, not the first part
     mad = np.median(np.abs(d - np.median(d, axis=0)), axis=0)
     return 1.4826 * mad / np.sqrt(float(math.comb(2 * order, order)))
 
@@ -176,21 +189,24 @@ def condition_joint_stream(
                 t, regularised = grid, True
                 dt = float(np.median(np.diff(t)))
     uniform = np.max(np.abs(np.diff(t) - dt)) <= 0.01 * dt
-    sigma_v = _robust_noise(qd, 2)
+    sigma_v = white_noise_std(qd, 2)
     dq = np.abs(np.diff(q, axis=0))
     step = np.array([np.min(c[c > 1e-12]) if np.any(c > 1e-12) else 0.0 for c in dq.T])
-    sigma_q = np.maximum(_robust_noise(q, 3), step / np.sqrt(12.0))
+    sigma_q = np.maximum(white_noise_std(q, 3), step / np.sqrt(12.0))
     window = max(5, int(round(window_s / dt)) | 1)
+    window_q = max(window, (POSITION_POLYORDER + 2) | 1)  # an order-5 fit needs 7 samples or more
     noise_v = float(np.max(sigma_v)) * np.linalg.norm(savgol_coeffs(window, 3, deriv=1, delta=dt))
-    noise_q = float(np.max(sigma_q)) * np.linalg.norm(savgol_coeffs(window, POSITION_POLYORDER, deriv=2, delta=dt))
+    noise_q = float(np.max(sigma_q)) * np.linalg.norm(
+        savgol_coeffs(window_q, POSITION_POLYORDER, deriv=2, delta=dt)
+    )
     info = dict(regularised_stamps=regularised, stamp_jitter_s=jitter, position_noise=sigma_q, velocity_noise=sigma_v)
-    if t.shape[0] <= window:
+    if t.shape[0] <= window_q:
         return joints, JointConditioning(source="velocities", qdd_noise=noise_v, **info)
     if uniform and noise_q < noise_v:
-        qd_q = savgol_filter(q, window, POSITION_POLYORDER, deriv=1, delta=dt, axis=0, mode="interp")
-        qdd_q = savgol_filter(q, window, POSITION_POLYORDER, deriv=2, delta=dt, axis=0, mode="interp")
+        qd_q = savgol_filter(q, window_q, POSITION_POLYORDER, deriv=1, delta=dt, axis=0, mode="interp")
+        qdd_q = savgol_filter(q, window_q, POSITION_POLYORDER, deriv=2, delta=dt, axis=0, mode="interp")
         out = JointStates(t=t, q=q, qd=qd_q, qdd=qdd_q)
-        kinks = _kinks(q, window, sigma_q, KINK_FLOOR["positions"])
+        kinks = _kinks(q, window_q, sigma_q, KINK_FLOOR["positions"])
         return out, JointConditioning(source="positions", qdd_noise=noise_q, unreliable=kinks, **info)
     out = joints if not regularised else JointStates(t=t, q=q, qd=qd, qdd=joints.qdd)
     kinks = _kinks(qd, window, sigma_v, KINK_FLOOR["velocities"])

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from skincal.calib.preprocess import white_noise_std
 from skincal.data.dataset import DYNAMIC, STATIC, JointStates, Segments
 from skincal.kinematics.transforms import FloatArray
 
@@ -47,18 +48,10 @@ STILL_FLOOR_GYRO = 2e-3
 
 
 def second_difference_noise(x: FloatArray) -> FloatArray:
-    """Robust white-noise std per column of ``x`` ``(N, k)`` from its second differences.
-
-    ``d_i = x_{i+1} - 2 x_i + x_{i-1}`` cancels any locally linear signal and has variance
-    ``6 sigma^2`` for white noise; the MAD makes the estimate ignore the samples where the signal
-    curves (motion starts and stops): ``sigma = 1.4826 MAD(d) / sqrt(6)``.
-    """
-    x = np.asarray(x, dtype=float)
-    if x.shape[0] < 3:
-        return np.zeros(x.shape[1:])
-    d = x[2:] - 2.0 * x[1:-1] + x[:-2]
-    mad = np.median(np.abs(d - np.median(d, axis=0)), axis=0)
-    return 1.4826 * mad / np.sqrt(6.0)
+    """Robust white-noise std per column of ``x`` ``(N, k)`` from its second differences
+    (:func:`~skincal.calib.preprocess.white_noise_std` of order 2): ``d_i = x_{i+1} - 2 x_i + x_{i-1}``
+    cancels any locally linear signal and has variance ``6 sigma^2`` for white noise."""
+    return white_noise_std(x, 2)
 
 
 @dataclass(frozen=True)
@@ -69,7 +62,8 @@ class JointRest:
         t: ``(N,)`` joint-stream instants, s.
         rest: ``(N, n)`` True where joint ``j`` (0-based column) is at rest.
         source: ``"segments"`` or ``"joint positions"``.
-        speed_threshold: ``(n,)`` windowed mean speed above which a joint moves, rad/s (data source).
+        speed_threshold: ``(n,)`` windowed mean speed above which a joint moves, rad/s (NaN when the
+            rests come from the segments).
         velocity_noise: ``(n,)`` estimated white-noise std of the reported velocities, rad/s.
         position_noise: ``(n,)`` estimated noise std of the reported positions (encoder step
             included), rad.
@@ -127,8 +121,11 @@ def joint_rest_from_data(joints: JointStates, window_s: float = REST_WINDOW_S) -
     return JointRest(t, rest, "joint positions", thr_q, sigma_v, sigma_q)
 
 
-def joint_rest_from_segments(joints: JointStates, segments: Segments) -> JointRest:
-    """Rest of each joint from the protocol segments (module docstring); noise figures from the data."""
+def joint_rest_from_segments(
+    joints: JointStates, segments: Segments, noise: tuple[FloatArray, FloatArray] | None = None
+) -> JointRest:
+    """Rest of each joint from the protocol segments (module docstring); noise figures ``(position,
+    velocity)`` as given (already estimated elsewhere) or from the data."""
     t = np.asarray(joints.t, dtype=float)
     n = np.asarray(joints.q).shape[1]
     rest = np.zeros((t.size, n), dtype=bool)
@@ -142,14 +139,17 @@ def joint_rest_from_segments(joints: JointStates, segments: Segments) -> JointRe
             others = np.ones(n, dtype=bool)
             others[j] = False
             rest[np.ix_(inside, others)] = True
-    data = joint_rest_from_data(joints)
-    return JointRest(t, rest, "segments", data.speed_threshold, data.velocity_noise, data.position_noise)
+    sigma_q, sigma_v = noise if noise is not None else (second_difference_noise(joints.q), second_difference_noise(joints.qd))
+    return JointRest(t, rest, "segments", np.full(n, np.nan), sigma_v, sigma_q)
 
 
-def joint_rest(joints: JointStates, segments: Segments | None) -> JointRest:
-    """From the segments when there are any, else from the joint data."""
+def joint_rest(
+    joints: JointStates, segments: Segments | None, noise: tuple[FloatArray, FloatArray] | None = None
+) -> JointRest:
+    """From the segments when there are any, else from the joint data (``noise``: known
+    ``(position, velocity)`` noise std per joint, only used with segments)."""
     if segments is not None and len(segments) > 0:
-        return joint_rest_from_segments(joints, segments)
+        return joint_rest_from_segments(joints, segments, noise)
     return joint_rest_from_data(joints)
 
 

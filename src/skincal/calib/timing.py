@@ -162,3 +162,72 @@ def coarse_time_offset(
     far = np.abs(lags - offset) > 0.25
     sharpness = peak - float(c[far].max()) if np.any(far) else peak
     return OffsetSearch(float(offset), int(link), corr, float(sharpness), source)
+
+
+STEP_SIGMAS = 8.0
+"""An interval longer than the stream's whole periods by this many stamp-jitter std is a clock step..."""
+STEP_MIN_S = 20e-6
+"""...and by at least this much, s."""
+MIN_STEPS = 3
+"""Fewer steps than this are not taken as periodic re-syncs."""
+
+
+@dataclass(frozen=True)
+class ClockSteps:
+    """Periodic re-sync steps found in a unit's stamps (:func:`find_clock_steps`).
+
+    A sensor clock that runs at ``1 + drift`` of the true rate, with stamps re-synchronised to the
+    host every ``period_s``, makes stamps that are regular between re-syncs and jump by
+    ``-drift * period`` at each: a sawtooth ``tau(t) = offset + drift (t - t_sync)``.
+
+    Attributes:
+        n_steps: steps found.
+        period_s: mean interval between them, s.
+        mean_step_s: mean step, s (positive: stamps jump forward, the sensor clock is slow).
+        drift_ppm: ``-mean_step / period`` in ppm.
+        sync_stamps: ``(n_steps,)`` the first stamp after each step, s.
+    """
+
+    n_steps: int
+    period_s: float
+    mean_step_s: float
+    drift_ppm: float
+    sync_stamps: FloatArray
+
+    def correct(self, t: FloatArray) -> FloatArray:
+        """Stamps with the sawtooth removed: ``t - drift (t - t_sync)`` (the last re-sync at or before
+        each stamp; one period before the first step for the stamps before it), s."""
+        syncs = np.concatenate([[self.sync_stamps[0] - self.period_s], self.sync_stamps])
+        i = np.clip(np.searchsorted(syncs, t, side="right") - 1, 0, syncs.size - 1)
+        return t - 1e-6 * self.drift_ppm * (t - syncs[i])
+
+
+def find_clock_steps(t: FloatArray) -> ClockSteps | None:
+    """Periodic re-sync steps of a stamp stream ``t`` ``(M,)`` s, or ``None`` when the stamps show none.
+
+    Each interval is compared with its nearest whole number of median periods (dropped samples
+    leave whole periods); what is left is stamp jitter, except at a re-sync, where it stands out by
+    :data:`STEP_SIGMAS` (robust jitter std) and :data:`STEP_MIN_S`. Steps must share their sign and
+    recur at least :data:`MIN_STEPS` times; with jittery stamps (a millisecond) the steps of a few
+    hundred ppm cannot be seen and ``None`` is returned.
+    """
+    dt = np.diff(np.asarray(t, dtype=float))
+    if dt.size < 10:
+        return None
+    P = float(np.median(dt))
+    whole = np.maximum(np.rint(dt / P), 1.0)
+    resid = dt - whole * P
+    jitter = 1.4826 * float(np.median(np.abs(resid - np.median(resid))))
+    threshold = max(STEP_SIGMAS * jitter, STEP_MIN_S)
+    idx = np.flatnonzero(np.abs(resid) > threshold)
+    if idx.size < MIN_STEPS:
+        return None
+    steps = resid[idx]
+    if not (np.all(steps > 0) or np.all(steps < 0)):
+        return None
+    syncs = t[idx + 1]
+    period = float(np.median(np.diff(syncs)))
+    if period <= 0:
+        return None
+    mean_step = float(np.mean(steps))
+    return ClockSteps(int(idx.size), period, mean_step, -mean_step / period * 1e6, syncs)

@@ -244,12 +244,6 @@ class LinkMotion:
     v_origin: FloatArray
     a_origin: FloatArray
 
-    def select(self, rows: np.ndarray) -> LinkMotion:
-        """The same motion at the samples ``rows`` (a boolean mask or indices over ``N``)."""
-        return LinkMotion(
-            self.T_base_link[rows], self.omega[rows], self.omega_dot[rows], self.v_origin[rows], self.a_origin[rows]
-        )
-
     def point(self, link: int, p_link: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Position, velocity and acceleration ``(N, 3)`` in the base frame of a point on ``link``.
 

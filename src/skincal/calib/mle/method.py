@@ -48,7 +48,14 @@ from skincal.calib.mle.solver import (
 )
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.rest import JointRest, joint_rest
-from skincal.calib.timing import MotionProfile, OffsetSearch, coarse_time_offset, motion_profile
+from skincal.calib.timing import (
+    ClockSteps,
+    MotionProfile,
+    OffsetSearch,
+    coarse_time_offset,
+    find_clock_steps,
+    motion_profile,
+)
 from skincal.data.dataset import Dataset, ImuStream
 from skincal.data.result import UnitResult
 from skincal.errors import CalibrationError
@@ -99,20 +106,51 @@ class Shared:
     profile: MotionProfile
     interpolator: JointInterpolator
 
+    def warm(self) -> None:
+        """Fill the lazily built tables now (before forking workers that then share them)."""
+        self.table.warm()
+
 
 def prepare(dataset: Dataset, interpolator: JointInterpolator) -> Shared:
     """Once per dataset: the link signals of every link on a uniform grid and the joint rests."""
-    rest = joint_rest(dataset.joints, dataset.segments)
-    table = SignalTable(dataset.robot, interpolator, np.asarray(dataset.gravity, dtype=float), rest)
+    c = interpolator.conditioning
+    noise = None if c.velocity_noise is None else (c.position_noise, c.velocity_noise)
+    rest = joint_rest(dataset.joints, dataset.segments, noise=noise)
+    table = SignalTable(dataset.robot, interpolator, np.asarray(dataset.gravity, dtype=float))
     return Shared(table, rest, motion_profile(table.grid_t, table.angular_speed, table.joint_speed), interpolator)
 
 
-def align(shared: Shared, imu: ImuStream) -> OffsetSearch:
-    """Coarse time offset of one unit's stream (:func:`skincal.calib.timing.coarse_time_offset`)."""
+@dataclass(frozen=True)
+class Alignment:
+    """A unit's stream put on the joint clock before calibration: periodic re-sync steps removed
+    from its stamps (when its stamps show them) and the coarse time offset.
+
+    Attributes:
+        offset_s: coarse offset (the sample stamped ``t`` measured the motion at ``t - offset_s``).
+        search: the cross-correlation's outcome.
+        steps: the re-sync steps found, or ``None``.
+        stamps: ``(M,)`` the corrected stamps, or ``None`` when unchanged.
+    """
+
+    offset_s: float
+    search: OffsetSearch
+    steps: ClockSteps | None = None
+    stamps: FloatArray | None = None
+
+
+def align(shared: Shared, imu: ImuStream) -> Alignment:
+    """Re-sync steps (:func:`~skincal.calib.timing.find_clock_steps`) and coarse time offset
+    (:func:`~skincal.calib.timing.coarse_time_offset`) of one unit's stream."""
+    t = np.asarray(imu.t, dtype=float)
+    steps = find_clock_steps(t)
+    stamps = steps.correct(t) if steps is not None else None
+    if stamps is not None:
+        t = stamps
     accel = np.asarray(imu.accel, dtype=float)
     finite = np.all(np.isfinite(accel), axis=1)
     gyro = None if imu.gyro is None else np.asarray(imu.gyro, dtype=float)[finite]
-    return coarse_time_offset(shared.profile, np.asarray(imu.t, dtype=float)[finite], accel[finite], gyro)
+    search = coarse_time_offset(shared.profile, t[finite], accel[finite], gyro)
+    return Alignment(search.offset_s, search, steps, stamps)
 
 
 @dataclass(frozen=True)
@@ -216,7 +254,7 @@ def choose_link(problem: UnitProblem) -> tuple[int, float, list[str], dict[int, 
     # Not decisive: a joint's motion can shake earlier links through the servos' finite stiffness
     # (the activity then points too far out), so every link up to one past the suggestion competes;
     # without any activity (no segments to tell the excited joint), every link does.
-    hint = problem.alignment.link if problem.alignment is not None else n
+    hint = problem.alignment.search.link if problem.alignment is not None else n
     top = n if activity.link == 0 else min(n, max(activity.link, hint) + 1)
     for link in range(1, top + 1):
         try:
@@ -395,7 +433,9 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         )
     blocks = _blocks(problem, p)
     if start is not None:
-        start = replace(start, E=np.zeros((3, 3)), bg=_start(p).bg)
+        rows = p.data.rows
+        bg = np.median(rows.static_g, axis=0) if rows.static_g is not None and len(rows.static_g) else np.zeros(3)
+        start = replace(start, E=np.zeros((3, 3)), bg=bg)
     # Converge on every 8th moving sample, then one Gauss-Newton step on all of them, whose
     # normal matrix also gives the covariance.
     coarse = _fit(_decimated(p, 8), blocks, state=start)
@@ -411,7 +451,9 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     st = fit.state
     sl = fit.blocks.slices()
     total_offset = problem.time_offset_s + st.tau
-    cov, honesty = _honesty(fit, p, problem.alignment, total_offset)
+    steps = None if problem.alignment is None else problem.alignment.steps
+    alignment: Alignment | None = problem.alignment
+    cov, honesty = _honesty(fit, p, None if alignment is None else alignment.search, total_offset)
     warnings += honesty
     observable = fit.null_space.shape[1] == 0
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -433,9 +475,10 @@ def run_unit(problem: UnitProblem) -> UnitResult:
             "accel_bias_std_mps2": std[6:9],
             "time_offset_s": total_offset,
             "time_offset_std_s": float(get_std("tau")[0]) if "tau" in sl else None,
-            "time_offset_coarse_s": None if problem.alignment is None else problem.alignment.offset_s,
+            "time_offset_coarse_s": None if alignment is None else alignment.offset_s,
             "time_reference_s": p.data.t_c,
-            "clock_drift_ppm": st.d * 1e6 if "d" in sl else None,
+            "clock_drift_ppm": (st.d * 1e6 if "d" in sl else 0.0) + (steps.drift_ppm if steps is not None else 0.0)
+            if "d" in sl or steps is not None else None,
             "clock_drift_std_ppm": float(get_std("d")[0]) * 1e6 if "d" in sl else None,
             "residual_std_mps2": fit.sigma,
             "residual_correlation": fit.residual_correlation,
@@ -447,6 +490,15 @@ def run_unit(problem: UnitProblem) -> UnitResult:
             "rest_source": problem.shared.rest.source,
         }
     )
+    if steps is not None:
+        extras["clock_resync_steps"] = steps.n_steps
+        extras["clock_resync_period_s"] = steps.period_s
+        extras["clock_resync_step_s"] = steps.mean_step_s
+        warnings.append(
+            f"clock re-synced {steps.n_steps} times (every {steps.period_s:.2f} s, steps of "
+            f"{steps.mean_step_s * 1e3:.2f} ms: the sensor clock drifts {steps.drift_ppm:+.0f} ppm between "
+            "re-syncs); stamps corrected"
+        )
     if "bg" in sl:
         extras["gyro_bias_rps"] = st.bg
         extras["gyro_bias_std_rps"] = get_std("bg")

@@ -66,7 +66,6 @@ class SignalTable:
         chain: SerialChain,
         interpolator: JointInterpolator,
         gravity: FloatArray,
-        rest: JointRest,
         rate_hz: float = 125.0,
     ) -> None:
         grid, q, qd, qdd = interpolator.on_grid(max(1, int(round(1.0 / (rate_hz * interpolator.dt)))))
@@ -77,16 +76,15 @@ class SignalTable:
         """``(G, n)`` angular speed of every link frame on the uniform grid, rad/s."""
         self.joint_speed = np.cumsum(np.abs(qd), axis=1)
         """``(G, n)`` ``sum_{j <= k} |qd_j|`` on the uniform grid, rad/s."""
-        # Keep the grid where some joint moves (plus a margin): elsewhere units are stationary and
-        # use exact static rows instead. Gaps are bridged by the interpolation only at their ends.
-        moving = ~rest.unit_rest(grid, chain.n_joints)
-        pad = int(np.ceil(0.5 * rate_hz))
-        keep = np.convolve(moving, np.ones(2 * pad + 1), mode="same") > 0
-        keep[[0, -1]] = True
-        self.t = grid[keep]
-        self._motion = motion.select(keep)
+        self.t = grid
+        self._motion = motion
         self._gravity = np.asarray(gravity, dtype=float)
         self._cache: dict[int, FloatArray] = {}
+
+    def warm(self) -> None:
+        """Compute every link's table now (before forking workers that then share them)."""
+        for link in range(1, self._motion.omega.shape[1]):
+            self._link(link)
 
     def _link(self, link: int) -> FloatArray:
         """``(N, 36)`` rows ``[u (3), K (9, row-major), w (3), u_g (3)]`` and their time derivatives of

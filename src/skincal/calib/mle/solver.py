@@ -245,8 +245,23 @@ def _accel_rows(
 def _gyro_rows(
     state: State, blocks: Blocks, lin: Linearisation | None, rows: Rows
 ) -> tuple[FloatArray, FloatArray]:
-    """Gyroscope residuals ``(S + M, 3)`` and Jacobian (static rows: ``w = 0``)."""
+    """Gyroscope residuals ``(S + M, 3)`` and Jacobian ``(S + M, 3, P)`` (static rows: ``w = 0``)."""
+    r, J_c, cols = _gyro_rows_compact(state, blocks, lin, rows)
+    J = np.zeros((len(r), 3, blocks.size))
+    J[:, :, cols] = J_c
+    return r, J
+
+
+def _gyro_rows_compact(
+    state: State, blocks: Blocks, lin: Linearisation | None, rows: Rows
+) -> tuple[FloatArray, FloatArray, np.ndarray]:
+    """:func:`_gyro_rows` with only the columns the gyroscope depends on (rotation, time offset,
+    clock drift, gyroscope bias): residuals, Jacobian ``(S + M, 3, C)`` and the ``C`` column indices."""
     sl = blocks.slices()
+    names = [n for n in ("theta", "tau", "d", "bg") if n in sl and (lin is not None or n in ("theta", "bg"))]
+    cols = np.concatenate([np.arange(sl[n].start, sl[n].stop) for n in names])
+    at = {n: np.arange(sl[n].start, sl[n].stop) for n in names}
+    local = {n: np.searchsorted(cols, at[n]) for n in names}
     R = state.R
     parts_w = [np.zeros_like(rows.static_u)]
     meas = [rows.static_g]
@@ -257,17 +272,17 @@ def _gyro_rows(
     w = np.concatenate(parts_w)
     g = w @ R
     r = g + state.bg - np.concatenate(meas)
-    J = np.zeros((len(w), 3, blocks.size))
-    J[:, :, sl["theta"]] = skew(g)
-    J[:, :, sl["bg"]] = np.eye(3)
+    J = np.zeros((len(w), 3, cols.size))
+    J[:, :, local["theta"]] = skew(g)
+    J[:, :, local["bg"]] = np.eye(3)
     if lin is not None and ("tau" in sl or "d" in sl):
         S = len(rows.static_u)
         col = -(lin.dw @ R)
-        if "tau" in sl:
-            J[S:, :, sl["tau"].start] = col
-        if "d" in sl:
-            J[S:, :, sl["d"].start] = col * rows.moving_t[:, None]
-    return r, J
+        if "tau" in local:
+            J[S:, :, local["tau"][0]] = col
+        if "d" in local:
+            J[S:, :, local["d"][0]] = col * rows.moving_t[:, None]
+    return r, J, cols
 
 
 def _apply(state: State, blocks: Blocks, delta: FloatArray) -> State:
@@ -331,7 +346,7 @@ def solve(
     *,
     max_outer: int = 6,
     max_inner: int = 8,
-    tol: float = 1e-9,
+    tol: float = 1e-6,
     sigma_floor: float = SIGMA_FLOOR,
 ) -> Fit:
     """Robust Gauss-Newton (see module docstring).
@@ -367,18 +382,19 @@ def solve(
             H, g = _normal_equations(J, r, w)
             cost = float(np.sum(w * np.sum(r * r, axis=1)))
             if use_gyro:
-                r_g, J_g = _gyro_rows(state, blocks, lin, rows)
+                r_g, J_g, cols_g = _gyro_rows_compact(state, blocks, lin, rows)
                 norm_g = np.linalg.norm(r_g, axis=1) * base
                 sigma_g = max(_robust_sigma(norm_g[S:] if len(r_g) > S else norm_g), 0.1 * sigma_floor)
                 w_g = (base**2) * _huber(norm_g, sigma_g) / sigma_g**2
                 H_g, g_g = _normal_equations(J_g, r_g, w_g)
-                H, g = H + H_g, g + g_g
+                H[np.ix_(cols_g, cols_g)] += H_g
+                g[cols_g] += g_g
                 cost += float(np.sum(w_g * np.sum(r_g * r_g, axis=1)))
             H_p, g_p = _prior(state, blocks)
             H, g = H + H_p, g + g_p
             delta, null = _pinv_step(H, g)
             state = _apply(state, blocks, _limit_step(delta, blocks))
-            if np.max(np.abs(delta)) < tol:
+            if float(delta @ H @ delta) < tol:  # the step moves less than 1e-3 std in every direction
                 break
         max_inner = min(max_inner, 3)  # later outer loops only follow the small change of tau
         if lin is None or not (blocks.time_offset or blocks.clock_drift):
@@ -392,10 +408,11 @@ def solve(
     info = H
     if use_gyro:
         rho_g = _residual_correlation(r_g[S:])
-        _, J_g = _gyro_rows(state, blocks, lin, rows)
+        _, J_g, cols_g = _gyro_rows_compact(state, blocks, lin, rows)
         base = np.concatenate([sw_static, np.ones(len(r_g) - S)])
         w_g = (base**2) * _huber(np.linalg.norm(r_g, axis=1) * base, sigma_g) / sigma_g**2
-        H_g, _ = _normal_equations(J_g, r_g, w_g)
+        H_g = np.zeros_like(H)
+        H_g[np.ix_(cols_g, cols_g)] = _normal_equations(J_g, r_g, w_g)[0]
         H_p, _ = _prior(state, blocks)
         info = (H - H_g - H_p) / rho + H_g / rho_g + H_p
     else:
