@@ -60,7 +60,7 @@ from skincal.data.dataset import Dataset, ImuStream
 from skincal.data.result import UnitResult
 from skincal.errors import CalibrationError
 from skincal.kinematics.chain import SerialChain
-from skincal.kinematics.transforms import FloatArray
+from skincal.kinematics.transforms import FloatArray, skew
 from skincal.skin.pose import SkinUnitPose
 
 MAX_RESIDUAL_OFFSET_S = 0.1
@@ -92,6 +92,12 @@ OFFSET_SHARPNESS_MIN = 0.02
 """Coarse-alignment peaks less distinct than this (correlation units) leave the offset uncertain."""
 OFFSET_JUMP_WARN_S = 0.05
 """A refined offset further than this from the coarse one is flagged as uncertain, s."""
+MOVE_MIN_RUNS = 4
+"""A move is looked for only with this many rest runs on each side of it."""
+MOVE_IMPROVEMENT = 10.0
+"""A before/after split must explain the rest runs this many times better than one pose..."""
+MOVE_MIN_ANGLE_DEG = 1.0
+"""...and the two poses' rotations differ by this much, deg."""
 CORRELATION_WARN = 4.0
 """Residual autocorrelation factors above this are reported (model error, covariance inflated)."""
 
@@ -177,18 +183,77 @@ def _use_gyro(problem: UnitProblem) -> bool:
     return problem.samples.gyro is not None and bool(problem.options.get("gyro", True))
 
 
-def _arrange(problem: UnitProblem, link: int, decimate: int = 1) -> _Problem:
+def _arrange(
+    problem: UnitProblem, link: int, decimate: int = 1, window: tuple[float, float] | None = None
+) -> _Problem:
     s = problem.samples
     shared: Shared = problem.shared
     # Keep samples whose instants stay inside the joint stream for any residual offset tried.
     margin = MAX_RESIDUAL_OFFSET_S + 0.01
     keep = (s.t >= shared.interpolator.t_start + margin) & (s.t <= shared.interpolator.t_end - margin)
+    if window is not None:
+        keep &= (s.t >= window[0]) & (s.t <= window[1])
     gyro = s.gyro[keep] if _use_gyro(problem) else None
     data = arrange_unit_data(
         problem.chain, link, s.t[keep], s.accel[keep], gyro, shared.rest, shared.interpolator, problem.gravity
     )
     p = _Problem(shared.table, data)
     return _decimated(p, decimate) if decimate > 1 else p
+
+
+@dataclass(frozen=True)
+class Move:
+    """A unit that moved on its link during the session (knocked, peeled and re-stuck): the rest
+    runs before ``t_before`` and after ``t_after`` (s) each fit one pose but not together."""
+
+    t_before: float
+    t_after: float
+    angle_deg: float
+    improvement: float
+
+
+def _turn_fit(f: FloatArray, r: FloatArray, w: FloatArray) -> tuple[float, FloatArray]:
+    """Weighted least squares of rest-row residuals ``r`` by a small turn ``phi`` and bias change
+    ``c`` of the unit, ``r ~ [f]x phi + c`` (``f`` the readings, unit frame): the residual sum of
+    squares left and ``phi`` (rad)."""
+    X = np.zeros((len(f), 3, 6))
+    X[:, :, :3] = skew(f)
+    X[:, :, 3:] = np.eye(3)
+    sw = np.sqrt(w)[:, None, None]
+    A = (X * sw).reshape(-1, 6)
+    y = (r[:, :, None] * sw).reshape(-1)
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    left = A @ coef - y
+    return float(left @ left), coef[:3]
+
+
+def find_move(rows: Rows, residuals: FloatArray, t_c: float) -> Move | None:
+    """A change of the unit's pose during the session, from the fitted model's rest-row residuals.
+
+    A unit that moved on its link leaves rest residuals that a small turn and bias change explain,
+    differently before and after the move. Each split of the time-ordered rest runs (at least
+    ``MOVE_MIN_RUNS`` each side) gets its own ``phi, c`` per side (:func:`_turn_fit`); the best
+    split is a move when it lowers the weighted residual sum by more than ``MOVE_IMPROVEMENT``
+    times and the two turns differ by more than ``MOVE_MIN_ANGLE_DEG`` (a drifting bias improves a
+    split too, but turns nothing).
+    """
+    S = len(rows.static_u)
+    if S < 2 * MOVE_MIN_RUNS or residuals is None:
+        return None
+    order = np.argsort(rows.static_t)
+    f, w, t, r = rows.static_f[order], rows.static_weight[order], rows.static_t[order], residuals[:S][order]
+    total = float(np.sum(w * np.sum(r * r, axis=1)))
+    best = (np.inf, 0, np.zeros(3), np.zeros(3))
+    for k in range(MOVE_MIN_RUNS, S - MOVE_MIN_RUNS + 1):
+        (c1, phi1), (c2, phi2) = _turn_fit(f[:k], r[:k], w[:k]), _turn_fit(f[k:], r[k:], w[k:])
+        if c1 + c2 < best[0]:
+            best = (c1 + c2, k, phi1, phi2)
+    cost, k, phi1, phi2 = best
+    angle = float(np.degrees(np.linalg.norm(phi2 - phi1)))
+    improvement = total / max(cost, 1e-300)
+    if improvement < MOVE_IMPROVEMENT or angle < MOVE_MIN_ANGLE_DEG:
+        return None
+    return Move(float(t[k - 1] + t_c), float(t[k] + t_c), angle, improvement)
 
 
 def _start(p: _Problem) -> State:
@@ -439,6 +504,19 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     # Converge on every 8th moving sample, then one Gauss-Newton step on all of them, whose
     # normal matrix also gives the covariance.
     coarse = _fit(_decimated(p, 8), blocks, state=start)
+    move = find_move(p.data.rows, coarse.residuals, p.data.t_c) if problem.options.get("detect_move", True) else None
+    if move is not None:  # keep the longer part and fit again
+        s = problem.samples
+        before = np.count_nonzero(s.t <= move.t_before) >= np.count_nonzero(s.t >= move.t_after)
+        p = _arrange(problem, link, window=(-np.inf, move.t_before) if before else (move.t_after, np.inf))
+        blocks = _blocks(problem, p)
+        coarse = _fit(_decimated(p, 8), blocks, state=coarse.state)
+        extras["moved_between_s"] = [move.t_before, move.t_after]
+        warnings.append(
+            f"unit moved on its link between {move.t_before:.1f} s and {move.t_after:.1f} s (its rest poses before "
+            f"and after differ by about {move.angle_deg:.1f} deg): calibrated from the part "
+            f"{'before' if before else 'after'} it only"
+        )
     fit = _fit(p, blocks, state=coarse.state, max_outer=1, max_inner=1)
     e = fit.blocks.slices().get("e")
     if e is not None:
