@@ -1,9 +1,13 @@
 """The default calibrator's targets, measured (``skincal benchmark mle``).
 
 * accuracy, noise-free: the paper's protocol and configuration;
-* accuracy under the ``realistic`` sensor preset: random placements on the Panda and the Sawyer,
-  joint accelerations estimated from q/qd, links found from the data, and the calibration of the
-  reported standard deviations (RMS of error / std per axis);
+* accuracy under the ``realistic`` sensor preset with ``controller`` joint states (encoder steps,
+  velocity noise, stamp jitter, no accelerations): random placements on the Panda, the Sawyer and
+  the UR5e, links found from the data, the mean reported position std beside the error (the
+  Cramer-Rao bound of the data, as the calibrator computes it from the information at its
+  solution) and the calibration of the reported std (RMS of error / std per axis);
+* the ``real`` IMU preset (figures of a real recording) with ``wifi-resync`` clocks (offsets up to
+  0.5 s, drift and periodic re-sync steps): errors, and time offset and drift recovered;
 * the ``fast`` protocol under ``realistic`` sensors;
 * run time for 6 and 100 units (one worker, and two workers as ``skincal calibrate`` uses: forked processes on Linux);
 * OM (the paper's method) against ``mle`` on the same data, wall-time ratio and errors.
@@ -22,6 +26,8 @@ from skincal.calib import calibrate, evaluate
 from skincal.kinematics import get_robot
 from skincal.protocol import build_trajectory, get_protocol
 from skincal.sim.analytic import simulate
+from skincal.sim.joint_states import get_joint_model
+from skincal.skin.clock import get_clock_model
 from skincal.skin.imu import get_imu_model
 from skincal.skin.placement import paper_placement, random_placement
 
@@ -36,26 +42,42 @@ def protocol_for(chain, name: str):
     return config
 
 
-def simulate_session(robot: str, placement: str, n_units: int, noise: str, protocol: str, seed: int):
+def simulate_session(
+    robot: str, placement: str, n_units: int, noise: str, protocol: str, seed: int,
+    joints: str = "ideal", clock: str = "ideal",
+):
+    """A simulated session (analytic simulator) with the given IMU, joint-state and clock presets."""
     chain = get_robot(robot)
     rng = np.random.default_rng(seed)
     pl = paper_placement(chain) if placement == "paper" else random_placement(chain, n_units, rng)
     traj = build_trajectory(chain, protocol_for(chain, protocol), rng)
-    return simulate(chain, pl, traj, get_imu_model(noise), rng)
+    return simulate(chain, pl, traj, get_imu_model(noise), rng, joint_model=get_joint_model(joints),
+                    clock_model=get_clock_model(clock))
 
 
 def _summary(ds, result) -> dict[str, Any]:
     ev = evaluate(result, ds)
-    z = []
+    z, std, dtau, ddrift = [], [], [], []
     for name, unit in result.units.items():
         if unit.observable and unit.position_std_m is not None:
             z.extend((unit.pose.p_link_su - ds.truth[name].p_link_su) / unit.position_std_m)
+            std.append(float(np.linalg.norm(unit.position_std_m)))
+        truth = ds.truth_sensor.get(name, {})
+        if unit.extras.get("time_offset_s") is not None and "time_offset_s" in truth:
+            dtau.append(abs(unit.extras["time_offset_s"] - truth["time_offset_s"]))
+        if unit.extras.get("clock_drift_ppm") is not None and "clock_drift_ppm" in truth:
+            ddrift.append(abs(unit.extras["clock_drift_ppm"] - truth["clock_drift_ppm"]))
+    z = [v for v in z if np.isfinite(v)]
     return {
         "mean_position_error_mm": ev["mean_position_error_mm"],
         "max_position_error_mm": max(u["position_error_mm"] for u in ev["units"].values()),
         "mean_rotation_error_deg": ev["mean_rotation_error_deg"],
+        "mean_position_std_mm": 1e3 * float(np.mean(std)) if std else None,
+        "max_time_offset_error_ms": 1e3 * max(dtau) if dtau else None,
+        "max_clock_drift_error_ppm": max(ddrift) if ddrift else None,
         "links_correct": ev["links_correct"],
         "units_total": ev["units_total"],
+        "units_warned": sum(1 for u in result.units.values() if u.warnings),
         "runtime_s": result.runtime_s,
         "z_rms": float(np.sqrt(np.mean(np.square(z)))) if z else None,
     }
@@ -71,24 +93,31 @@ def run_mle_benchmark(
     note("noise-free, paper configuration")
     ds = simulate_session("panda", "paper", 6, "none", protocol, seed=0)
     out["noise_free_paper"] = _summary(ds, calibrate(ds, "mle"))
-    for robot in ("panda", "sawyer"):
+    for robot in ("panda", "sawyer", "ur5e"):
         rows = []
         for seed in range(runs):
-            note(f"realistic, {robot}, placement {seed + 1}/{runs}")
-            ds = simulate_session(robot, "random", 6, "realistic", protocol, seed=100 + seed)
-            rows.append(_summary(ds, calibrate(ds, "mle")))
+            note(f"realistic IMUs, controller joints, {robot}, placement {seed + 1}/{runs}")
+            ds = simulate_session(robot, "random", 6, "realistic", protocol, seed=100 + seed, joints="controller")
+            rows.append(_summary(ds, calibrate(ds, "mle", workers=2)))
         out[f"realistic_{robot}"] = _aggregate(rows)
+        rows = []
+        for seed in range(max(1, runs // 4)):
+            note(f"real IMUs, controller joints, wifi-resync clocks, {robot}, placement {seed + 1}/{max(1, runs // 4)}")
+            ds = simulate_session(robot, "random", 6, "real", protocol, seed=400 + seed, joints="controller",
+                                  clock="wifi-resync")
+            rows.append(_summary(ds, calibrate(ds, "mle", workers=2)))
+        out[f"real_clock_{robot}"] = _aggregate(rows)
     rows = []
     for seed in range(runs):
         note(f"fast protocol, realistic, panda {seed + 1}/{runs}")
-        ds = simulate_session("panda", "random", 6, "realistic", "fast", seed=200 + seed)
+        ds = simulate_session("panda", "random", 6, "realistic", "fast", seed=200 + seed, joints="controller")
         rows.append(_summary(ds, calibrate(ds, "mle")))
     out["fast_protocol_panda"] = _aggregate(rows)
     out["fast_protocol_duration_s"] = float(ds.duration)
     for n_units in (6, 100):
         for proto in ("paper-sim", "fast") if not quick else ("fast",):
             note(f"run time, {n_units} units, {proto}")
-            ds = simulate_session("panda", "random", n_units, "realistic", proto, seed=300)
+            ds = simulate_session("panda", "random", n_units, "realistic", proto, seed=300, joints="controller")
             start = time.perf_counter()
             result = calibrate(ds, "mle")
             out[f"runtime_{n_units}_units_{proto}_s"] = time.perf_counter() - start
@@ -116,8 +145,15 @@ def run_mle_benchmark(
 
 
 def _aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    keys = ("mean_position_error_mm", "max_position_error_mm", "mean_rotation_error_deg", "runtime_s", "z_rms")
-    agg: dict[str, Any] = {k: float(np.mean([r[k] for r in rows if r[k] is not None])) for k in keys}
+    keys = ("mean_position_error_mm", "max_position_error_mm", "mean_rotation_error_deg", "mean_position_std_mm",
+            "runtime_s", "z_rms")
+    agg: dict[str, Any] = {
+        k: float(np.mean(vals)) if (vals := [r[k] for r in rows if r[k] is not None]) else None for k in keys
+    }
+    for k in ("max_time_offset_error_ms", "max_clock_drift_error_ppm"):
+        vals = [r[k] for r in rows if r[k] is not None]
+        agg[k] = float(max(vals)) if vals else None
+    agg["units_warned"] = int(sum(r["units_warned"] for r in rows))
     agg["worst_mean_position_error_mm"] = float(max(r["mean_position_error_mm"] for r in rows))
     agg["links_correct"] = int(sum(r["links_correct"] for r in rows))
     agg["units_total"] = int(sum(r["units_total"] for r in rows))
