@@ -329,7 +329,7 @@ def calibrate_unit(
         alignment=alignment,
     )
     result = spec.run_unit(problem)
-    _, screening = screen_readings(unit, np.asarray(dataset.imu[unit].accel, dtype=float))
+    _, screening = screen_readings(unit, dataset.imu[unit].accel, dataset.imu[unit].t)
     if screening:
         result = replace(result, warnings=tuple(screening) + tuple(result.warnings))
     return result

@@ -450,7 +450,7 @@ def unit_samples(
     keep = finite & (t >= tj[0]) & (t <= tj[-1])
     t, accel = t[keep], accel[keep]
     gyro = None if imu.gyro is None else np.asarray(imu.gyro, dtype=float)[keep]
-    usable, _ = screen_readings(unit, accel)
+    usable, _ = screen_readings(unit, accel, t)
     t, accel = t[usable], accel[usable]
     gyro = None if gyro is None else gyro[usable]
     if interpolator is None:
@@ -482,15 +482,67 @@ SATURATION_MIN = 11.0
 repeats its reading too, but never saturates there)."""
 
 
-def screen_readings(unit: str, accel: FloatArray) -> tuple[np.ndarray, list[str]]:
-    """Reject what no method can use: a stuck accelerometer axis (an error) and saturated samples
-    (dropped, with a warning). Returns the mask of usable samples and the warnings."""
-    keep = np.ones(len(accel), dtype=bool)
+def screen_readings(
+    unit: str,
+    accel: FloatArray,
+    t: FloatArray | None = None,
+    *,
+    stuck_min_s: float = 1.0,
+    stuck_min_fraction: float = 0.02,
+    stuck_others_ptp: float = 0.2,
+) -> tuple[np.ndarray, list[str]]:
+    """Reject what no method can use: a stuck accelerometer axis and saturated samples. Returns the
+    mask of usable samples and the warnings.
+
+    An axis constant over the whole stream is an error. An axis that holds one value from some
+    instant on (a register that stopped updating) shows as a run of exactly repeated consecutive
+    values that lasts at least ``stuck_min_s`` (needs the stamps ``t`` ``(M,)``, s) or
+    ``stuck_min_fraction`` of the samples (at least 10 samples), while another axis of the same
+    samples varies by more than ``stuck_others_ptp`` m/s^2 peak to peak: those samples are not
+    usable (a unit at rest whose noise stays below one LSB repeats its readings too, but then its
+    other axes do not move). A repeated value at the axis' saturating extreme is left to the
+    saturation test: samples at an extreme beyond ``SATURATION_MIN`` that repeats in more than
+    ``SATURATION_FRACTION`` of the samples are dropped, with a warning.
+    """
+    accel = np.asarray(accel, dtype=float)
+    n = len(accel)
+    keep = np.ones(n, dtype=bool)
     warnings: list[str] = []
+    t = None if t is None else np.asarray(t, dtype=float)
+    min_run = stuck_min_fraction * n
+    if t is not None and n > 1:
+        dt = float(np.median(np.diff(t)))
+        if dt > 0:
+            min_run = min(min_run, stuck_min_s / dt)
+    min_run = max(min_run, 10.0)
+    rows = np.flatnonzero(np.all(np.isfinite(accel), axis=1))  # runs are judged on the complete samples
+    fin = accel[rows]
     for k, axis in enumerate("xyz"):
         a = accel[:, k]
         if a.size > 10 and np.ptp(a) < 1e-9:
             raise CalibrationError(f"unit '{unit}': accelerometer {axis} axis is stuck at {a[0]:.4g} m/s^2")
+        af, others = fin[:, k], np.delete(fin, k, axis=1)
+        same = np.concatenate([[False], af[1:] == af[:-1], [False]])  # same[i]: sample i repeats sample i - 1
+        edges = np.flatnonzero(np.diff(same.astype(np.int8)))
+        for i0, i1 in zip(edges[::2], edges[1::2], strict=True):
+            start, end = int(i0), int(i1) + 1  # finite samples [start, end) hold one value
+            value = float(af[start])
+            if end - start < min_run:
+                continue
+            if abs(value) > SATURATION_MIN and value in (af.max(), af.min()):
+                continue  # a rail: the saturation test below judges it
+            if not np.max(np.ptp(others[start:end], axis=0)) > stuck_others_ptp:
+                continue  # the whole unit is still: repeated readings below one LSB of noise
+            i, j = rows[start], rows[end - 1]
+            keep[i : j + 1] = False
+            last = end == rows.size
+            if t is None:
+                span = f"from sample {i} " + ("to the end" if last else f"to sample {j}")
+            else:
+                span = f"from {t[i]:.1f} s " + ("to the end" if last else f"to {t[j]:.1f} s")
+            warnings.append(
+                f"accelerometer {axis} axis stuck at {value:.4g} m/s^2 {span} ({end - start} samples ignored)"
+            )
         for extreme in (a.max(), a.min()):
             hits = a == extreme
             if abs(extreme) > SATURATION_MIN and hits.mean() > SATURATION_FRACTION and np.count_nonzero(hits) > 3:

@@ -172,6 +172,7 @@ class RestRuns:
         accel_noise: typical accelerometer std inside a run, m/s^2.
         gyro_noise: typical gyroscope std inside a run, rad/s (0 without a gyroscope).
         warnings: one per dropped run (or a summary when there are many).
+        trimmed: how many kept runs lost their start to a unit still settling (no warning).
     """
 
     bounds: np.ndarray
@@ -181,6 +182,7 @@ class RestRuns:
     accel_noise: float
     gyro_noise: float
     warnings: tuple[str, ...]
+    trimmed: int = 0
 
 
 def _spread(x: FloatArray, a: int, b: int) -> float:
@@ -188,10 +190,24 @@ def _spread(x: FloatArray, a: int, b: int) -> float:
 
 
 def unit_rest_runs(
-    rest_mask: np.ndarray, t: FloatArray, accel: FloatArray, gyro: FloatArray | None, guard_s: float = GUARD_S
+    rest_mask: np.ndarray,
+    t: FloatArray,
+    accel: FloatArray,
+    gyro: FloatArray | None,
+    guard_s: float = GUARD_S,
+    settle_window_s: float = 0.1,
 ) -> RestRuns:
     """Rest runs of one unit: the joint-derived ``rest_mask`` ``(M,)`` at its instants ``t``, shrunk by
-    the guard, then checked against the unit's own accelerometer ``(M, 3)`` and gyroscope."""
+    the guard, then checked against the unit's own accelerometer ``(M, 3)`` and gyroscope.
+
+    A run whose spread exceeds the limit but that moves only at its start (a servo still settling
+    after the motion) is trimmed instead of dropped: its first ``settle_window_s`` window must be
+    beyond the limit, it starts again after the last window (of ``settle_window_s``, half
+    overlapping) that is, and it is kept when at least half of it (and ``MIN_RUN_SAMPLES``) remains
+    and that remainder passes the whole-run test too (a slow turn does not show in short windows).
+    Such runs are kept silently and counted in ``trimmed``; runs that move later (a knock, a
+    misdeclared segment) are dropped and named in a warning.
+    """
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.01
     guard = int(np.ceil(guard_s / dt))
     candidates = []
@@ -206,13 +222,39 @@ def unit_rest_runs(
     level_a = max(float(np.median(sa)), 1e-12)
     limit_a = max(STILL_FACTOR * level_a, STILL_FLOOR_ACCEL)
     still = sa <= limit_a
-    level_g = 0.0
+    level_g, limit_g = 0.0, np.inf
     if gyro is not None:
         sg = np.array([_spread(gyro, a, b) for a, b in candidates])
         level_g = max(float(np.median(sg)), 1e-12)
-        still &= sg <= max(STILL_FACTOR * level_g, STILL_FLOOR_GYRO)
-    keep = [c for c, s in zip(candidates, still, strict=True) if s]
-    gone = [c for c, s in zip(candidates, still, strict=True) if not s]
+        limit_g = max(STILL_FACTOR * level_g, STILL_FLOOR_GYRO)
+        still &= sg <= limit_g
+
+    def quiet(a: int, b: int) -> bool:
+        return _spread(accel, a, b) <= limit_a and (gyro is None or _spread(gyro, a, b) <= limit_g)
+
+    def settled_start(a: int, b: int) -> int | None:
+        """Where a run that only moves at its start becomes still, or None."""
+        width = max(MIN_RUN_SAMPLES, int(round(settle_window_s / dt)))
+        latest = b - max(MIN_RUN_SAMPLES, int(np.ceil(0.5 * (b - a))))
+        if latest <= a or b - a < 2 * width or quiet(a, a + width):
+            return None  # too short to trim, or still at its start: it moved later
+        step = max(1, width // 2)
+        loud = [p for p in range(a, b - width + 1, step) if not quiet(p, p + width)]
+        if not quiet(b - width, b):
+            return None  # moving at its end
+        s = loud[-1] + width
+        while s <= latest and not quiet(s, b):
+            s += step
+        return s if s <= latest else None
+
+    keep, gone, trimmed = [], [], 0
+    for (a, b), ok in zip(candidates, still, strict=True):
+        s = a if ok else settled_start(a, b)
+        if s is None:
+            gone.append((a, b))
+        else:
+            keep.append((s, b))
+            trimmed += int(s > a)
     rest = np.zeros(t.size, dtype=bool)
     for a, b in keep:
         rest[a:b] = True
@@ -225,5 +267,12 @@ def unit_rest_runs(
             f"IMU moved in them ({where}; accelerometer spread above {limit_a:.3g} m/s^2)"
         )
     return RestRuns(
-        np.array(keep, dtype=np.intp).reshape(-1, 2), rest, ~rest_mask, dropped, level_a, level_g, tuple(warnings)
+        np.array(keep, dtype=np.intp).reshape(-1, 2),
+        rest,
+        ~rest_mask,
+        dropped,
+        level_a,
+        level_g,
+        tuple(warnings),
+        trimmed,
     )
