@@ -4,7 +4,8 @@ A unit on link ``L`` is at rest when joints ``1 .. L`` are (joints after ``L`` m
 move the unit). Two sources say when a joint rests:
 
 * **the protocol segments** (``/segments``), when the dataset has them: joint ``j`` rests inside a
-  static segment and inside a dynamic segment that excites another joint;
+  static segment and inside a dynamic segment that excites another joint, provided its own data
+  (below) agree;
 * **the joint positions**, otherwise: over a window of ``REST_WINDOW_S`` the mean speed from the
   position change, ``|q(t + W/2) - q(t - W/2)| / W``, and the mean reported speed must both lie below
   a threshold derived from the stream's own noise (encoder step and velocity noise, estimated from
@@ -62,8 +63,7 @@ class JointRest:
         t: ``(N,)`` joint-stream instants, s.
         rest: ``(N, n)`` True where joint ``j`` (0-based column) is at rest.
         source: ``"segments"`` or ``"joint positions"``.
-        speed_threshold: ``(n,)`` windowed mean speed above which a joint moves, rad/s (NaN when the
-            rests come from the segments).
+        speed_threshold: ``(n,)`` windowed mean speed above which a joint moves, rad/s.
         velocity_noise: ``(n,)`` estimated white-noise std of the reported velocities, rad/s.
         position_noise: ``(n,)`` estimated noise std of the reported positions (encoder step
             included), rad.
@@ -139,8 +139,11 @@ def joint_rest_from_segments(
             others = np.ones(n, dtype=bool)
             others[j] = False
             rest[np.ix_(inside, others)] = True
-    sigma_q, sigma_v = noise if noise is not None else (second_difference_noise(joints.q), second_difference_noise(joints.qd))
-    return JointRest(t, rest, "segments", np.full(n, np.nan), sigma_v, sigma_q)
+    # A joint the segments declare at rest must also rest in its own data: the reaction of a far
+    # joint's excitation can swing a near one by milliradians (a real robot's finite servo stiffness).
+    data = joint_rest_from_data(joints)
+    sigma_q, sigma_v = noise if noise is not None else (data.position_noise, data.velocity_noise)
+    return JointRest(t, rest & data.rest, "segments", data.speed_threshold, sigma_v, sigma_q)
 
 
 def joint_rest(

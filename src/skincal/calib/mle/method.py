@@ -349,32 +349,46 @@ NULL_POSITION_SCALE_M = 0.1
 turned by one radian about an axis 0.1 m away moves by 0.1 m)."""
 
 
-def _physical_null(null: FloatArray) -> FloatArray:
-    """Null-space directions with positions in units of :data:`NULL_POSITION_SCALE_M` and the pose
-    part of each normalised (rows ``0:6`` = rotation, position); sensor-only directions are dropped."""
+NULL_SHARE = 0.05
+"""A pose component whose share in the null space (row norm of its orthonormal basis) exceeds this
+is undetermined: its std is reported as null."""
+
+
+def _pose_null_basis(null: FloatArray) -> FloatArray:
+    """Orthonormal basis ``(6, k)`` of the pose part of the null space (rows: rotation in the unit
+    frame, rad; position in units of :data:`NULL_POSITION_SCALE_M`), whatever basis the solver
+    returned: the row norms of it (the share of each parameter in the null space) do not depend on
+    that basis. Directions of the sensor parameters alone are dropped."""
     pose = null[0:6].copy()
     pose[3:6] /= NULL_POSITION_SCALE_M
-    norm = np.linalg.norm(pose, axis=0)
-    keep = norm > 1e-6
-    return pose[:, keep] / norm[keep]
+    if pose.size == 0 or not np.any(pose):
+        return np.zeros((6, 0))
+    U, s, _ = np.linalg.svd(pose, full_matrices=False)
+    return U[:, s > 1e-12 * s.max()]
 
 
-def _describe_null(null: FloatArray, R: FloatArray, axis_link: FloatArray, joint: int) -> str:
+def _describe_null(basis: FloatArray, R: FloatArray, axis_link: FloatArray, joint: int) -> str:
+    """Words for a pose null space ``basis`` (:func:`_pose_null_basis`): the rotation axes it turns
+    about (link frame) and the directions it shifts along without turning."""
     parts = []
-    for k in range(null.shape[1]):
-        v = null[:, k]
-        rot = R @ v[0:3]
-        pos = v[3:6]
-        if np.linalg.norm(rot) > 0.3 * np.linalg.norm(v):
-            a = rot / np.linalg.norm(rot)
+    rot = R @ basis[0:3]  # rotation part in link frame
+    U, s, Vt = np.linalg.svd(rot, full_matrices=True)
+    for k in range(min(3, s.size)):
+        if s[k] > 0.3:
+            a = U[:, k]
             what = f"joint-{joint} axis" if abs(a @ axis_link) > 0.99 else f"axis {np.round(a, 3).tolist()}"
             parts.append(f"rotation (yaw) about the {what}")
-        elif np.linalg.norm(pos) > 0.1 * np.linalg.norm(v):
+    # combinations of the basis that do not turn: the right singular vectors of the rotation part
+    # with (near) zero singular value
+    n_turn = int(np.sum(s > 1e-6))
+    for v in Vt[n_turn:]:
+        pos = basis[3:6] @ v
+        if np.linalg.norm(pos) > 0.1:
             a = pos / np.linalg.norm(pos)
             what = f"joint-{joint} axis" if abs(a @ axis_link) > 0.99 else f"direction {np.round(a, 3).tolist()}"
             parts.append(f"offset along the {what}")
-        else:
-            parts.append("a combination of sensor parameters")
+    if not parts:
+        parts.append("a combination of sensor parameters")
     return "unobservable: " + " and ".join(dict.fromkeys(parts)) + " (left at the closed-form start)"
 
 
@@ -417,31 +431,37 @@ def _blocks(problem: UnitProblem, p: _Problem) -> Blocks:
     )
 
 
-def _static_chi2(fit: Fit, rows: Rows, rest_noise: float) -> float:
-    """Variance ratio of the rest rows' residuals to what the rest noise explains (1 when consistent).
+def _static_chi2(fit: Fit, rows: Rows, rest_noise: float, angle_noise: float = 0.0) -> float:
+    """Variance ratio of the rest rows' residuals to what the noise explains (1 when consistent).
 
     A rest run of ``n`` samples with white noise ``sigma_r`` has a mean residual of variance
-    ``sigma_r^2 / n`` per axis; the ratio over all runs, ``sum n |r|^2 / (3 sigma_r^2 (S - k))``,
-    exceeds 1 when the runs disagree with the model (bias drift, a moved unit, wrong gravity).
+    ``sigma_r^2 / n`` per axis, plus ``(|u| sigma_q)^2`` from the joint angles' own error
+    ``sigma_q`` (rad; an encoder's rounding tilts the predicted gravity); the ratio over all runs,
+    ``sum |r|^2 / (3 var (S - k))``, exceeds 1 when the runs disagree with the model (bias drift, a
+    moved unit, wrong gravity).
     """
     S = len(rows.static_u)
     if fit.residuals is None or S < 4:
         return 1.0
     rest_noise = max(rest_noise, REST_NOISE_FLOOR)
     r = fit.residuals[:S]
+    var = rest_noise**2 / rows.static_weight + (np.linalg.norm(rows.static_u, axis=1) * angle_noise) ** 2
     dof = max(3 * S - 9, 1)
-    return float(np.sum(rows.static_weight * np.sum(r * r, axis=1)) / (rest_noise**2 * dof))
+    return float(np.sum(np.sum(r * r, axis=1) / var) / dof)
 
 
-def _honesty(fit: Fit, p: _Problem, alignment: OffsetSearch | None, total_offset: float) -> tuple[FloatArray, list[str]]:
-    """Residual tests: the covariance inflated where the model leaves something out, and warnings."""
+def _honesty(
+    fit: Fit, p: _Problem, alignment: OffsetSearch | None, total_offset: float, angle_noise: float = 0.0
+) -> tuple[FloatArray, list[str]]:
+    """Residual tests: the covariance inflated where the model leaves something out, and warnings
+    (``angle_noise``: error of the rest poses' joint angles along the chain to the unit, rad)."""
     rows = p.data.rows
     sl = fit.blocks.slices()
     cov = fit.covariance
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     st = fit.state
     warnings: list[str] = []
-    chi2 = _static_chi2(fit, rows, p.data.rest.accel_noise)
+    chi2 = _static_chi2(fit, rows, p.data.rest.accel_noise, angle_noise)
     if chi2 > STATIC_CHI2_WARN:
         cov = cov * chi2
         warnings.append(
@@ -531,7 +551,9 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     total_offset = problem.time_offset_s + st.tau
     steps = None if problem.alignment is None else problem.alignment.steps
     alignment: Alignment | None = problem.alignment
-    cov, honesty = _honesty(fit, p, None if alignment is None else alignment.search, total_offset)
+    sigma_q = problem.shared.interpolator.conditioning.position_noise
+    angle_noise = 0.0 if sigma_q is None else float(np.sqrt(np.sum(np.square(sigma_q[:link]))))
+    cov, honesty = _honesty(fit, p, None if alignment is None else alignment.search, total_offset, angle_noise)
     warnings += honesty
     observable = fit.null_space.shape[1] == 0
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -539,10 +561,10 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     rot_cov = st.R @ cov[0:3, 0:3] @ st.R.T
     rot_std = np.degrees(np.sqrt(np.maximum(np.diag(rot_cov), 0.0)))
     if not observable:
-        null = _physical_null(fit.null_space)
-        warnings.append(_describe_null(null, st.R, _joint_axis_in_link(problem.chain, link), link))
-        affected_p = np.abs(null[3:6]).max(axis=1) > 0.05
-        affected_r = np.abs(st.R @ null[0:3]).max(axis=1) > 0.05
+        basis = _pose_null_basis(fit.null_space)
+        warnings.append(_describe_null(basis, st.R, _joint_axis_in_link(problem.chain, link), link))
+        affected_p = np.linalg.norm(basis[3:6], axis=1) > NULL_SHARE
+        affected_r = np.linalg.norm(st.R @ basis[0:3], axis=1) > NULL_SHARE
         pos_std = np.where(affected_p, np.nan, pos_std)
         rot_std = np.where(affected_r, np.nan, rot_std)
     get_std = lambda name: std[sl[name]] if name in sl else None  # noqa: E731
