@@ -41,7 +41,8 @@ def test_quick_cli_writes_every_cell(tmp_path):
     assert len(doc["records"]) == 2
     rec = next(r for r in doc["records"] if r["fault"] == "knock")
     hit = rec["units"][rec["affected"]["knocked_unit"]]
-    assert hit["position_error_mm"] > 1.0 and hit["warnings"]  # knocked 3 cm: off, and says so
+    # knocked 3 cm / 10 deg at 2/3 of the session: found, named, and calibrated from the part before it
+    assert any("moved on its link" in w for w in hit["warnings"]) and hit["position_error_mm"] < 1.0
     # an existing file is kept unless --force
     before = out.read_text()
     assert main(args) == 2 and out.read_text() == before
