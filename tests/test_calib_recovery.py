@@ -101,7 +101,7 @@ def test_a_clock_drift_is_estimated_and_reported(realistic):
 
 def test_no_drift_no_drift_warning(realistic):
     ds, result = realistic
-    for name, unit in result.units.items():
+    for unit in result.units.values():
         assert abs(unit.extras["clock_drift_ppm"]) < 4 * unit.extras["clock_drift_std_ppm"] + 1.0
         assert not any("clock drifts" in w for w in unit.warnings)
 

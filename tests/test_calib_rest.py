@@ -68,7 +68,6 @@ def _synthetic_joint_stream(seed: int = 0):
     Returns the stream, the true moving mask ``(N, 3)`` and the transition instants.
     """
     rng = np.random.default_rng(seed)
-    n = 3
     amp, freq, periods = 1.0, 1.0, 2
     rest_s = 2.0
     t = np.arange(int(round((rest_s + 4 * (periods / freq + rest_s)) * RATE_HZ))) / RATE_HZ

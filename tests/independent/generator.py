@@ -247,7 +247,7 @@ def mjcf_xml(spec: RobotSpec, placements: list[Placement], gravity: float = G_FI
                 'size="0.01"/>'
             )
         indent = inner
-    for i in range(n, 0, -1):
+    for _ in range(n, 0, -1):
         indent = indent[:-2]
         lines.append(f"{indent}</body>")
     lines.append("  </worldbody>")

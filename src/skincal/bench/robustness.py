@@ -489,5 +489,6 @@ def config_dict(config: RobustnessConfig) -> dict[str, Any]:
         "silent_error": SILENT_RULE,
         "z": "e_i / sigma_i: position error on link axis i over the reported std (link right, finite std)",
         "warned": "calibrated units with at least one warning",
-        "beyond_3sigma": "calibrated units wrong beyond their reported uncertainty by the silent-error rule, warned or not",
+        "beyond_3sigma": "calibrated units wrong beyond their reported uncertainty by the silent-error rule, "
+        "warned or not",
     }

@@ -71,7 +71,8 @@ class MethodSpec:
     ``UnitProblem.shared``; ``exact_joint_states=False`` when the method only needs the joint
     states of the samples to find rest periods (see :func:`unit_samples`); ``align(shared, imu)``, when
     given, returns the unit's coarse time alignment (an object with ``offset_s`` and, when its
-    stamps had to be corrected, ``stamps``) applied before the samples are gathered; ``needs_segments=False`` when the method finds rests itself (a
+    stamps had to be corrected, ``stamps``) applied before the samples are gathered;
+    ``needs_segments=False`` when the method finds rests itself (a
     dataset without ``/segments`` is then segmented automatically only to tag samples, and a
     failure to do so is not fatal)."""
 

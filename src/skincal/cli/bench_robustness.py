@@ -47,7 +47,8 @@ def robustness_table(config, cells: list[dict[str, Any]]):
             f"{_num(c['mean_position_error_mm'], 3)} / {_num(c['max_position_error_mm'], 2)}",
             f"{_num(c['mean_rotation_error_deg'], 3)} / {_num(c['max_rotation_error_deg'], 2)}",
             f"{c['links_correct']}/{n}", _num(c["z_rms"], 2), f"{c['units_calibrated']}/{n}",
-            str(c["warned"]), str(c["beyond_3sigma"]), ("[red]" + str(c["silent"]) + "[/red]") if c["silent"] else "0", verdict,
+            str(c["warned"]), str(c["beyond_3sigma"]),
+            ("[red]" + str(c["silent"]) + "[/red]") if c["silent"] else "0", verdict,
         )
     return table
 

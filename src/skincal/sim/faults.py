@@ -5,14 +5,17 @@ Pure functions ``Dataset -> Dataset`` (the input is never modified) and two simu
 (numbers only, so that the dataset still writes to HDF5; keys listed in ``docs/interfaces.md``).
 Time ``t`` is the IMU stream's own stamp (s); the session is ``[t0, t1]``, the joint stream's span.
 
-| function | fault | equation | truth recorded |
-|---|---|---|---|
-| :func:`shift_imu_stamps` | fixed clock offset | ``t' = t + offset_s`` | ``time_offset_s += offset_s`` |
-| :func:`saturate_accel` | small full-scale range | ``a' = clip(a, -r, r)`` per axis | ``accel_range_mps2 = r`` |
-| :func:`stick_axis` | one accelerometer axis stuck | ``a'_i(t) = a_i(t_k*)`` for ``t >= t_s`` | ``accel_stuck_axis``, ``accel_stuck_from_s``, ``accel_stuck_value_mps2`` |
-| :func:`drift_bias` | accelerometer bias drift | ``a'(t) = a(t) + d (t - t0) / (t1 - t0)`` | ``accel_bias_drift_mps2 = d`` |
-| :func:`splice_knock` | unit knocked at ``t_s`` | stream of ``before`` for ``t < t_s``, of ``after`` from ``t_s`` | pose at the majority of the session; both poses and ``knock_t_s`` |
-| :func:`declare_gravity` | wrong gravity in the file | ``gravity`` field replaced | ``gravity_true_mps2`` |
+* :func:`shift_imu_stamps`, fixed clock offset: ``t' = t + offset_s``; truth ``time_offset_s += offset_s``.
+* :func:`saturate_accel`, small full-scale range: ``a' = clip(a, -r, r)`` per axis; truth
+  ``accel_range_mps2 = r``.
+* :func:`stick_axis`, one accelerometer axis stuck: ``a'_i(t) = a_i(t_k*)`` for ``t >= t_s``; truth
+  ``accel_stuck_axis``, ``accel_stuck_from_s``, ``accel_stuck_value_mps2``.
+* :func:`drift_bias`, accelerometer bias drift: ``a'(t) = a(t) + d (t - t0) / (t1 - t0)``; truth
+  ``accel_bias_drift_mps2 = d``.
+* :func:`splice_knock`, unit knocked at ``t_s``: the stream of ``before`` for ``t < t_s``, of ``after``
+  from ``t_s``; truth: the pose at the majority of the session, both poses and ``knock_t_s``.
+* :func:`declare_gravity`, wrong gravity in the file: the ``gravity`` field replaced; truth
+  ``gravity_true_mps2``.
 
 The pose truth (``Dataset.truth``) a calibration is judged against is the unit's pose, unchanged by
 every fault but the knock; for a knocked unit it is the pose it had over the larger part of the

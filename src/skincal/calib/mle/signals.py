@@ -20,11 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.mle.solver import Rows
+from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.rest import JointRest, RestRuns, unit_rest_runs
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray, skew
+
 
 @dataclass(frozen=True)
 class LinkSignals:
@@ -175,7 +176,8 @@ def arrange_unit_data(
     runs = unit_rest_runs(rest_mask, t, accel, gyro)
     t_c = 0.5 * (float(t[0]) + float(t[-1])) if t.size else 0.0
     S = len(runs.bounds)
-    f_s, g_s, w_s, tm_s, q_s = np.zeros((S, 3)), np.zeros((S, 3)), np.zeros(S), np.zeros(S), np.zeros((S, chain.n_joints))
+    f_s, g_s, q_s = np.zeros((S, 3)), np.zeros((S, 3)), np.zeros((S, chain.n_joints))
+    w_s, tm_s = np.zeros(S), np.zeros(S)
     for k, (a, b) in enumerate(runs.bounds):
         f_s[k] = accel[a:b].mean(axis=0)
         if gyro is not None:
@@ -183,7 +185,8 @@ def arrange_unit_data(
         w_s[k] = b - a
         tm_s[k] = 0.5 * (t[a] + t[b - 1])
         q_s[k] = interpolator.nearest(t[a:b])[0].mean(axis=0)
-    static_u = link_signals(chain, link, q_s, np.zeros_like(q_s), np.zeros_like(q_s), gravity).u if S else np.zeros((0, 3))
+    zero = np.zeros_like(q_s)
+    static_u = link_signals(chain, link, q_s, zero, zero, gravity).u if S else np.zeros((0, 3))
     moving = ~rest_mask & interpolator.reliable(t)
     for t0, t1 in runs.dropped:
         moving &= ~((t >= t0) & (t <= t1))
