@@ -11,6 +11,7 @@ import re
 
 import numpy as np
 import pytest
+from synthetic_streams import rest_runs_stream
 
 from skincal.calib.rest import (
     joint_rest_from_data,
@@ -161,29 +162,6 @@ def test_runs_are_half_open_true_ranges():
 
 
 # ---------------------------------------------------------------------------- IMU cross-check
-def _rest_runs_stream(seed: int = 0, rate: float = 100.0):
-    """An accelerometer at 100 Hz: six rest runs of 1.5 s (each at its own gravity direction, white
-    noise 0.03 m/s^2) separated by 0.5 s of motion (large, varying readings)."""
-    rng = np.random.default_rng(seed)
-    run_s, move_s, n_runs = 1.5, 0.5, 6
-    t = np.arange(int(round(n_runs * (run_s + move_s) * rate))) / rate
-    rest_mask = np.zeros(t.size, dtype=bool)
-    accel = np.empty((t.size, 3))
-    bounds = []
-    for k in range(n_runs):
-        a, b = np.searchsorted(t, k * (run_s + move_s) - 1e-9), np.searchsorted(t, k * (run_s + move_s) + run_s - 1e-9)
-        rest_mask[a:b] = True
-        g = rng.normal(size=3)
-        accel[a:b] = 9.81 * g / np.linalg.norm(g)
-        bounds.append((a, b))
-    motion = ~rest_mask
-    accel[motion] = 3.0 * np.sin(2 * np.pi * 2 * t[motion])[:, None] + np.array([0.0, 0.0, 9.81])
-    accel += rng.normal(0.0, 0.03, accel.shape)
-    gyro = rng.normal(0.0, 5e-3, accel.shape)
-    gyro[motion] += 1.0
-    return t, rest_mask, accel, gyro, bounds
-
-
 def _guard(out, bounds) -> int:
     """The guard the function applied, checked to be the 60 ms of GUARD_S (6 or 7 samples at 100 Hz)."""
     a0 = bounds[0][0]
@@ -193,7 +171,7 @@ def _guard(out, bounds) -> int:
 
 
 def test_unit_rest_runs_keeps_still_runs_with_the_guard():
-    t, rest_mask, accel, gyro, bounds = _rest_runs_stream()
+    t, rest_mask, accel, gyro, bounds = rest_runs_stream()
     out = unit_rest_runs(rest_mask, t, accel, gyro)
     # The 60 ms guard at 100 Hz: 6 samples (7 when the median period rounds just below 10 ms).
     guard = _guard(out, bounds)
@@ -208,7 +186,7 @@ def test_unit_rest_runs_keeps_still_runs_with_the_guard():
 
 @pytest.mark.parametrize("with_gyro", [True, False])
 def test_unit_rest_runs_drops_the_run_in_which_the_imu_moved(with_gyro):
-    t, rest_mask, accel, gyro, bounds = _rest_runs_stream(seed=1)
+    t, rest_mask, accel, gyro, bounds = rest_runs_stream(seed=1)
     bumped = 3
     a, b = bounds[bumped]
     mid = (a + b) // 2
@@ -233,7 +211,7 @@ def test_unit_rest_runs_drops_the_run_in_which_the_imu_moved(with_gyro):
 
 def test_unit_rest_runs_drops_a_run_that_only_the_gyroscope_sees():
     """A slow turn of the unit barely changes the accelerometer's spread but shows on the gyroscope."""
-    t, rest_mask, accel, gyro, bounds = _rest_runs_stream(seed=2)
+    t, rest_mask, accel, gyro, bounds = rest_runs_stream(seed=2)
     a, b = bounds[1]
     gyro = gyro.copy()
     gyro[a + 20 : a + 60, 2] += 0.05  # 0.05 rad/s for 0.4 s: a 1.1 deg turn

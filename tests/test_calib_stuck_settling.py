@@ -11,6 +11,7 @@ import re
 
 import numpy as np
 import pytest
+from synthetic_streams import rest_runs_stream
 
 from skincal.calib.preprocess import screen_readings
 from skincal.calib.rest import unit_rest_runs
@@ -94,30 +95,6 @@ def test_an_axis_constant_over_the_whole_stream_is_still_an_error():
 
 
 # ---------------------------------------------------------------------------- settling rest runs
-def _rest_runs_stream(seed: int = 0):
-    """Six rest runs of 1.5 s at 100 Hz (each at its own gravity direction, white noise 0.03 m/s^2,
-    gyroscope noise 5e-3 rad/s) separated by 0.5 s of large motion."""
-    rng = np.random.default_rng(seed)
-    run_s, move_s, n_runs = 1.5, 0.5, 6
-    t = np.arange(int(round(n_runs * (run_s + move_s) * RATE_HZ))) / RATE_HZ
-    rest_mask = np.zeros(t.size, dtype=bool)
-    accel = np.empty((t.size, 3))
-    bounds = []
-    for k in range(n_runs):
-        a = int(np.searchsorted(t, k * (run_s + move_s) - 1e-9))
-        b = int(np.searchsorted(t, k * (run_s + move_s) + run_s - 1e-9))
-        rest_mask[a:b] = True
-        g = rng.normal(size=3)
-        accel[a:b] = 9.81 * g / np.linalg.norm(g)
-        bounds.append((a, b))
-    motion = ~rest_mask
-    accel[motion] = 3.0 * np.sin(2 * np.pi * 2 * t[motion])[:, None] + np.array([0.0, 0.0, 9.81])
-    accel += rng.normal(0.0, 0.03, accel.shape)
-    gyro = rng.normal(0.0, 5e-3, accel.shape)
-    gyro[motion] += 1.0
-    return t, rest_mask, accel, gyro, bounds
-
-
 def _ring(t: np.ndarray, a: int, b: int, amplitude: float, tau_s: float = 0.15, hz: float = 6.0) -> np.ndarray:
     """A decaying oscillation from sample ``a`` on (a servo settling after the motion), ``(b - a, 3)``."""
     s = t[a:b] - t[a]
@@ -125,12 +102,12 @@ def _ring(t: np.ndarray, a: int, b: int, amplitude: float, tau_s: float = 0.15, 
 
 
 def test_a_run_ringing_at_its_start_is_trimmed_silently_and_a_bumped_one_dropped():
-    t, rest_mask, accel, gyro, bounds = _rest_runs_stream()
+    t, rest_mask, accel, gyro, bounds = rest_runs_stream()
     ringing, bumped = 1, 4
     a, b = bounds[ringing]
     accel[a:b] += _ring(t, a, b, 3.0)
     gyro[a:b] += _ring(t, a, b, 0.5)
-    clean = unit_rest_runs(rest_mask, t, *_rest_runs_stream()[2:4])
+    clean = unit_rest_runs(rest_mask, t, *rest_runs_stream()[2:4])
     out = unit_rest_runs(rest_mask, t, accel, gyro)
     # the ringing run is kept (no warning), shorter at its start only, by at least the ringing's loud
     # part (amplitude above the 4x noise limit until ~0.4 s) and by at most half of it
@@ -155,7 +132,7 @@ def test_a_run_ringing_at_its_start_is_trimmed_silently_and_a_bumped_one_dropped
 
 
 def test_a_run_that_rings_for_most_of_its_length_or_moves_at_its_end_is_dropped():
-    t, rest_mask, accel, gyro, bounds = _rest_runs_stream(seed=1)
+    t, rest_mask, accel, gyro, bounds = rest_runs_stream(seed=1)
     a, b = bounds[2]
     accel[a:b] += _ring(t, a, b, 3.0, tau_s=0.6)  # loud for ~1.0 s of the 1.4 s run: less than half remains
     x, y = bounds[3]
