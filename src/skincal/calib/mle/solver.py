@@ -44,12 +44,14 @@ from scipy.spatial.transform import Rotation
 
 from skincal.kinematics.transforms import FloatArray, skew
 
-PRIOR_STD = {"e": 0.05, "d": 1e-3, "c": 1e-3, "k": 0.01}
+PRIOR_STD = {"e": 0.05, "d": 1e-3, "c": 1e-3, "k": 0.002}
 """Zero-mean Gaussian priors of the sensor blocks (a MAP estimate): scale/misalignment 5 % (real
-IMUs: 1-3 %), clock drift 1000 ppm, bias drift 1e-3 m/s^3 (0.6 m/s^2 over ten minutes), gravity
-1 %. Far wider than any real value, so data that determine a block are not biased; where the data
-do not, the block stays near zero and its prior std enters the covariance instead of an
-arbitrary null-space value."""
+IMUs: 1-3 %), clock drift 1000 ppm, bias drift 1e-3 m/s^3 (0.6 m/s^2 over ten minutes): far wider
+than any real value, so data that determine a block are not biased; where the data do not, the
+block stays near zero and its prior std enters the covariance instead of an arbitrary null-space
+value. Gravity 0.2 %: the spread of the local gravity magnitude over the Earth's surface
+(9.780-9.832 m/s^2) about the 9.81 a dataset usually states; a unit whose data cannot separate it
+from its position then carries that uncertainty honestly in its position std."""
 MAX_STEP = {"theta": 0.5, "p": 0.5}
 """Largest Gauss-Newton step of the rotation (rad) and position (m); a larger one is scaled down."""
 HUBER_K = 3.0
