@@ -84,8 +84,10 @@ def robustness(
         return
     if workers < 1:
         raise ConfigError(f"--workers must be at least 1, got {workers}")
-    if out is not None and out.exists() and not force:
-        raise ConfigError(f"{out} exists; pass --force to overwrite it")
+    if out is not None:
+        from skincal.data.atomic import check_output
+
+        check_output(out, force=force)
     overrides: dict[str, Any] = {"seed": seed}
     for key, value in (("robots", _names(robots)), ("backends", _names(backends)), ("faults", _names(faults))):
         if value is not None:

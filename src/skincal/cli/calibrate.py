@@ -80,14 +80,19 @@ def calibrate(
     use_dataset_qdd: bool = typer.Option(False, help="use the dataset's qdd instead of estimating it"),
     unit: list[str] | None = typer.Option(None, help="calibrate only this unit (repeatable)"),
     workers: int = typer.Option(2, help="units calibrated at once (forked processes on Linux, else threads)"),
+    force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Calibrate the skin units of a dataset and write the result JSON."""
     from rich.progress import Progress
 
     from skincal.calib import calibrate as run
+    from skincal.data.atomic import check_output
     from skincal.data.hdf5 import read_dataset
     from skincal.data.result import sha256_file, write_result
 
+    check_output(out, force=force, inputs=(dataset,))
+    if workers < 1:
+        raise ConfigError(f"--workers must be at least 1, got {workers}")
     ds = read_dataset(dataset)
     link_map = read_links_file(links) if links is not None else None
     names = unit or ds.units

@@ -73,14 +73,17 @@ def import_bag(
     rest_velocity: float = _REST,
     min_static: float = _MIN_STATIC,
     min_dynamic: float = _MIN_DYNAMIC,
+    force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Import a ROS bag (no ROS install needed), segment it and write a dataset."""
     from dataclasses import replace
 
+    from skincal.data.atomic import check_output
     from skincal.data.hdf5 import write_dataset
     from skincal.data.rosbag import read_bag, topic_map
     from skincal.data.segment import segment_dataset
 
+    check_output(out, force=force, inputs=(bag,))
     tmap = topic_map(imu_topic, joint_topic, range_topic, path=map_file)
     ds, report = read_bag(bag, robot, tmap, accel_unit=accel_unit, gyro_unit=gyro_unit)
     units = ", ".join(f"{u} <- {t}" for t, u in report.imu_topics.items())
@@ -108,11 +111,14 @@ def segment_cmd(
     min_static: float = _MIN_STATIC,
     min_dynamic: float = _MIN_DYNAMIC,
     verbose: bool = typer.Option(False, "--verbose", "-v", help="list every segment"),
+    force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Find static and single-joint dynamic segments in a recording and write them to /segments."""
+    from skincal.data.atomic import check_output
     from skincal.data.hdf5 import read_dataset, write_dataset
     from skincal.data.segment import segment_dataset
 
+    check_output(out, force=force, inputs=(dataset,))
     ds = read_dataset(dataset)
     had = ds.segments is not None and len(ds.segments) > 0
     ds, report = segment_dataset(ds, _segmentation_config(rest_velocity, min_static, min_dynamic))
@@ -129,11 +135,14 @@ def export_cmd(
     out: Path = typer.Option(..., "--out", "-o", help="file to write"),
     robot_links: Path | None = typer.Option(None, help="YAML map of link number -> frame (+ xyz/rpy offset)"),
     prefix: str = typer.Option("", help="prefix of the unit frame names"),
+    force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Export calibrated unit poses onto the robot's link frames (URDF, YAML, static TF launch, CSV)."""
+    from skincal.data.atomic import check_output
     from skincal.data.export import export_result
     from skincal.data.result import failed_units, read_result
 
+    check_output(out, force=force, inputs=(result,))
     res = read_result(result)
     frames = export_result(res, fmt, out, link_map=robot_links, prefix=prefix)
     console.print(f"wrote {out}: {len(frames)} unit(s) as {fmt} onto " + ", ".join(

@@ -134,10 +134,13 @@ def simulate(
     clock: str = typer.Option(
         "auto", help="unit clocks: ideal, driver, wifi, wifi-resync or auto (driver for --noise real)"
     ),
+    force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Simulate a calibration session and write it as a dataset file."""
+    from skincal.data.atomic import check_output
     from skincal.data.hdf5 import write_dataset
 
+    check_output(out, force=force)
     start = time.perf_counter()
     ds = simulate_dataset(
         robot, placement, units, noise, protocol, seed, backend, mujoco_mode=mujoco_mode, joints=joints, clock=clock

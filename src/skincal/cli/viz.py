@@ -111,6 +111,7 @@ def report(
     out: Path | None = typer.Option(None, "--out", "-o", help="file to write (default: print markdown)"),
     fmt: str = typer.Option("html", "--format", help="html (one self-contained file) or md (markdown summary)"),
     use_dataset_qdd: bool = typer.Option(False, help="predict with the dataset's qdd (as calibrate --use-dataset-qdd)"),
+    force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Write a calibration report: per-unit table, residuals, sensor parameters, coverage, errors."""
     from skincal.data.hdf5 import read_dataset
@@ -120,6 +121,10 @@ def report(
 
     if fmt not in ("html", "md"):
         raise ConfigError(f"--format must be 'html' or 'md', got '{fmt}'")
+    if out is not None:
+        from skincal.data.atomic import check_output
+
+        check_output(out, force=force, inputs=(result, dataset))
     res = read_result(result)
     ds = read_dataset(dataset)
     if out is None:

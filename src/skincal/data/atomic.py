@@ -63,3 +63,24 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> None:
         fh.write(data)
         fh.flush()
         os.fsync(fh.fileno())
+
+
+def check_output(path: str | Path, *, force: bool = False, inputs: tuple[str | Path, ...] = ()) -> Path:
+    """Refuse an output path before any work is done, with a one-line :class:`ConfigError`:
+    one of the command's ``inputs`` (never overwritten, even with ``force``), an existing file
+    unless ``force``, a directory, or a file in a folder that does not exist."""
+    from skincal.errors import ConfigError
+
+    out = Path(path)
+    for source in inputs:
+        with contextlib.suppress(OSError):
+            if Path(source).exists() and out.exists() and os.path.samefile(out, source):
+                raise ConfigError(f"{out} is the input {source}; write the output to another file")
+    if out.is_dir():
+        raise ConfigError(f"{out} is a folder; give a file name")
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        raise ConfigError(f"{out}: the folder {parent} does not exist")
+    if out.exists() and not force:
+        raise ConfigError(f"{out} exists; pass --force to overwrite it")
+    return out

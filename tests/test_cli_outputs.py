@@ -1,0 +1,65 @@
+"""Outputs are never clobbered silently: every command that writes a file refuses its own input,
+an existing file (unless --force), a folder and a missing folder, before doing any work."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import pytest
+
+from skincal.cli import main
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    root = tmp_path_factory.mktemp("outputs")
+    data = root / "data.h5"
+    assert main(["simulate", "--robot", "panda", "--placement", "random", "--units", "2", "--protocol", "fast",
+                 "--out", str(data)]) == 0
+    result = root / "result.json"
+    assert main(["calibrate", str(data), "--out", str(result)]) == 0
+    return root, data, result
+
+
+def test_calibrate_refuses_its_input_an_existing_file_and_bad_folders(files, capsys):
+    root, data, result = files
+    before_data, before_result = _digest(data), _digest(result)
+    capsys.readouterr()
+    assert main(["calibrate", str(data), "--out", str(data)]) == 2
+    assert main(["calibrate", str(data), "--out", str(data), "--force"]) == 2  # the input, even with --force
+    assert main(["calibrate", str(data), "--out", str(result)]) == 2
+    assert main(["calibrate", str(data), "--out", str(root)]) == 2
+    assert main(["calibrate", str(data), "--out", str(root / "nowhere" / "r.json")]) == 2
+    assert main(["calibrate", str(data), "--out", str(root / "w.json"), "--workers", "0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 6 and all(line.startswith("error:") for line in err)
+    assert "is the input" in err[0] and "is the input" in err[1] and "pass --force" in err[2]
+    assert "folder" in err[3] and "does not exist" in err[4] and "--workers" in err[5]
+    assert _digest(data) == before_data and _digest(result) == before_result
+    assert not (root / "w.json").exists()
+    assert main(["calibrate", str(data), "--out", str(result), "--force"]) == 0  # asked for: replaced
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["simulate", "--protocol", "fast", "--out", "{data}"],
+        ["segment", "{data}", "--out", "{data}"],
+        ["export", "{result}", "-f", "csv", "-o", "{result}"],
+        ["export", "{result}", "-f", "csv", "-o", "{data}"],
+        ["report", "{result}", "--dataset", "{data}", "--out", "{data}"],
+        ["report", "{result}", "--dataset", "{data}", "--out", "{result}"],
+    ],
+)
+def test_other_writers_keep_existing_files(files, command, capsys):
+    _, data, result = files
+    before = {p: _digest(p) for p in (data, result)}
+    args = [a.format(data=data, result=result) for a in command]
+    assert main(args) == 2
+    assert capsys.readouterr().err.startswith("error:")
+    assert {p: _digest(p) for p in (data, result)} == before
