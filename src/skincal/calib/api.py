@@ -10,6 +10,7 @@ or the method's own discovery when it has one).
 from __future__ import annotations
 
 import multiprocessing
+import os
 import time
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
@@ -84,6 +85,9 @@ class MethodSpec:
     exact_joint_states: bool = True
     align: Callable[[Any, Any], Any] | None = None
     needs_segments: bool = True
+    options: tuple[str, ...] | None = None
+    """The method's option names (``calibrate(..., **options)``); others are refused. ``None``: the
+    method checks them itself."""
 
 
 METHODS: dict[str, MethodSpec] = {}
@@ -176,6 +180,10 @@ def calibrate(
     if method not in METHODS:
         raise ConfigError(f"unknown method '{method}' (available: {', '.join(sorted(METHODS))})")
     spec = METHODS[method]
+    if spec.options is not None and (unknown := sorted(set(options) - set(spec.options))):
+        raise ConfigError(
+            f"unknown option(s) {', '.join(unknown)} for method '{method}' (known: {', '.join(spec.options)})"
+        )
     given = _resolve_links(dataset, links, use_truth_links)
     names = dataset.units if units is None else list(units)
     for u in names:
@@ -206,7 +214,7 @@ def calibrate(
         except (ArithmeticError, ValueError, IndexError, np.linalg.LinAlgError) as exc:
             return name, None, f"internal error ({type(exc).__name__}: {exc})"  # one unit never stops the others
 
-    n_workers = max(1, min(int(workers), len(names)))
+    n_workers = max(1, min(int(workers), len(names), os.cpu_count() or 1))  # more would only oversubscribe
     pool: Executor | None = None
     if n_workers == 1:
         # one BLAS thread, as in the worker processes: the small per-unit matrices gain nothing from
@@ -261,6 +269,21 @@ def calibrate(
     )
 
 
+def _check_overlap(dataset: Dataset, unit: str, slack_s: float = 1.0) -> None:
+    """A unit's stamps must overlap the joint stream (within ``slack_s``): stamps on another clock
+    (Unix time, a device's boot time) would otherwise fail deep inside a method."""
+    t = np.asarray(dataset.imu[unit].t, dtype=float)
+    tj = np.asarray(dataset.joints.t, dtype=float)
+    if t.size == 0:
+        raise CalibrationError(f"unit '{unit}': no IMU samples")
+    inside = np.count_nonzero((t >= tj[0] - slack_s) & (t <= tj[-1] + slack_s))
+    if inside < 10:
+        raise CalibrationError(
+            f"unit '{unit}': its stamps {t[0]:.3f}..{t[-1]:.3f} s do not overlap the joint stream "
+            f"{tj[0]:.3f}..{tj[-1]:.3f} s (stamped by another clock? put both on one clock first)"
+        )
+
+
 def _segment_automatically(dataset: Dataset, spec: MethodSpec) -> tuple[Dataset, list[str]]:
     """Segments for a dataset without ``/segments``, from its joint stream, with the rest speed
     threshold raised above the stream's own velocity noise (six standard deviations)."""
@@ -299,6 +322,7 @@ def calibrate_unit(
     if shared is None and spec.prepare is not None:
         shared = spec.prepare(dataset, interpolator)
     alignment, offset = None, 0.0
+    _check_overlap(dataset, unit)
     if spec.align is not None:
         alignment = spec.align(shared, dataset.imu[unit])
         offset = float(alignment.offset_s)

@@ -149,11 +149,11 @@ def joint_rest_from_segments(
 def joint_rest(
     joints: JointStates, segments: Segments | None, noise: tuple[FloatArray, FloatArray] | None = None
 ) -> JointRest:
-    """From the segments when there are any, else from the joint data (``noise``: known
+    """From the segments when they have a static one, else from the joint data (``noise``: known
     ``(position, velocity)`` noise std per joint, only used with segments)."""
-    if segments is not None and len(segments) > 0:
+    if segments is not None and np.any(np.asarray(segments.kind) == STATIC):
         return joint_rest_from_segments(joints, segments, noise)
-    return joint_rest_from_data(joints)
+    return joint_rest_from_data(joints)  # no segments, or none static: they cannot say when the robot rests
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:

@@ -105,6 +105,8 @@ def calibrate(
         )
     write_result(result, out)
     console.print(_unit_table(result, f"{method}: {len(result.units)} units in {result.runtime_s:.2f} s"))
+    for note in result.extras.get("notes", []):
+        console.print(f"note: {note}", highlight=False, markup=False)
     for name, reason in result.extras.get("failed_units", {}).items():
         console.print(f"[yellow]warning[/]: unit {name} not calibrated: {reason}", highlight=False)
     console.print(f"wrote {out}")

@@ -56,7 +56,7 @@ from skincal.calib.timing import (
     find_clock_steps,
     motion_profile,
 )
-from skincal.data.dataset import Dataset, ImuStream
+from skincal.data.dataset import STATIC, Dataset, ImuStream
 from skincal.data.result import UnitResult
 from skincal.errors import CalibrationError
 from skincal.kinematics.chain import SerialChain
@@ -312,15 +312,18 @@ def choose_link(problem: UnitProblem) -> tuple[int, float, list[str], dict[int, 
     levels: dict[int, float] = {}
     states: dict[int, State] = {}
     warnings = [w for w in activity.warnings if "ambiguous" not in w and "never excited" not in w]
-    if activity.link != 0 and activity.confidence >= DECISIVE_ACTIVITY:
+    tagged = bool(np.any(problem.samples.kind == STATIC))  # the activity's noise floor needs static segments
+    if not tagged:
+        warnings = []
+    if tagged and activity.link != 0 and activity.confidence >= DECISIVE_ACTIVITY:
         return activity.link, activity.confidence, warnings, levels, None  # no doubt: nothing to compare
-    if activity.link == 0 and np.any(np.isfinite(activity.activity)):  # joints were excited, none moved it
+    if tagged and activity.link == 0 and np.any(np.isfinite(activity.activity)):  # joints excited, none moved it
         raise CalibrationError("; ".join(activity.warnings) or "no joint motion excites this unit")
     # Not decisive: a joint's motion can shake earlier links through the servos' finite stiffness
     # (the activity then points too far out), so every link up to one past the suggestion competes;
     # without any activity (no segments to tell the excited joint), every link does.
     hint = problem.alignment.search.link if problem.alignment is not None else n
-    top = n if activity.link == 0 else min(n, max(activity.link, hint) + 1)
+    top = n if activity.link == 0 or not tagged else min(n, max(activity.link, hint) + 1)
     for link in range(1, top + 1):
         try:
             fit = _fit(_arrange(problem, link, decimate=10), Blocks(scale=SCALE_NONE), max_outer=2)
@@ -452,15 +455,17 @@ def _static_chi2(fit: Fit, rows: Rows, rest_noise: float, angle_noise: float = 0
 
 def _honesty(
     fit: Fit, p: _Problem, alignment: OffsetSearch | None, total_offset: float, angle_noise: float = 0.0
-) -> tuple[FloatArray, list[str]]:
-    """Residual tests: the covariance inflated where the model leaves something out, and warnings
-    (``angle_noise``: error of the rest poses' joint angles along the chain to the unit, rad)."""
+) -> tuple[FloatArray, list[str], list[str]]:
+    """Residual tests: the covariance inflated where the model leaves something out, warnings (the
+    estimate may be off: the reported std accounts for it) and notes (found and corrected, e.g. a
+    drifting clock) (``angle_noise``: error of the rest poses' joint angles along the chain, rad)."""
     rows = p.data.rows
     sl = fit.blocks.slices()
     cov = fit.covariance
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     st = fit.state
     warnings: list[str] = []
+    notes: list[str] = []
     chi2 = _static_chi2(fit, rows, p.data.rest.accel_noise, angle_noise)
     if chi2 > STATIC_CHI2_WARN:
         cov = cov * chi2
@@ -471,7 +476,7 @@ def _honesty(
     if "d" in sl:
         d, sd = st.d, std[sl["d"].start]
         if abs(d) > DRIFT_WARN_SIGMAS * sd and abs(d) * 1e6 > CLOCK_DRIFT_WARN_PPM:
-            warnings.append(f"clock drifts: {d * 1e6:+.0f} ppm relative to the robot's clock (estimated and corrected)")
+            notes.append(f"clock drifts: {d * 1e6:+.0f} ppm relative to the robot's clock (estimated and corrected)")
     if "c" in sl:
         T = float(np.ptp(rows.static_t))
         change = np.linalg.norm(st.c) * T
@@ -493,7 +498,7 @@ def _honesty(
             f"residuals strongly correlated in time (factor {fit.residual_correlation:.1f}: unmodelled dynamics "
             "or joint-state errors); uncertainty inflated by it"
         )
-    return cov, warnings
+    return cov, warnings, notes
 
 
 def run_unit(problem: UnitProblem) -> UnitResult:
@@ -553,7 +558,7 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     alignment: Alignment | None = problem.alignment
     sigma_q = problem.shared.interpolator.conditioning.position_noise
     angle_noise = 0.0 if sigma_q is None else float(np.sqrt(np.sum(np.square(sigma_q[:link]))))
-    cov, honesty = _honesty(fit, p, None if alignment is None else alignment.search, total_offset, angle_noise)
+    cov, honesty, notes = _honesty(fit, p, None if alignment is None else alignment.search, total_offset, angle_noise)
     warnings += honesty
     observable = fit.null_space.shape[1] == 0
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -568,15 +573,27 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         pos_std = np.where(affected_p, np.nan, pos_std)
         rot_std = np.where(affected_r, np.nan, rot_std)
     get_std = lambda name: std[sl[name]] if name in sl else None  # noqa: E731
+    # The offset at the start of the joint stream (where a simulation's truth and a user's sync
+    # refer to), carried from the fit's reference t_c along the drift: tau + d (t_ref - t_c).
+    t_ref = problem.shared.interpolator.t_start
+    lever = t_ref - p.data.t_c
+    offset_ref = total_offset + (st.d * lever if "d" in sl else 0.0)
+    offset_ref_std = None
+    if "tau" in sl:
+        j = np.zeros(len(std))
+        j[sl["tau"].start] = 1.0
+        if "d" in sl:
+            j[sl["d"].start] = lever
+        offset_ref_std = float(np.sqrt(max(j @ cov @ j, 0.0)))
     extras.update(
         {
             "accel_bias_mps2": st.b,
             "accel_scale_misalignment": st.A,
             "accel_bias_std_mps2": std[6:9],
-            "time_offset_s": total_offset,
-            "time_offset_std_s": float(get_std("tau")[0]) if "tau" in sl else None,
+            "time_offset_s": offset_ref,
+            "time_offset_std_s": offset_ref_std,
             "time_offset_coarse_s": None if alignment is None else alignment.offset_s,
-            "time_reference_s": p.data.t_c,
+            "time_reference_s": t_ref,
             "clock_drift_ppm": (st.d * 1e6 if "d" in sl else 0.0) + (steps.drift_ppm if steps is not None else 0.0)
             if "d" in sl or steps is not None else None,
             "clock_drift_std_ppm": float(get_std("d")[0]) * 1e6 if "d" in sl else None,
@@ -594,7 +611,7 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         extras["clock_resync_steps"] = steps.n_steps
         extras["clock_resync_period_s"] = steps.period_s
         extras["clock_resync_step_s"] = steps.mean_step_s
-        warnings.append(
+        notes.append(
             f"clock re-synced {steps.n_steps} times (every {steps.period_s:.2f} s, steps of "
             f"{steps.mean_step_s * 1e3:.2f} ms: the sensor clock drifts {steps.drift_ppm:+.0f} ppm between "
             "re-syncs); stamps corrected"
@@ -618,6 +635,8 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         extras["accel_scale"] = np.diag(st.A).copy()
         sym = 0.5 * (st.E + st.E.T)
         extras["accel_misalignment_sym"] = sym - np.diag(np.diag(sym))
+    if notes:
+        extras["notes"] = notes
     return UnitResult(
         pose=SkinUnitPose(link, st.R, st.p),
         observable=observable,
@@ -640,5 +659,6 @@ register(
         exact_joint_states=False,
         align=align,
         needs_segments=False,
+        options=("scale", "time_offset", "clock_drift", "bias_drift", "gravity", "gyro", "detect_move"),
     ),
 )

@@ -1,0 +1,46 @@
+"""The calibration door refuses what it cannot honour: misspelt options, stamps on another clock;
+and a segment table with no static segment does not mislead the default method."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from skincal.calib import calibrate, evaluate
+from skincal.cli.simulate import simulate_dataset
+from skincal.data.dataset import DYNAMIC, Segments
+from skincal.errors import CalibrationError, ConfigError
+
+
+@pytest.fixture(scope="module")
+def session():
+    return simulate_dataset("panda", "random", 3, "realistic", "fast", seed=8)
+
+
+def test_a_misspelt_option_is_refused(session):
+    with pytest.raises(ConfigError, match=r"unknown option\(s\) scael for method 'mle'.*known: scale"):
+        calibrate(session, "mle", scael=False)
+
+
+def test_stamps_on_another_clock_are_named(session):
+    imu = {k: replace(v, t=v.t + 1.7e9) for k, v in session.imu.items()}
+    with pytest.raises(CalibrationError, match="do not overlap the joint stream"):
+        calibrate(replace(session, imu=imu), "mle")
+
+
+def test_segments_without_a_static_one_fall_back_to_the_joint_data(session):
+    """A segmentation that found only dynamic segments (too short rests rejected) must not be taken
+    as "the robot never rests": rests come from the joint data and the links stay right."""
+    seg = session.segments
+    dyn = np.asarray(seg.kind) == DYNAMIC
+    only_dynamic = Segments(
+        np.asarray(seg.t_start)[dyn], np.asarray(seg.t_end)[dyn], np.asarray(seg.kind)[dyn],
+        np.asarray(seg.pose)[dyn], np.asarray(seg.joint)[dyn],
+    )
+    result = calibrate(replace(session, segments=only_dynamic), "mle")
+    ev = evaluate(result, session)
+    assert ev["links_correct"] == 3
+    assert ev["mean_position_error_mm"] < 1.0
+    assert all(u.extras["rest_source"] == "joint positions" for u in result.units.values())
