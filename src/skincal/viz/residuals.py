@@ -14,7 +14,7 @@ unit frame, m/s^2.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -75,6 +75,12 @@ def unit_residuals(
     A, b, tau = sensor_model(unit)
     if interpolator is None:
         interpolator = JointInterpolator(dataset.joints)
+    drift_ppm, t_ref = unit.extras.get("clock_drift_ppm"), unit.extras.get("time_reference_s")
+    if drift_ppm is not None and t_ref is not None and np.isfinite(drift_ppm):
+        # a drifting unit clock: the offset grows by drift (t - t_ref) from time_reference_s
+        imu = dataset.imu[name]
+        stamps = imu.t - 1e-6 * float(drift_ppm) * (imu.t - float(t_ref))
+        dataset = replace(dataset, imu={**dataset.imu, name: replace(imu, t=stamps)})
     s = unit_samples(dataset, name, time_offset_s=tau, interpolator=interpolator)
     pose = unit.pose
     sig = link_signals(dataset.robot, pose.link, s.q, s.qd, s.qdd, np.asarray(dataset.gravity, dtype=float))
