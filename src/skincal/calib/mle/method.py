@@ -529,7 +529,13 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     # Converge on every 8th moving sample, then one Gauss-Newton step on all of them, whose
     # normal matrix also gives the covariance.
     coarse = _fit(_decimated(p, 8), blocks, state=start)
-    move = find_move(p.data.rows, coarse.residuals, p.data.t_c) if problem.options.get("detect_move", True) else None
+    move = None
+    if problem.options.get("detect_move", True) and coarse.residuals is not None:
+        # a fitted bias drift can soak up part of a move: look with and without it
+        S = len(p.data.rows.static_u)
+        undrifted = coarse.residuals.copy()
+        undrifted[:S] -= np.outer(p.data.rows.static_t, coarse.state.c)
+        move = find_move(p.data.rows, coarse.residuals, p.data.t_c) or find_move(p.data.rows, undrifted, p.data.t_c)
     if move is not None:  # keep the longer part and fit again
         s = problem.samples
         before = np.count_nonzero(s.t <= move.t_before) >= np.count_nonzero(s.t >= move.t_after)
