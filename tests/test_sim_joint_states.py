@@ -236,6 +236,6 @@ def test_cli_simulate_with_real_timing(tmp_path, capsys):
         ("--joints", "robotic", "unknown joint-state model 'robotic'"),
         ("--clock", "sundial", "unknown clock model 'sundial'"),
     ):
-        assert main([*args, option, bad]) == 2
+        assert main([*args, "--force", option, bad]) == 2  # the file exists: --force, to reach the preset
         err = capsys.readouterr().err.strip()
         assert message in err and len(err.splitlines()) == 1 and "Traceback" not in err
