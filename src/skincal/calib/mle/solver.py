@@ -373,6 +373,7 @@ def solve(
     r = r_g = np.zeros((0, 3))
     rho = rho_g = 1.0
     cost = 0.0
+    H_gyro = np.zeros((blocks.size, blocks.size))
     for _outer in range(max_outer):
         for _inner in range(max_inner):
             iterations += 1
@@ -388,8 +389,10 @@ def solve(
                 norm_g = np.linalg.norm(r_g, axis=1) * base
                 sigma_g = max(_robust_sigma(norm_g[S:] if len(r_g) > S else norm_g), 0.1 * sigma_floor)
                 w_g = (base**2) * _huber(norm_g, sigma_g) / sigma_g**2
-                H_g, g_g = _normal_equations(J_g, r_g, w_g)
-                H[np.ix_(cols_g, cols_g)] += H_g
+                H_g_c, g_g = _normal_equations(J_g, r_g, w_g)
+                H_gyro = np.zeros_like(H)
+                H_gyro[np.ix_(cols_g, cols_g)] = H_g_c
+                H = H + H_gyro
                 g[cols_g] += g_g
                 cost += float(np.sum(w_g * np.sum(r_g * r_g, axis=1)))
             H_p, g_p = _prior(state, blocks)
@@ -407,18 +410,11 @@ def solve(
     # Covariance from the last iteration's normal matrix (the final step changes it negligibly),
     # each sensor's information divided by its residuals' autocorrelation factor.
     rho = _residual_correlation(r[S:])
-    info = H
+    H_p, _ = _prior(state, blocks)
     if use_gyro:
         rho_g = _residual_correlation(r_g[S:])
-        _, J_g, cols_g = _gyro_rows_compact(state, blocks, lin, rows)
-        base = np.concatenate([sw_static, np.ones(len(r_g) - S)])
-        w_g = (base**2) * _huber(np.linalg.norm(r_g, axis=1) * base, sigma_g) / sigma_g**2
-        H_g = np.zeros_like(H)
-        H_g[np.ix_(cols_g, cols_g)] = _normal_equations(J_g, r_g, w_g)[0]
-        H_p, _ = _prior(state, blocks)
-        info = (H - H_g - H_p) / rho + H_g / rho_g + H_p
+        info = (H - H_gyro - H_p) / rho + H_gyro / rho_g + H_p
     else:
-        H_p, _ = _prior(state, blocks)
         info = (H - H_p) / rho + H_p
     cov = _pinv(info)
     return Fit(state, cov, sigma, null, blocks, cost, iterations, max(rho, rho_g), sigma_g if use_gyro else 0.0, r)
