@@ -117,10 +117,19 @@ def white_noise_std(x: FloatArray, order: int = 2) -> FloatArray:
     x = np.asarray(x, dtype=float)
     if x.shape[0] <= order:
         return np.zeros(x.shape[1:])
-    d = np.diff(x, n=order, axis=0)
-    d = d[:: max(1, d.shape[0] // NOISE_SAMPLES)]  # a median needs no more: strided, not the first part
+    # the differences at evenly strided places only (a median needs no more than NOISE_SAMPLES):
+    # d_i = sum_k (-1)^(order-k) C(order, k) x_{i+k}
+    i = np.arange(0, x.shape[0] - order, max(1, (x.shape[0] - order) // NOISE_SAMPLES))
+    d = sum((-1) ** (order - k) * math.comb(order, k) * x[i + k] for k in range(order + 1))
     mad = np.median(np.abs(d - np.median(d, axis=0)), axis=0)
     return 1.4826 * mad / np.sqrt(float(math.comb(2 * order, order)))
+
+
+def _line(x: FloatArray, y: FloatArray) -> tuple[float, float]:
+    """Least-squares slope and intercept of ``y = a + b x``."""
+    xm, ym = float(x.mean()), float(y.mean())
+    b = float(np.dot(x - xm, y - ym) / np.dot(x - xm, x - xm))
+    return b, ym - b * xm
 
 
 def _regular_grid(t: FloatArray, chunk: int = 200) -> tuple[FloatArray, float] | None:
@@ -148,7 +157,7 @@ def _regular_grid(t: FloatArray, chunk: int = 200) -> tuple[FloatArray, float] |
             offset += float(np.rint((base - prev_base) / dt))
         k[a : a + chunk] = kc + offset
         prev_base = base
-    b, a0 = np.polyfit(k, t, 1)
+    b, a0 = _line(k, t)
     k = np.rint((t - a0) / b)  # with the fitted period, reassign once and refit
     for i in np.flatnonzero(np.diff(k) < 1):  # a stamp jittered past half a period: move the further one
         r0, r1 = t[i] - (a0 + b * k[i]), t[i + 1] - (a0 + b * k[i + 1])
@@ -158,7 +167,7 @@ def _regular_grid(t: FloatArray, chunk: int = 200) -> tuple[FloatArray, float] |
             k[i + 1] += 1
     if np.any(np.diff(k) < 1):
         return None
-    b, a0 = np.polyfit(k, t, 1)
+    b, a0 = _line(k, t)
     grid = a0 + b * k
     jitter = float(np.std(t - grid))
     return (grid, jitter) if jitter < 0.25 * dt else None

@@ -78,6 +78,7 @@ class SignalTable:
         self.joint_speed = np.cumsum(np.abs(qd), axis=1)
         """``(G, n)`` ``sum_{j <= k} |qd_j|`` on the uniform grid, rad/s."""
         self.t = grid
+        self._dt = float(grid[1] - grid[0]) if grid.size > 1 else 1.0
         self._motion = motion
         self._gravity = np.asarray(gravity, dtype=float)
         self._cache: dict[int, FloatArray] = {}
@@ -99,7 +100,8 @@ class SignalTable:
             W = skew(w_l)
             ug = -np.einsum("nji,j->ni", R, self._gravity)  # gravity's part of u
             y = np.concatenate([u, (skew(dw_l) + W @ W).reshape(-1, 9), w_l, ug], axis=1)
-            self._cache[link] = np.ascontiguousarray(np.concatenate([y, np.gradient(y, self.t, axis=0)], axis=1))
+            dy = np.gradient(y, self._dt, axis=0)  # the grid is uniform
+            self._cache[link] = np.ascontiguousarray(np.concatenate([y, dy], axis=1))
         return self._cache[link]
 
     def at(self, link: int, t: FloatArray) -> tuple[FloatArray, ...]:
