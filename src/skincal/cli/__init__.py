@@ -7,6 +7,7 @@ one-line message on stderr and exit code 2; no traceback reaches the user.
 
 from __future__ import annotations
 
+import importlib
 import os
 import sys
 
@@ -28,6 +29,19 @@ from skincal.cli.app import app, console_error
 __all__ = ["app", "main"]
 
 
+def _click_exceptions() -> tuple[tuple[type, ...], tuple[type, ...], tuple[type, ...]]:
+    """``(ClickException, Abort, NoArgsIsHelpError)`` classes of every click that may raise: typer
+    ships its own copy (``typer._click``) besides the separately installed one."""
+    modules = []
+    for name in ("typer._click.exceptions", "click.exceptions"):
+        try:
+            modules.append(importlib.import_module(name))
+        except ImportError:
+            continue
+    pick = lambda attr: tuple(getattr(m, attr) for m in modules if hasattr(m, attr))  # noqa: E731
+    return pick("ClickException"), pick("Abort"), pick("NoArgsIsHelpError")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the process exit code."""
     from skincal.errors import SkincalError
@@ -46,12 +60,13 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # typer/click usage errors and explicit exits
         return int(exc.code or 0) if isinstance(exc.code, int) else 1
     except Exception as exc:  # click's own exceptions (bad option, missing argument)
-        import click
-
-        if isinstance(exc, click.exceptions.ClickException):
+        usage, abort, no_args = _click_exceptions()
+        if isinstance(exc, no_args):  # bare `skincal` or a group without its command: help was shown
+            return 2
+        if isinstance(exc, usage):
             exc.show()
             return exc.exit_code
-        if isinstance(exc, click.exceptions.Abort):
+        if isinstance(exc, abort):
             console_error("aborted")
             return 1
         if os.environ.get("SKINCAL_DEBUG"):

@@ -18,6 +18,21 @@ def version() -> None:
     console.print(skincal.__version__)
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        version()
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _root(
+    show_version: bool = typer.Option(
+        False, "--version", help="print the skincal version and exit", callback=_print_version, is_eager=True
+    ),
+) -> None:
+    """Self-contained kinematic calibration of robot skin units from accelerometers."""
+
+
 def _rate_hz(t: np.ndarray) -> float | None:
     """Nominal sample rate, Hz: the inverse of the median sample interval (None below 2 samples)."""
     return float(1.0 / np.median(np.diff(t))) if len(t) >= 2 else None
