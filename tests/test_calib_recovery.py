@@ -242,3 +242,32 @@ def test_paper_session_with_controller_joints_and_realistic_imus():
         z = (unit.pose.p_link_su - ds.truth[name].p_link_su) / unit.position_std_m
         silent = np.any(np.abs(z) > 3) or float(np.sum(z**2)) > 14.16
         assert not silent or unit.warnings, (name, z)
+
+
+def test_velocities_a_driver_differentiates_from_encoder_counts():
+    """A joint stream whose qd is the finite difference of the encoder counts (zero at rest,
+    quantised in steps of LSB / dt in motion) and whose stamps lag the robot by 4 ms: the noise of
+    such velocities must not read as zero (a MAD over resting samples would), the encoder positions
+    are the better source, and the unit is calibrated within target with the relative latency found
+    (IMU 15 ms minus joints 4 ms)."""
+    import dataclasses
+
+    from skincal.calib.preprocess import JointInterpolator
+    from skincal.sim import joint_states
+
+    model = dataclasses.replace(
+        joint_states.JOINT_PRESETS["controller"], velocity_from_positions=True, velocity_noise_std=0.0,
+        latency_s=0.004,
+    )
+    chain = panda()
+    rng = np.random.default_rng(44)
+    placements = random_placement(chain, 3, rng)
+    traj = build_trajectory(chain, CONFIG, rng)
+    ds = simulate(chain, placements, traj, get_imu_model("realistic"), rng, joint_model=model)
+    conditioning = JointInterpolator(ds.joints).conditioning
+    assert conditioning.source == "positions" and np.all(conditioning.velocity_noise > 1e-3)
+    result = calibrate(ds, "mle")
+    assert evaluate(result, ds)["mean_position_error_mm"] <= 0.3
+    for unit in result.units.values():
+        assert unit.observable
+        assert unit.extras["time_offset_s"] == pytest.approx(0.015 - 0.004, abs=1.5e-3)

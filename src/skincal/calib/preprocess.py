@@ -107,12 +107,14 @@ NOISE_SAMPLES = 50_000
 samples is within 0.5 % of the full stream's."""
 
 
-def white_noise_std(x: FloatArray, order: int = 2) -> FloatArray:
+def white_noise_std(x: FloatArray, order: int = 2, where: np.ndarray | None = None) -> FloatArray:
     """Robust white-noise std per column of ``x`` ``(N, k)`` from its ``order``-th differences.
 
     They cancel any polynomial signal of lower degree and have variance ``C(2 order, order)
     sigma^2`` for white noise; the MAD makes the estimate ignore the samples where the signal
     curves more (motion starts and stops): ``sigma = 1.4826 MAD(diff) / sqrt(C(2 order, order))``.
+    ``where`` ``(N, k)``: only differences whose samples are all marked count (e.g. a joint while it
+    moves: an encoder at rest repeats its count and would read as noise-free).
     """
     x = np.asarray(x, dtype=float)
     if x.shape[0] <= order:
@@ -121,8 +123,22 @@ def white_noise_std(x: FloatArray, order: int = 2) -> FloatArray:
     # d_i = sum_k (-1)^(order-k) C(order, k) x_{i+k}
     i = np.arange(0, x.shape[0] - order, max(1, (x.shape[0] - order) // NOISE_SAMPLES))
     d = sum((-1) ** (order - k) * math.comb(order, k) * x[i + k] for k in range(order + 1))
-    mad = np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+    if where is None:
+        mad = np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+    else:
+        ok = np.all(np.stack([np.asarray(where)[i + k] for k in range(order + 1)]), axis=0)
+        mad = np.array([
+            np.median(np.abs(c[m] - np.median(c[m]))) if np.count_nonzero(m) >= 10 else 0.0
+            for c, m in zip(d.T, ok.T, strict=True)
+        ])
     return 1.4826 * mad / np.sqrt(float(math.comb(2 * order, order)))
+
+
+def _smallest_step(x: FloatArray) -> FloatArray:
+    """Smallest non-zero change between neighbouring samples per column of ``x`` ``(N, k)`` (the
+    quantisation step of a quantised signal; tiny for a smooth one)."""
+    d = np.abs(np.diff(np.asarray(x, dtype=float), axis=0))
+    return np.array([np.min(c[c > 1e-12]) if np.any(c > 1e-12) else 0.0 for c in d.T])
 
 
 def _line(x: FloatArray, y: FloatArray) -> tuple[float, float]:
@@ -211,10 +227,11 @@ def condition_joint_stream(
             qd = np.column_stack([np.interp(full, t, c) for c in qd.T])
             t = full
     uniform = np.max(np.abs(np.diff(t) - dt)) <= 0.01 * dt
-    sigma_v = white_noise_std(qd, 2)
-    dq = np.abs(np.diff(q, axis=0))
-    step = np.array([np.min(c[c > 1e-12]) if np.any(c > 1e-12) else 0.0 for c in dq.T])
-    sigma_q = np.maximum(white_noise_std(q, 3), step / np.sqrt(12.0))
+    # A quantised signal repeats its values (a MAD of 0): its rounding, step / sqrt(12), is the floor.
+    # Velocities a driver differentiates from encoder counts are quantised too (step = LSB / dt).
+    moving = np.abs(qd) > 1e-12
+    sigma_v = np.maximum(white_noise_std(qd, 2, where=moving), _smallest_step(qd) / np.sqrt(12.0))
+    sigma_q = np.maximum(white_noise_std(q, 3), _smallest_step(q) / np.sqrt(12.0))
     window = max(5, int(round(window_s / dt)) | 1)
     window_q = max(window, (POSITION_POLYORDER + 2) | 1)  # an order-5 fit needs 7 samples or more
     noise_v = float(np.max(sigma_v)) * np.linalg.norm(savgol_coeffs(window, 3, deriv=1, delta=dt))
