@@ -132,7 +132,7 @@ def test_round_trip_minimal_standard_chain(tmp_path: Path) -> None:
 
 
 def test_file_layout_follows_contract(good_file: Path) -> None:
-    """Checked with raw h5py against the field table of shared/interfaces.md."""
+    """Checked with raw h5py against the field table of docs/interfaces.md."""
     with h5py.File(good_file, "r") as f:
         assert f.attrs["format"] == "skincal-dataset" and int(f.attrs["version"]) == 1
         assert f["robot"].attrs["name"] == "panda" and f["robot"].attrs["convention"] == "modified"

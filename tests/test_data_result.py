@@ -14,7 +14,7 @@ from skincal.errors import DatasetError
 from skincal.kinematics import rotation_angle
 from skincal.skin.pose import SkinUnitPose
 
-# The example of shared/interfaces.md, verbatim apart from a real digest.
+# The example of docs/interfaces.md, verbatim apart from a real digest.
 CONTRACT_EXAMPLE = """
 {"format": "skincal-result", "version": 1, "method": "mle", "robot": "panda",
  "dataset_sha256": "%s", "runtime_s": 0.41,

@@ -2,7 +2,7 @@
 
 Data flows one way: robot model (``kinematics``) -> sensors (``skin``) -> simulation or
 hardware (``sim``, ``hw``) -> dataset (``data``) -> calibration (``calib``) -> perception ->
-control. See ``shared/design.md`` for the layout and the conventions used everywhere:
+control. See ``docs/design.md`` for the layout and the conventions used everywhere:
 SI units, radians inside, gravity ``[0, 0, -9.81]`` in the base frame, quaternions (w, x, y, z).
 """
 

@@ -1,4 +1,4 @@
-"""Errors of a calibration result against the truth (``shared/interfaces.md``, "Evaluation").
+"""Errors of a calibration result against the truth (``docs/interfaces.md``, "Evaluation").
 
 * ``position_error_mm``: ``|p_est - p_true|`` in the link frame, mm.
 * ``rotation_error_deg``: the angle of ``R_true^T R_est``, degrees.
@@ -39,7 +39,7 @@ def pose_errors(chain, q0: np.ndarray, est: SkinUnitPose, true: SkinUnitPose) ->
 
 
 def evaluate(result: CalibrationResult, truth: Dataset) -> dict[str, Any]:
-    """The evaluation document of ``shared/interfaces.md`` for ``result`` against ``truth``."""
+    """The evaluation document of ``docs/interfaces.md`` for ``result`` against ``truth``."""
     if not truth.truth:
         raise DatasetError("the truth dataset has no /truth group (only simulated datasets carry truth)")
     missing = [u for u in result.units if u not in truth.truth]

@@ -1,4 +1,4 @@
-"""The in-memory dataset: plain frozen dataclasses of NumPy arrays (``shared/interfaces.md``).
+"""The in-memory dataset: plain frozen dataclasses of NumPy arrays (``docs/interfaces.md``).
 
 Every stream carries its own time base in seconds on one shared clock; the robot and each IMU
 sample at their own instants. Validation of contents lives in :mod:`skincal.data.validate`.

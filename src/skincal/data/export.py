@@ -1,7 +1,7 @@
 """Exports of a calibration result: URDF snippet, YAML, ROS 2 static-transform launch file, CSV.
 
 Every unit pose of a result is ``T_link_su`` in skincal link frame ``i`` = DH frame {i} of the
-robot's convention (``shared/interfaces.md``). ROS tools name their own frames, so each link is
+robot's convention (``docs/interfaces.md``). ROS tools name their own frames, so each link is
 mapped to a named parent frame with a fixed offset ``T_frame_link`` (the pose of DH frame {i} in
 that frame); the exported pose is ``T_frame_su = T_frame_link @ T_link_su``.
 

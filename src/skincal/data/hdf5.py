@@ -1,4 +1,4 @@
-"""Dataset files: HDF5 ``format = "skincal-dataset"``, ``version = 1`` (``shared/interfaces.md``).
+"""Dataset files: HDF5 ``format = "skincal-dataset"``, ``version = 1`` (``docs/interfaces.md``).
 
 Layout (optional parts in brackets)::
 

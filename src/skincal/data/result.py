@@ -1,4 +1,4 @@
-"""Calibration result files: JSON ``format = "skincal-result"``, ``version = 1`` (``shared/interfaces.md``).
+"""Calibration result files: JSON ``format = "skincal-result"``, ``version = 1`` (``docs/interfaces.md``).
 
 Example::
 

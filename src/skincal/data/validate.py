@@ -1,4 +1,4 @@
-"""Validation of an in-memory :class:`~skincal.data.dataset.Dataset` against ``shared/interfaces.md``.
+"""Validation of an in-memory :class:`~skincal.data.dataset.Dataset` against ``docs/interfaces.md``.
 
 :func:`validate_dataset` runs after every read and before every write. Each failure raises one
 :class:`~skincal.errors.DatasetError` whose single line names the source (file), the field as its

@@ -1,6 +1,6 @@
 """Crash-safe HDF5 recorder of received skin and joint-state packets.
 
-Layout (``shared/interfaces.md``, dataset version 1) plus recording fields, per stream group:
+Layout (``docs/interfaces.md``, dataset version 1) plus recording fields, per stream group:
 
 * ``/imu/<unit>/t`` (M,) s, ``accel`` (M, 3) m/s^2, ``gyro`` (M, 3) rad/s (if the unit's first IMU
   packet had it; NaN rows where a later packet did not);

@@ -1,4 +1,4 @@
-"""Named protocols of the paper (Sec. IV; ``shared/reference/notes.md``, "Protocol").
+"""Named protocols of the paper (Watanabe et al., Sec. IV, "Protocol").
 
 * ``paper-sim``: A = 2 rad/s, f = 1 Hz, 3 s per joint, 2 s rest, P = 16. The paper sampled at
   100 Hz (its IMU rate); our robot stream defaults to 1 kHz (``rate_hz``).

@@ -2,7 +2,7 @@
 
 Frames
 ------
-Body ``link{i}`` IS link frame ``i`` = DH frame {i} of the chain's convention (``shared/interfaces.md``),
+Body ``link{i}`` IS link frame ``i`` = DH frame {i} of the chain's convention (``docs/interfaces.md``),
 so a unit pose ``T_link_su`` becomes a site at that pose on body ``link{i}`` with no conversion.
 ``link0`` is a static body at the base frame {0} (= MuJoCo world frame).
 

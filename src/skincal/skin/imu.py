@@ -1,6 +1,6 @@
 """Accelerometer and gyroscope model of a skin unit (LSM6DS3 class IMU).
 
-Physics (``shared/design.md``): an accelerometer fixed in the SU frame measures the specific force
+Physics (``docs/design.md``): an accelerometer fixed in the SU frame measures the specific force
 
     f_su = R_base_su^T (a_base - g_base),   g_base = GRAVITY_BASE = [0, 0, -9.81] m/s^2,
 
@@ -15,8 +15,8 @@ Measurement model (:func:`apply_imu_model`), per sample, SI units throughout:
 then quantisation to the LSB and saturation at the full-scale range. ``n_a, n_g`` are white,
 Gaussian, independent per axis with std = noise density * sqrt(bandwidth). Only a *symmetric*
 misalignment is modelled: the unit frame is defined by the accelerometer axes (polar factor), so
-an antisymmetric part would be indistinguishable from the unit's orientation
-(``shared/reference/notes.md``, "Misalignment").
+an antisymmetric part would be indistinguishable from the unit's orientation (a small rotation
+``R (I + [phi]x)`` and a skew misalignment ``I + [phi]x`` give the same readings).
 
 Timing: :func:`sample_instants` gives the unit's own time stamps (nominal ``k / rate_hz`` with a
 random phase, Gaussian jitter and random drops). The sample stamped ``t`` measures the physical

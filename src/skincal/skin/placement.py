@@ -1,7 +1,7 @@
 """Skin-unit placements: the paper's Table II set and random placements on the link surfaces.
 
 Every placement is a ``dict[str, SkinUnitPose]`` keyed ``su1, su2, ...`` with poses in link frame
-``link`` (DH frame {link}, ``shared/interfaces.md``), the unit's z axis pointing out of the link.
+``link`` (DH frame {link}, ``docs/interfaces.md``), the unit's z axis pointing out of the link.
 """
 
 from __future__ import annotations

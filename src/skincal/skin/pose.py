@@ -1,7 +1,7 @@
 """Skin unit poses on the kinematic chain and the paper's 6-parameter virtual-joint DH form.
 
 A skin unit (SU) on link ``n`` moves rigidly with joint ``n``. Its pose ``T_link_su = (R, p)`` is
-given in link frame ``n`` = DH frame {n} of the robot's convention (``shared/interfaces.md``). The
+given in link frame ``n`` = DH frame {n} of the robot's convention (``docs/interfaces.md``). The
 SU's z axis points out of the link surface; the time-of-flight sensor looks along it.
 """
 
