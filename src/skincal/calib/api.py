@@ -20,7 +20,14 @@ from typing import Any, Protocol
 import numpy as np
 
 from skincal.calib.links import LinkAssignment, discover_link
-from skincal.calib.preprocess import DEFAULT_QDD_WINDOW_S, JointInterpolator, UnitSamples, screen_readings, unit_samples
+from skincal.calib.preprocess import (
+    DEFAULT_QDD_WINDOW_S,
+    JointInterpolator,
+    UnitSamples,
+    joint_noise,
+    screen_readings,
+    unit_samples,
+)
 from skincal.data.dataset import Dataset
 from skincal.data.result import CalibrationResult, UnitResult
 from skincal.errors import CalibrationError, ConfigError, SkincalError
@@ -287,11 +294,10 @@ def _check_overlap(dataset: Dataset, unit: str, slack_s: float = 1.0) -> None:
 def _segment_automatically(dataset: Dataset, spec: MethodSpec) -> tuple[Dataset, list[str]]:
     """Segments for a dataset without ``/segments``, from its joint stream, with the rest speed
     threshold raised above the stream's own velocity noise (six standard deviations)."""
-    from skincal.calib.rest import second_difference_noise
     from skincal.data.segment import SegmentationConfig, segment_dataset
     from skincal.errors import DatasetError
 
-    sigma = float(np.max(second_difference_noise(np.asarray(dataset.joints.qd, dtype=float))))
+    sigma = float(np.max(joint_noise(dataset.joints.q, dataset.joints.qd)[1]))
     config = SegmentationConfig(rest_velocity=max(SegmentationConfig.rest_velocity, 6.0 * sigma))
     try:
         tagged, report = segment_dataset(dataset, config)

@@ -134,6 +134,22 @@ def white_noise_std(x: FloatArray, order: int = 2, where: np.ndarray | None = No
     return 1.4826 * mad / np.sqrt(float(math.comb(2 * order, order)))
 
 
+def joint_noise(q: FloatArray, qd: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """White-noise std per joint of reported positions (rad) and velocities (rad/s), ``(n,)`` each.
+
+    Positions from third differences, velocities from second differences taken where the joint
+    moves (an encoder at rest repeats its count, and velocities a driver differentiates from the
+    counts are then exactly zero: a MAD over those would read as noise-free). A quantised signal's
+    rounding, step / sqrt(12), is the floor of both (velocities differentiated from counts are
+    quantised in steps of LSB / dt).
+    """
+    q = np.asarray(q, dtype=float)
+    qd = np.asarray(qd, dtype=float)
+    sigma_v = np.maximum(white_noise_std(qd, 2, where=np.abs(qd) > 1e-12), _smallest_step(qd) / np.sqrt(12.0))
+    sigma_q = np.maximum(white_noise_std(q, 3), _smallest_step(q) / np.sqrt(12.0))
+    return sigma_q, sigma_v
+
+
 def _smallest_step(x: FloatArray) -> FloatArray:
     """Smallest non-zero change between neighbouring samples per column of ``x`` ``(N, k)`` (the
     quantisation step of a quantised signal; tiny for a smooth one)."""
@@ -227,11 +243,7 @@ def condition_joint_stream(
             qd = np.column_stack([np.interp(full, t, c) for c in qd.T])
             t = full
     uniform = np.max(np.abs(np.diff(t) - dt)) <= 0.01 * dt
-    # A quantised signal repeats its values (a MAD of 0): its rounding, step / sqrt(12), is the floor.
-    # Velocities a driver differentiates from encoder counts are quantised too (step = LSB / dt).
-    moving = np.abs(qd) > 1e-12
-    sigma_v = np.maximum(white_noise_std(qd, 2, where=moving), _smallest_step(qd) / np.sqrt(12.0))
-    sigma_q = np.maximum(white_noise_std(q, 3), _smallest_step(q) / np.sqrt(12.0))
+    sigma_q, sigma_v = joint_noise(q, qd)
     window = max(5, int(round(window_s / dt)) | 1)
     window_q = max(window, (POSITION_POLYORDER + 2) | 1)  # an order-5 fit needs 7 samples or more
     noise_v = float(np.max(sigma_v)) * np.linalg.norm(savgol_coeffs(window, 3, deriv=1, delta=dt))

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skincal.calib.preprocess import white_noise_std
+from skincal.calib.preprocess import joint_noise, white_noise_std
 from skincal.data.dataset import DYNAMIC, STATIC, JointStates, Segments
 from skincal.kinematics.transforms import FloatArray
 
@@ -101,17 +101,16 @@ def _windowed_mean(t: FloatArray, x: FloatArray, window_s: float) -> tuple[Float
     return (c[hi] - c[lo]) / n[:, None], n
 
 
-def joint_rest_from_data(joints: JointStates, window_s: float = REST_WINDOW_S) -> JointRest:
-    """Rest of each joint from its positions and velocities over windows (module docstring)."""
+def joint_rest_from_data(
+    joints: JointStates, window_s: float = REST_WINDOW_S, noise: tuple[FloatArray, FloatArray] | None = None
+) -> JointRest:
+    """Rest of each joint from its positions and velocities over windows (module docstring);
+    ``noise``: the ``(position, velocity)`` noise std per joint when already known
+    (:func:`~skincal.calib.preprocess.joint_noise` otherwise)."""
     t = np.asarray(joints.t, dtype=float)
     q = np.asarray(joints.q, dtype=float)
     qd = np.asarray(joints.qd, dtype=float)
-    sigma_v = second_difference_noise(qd)
-    sigma_q = second_difference_noise(q)
-    # An encoder step shows as the smallest non-zero position change; its rounding error is step / sqrt(12).
-    dq = np.abs(np.diff(q, axis=0))
-    step = np.array([np.min(c[c > 1e-12]) if np.any(c > 1e-12) else 0.0 for c in dq.T])
-    sigma_q = np.maximum(sigma_q, step / np.sqrt(12.0))
+    sigma_q, sigma_v = noise if noise is not None else joint_noise(q, qd)
     speed_from_q = _windowed_speed(t, q, window_s)
     mean_qd, n = _windowed_mean(t, qd, window_s)
     # Std of each windowed estimate under pure noise: sqrt(2) sigma_q / W and sigma_v / sqrt(n).
@@ -141,19 +140,18 @@ def joint_rest_from_segments(
             rest[np.ix_(inside, others)] = True
     # A joint the segments declare at rest must also rest in its own data: the reaction of a far
     # joint's excitation can swing a near one by milliradians (a real robot's finite servo stiffness).
-    data = joint_rest_from_data(joints)
-    sigma_q, sigma_v = noise if noise is not None else (data.position_noise, data.velocity_noise)
-    return JointRest(t, rest & data.rest, "segments", data.speed_threshold, sigma_v, sigma_q)
+    data = joint_rest_from_data(joints, noise=noise)
+    return JointRest(t, rest & data.rest, "segments", data.speed_threshold, data.velocity_noise, data.position_noise)
 
 
 def joint_rest(
     joints: JointStates, segments: Segments | None, noise: tuple[FloatArray, FloatArray] | None = None
 ) -> JointRest:
     """From the segments when they have a static one, else from the joint data (``noise``: known
-    ``(position, velocity)`` noise std per joint, only used with segments)."""
+    ``(position, velocity)`` noise std per joint)."""
     if segments is not None and np.any(np.asarray(segments.kind) == STATIC):
         return joint_rest_from_segments(joints, segments, noise)
-    return joint_rest_from_data(joints)  # no segments, or none static: they cannot say when the robot rests
+    return joint_rest_from_data(joints, noise=noise)  # no static segment: they cannot say when the robot rests
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:

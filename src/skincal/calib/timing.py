@@ -25,8 +25,6 @@ import numpy as np
 
 from skincal.kinematics.transforms import FloatArray
 
-COARSE_RATE_HZ = 100.0
-"""Grid of the coarse search, Hz (10 ms lags, refined below a millisecond by the parabola)."""
 MAX_OFFSET_S = 0.5
 """Largest time offset searched, s."""
 SPREAD_WINDOW_S = 0.1

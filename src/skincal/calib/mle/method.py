@@ -256,23 +256,27 @@ def find_move(rows: Rows, residuals: FloatArray, t_c: float) -> Move | None:
     return Move(float(t[k - 1] + t_c), float(t[k] + t_c), angle, improvement)
 
 
+def _gyro_bias_start(rows: Rows) -> FloatArray:
+    """The gyroscope's reading at rest: the median of its rest runs' means, rad/s (0 without any)."""
+    return np.median(rows.static_g, axis=0) if rows.static_g is not None and len(rows.static_g) else np.zeros(3)
+
+
 def _start(p: _Problem) -> State:
     """Closed-form start: rotation from the rest runs (or the angular velocities), then position."""
     rows = p.data.rows
     S, M = len(rows.static_u), len(rows.moving_t)
-    bg = np.median(rows.static_g, axis=0) if rows.static_g is not None and S else np.zeros(3)
+    bg = _gyro_bias_start(rows)
+    lin = p.linearise(0.0, 0.0) if M >= 10 else None
     if S >= 2:
         R, b = static_rotation_and_bias(rows.static_u, rows.static_f, rows.static_weight)
-    elif rows.moving_g is not None and M >= 10:
-        lin = p.linearise(0.0, 0.0)
+    elif rows.moving_g is not None and lin is not None:
         R, b = wahba(lin.w, rows.moving_g - bg), np.zeros(3)
     else:
         raise CalibrationError(
             f"only {S} rest period(s) for link {p.data.link} and no gyroscope; at least 2 distinct static "
             "poses are needed"
         )
-    if M >= 10:
-        lin = p.linearise(0.0, 0.0)
+    if lin is not None:
         pos, b_dyn = position_and_bias(R, lin.u, lin.K, rows.moving_f)
         return State(R=R, p=pos, b=b_dyn if np.linalg.norm(b) == 0 else b, bg=bg)
     return State(R=R, p=np.zeros(3), b=b, bg=bg)
@@ -523,9 +527,7 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         )
     blocks = _blocks(problem, p)
     if start is not None:
-        rows = p.data.rows
-        bg = np.median(rows.static_g, axis=0) if rows.static_g is not None and len(rows.static_g) else np.zeros(3)
-        start = replace(start, E=np.zeros((3, 3)), bg=bg)
+        start = replace(start, E=np.zeros((3, 3)), bg=_gyro_bias_start(p.data.rows))
     # Converge on every 8th moving sample, then one Gauss-Newton step on all of them, whose
     # normal matrix also gives the covariance.
     coarse = _fit(_decimated(p, 8), blocks, state=start)
