@@ -137,7 +137,9 @@ def capture_page(
     exe = chromium or find_chromium()
     if exe is None:
         raise ConfigError("no Chromium found: install the Debian package 'chromium' or set SKINCAL_CHROMIUM")
-    with tempfile.TemporaryDirectory(prefix="skincal-chromium-") as profile:
+    # Chromium's helper processes can still write into the profile for a moment after the browser
+    # exits: clean-up must not turn a finished screenshot into an error.
+    with tempfile.TemporaryDirectory(prefix="skincal-chromium-", ignore_cleanup_errors=True) as profile:
         args = [exe, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", f"--window-size={width},{height}",
                 "--remote-debugging-address=127.0.0.1", "--remote-debugging-port=0", "about:blank"]
         proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
