@@ -20,5 +20,8 @@ err_console = Console(stderr=True)
 
 
 def console_error(message: str) -> None:
-    """Print a one-line error to stderr (no markup interpretation of user text)."""
-    err_console.print(f"error: {message}", markup=False, highlight=False, soft_wrap=True)
+    """Print a one-line error to stderr: no markup interpretation of user text, and control
+    characters (ESC sequences, newlines) shown escaped so the message stays one line."""
+    from skincal.data.names import printable
+
+    err_console.print(f"error: {printable(message)}", markup=False, highlight=False, soft_wrap=True)
