@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from skincal.bench import robustness as rb
-from skincal.bench.runner import map_local
+from skincal.workflows import robustness as rb
+from skincal.workflows.sweep import map_local
 from skincal.cli import app, main
 from skincal.data.result import UnitResult
 from skincal.skin.pose import SkinUnitPose

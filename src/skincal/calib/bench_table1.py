@@ -180,7 +180,7 @@ def run_local(
     config: Table1Config, workers: int = 1, progress: Callable[[dict[str, Any]], None] | None = None
 ) -> list[dict[str, Any]]:
     """Run every job in ``workers`` local processes (``1``: in this process); ``progress`` gets each record."""
-    from skincal.bench.runner import map_local
+    from skincal.workflows.sweep import map_local
 
     return map_local(run_job, jobs(config), workers, progress)
 
@@ -189,7 +189,7 @@ def run_dask(
     config: Table1Config, address: Any, progress: Callable[[dict[str, Any]], None] | None = None
 ) -> list[dict[str, Any]]:
     """Run every job on an existing ``dask.distributed`` cluster (scheduler address or a ``Client``)."""
-    from skincal.bench.runner import map_dask
+    from skincal.workflows.sweep import map_dask
 
     return map_dask(run_job, jobs(config), address, progress)
 

@@ -74,7 +74,7 @@ def robustness(
     per cell: errors, links right, z RMS, warnings and silent errors against targets."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from skincal.bench.robustness import FAULTS, RobustnessConfig, config_dict, jobs, run, summarise
+    from skincal.workflows.robustness import FAULTS, RobustnessConfig, config_dict, jobs, run, summarise
     from skincal.data.atomic import write_bytes_atomic
 
     if list_faults:

@@ -32,7 +32,7 @@ link axis over the reported std), units calibrated, units with any warning, and 
 every cell all links right and no silent error.
 
 One job is one ``(robot, backend, fault, seed)`` (:func:`run_job`): a pure function of a picklable
-:class:`Job`, run in local processes or on Dask by :mod:`skincal.bench.runner`.
+:class:`Job`, run in local processes or on Dask by :mod:`skincal.workflows.sweep`.
 """
 
 from __future__ import annotations
@@ -472,7 +472,7 @@ def run(
     progress: Callable[[dict[str, Any]], None] | None = None,
 ) -> list[dict[str, Any]]:
     """Every job's record (in :func:`jobs` order), in local processes or on a Dask cluster."""
-    from skincal.bench.runner import map_jobs
+    from skincal.workflows.sweep import map_jobs
 
     return map_jobs(run_job, jobs(config), workers=workers, dask=dask, progress=progress)
 
