@@ -20,6 +20,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from skincal.calib.links import LinkAssignment, discover_link
+from skincal.calib.options import NoOptions, parse_options
 from skincal.calib.preprocess import (
     DEFAULT_QDD_WINDOW_S,
     JointInterpolator,
@@ -48,7 +49,7 @@ class UnitProblem:
         interpolator: the dataset's joint interpolator (to re-evaluate joint states at shifted
             instants, e.g. when estimating a time offset).
         shared: what the method's ``prepare`` computed once for the whole dataset, or ``None``.
-        options: method options.
+        options: the method's options (an instance of its ``MethodSpec.options`` dataclass).
         time_offset_s: the coarse IMU time offset already removed from ``samples.t`` (methods
             with an ``align`` step), s.
         alignment: that step's outcome (method-specific), or ``None``.
@@ -62,7 +63,7 @@ class UnitProblem:
     rng: np.random.Generator
     interpolator: JointInterpolator | None = None
     shared: Any = None
-    options: Mapping[str, Any] = field(default_factory=dict)
+    options: Any = field(default_factory=NoOptions)
     time_offset_s: float = 0.0
     alignment: Any = None
 
@@ -92,9 +93,10 @@ class MethodSpec:
     exact_joint_states: bool = True
     align: Callable[[Any, Any], Any] | None = None
     needs_segments: bool = True
-    options: tuple[str, ...] | None = None
-    """The method's option names (``calibrate(..., **options)``); others are refused. ``None``: the
-    method checks them itself."""
+    options: type = NoOptions
+    """The method's options: a frozen dataclass parsed by :func:`~skincal.calib.options.parse_options`
+    from ``calibrate(..., **options)`` (unknown names and mistyped values are refused there, for
+    every method alike); the instance reaches the method as ``UnitProblem.options``."""
 
 
 METHODS: dict[str, MethodSpec] = {}
@@ -187,10 +189,7 @@ def calibrate(
     if method not in METHODS:
         raise ConfigError(f"unknown method '{method}' (available: {', '.join(sorted(METHODS))})")
     spec = METHODS[method]
-    if spec.options is not None and (unknown := sorted(set(options) - set(spec.options))):
-        raise ConfigError(
-            f"unknown option(s) {', '.join(unknown)} for method '{method}' (known: {', '.join(spec.options)})"
-        )
+    parsed = parse_options(spec.options, options, method)
     given = _resolve_links(dataset, links, use_truth_links)
     names = dataset.units if units is None else list(units)
     for u in names:
@@ -211,7 +210,7 @@ def calibrate(
         try:
             unit = calibrate_unit(
                 tagged, name, spec, link=given.get(name), rng=np.random.default_rng([seed, k]),
-                interpolator=interpolator, shared=shared, options=options,
+                interpolator=interpolator, shared=shared, options=parsed,
             )
             return name, unit, None
         except CalibrationError as exc:
@@ -320,9 +319,10 @@ def calibrate_unit(
     rng: np.random.Generator,
     interpolator: JointInterpolator | None = None,
     shared: Any = None,
-    options: Mapping[str, Any] | None = None,
+    options: Any = None,
 ) -> UnitResult:
-    """Calibrate one unit (see :func:`calibrate`)."""
+    """Calibrate one unit (see :func:`calibrate`); ``options``: the method's parsed options
+    (default: the method's defaults)."""
     if interpolator is None:
         interpolator = JointInterpolator(dataset.joints)
     if shared is None and spec.prepare is not None:
@@ -355,7 +355,7 @@ def calibrate_unit(
         rng=rng,
         interpolator=interpolator,
         shared=shared,
-        options=dict(options or {}),
+        options=parse_options(spec.options, {}, "") if options is None else options,
         time_offset_s=offset,
         alignment=alignment,
     )

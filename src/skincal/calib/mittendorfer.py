@@ -22,7 +22,7 @@ from skincal.data.result import UnitResult
 
 
 def _run(problem: UnitProblem, model: str) -> UnitResult:
-    options = PaperOptions.from_options(problem.options)
+    options: PaperOptions = problem.options
     static, dynamic = unit_data(problem, options)
     return paper_unit_result(problem, fit_joint(static, dynamic, problem.rng, options, model))
 
@@ -37,5 +37,8 @@ def run_mm(problem: UnitProblem) -> UnitResult:
     return _run(problem, "mm")
 
 
-register("mmm", MethodSpec(run_mmm, "paper's baseline: gravity + centripetal + 2nd derivative of position"))
-register("mm", MethodSpec(run_mm, "Mittendorfer 2012: 2nd derivative of position, no gravity"))
+register(
+    "mmm",
+    MethodSpec(run_mmm, "paper's baseline: gravity + centripetal + 2nd derivative of position", options=PaperOptions),
+)
+register("mm", MethodSpec(run_mm, "Mittendorfer 2012: 2nd derivative of position, no gravity", options=PaperOptions))

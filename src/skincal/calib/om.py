@@ -56,17 +56,23 @@ def paper_unit_result(problem: UnitProblem, fit: Fit) -> UnitResult:
 
 def run_om(problem: UnitProblem) -> UnitResult:
     """OM, two stages (see module docstring)."""
-    options = PaperOptions.from_options(problem.options)
+    options: PaperOptions = problem.options
     static, dynamic = unit_data(problem, options)
     return paper_unit_result(problem, fit_two_stage(static, dynamic, problem.rng, options))
 
 
 def run_om_joint(problem: UnitProblem) -> UnitResult:
     """OM's model with all six parameters optimised at once (see module docstring)."""
-    options = PaperOptions.from_options(problem.options)
+    options: PaperOptions = problem.options
     static, dynamic = unit_data(problem, options)
     return paper_unit_result(problem, fit_joint(static, dynamic, problem.rng, options, "om"))
 
 
-register("om", MethodSpec(run_om, "paper: static rotation then dynamic position, NLopt MLSL-LDS + NEWUOA"))
-register("om-joint", MethodSpec(run_om_joint, "paper's unseparated variant: all 6 parameters on E_s + E_d"))
+register(
+    "om",
+    MethodSpec(run_om, "paper: static rotation then dynamic position, NLopt MLSL-LDS + NEWUOA", options=PaperOptions),
+)
+register(
+    "om-joint",
+    MethodSpec(run_om_joint, "paper's unseparated variant: all 6 parameters on E_s + E_d", options=PaperOptions),
+)

@@ -25,8 +25,8 @@ Settings (:class:`PaperOptions`, all overridable through ``calibrate(..., **opti
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, fields
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import nlopt
@@ -41,7 +41,6 @@ from skincal.calib.paper_model import (
     static_data,
     static_error,
 )
-from skincal.errors import ConfigError
 from skincal.kinematics.transforms import FloatArray
 from skincal.skin.pose import dh6_to_transform
 
@@ -53,6 +52,9 @@ ROTATION_INDEX = np.array([0, 2, 5])
 """Indices of the rotational parameters ``theta_v, theta_su, alpha_su`` (stage 1)."""
 POSITION_INDEX = np.array([1, 3, 4])
 """Indices of the positional parameters ``d_v, d_su, a_su`` (stage 2)."""
+
+
+_NON_NEGATIVE = {"min": 0}
 
 
 @dataclass(frozen=True)
@@ -69,33 +71,14 @@ class PaperOptions:
         population: MLSL sample points per iteration (0 = NLopt's default).
     """
 
-    stopval: float = 0.01
-    xtol: float = 1e-3
-    maxeval_static: int = 2000
-    maxeval_dynamic: int = 2000
-    maxeval_joint: int = 6000
-    maxtime_s: float = 0.0
-    max_dynamic_samples: int = 3000
-    population: int = 0
-
-    @classmethod
-    def from_options(cls, options: Mapping[str, Any]) -> PaperOptions:
-        """Build from ``calibrate`` options; unknown keys or bad values raise :class:`ConfigError`."""
-        known = {f.name: f.type for f in fields(cls)}
-        unknown = sorted(set(options) - set(known))
-        if unknown:
-            names = ", ".join(known)
-            raise ConfigError(f"unknown option(s) {', '.join(unknown)} for the paper's methods (known: {names})")
-        values: dict[str, Any] = {}
-        for key, value in options.items():
-            default = getattr(cls, key)
-            try:
-                values[key] = type(default)(value)
-            except (TypeError, ValueError):
-                raise ConfigError(f"option {key}: expected a number, got {value!r}") from None
-            if not np.isfinite(values[key]) or values[key] < 0:
-                raise ConfigError(f"option {key}: must be finite and non-negative, got {value!r}")
-        return cls(**values)
+    stopval: float = field(default=0.01, metadata=_NON_NEGATIVE)
+    xtol: float = field(default=1e-3, metadata=_NON_NEGATIVE)
+    maxeval_static: int = field(default=2000, metadata=_NON_NEGATIVE)
+    maxeval_dynamic: int = field(default=2000, metadata=_NON_NEGATIVE)
+    maxeval_joint: int = field(default=6000, metadata=_NON_NEGATIVE)
+    maxtime_s: float = field(default=0.0, metadata=_NON_NEGATIVE)
+    max_dynamic_samples: int = field(default=3000, metadata=_NON_NEGATIVE)
+    population: int = field(default=0, metadata=_NON_NEGATIVE)
 
 
 @dataclass(frozen=True)

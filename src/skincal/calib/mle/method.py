@@ -103,6 +103,32 @@ CORRELATION_WARN = 4.0
 
 
 @dataclass(frozen=True)
+class MleOptions:
+    """Options of ``mle`` (``calibrate(ds, "mle", scale=False)``, ``skincal calibrate --option
+    scale=false``); each turns one block of the model off (all on by default).
+
+    Attributes:
+        scale: estimate the accelerometer's scale/misalignment matrix (symmetric without a
+            gyroscope, full with one).
+        time_offset: estimate the IMU's time offset to the joint stream (and, with ``clock_drift``,
+            its drift); off: the stamps are taken as they are.
+        clock_drift: estimate a clock drift when the moving data span long enough.
+        bias_drift: estimate a linear accelerometer bias drift when rest runs span the session.
+        gravity: estimate the gravity scale (needs ``scale``).
+        gyro: use the gyroscope when the unit has one.
+        detect_move: look for a unit that moved on its link during the session.
+    """
+
+    scale: bool = True
+    time_offset: bool = True
+    clock_drift: bool = True
+    bias_drift: bool = True
+    gravity: bool = True
+    gyro: bool = True
+    detect_move: bool = True
+
+
+@dataclass(frozen=True)
 class Shared:
     """What ``mle`` computes once per dataset: the link-signal table, when each joint rests and the
     motion profile of the coarse time alignment."""
@@ -180,7 +206,7 @@ def _decimated(p: _Problem, step: int) -> _Problem:
 
 
 def _use_gyro(problem: UnitProblem) -> bool:
-    return problem.samples.gyro is not None and bool(problem.options.get("gyro", True))
+    return problem.samples.gyro is not None and problem.options.gyro
 
 
 def _arrange(
@@ -419,20 +445,20 @@ def _distinct_orientations(u_link: FloatArray, min_angle_deg: float = 5.0) -> in
 
 
 def _blocks(problem: UnitProblem, p: _Problem) -> Blocks:
-    opts = problem.options
+    opts: MleOptions = problem.options
     rows = p.data.rows
     gyro = rows.static_g is not None
-    scale = (SCALE_FULL if gyro else SCALE_SYM) if bool(opts.get("scale", True)) else SCALE_NONE
-    time_offset = bool(opts.get("time_offset", True))
+    scale = (SCALE_FULL if gyro else SCALE_SYM) if opts.scale else SCALE_NONE
+    time_offset = opts.time_offset
     span = float(np.ptp(rows.moving_t)) if len(rows.moving_t) else 0.0
     static_span = float(np.ptp(rows.static_t)) if len(rows.static_t) else 0.0
     return Blocks(
         scale=scale,
-        gravity=scale != SCALE_NONE and bool(opts.get("gravity", True)) and len(rows.moving_t) >= 10,
+        gravity=scale != SCALE_NONE and opts.gravity and len(rows.moving_t) >= 10,
         time_offset=time_offset,
-        clock_drift=time_offset and bool(opts.get("clock_drift", True)) and span >= CLOCK_DRIFT_MIN_SPAN_S,
+        clock_drift=time_offset and opts.clock_drift and span >= CLOCK_DRIFT_MIN_SPAN_S,
         gyro=gyro,
-        bias_drift=bool(opts.get("bias_drift", True))
+        bias_drift=opts.bias_drift
         and len(rows.static_t) >= BIAS_DRIFT_MIN_RUNS
         and static_span >= BIAS_DRIFT_MIN_SPAN_S,
     )
@@ -532,7 +558,7 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     # normal matrix also gives the covariance.
     coarse = _fit(_decimated(p, 8), blocks, state=start)
     move = None
-    if problem.options.get("detect_move", True) and coarse.residuals is not None:
+    if problem.options.detect_move and coarse.residuals is not None:
         # a fitted bias drift can soak up part of a move: look with and without it
         S = len(p.data.rows.static_u)
         undrifted = coarse.residuals.copy()
@@ -667,6 +693,6 @@ register(
         exact_joint_states=False,
         align=align,
         needs_segments=False,
-        options=("scale", "time_offset", "clock_drift", "bias_drift", "gravity", "gyro", "detect_move"),
+        options=MleOptions,
     ),
 )

@@ -1,0 +1,58 @@
+"""Method options are typed and checked in one place (:mod:`skincal.calib.options`), for every method."""
+
+from __future__ import annotations
+
+import pytest
+
+from skincal.calib import METHODS
+from skincal.calib.mle.method import MleOptions
+from skincal.calib.options import NoOptions, parse_option_strings, parse_options
+from skincal.calib.paper_opt import PaperOptions
+from skincal.errors import ConfigError
+
+
+def test_every_method_declares_a_frozen_options_dataclass():
+    for name, spec in METHODS.items():
+        assert spec.options is NoOptions or spec.options.__dataclass_params__.frozen, name
+        parse_options(spec.options, {}, name)  # the defaults always parse
+
+
+@pytest.mark.parametrize("method", sorted(METHODS))
+def test_a_misspelt_option_is_refused_by_every_method(method):
+    with pytest.raises(ConfigError, match=rf"unknown option\(s\) scael for method '{method}'"):
+        parse_options(METHODS[method].options, {"scael": False}, method)
+
+
+def test_cli_strings_become_typed_values():
+    opts = parse_options(MleOptions, parse_option_strings(["scale=false", "gyro=Yes"]), "mle")
+    assert opts.scale is False and opts.gyro is True and opts.time_offset is True
+    paper = parse_options(PaperOptions, parse_option_strings(["maxeval_static=300", "xtol=1e-4"]), "om")
+    assert paper.maxeval_static == 300 and isinstance(paper.maxeval_static, int) and paper.xtol == 1e-4
+
+
+@pytest.mark.parametrize(
+    ("cls", "options", "message"),
+    [
+        (MleOptions, {"scale": "maybe"}, "option scale expects true or false"),
+        (MleOptions, {"scale": 0}, "option scale expects true or false"),  # not silently bool(0)
+        (PaperOptions, {"maxeval_static": -1}, "option maxeval_static must be non-negative"),
+        (PaperOptions, {"maxeval_static": 1.5}, "option maxeval_static expects an integer"),
+        (PaperOptions, {"maxeval_static": True}, "option maxeval_static expects a number"),
+        (PaperOptions, {"xtol": "nan"}, "option xtol must be finite"),
+        (PaperOptions, {"xtol": "abc"}, "option xtol expects a number"),
+    ],
+)
+def test_mistyped_values_are_refused(cls, options, message):
+    with pytest.raises(ConfigError, match=message):
+        parse_options(cls, options, "m")
+
+
+@pytest.mark.parametrize("item", ["scale", "=1", ""])
+def test_malformed_option_strings_are_refused(item):
+    with pytest.raises(ConfigError, match="--option expects name=value"):
+        parse_option_strings([item])
+
+
+def test_an_option_given_twice_is_refused():
+    with pytest.raises(ConfigError, match="given twice"):
+        parse_option_strings(["scale=1", "scale=0"])
