@@ -44,3 +44,21 @@ def test_segments_without_a_static_one_fall_back_to_the_joint_data(session):
     assert ev["links_correct"] == 3
     assert ev["mean_position_error_mm"] < 1.0
     assert all(u.extras["rest_source"] == "joint positions" for u in result.units.values())
+
+
+def test_a_foreign_error_in_one_unit_is_that_units_failure(session, monkeypatch):
+    """A method's unexpected exception (here a KeyError) fails only the unit it happened in, named
+    with its type; the other units are calibrated as before."""
+    from skincal.calib import api
+
+    spec = api.METHODS["mle"]
+
+    def flaky(problem):
+        if problem.samples.unit == session.units[0]:
+            raise KeyError("boom")
+        return spec.run_unit(problem)
+
+    monkeypatch.setitem(api.METHODS, "flaky", replace(spec, run_unit=flaky))
+    result = calibrate(session, "flaky", workers=1)
+    assert sorted(result.units) == sorted(session.units[1:])
+    assert result.extras["failed_units"] == {session.units[0]: "internal error (KeyError: 'boom')"}

@@ -134,8 +134,12 @@ def minimize_mlsl(
     try:
         opt.optimize(np.clip(x0, lower, upper))
         status = int(opt.last_optimize_result())
-    except (nlopt.RoundoffLimited, RuntimeError):
+    except nlopt.RoundoffLimited:  # the best point so far stands (NLopt's documented meaning)
         status = int(nlopt.ROUNDOFF_LIMITED)
+    except RuntimeError as exc:  # NLopt's generic failure; anything else (our objective) propagates
+        if not str(exc).startswith("nlopt"):
+            raise
+        status = int(nlopt.FAILURE)
     return Minimum(x=best[1], value=float(best[0]), n_evals=count[0], status=status)
 
 
