@@ -38,7 +38,7 @@ from skincal.skin.placement import paper_placement, ring_placement
 def mle_poses(truth, placement: str, quick: bool):
     """Poses from the default calibration (mle) of a simulated session with ``placement``."""
     from skincal.calib import calibrate
-    from skincal.cli.simulate import simulate_dataset
+    from skincal.workflows.session import simulate_dataset
 
     ds = simulate_dataset("panda", placement, None, "realistic", "fast" if quick else "paper-sim", 0, "analytic")
     t0 = time.perf_counter()

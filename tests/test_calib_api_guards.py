@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from skincal.calib import calibrate, evaluate
-from skincal.cli.simulate import simulate_dataset
+from skincal.workflows.session import simulate_dataset
 from skincal.data.dataset import DYNAMIC, Segments
 from skincal.errors import CalibrationError, ConfigError
 

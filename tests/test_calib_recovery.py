@@ -231,7 +231,7 @@ def test_unit_on_link_one_writes_null_std_where_undetermined(tmp_path):
 # ---------------------------------------------------------------------------- (g) paper protocol, controller
 @pytest.mark.slow
 def test_paper_session_with_controller_joints_and_realistic_imus():
-    from skincal.cli.simulate import simulate_dataset
+    from skincal.workflows.session import simulate_dataset
 
     ds = simulate_dataset("panda", "paper", None, "realistic", "paper-sim", 0, "analytic", joints="controller")
     result = calibrate(ds, "mle")

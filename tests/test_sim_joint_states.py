@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from skincal.cli import main
-from skincal.cli.simulate import resolve_timing, simulate_dataset
+from skincal.workflows.session import resolve_timing, simulate_dataset
 from skincal.data.dataset import STATIC
 from skincal.data.hdf5 import read_dataset, write_dataset
 from skincal.errors import ConfigError

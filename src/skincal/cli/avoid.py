@@ -13,7 +13,7 @@ from skincal.errors import ConfigError
 
 def simulated_skin(placement: str, chain) -> dict:
     """The true unit poses of the skin the avoidance loop simulates: ``ring`` (dense) or ``paper`` (Table II)."""
-    from skincal.cli.simulate import make_placements
+    from skincal.workflows.session import make_placements
 
     if placement not in ("ring", "paper"):
         raise ConfigError(f"unknown placement '{placement}' (use ring or paper)")

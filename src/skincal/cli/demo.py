@@ -22,7 +22,7 @@ def demo(
 
     from skincal.calib import calibrate, evaluate
     from skincal.cli.calibrate import std_cell
-    from skincal.cli.simulate import simulate_dataset
+    from skincal.workflows.session import simulate_dataset
     from skincal.data.result import failed_units
 
     console.print(

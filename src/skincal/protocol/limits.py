@@ -39,6 +39,25 @@ def check_amplitudes(chain: SerialChain, config: ProtocolConfig) -> None:
             )
 
 
+VELOCITY_CAP_FRACTION = 0.95
+""":func:`fit_to_limits` caps excitation amplitudes at this fraction of each joint's velocity limit."""
+
+
+def fit_to_limits(
+    chain: SerialChain, config: ProtocolConfig, fraction: float = VELOCITY_CAP_FRACTION
+) -> ProtocolConfig:
+    """``config`` for ``chain``: robot-relative settings resolved (:meth:`ProtocolConfig.for_chain`) and
+    every amplitude above ``fraction`` of its joint's velocity limit capped there (the paper's 2 rad/s
+    exceeds the Sawyer's joint 1-2 limits). Unchanged for a chain without velocity limits."""
+    from dataclasses import replace
+
+    config = config.for_chain(chain)
+    if chain.velocity_limit is None:
+        return config
+    amp = np.minimum(config.amplitude_per_joint(chain.n_joints), fraction * np.asarray(chain.velocity_limit))
+    return replace(config, amplitude=tuple(float(a) for a in amp))
+
+
 def excursion_envelopes(chain: SerialChain, config: ProtocolConfig) -> tuple[FloatArray, FloatArray]:
     """Per joint, the lowest and highest offset from the pose reached while it is excited, ``(n,)`` rad.
 

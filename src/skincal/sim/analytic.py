@@ -27,7 +27,7 @@ with the ``ideal`` clock they are those of the simulator before clock models, bi
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -77,6 +77,7 @@ def simulate(
     description: str = "",
     joint_model: JointStateModel | None = None,
     clock_model: ClockModel | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Dataset:
     """Simulate a calibration session (see module docstring).
 
@@ -92,6 +93,7 @@ def simulate(
         description: stored in the dataset.
         joint_model: how the robot reports its joint states (default: ``ideal``).
         clock_model: the units' clock type (default: ``ideal``).
+        progress: called as ``progress(done, total)`` after each unit.
     """
     if not placements:
         raise ConfigError("simulate: no skin units to simulate")
@@ -115,6 +117,8 @@ def simulate(
         clock, t_stamp, keep = unit_clock_stamps(clock_model, unit_rng, t_stamp, t_true, t0)
         imu[name] = ImuStream(t=t_stamp, accel=accel[keep], gyro=gyro[keep])
         truth_sensor[name] = sensor_truth(errors, clock)
+        if progress is not None:
+            progress(len(imu), len(placements))
     joints = apply_joint_state_model(
         joint_model or JointStateModel(), trajectory.evaluate, trajectory.t, rng.spawn(1)[0]
     )

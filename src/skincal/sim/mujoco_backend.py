@@ -32,7 +32,7 @@ Time-of-flight: with a :class:`~skincal.sim.scene.Scene`, each unit gets a ToF s
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -223,6 +223,7 @@ def simulate_mujoco(
     model_options: Mapping[str, Any] | None = None,
     joint_model: JointStateModel | None = None,
     clock_model: ClockModel | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> Dataset:
     """Simulate a calibration session with MuJoCo (see the module docstring).
 
@@ -237,6 +238,7 @@ def simulate_mujoco(
         model_options: extra keyword arguments of :func:`build_model` (e.g. ``link_radius``).
         joint_model: how the robot reports its joint states (default: ``ideal``).
         clock_model: the units' clock type (default: ``ideal``).
+        progress: called as ``progress(done, total)`` after each unit's sensor model.
     """
     if mode not in MODES:
         raise ConfigError(f"simulate_mujoco: mode must be one of {', '.join(MODES)}, got '{mode}'")
@@ -320,6 +322,8 @@ def simulate_mujoco(
         clock, t_stamp, keep = unit_clock_stamps(clock_model, unit_rng, stamps[u], true_t[u], t0)
         imu[name] = ImuStream(t=t_stamp, accel=accel[keep], gyro=gyro[keep])
         truth_sensor[name] = sensor_truth(errors[u], clock)
+        if progress is not None:
+            progress(u + 1, len(units))
     return Dataset(
         robot=chain,
         joints=joints,
