@@ -39,6 +39,8 @@ from typing import Any
 import numpy as np
 
 from skincal.data.atomic import write_bytes_atomic
+from skincal.data.jsonio import load_json, regular_file
+from skincal.data.names import MAX_NAME_CHARS, name_problem
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.transforms import FloatArray
 from skincal.skin.pose import SkinUnitPose
@@ -50,6 +52,9 @@ _NO_REASON = "no pose (the result file gives no reason)"
 _TOP_KEYS = ("format", "version", "method", "robot", "dataset_sha256", "runtime_s", "units")
 _UNIT_KEYS = ("link", "position_m", "quaternion_wxyz", "observable", "position_std_m", "rotation_std_deg", "warnings")
 _QUAT_NORM_TOL = 1e-3
+MAX_POSITION_M = 1e3
+"""Largest accepted position component, m: a skin unit sits on a robot link, and numbers like
+``1e308`` overflow every distance computed from them."""
 
 
 @dataclass(frozen=True)
@@ -120,7 +125,9 @@ def failed_units(result: CalibrationResult) -> dict[str, str]:
 
 
 def sha256_file(path: str | Path) -> str:
-    """SHA-256 hex digest of a file's bytes (streamed, any size)."""
+    """SHA-256 hex digest of a regular file's bytes (streamed, any size; a FIFO or device is refused)."""
+    if Path(path).exists():  # a missing file keeps its message below
+        regular_file(path, "file", DatasetError)
     try:
         with open(path, "rb") as fh:
             return hashlib.file_digest(fh, "sha256").hexdigest()
@@ -210,6 +217,12 @@ class _Checker:
             raise self.fail(where, f"must be a string, got {_short(value)}")
         return value
 
+    def name(self, value: Any, where: str) -> str:
+        problem = name_problem(value)
+        if problem is not None:
+            raise self.fail(where, f"{problem} (names: 1-{MAX_NAME_CHARS} characters, no '/', no control characters)")
+        return value
+
     def vector(self, value: Any, n: int, where: str, *, nonneg: bool = False, nulls: bool = False) -> FloatArray:
         """``value`` as a float array of ``n`` finite numbers; with ``nulls``, ``None`` components are
         allowed and become NaN."""
@@ -239,7 +252,8 @@ class _Checker:
             raise self.fail("version", f"is {version}; this skincal reads version {VERSION}")
         if not self.string(self.get(doc, "method", ""), "method"):
             raise self.fail("method", "is empty")
-        self.string(self.get(doc, "robot", ""), "robot")
+        self.name(self.get(doc, "method", ""), "method")
+        self.name(self.string(self.get(doc, "robot", ""), "robot"), "robot")
         sha = self.string(self.get(doc, "dataset_sha256", ""), "dataset_sha256")
         if sha and (len(sha) != 64 or any(c not in "0123456789abcdefABCDEF" for c in sha)):
             raise self.fail("dataset_sha256", f"must be 64 hex digits or empty, got {_short(sha)}")
@@ -250,8 +264,25 @@ class _Checker:
         units = self.get(doc, "units", "")
         if not isinstance(units, dict):
             raise self.fail("units", f"must be an object of unit name -> result, got {_short(units)}")
+        if not units:
+            raise self.fail("units", "is empty (a result lists every unit of its dataset, calibrated or not)")
         for name, unit in units.items():
+            self.name(name, f"units key {_short(name)}")
             self.unit(unit, f"units.{name}")
+        links = self.robot_links(doc["robot"])
+        if links is not None:
+            for name, unit in units.items():
+                if unit["link"] is not None and unit["link"] > links:
+                    problem = f"is {unit['link']}; robot '{doc['robot']}' has links 1..{links}"
+                    raise self.fail(f"units.{name}.link", problem)
+
+    @staticmethod
+    def robot_links(robot: str) -> int | None:
+        """Number of links of a preset robot name, None for other names (checked against the chain where
+        the result meets a dataset: :func:`check_links`)."""
+        from skincal.kinematics.presets import PRESETS
+
+        return PRESETS[robot]().n_joints if robot in PRESETS else None
 
     def unit(self, unit: Any, where: str) -> None:
         if not isinstance(unit, dict):
@@ -264,7 +295,10 @@ class _Checker:
             also = "" if posed else " or null"
             raise self.fail(f"{where}.link", f"must be a positive integer (1-based link){also}, got {_short(link)}")
         if position is not None:
-            self.vector(position, 3, f"{where}.position_m")
+            p = self.vector(position, 3, f"{where}.position_m")
+            if np.any(np.abs(p) > MAX_POSITION_M):
+                problem = f"has a component beyond {MAX_POSITION_M:g} m, got {_short(position)}"
+                raise self.fail(f"{where}.position_m", problem)
         if quaternion is not None:
             quat = self.vector(quaternion, 4, f"{where}.quaternion_wxyz")
             norm = float(np.linalg.norm(quat))
@@ -274,8 +308,9 @@ class _Checker:
         if not isinstance(observable, bool):
             raise self.fail(f"{where}.observable", f"must be true or false, got {_short(observable)}")
         if observable and not posed:
-            raise self.fail(f"{where}.observable", "must be false for a unit without a pose "
-                                                   "(position_m or quaternion_wxyz is null)")
+            raise self.fail(
+                f"{where}.observable", "must be false for a unit without a pose (position_m or quaternion_wxyz is null)"
+            )
         for key in ("position_std_m", "rotation_std_deg"):
             value = self.get(unit, key, where)
             if value is not None:
@@ -323,8 +358,15 @@ def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[
     if isinstance(failed, Mapping):  # units without a pose are listed too (never lose a unit)
         for name, reason in failed.items():
             if isinstance(name, str) and name not in units:
-                units[name] = {"link": None, "position_m": None, "quaternion_wxyz": None, "observable": False,
-                               "position_std_m": None, "rotation_std_deg": None, "warnings": [str(reason)]}
+                units[name] = {
+                    "link": None,
+                    "position_m": None,
+                    "quaternion_wxyz": None,
+                    "observable": False,
+                    "position_std_m": None,
+                    "rotation_std_deg": None,
+                    "warnings": [str(reason)],
+                }
     doc["units"] = units
     _Checker(source).document(doc)
     return doc
@@ -343,8 +385,7 @@ def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
             pose = SkinUnitPose.from_quaternion(entry["link"], entry["position_m"], entry["quaternion_wxyz"])
         except ConfigError as exc:
             raise DatasetError(f"{source}: units.{name} is not a valid pose: {exc}") from None
-        stds = {k: None if entry[k] is None else np.array(_none_to_nan(entry[k]), dtype=float)
-                for k in _UNIT_KEYS[4:6]}
+        stds = {k: None if entry[k] is None else np.array(_none_to_nan(entry[k]), dtype=float) for k in _UNIT_KEYS[4:6]}
         units[name] = UnitResult(
             pose=pose,
             observable=entry["observable"],
@@ -356,8 +397,9 @@ def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
     if unposed:
         listed = extras.get(FAILED_UNITS, {})
         if not isinstance(listed, dict):
-            raise DatasetError(f"{source}: {FAILED_UNITS} must be an object of unit name -> reason, got "
-                               f"{_short(doc[FAILED_UNITS])}")
+            raise DatasetError(
+                f"{source}: {FAILED_UNITS} must be an object of unit name -> reason, got {_short(doc[FAILED_UNITS])}"
+            )
         extras[FAILED_UNITS] = {**listed, **unposed}
     return CalibrationResult(
         method=doc["method"],
@@ -380,24 +422,22 @@ def read_result(path: str | Path) -> CalibrationResult:
     """Read and validate a result file.
 
     Raises:
-        DatasetError: missing file, not JSON, wrong format or version, or a malformed field; one line
-            naming the file and the field (``units.su1.position_m``).
+        DatasetError: missing file, not a regular file, too large, not JSON (or JSON that
+            :func:`skincal.data.jsonio.load_json` refuses: duplicate keys, nesting deeper than 64,
+            NaN/Infinity, overflowing numbers), wrong format or version, a malformed field, a bad
+            unit or robot name (:func:`skincal.data.names.name_problem`), no units, a position
+            beyond :data:`MAX_POSITION_M`, or a link beyond a preset robot's links; one line naming
+            the file and the field (``units.su1.position_m``).
     """
-    source = str(path)
-    try:
-        raw = Path(path).read_bytes()
-    except FileNotFoundError:
-        raise DatasetError(f"{source}: no such file") from None
-    except OSError as exc:
-        raise DatasetError(f"{source}: cannot read file ({exc.strerror or exc})") from None
-    try:
-        doc = json.loads(raw.decode("utf-8"), parse_constant=lambda c: _reject_constant(source, c))
-    except UnicodeDecodeError:
-        raise DatasetError(f"{source}: not a JSON text file (not valid UTF-8)") from None
-    except json.JSONDecodeError as exc:
-        raise DatasetError(f"{source}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
-    return result_from_dict(doc, source=source)
+    doc = load_json(path, "result file (.json)", DatasetError)
+    return result_from_dict(doc, source=str(path))
 
 
-def _reject_constant(source: str, name: str) -> Any:
-    raise DatasetError(f"{source}: contains {name}, which is not valid JSON (use null)")
+def check_links(result: CalibrationResult, chain: Any, source: str = "<result>") -> None:
+    """Refuse a result whose units sit on links ``chain`` does not have (``1..chain.n_joints``), with
+    a one-line :class:`DatasetError`; call it where a result meets a robot (evaluation, viewers)."""
+    n = int(chain.n_joints)
+    for name, unit in result.units.items():
+        link = unit.pose.link
+        if not 1 <= link <= n:
+            raise DatasetError(f"{source}: units.{name}.link is {link}; robot '{chain.name}' has links 1..{n}")
