@@ -10,6 +10,7 @@ from skincal.hw.packet import (
     BadFieldError,
     BadLengthError,
     BadMagicError,
+    BadValueError,
     JointPacket,
     PacketError,
     ShortPacketError,
@@ -24,7 +25,8 @@ from skincal.hw.recorder import Recorder, RecordingSummary, default_unit_name
 from skincal.hw.session import record
 
 __all__ = [
-    "BadChecksumError", "BadFieldError", "BadLengthError", "BadMagicError", "ClockEstimator", "ClockFit",
+    "BadChecksumError", "BadFieldError", "BadLengthError", "BadMagicError", "BadValueError", "ClockEstimator",
+    "ClockFit",
     "Delivery", "DeviceClock", "EmulatorReport", "Faults", "JointPacket", "PacketError", "ReceiverStats",
     "Recorder", "RecordingSummary", "ShortPacketError", "SkinEmulator", "SkinPacket", "SkinReceiver",
     "StreamExpectation", "StreamKey", "StreamStats", "UnknownVersionError", "decode_packet", "default_unit_name",

@@ -41,6 +41,8 @@ FLAG_GYRO = 0x02
 FLAG_RANGE = 0x04
 _FLAGS_ALL = FLAG_ACCEL | FLAG_GYRO | FLAG_RANGE
 MAX_JOINTS = 32
+MAX_T0_US = (1 << 63) - (1 << 32)
+"""Largest ``t0_us`` accepted: every sample time ``t0_us + dt_us`` then fits in an int64 (~146,000 years)."""
 
 
 class PacketError(SkincalError, ValueError):
@@ -80,13 +82,21 @@ class BadLengthError(PacketError):
 
 
 class BadFieldError(PacketError):
-    """A header field is out of range (no samples, reserved flag bits, zero joints)."""
+    """A header field is out of range (no samples, reserved flag bits, zero joints, ``t0_us`` beyond int64)."""
 
     reason = "bad_field"
 
 
+class BadValueError(PacketError):
+    """A sample value no dataset can hold: a NaN or infinite accel, gyro, q or qd; an infinite or
+    negative range (NaN is "no target" and allowed)."""
+
+    reason = "bad_value"
+
+
 PACKET_ERRORS: tuple[type[PacketError], ...] = (
     ShortPacketError, BadMagicError, BadChecksumError, UnknownVersionError, BadLengthError, BadFieldError,
+    BadValueError,
 )
 
 
@@ -163,8 +173,9 @@ def _timestamps(t_us: ArrayLike, what: str) -> tuple[int, np.ndarray]:
     t = t.astype(np.int64)
     t0 = int(t[0])
     dt = t - t0
-    if t0 < 0 or np.any(dt < 0) or np.any(dt > 0xFFFFFFFF):
-        raise ConfigError(f"{what}: t_us must be >= 0 µs, non-decreasing and span < 2^32 µs within one packet")
+    if t0 < 0 or t0 > MAX_T0_US or np.any(dt < 0) or np.any(dt > 0xFFFFFFFF):
+        raise ConfigError(f"{what}: t_us must be in 0..2^63-2^32 µs, non-decreasing and span < 2^32 µs within one "
+                          "packet")
     return t0, dt
 
 
@@ -239,9 +250,11 @@ def decode_packet(data: bytes) -> SkinPacket | JointPacket:
     """Decode one datagram; raise a :class:`PacketError` subclass naming the problem.
 
     Checks, in order: length >= 24 bytes (short), magic (bad_magic), CRC-32 of all bytes but the
-    last four (bad_checksum), version (unknown_version), header fields (bad_field), length equal to
-    ``20 + n * sample_size + 4`` (bad_length). A single corrupted byte outside the magic is always
-    reported as a bad checksum (CRC-32 detects every burst of up to 32 bits).
+    last four (bad_checksum), version (unknown_version), header fields (bad_field, including
+    ``t0_us`` > :data:`MAX_T0_US`), length equal to ``20 + n * sample_size + 4`` (bad_length), sample
+    values (bad_value: non-finite accel, gyro, q, qd; infinite or negative range). A single
+    corrupted byte outside the magic is always reported as a bad checksum (CRC-32 detects every
+    burst of up to 32 bits). Any byte string either decodes or raises a :class:`PacketError`; nothing else.
     """
     size = len(data)
     if size < MIN_SIZE:
@@ -264,18 +277,26 @@ def decode_packet(data: bytes) -> SkinPacket | JointPacket:
         if not 1 <= flags <= MAX_JOINTS:
             raise BadFieldError(f"joint packet (source {source}): n_joints {flags} out of range 1..{MAX_JOINTS}")
         dtype = joint_sample_dtype(flags)
+    if t0 > MAX_T0_US:
+        raise BadFieldError(f"packet (source {source}, seq {seq}): t0_us {t0} beyond {MAX_T0_US} µs")
     expected = HEADER.size + n * dtype.itemsize + CRC.size
     if size != expected:
         raise BadLengthError(f"packet (source {source}, seq {seq}): {size} bytes, header implies {expected}")
     rec = np.frombuffer(data, dtype=dtype, count=n, offset=HEADER.size)
-    t_us = rec["dt_us"].astype(np.int64) + t0
+    t_us = rec["dt_us"].astype(np.int64) + np.int64(t0)
     if magic == MAGIC_JOINTS:
-        return JointPacket(source, seq, t_us, rec["q"].astype(float), rec["qd"].astype(float))
-    return SkinPacket(
-        unit_id=source,
-        seq=seq,
-        t_us=t_us,
-        accel=rec["accel"].astype(float) if flags & FLAG_ACCEL else None,
-        gyro=rec["gyro"].astype(float) if flags & FLAG_GYRO else None,
-        range=rec["range"].astype(float) if flags & FLAG_RANGE else None,
-    )
+        q, qd = rec["q"].astype(float), rec["qd"].astype(float)
+        if not (np.isfinite(q).all() and np.isfinite(qd).all()):
+            raise BadValueError(f"joint packet (source {source}, seq {seq}): non-finite q or qd")
+        return JointPacket(source, seq, t_us, q, qd)
+    fields: dict[str, np.ndarray | None] = dict.fromkeys(("accel", "gyro", "range"))
+    for name, flag in (("accel", FLAG_ACCEL), ("gyro", FLAG_GYRO)):
+        if flags & flag:
+            fields[name] = value = rec[name].astype(float)
+            if not np.isfinite(value).all():
+                raise BadValueError(f"skin packet (unit {source}, seq {seq}): non-finite {name}")
+    if flags & FLAG_RANGE:
+        fields["range"] = r = rec["range"].astype(float)
+        if np.any(np.isinf(r) | (r < 0)):  # NaN (no target) passes both tests
+            raise BadValueError(f"skin packet (unit {source}, seq {seq}): infinite or negative range")
+    return SkinPacket(unit_id=source, seq=seq, t_us=t_us, **fields)
