@@ -136,10 +136,14 @@ _BLAS_LIMIT: Any = None
 
 
 def _one_blas_thread() -> None:
-    """Worker initializer: one BLAS thread per worker process (``workers`` processes already fill
-    the cores; more threads each would oversubscribe them)."""
+    """Worker initializer: the worker dies with its parent (:func:`skincal.processes.die_with_parent`);
+    one BLAS thread per worker process (``workers`` processes already fill the cores; more threads
+    each would oversubscribe them)."""
     from threadpoolctl import threadpool_limits
 
+    from skincal.processes import die_with_parent
+
+    die_with_parent()
     global _BLAS_LIMIT
     _BLAS_LIMIT = threadpool_limits(limits=1, user_api="blas")
 

@@ -7,9 +7,13 @@ one-line message on stderr and exit code 2; no traceback reaches the user.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
+import signal
 import sys
+import threading
+from collections.abc import Iterator
 
 from skincal.cli import avoid as _avoid  # noqa: E402,F401
 from skincal.cli import bench_more as _bench_more  # noqa: E402,F401
@@ -42,15 +46,55 @@ def _click_exceptions() -> tuple[tuple[type, ...], tuple[type, ...], tuple[type,
     return pick("ClickException"), pick("Abort"), pick("NoArgsIsHelpError")
 
 
+class Terminated(SystemExit):
+    """Raised in the main thread when the process receives SIGTERM: it unwinds the command like an
+    exception, so every ``finally`` and :func:`skincal.data.atomic.atomic_path` clean-up runs (no
+    temporary file is left); exit code 143 (128 + SIGTERM), as if killed by the signal."""
+
+    def __init__(self) -> None:
+        super().__init__(128 + signal.SIGTERM)
+
+
+def _raise_terminated(_signum: int, _frame: object) -> None:
+    raise Terminated()
+
+
+@contextlib.contextmanager
+def _sigterm_unwinds() -> Iterator[None]:
+    """SIGTERM raises :class:`Terminated` while the command runs (main thread only; the previous
+    handler is restored afterwards). Commands that handle SIGTERM themselves (``record``) install
+    their own handler inside."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the process exit code."""
+    try:
+        with _sigterm_unwinds():
+            return _run(argv)
+    except Terminated as exc:  # between the command's end and the handler's removal
+        console_error("terminated")
+        return int(exc.code)
+
+
+def _run(argv: list[str] | None) -> int:
     from skincal.errors import SkincalError
 
     try:
-        app(args=argv, prog_name="skincal", standalone_mode=False)
+        code = app(args=argv, prog_name="skincal", standalone_mode=False)
     except SkincalError as exc:
         console_error(str(exc))
         return 2
+    except Terminated as exc:
+        console_error("terminated")
+        return int(exc.code)
     except KeyboardInterrupt:
         console_error("interrupted")
         return 130
@@ -73,6 +117,12 @@ def main(argv: list[str] | None = None) -> int:
             raise
         console_error(f"internal error ({type(exc).__name__}: {exc}); rerun with SKINCAL_DEBUG=1 for a traceback")
         return 3
+    # standalone_mode=False: typer returns the code of an explicit exit (typer.Exit) and turns Ctrl-C
+    # into exit code 130; a command that simply ends returns None
+    if isinstance(code, int) and not isinstance(code, bool):
+        if code == 130:
+            console_error("interrupted")
+        return code
     return 0
 
 

@@ -2,13 +2,16 @@
 
 A reader of the target sees either the old complete file or the new complete file, never a
 half-written one; a crash or an exception while writing leaves the old file untouched and no
-temporary file behind.
+temporary file behind. A process killed outright (SIGKILL, power cut) cannot clean up: its temporary
+``.<name>.<pid>.<hex>.tmp`` carries the writer's pid, and the next :func:`atomic_path` for the same
+target removes such debris of writers that are no longer alive.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import secrets
 from collections.abc import Iterator
 from pathlib import Path
@@ -31,6 +34,45 @@ def _fsync_path(path: Path, directory: bool = False) -> None:
         os.close(fd)
 
 
+def _pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists on this machine (POSIX; elsewhere every pid counts as alive,
+    so nothing is ever removed: ``os.kill(pid, 0)`` would terminate it on Windows)."""
+    if pid == os.getpid():
+        return True
+    if os.name != "posix" or pid <= 0:
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # PermissionError: someone else's live process
+        return True
+    return True
+
+
+def remove_debris(target: str | Path) -> list[Path]:
+    """Remove the temporaries ``.<name>.<pid>.<hex>.tmp`` that writers of ``target`` which are no
+    longer alive left next to it (killed before they could clean up); returns the removed paths.
+    Temporaries of live writers (and of other targets) are left alone."""
+    target = Path(target)
+    directory = target.parent if str(target.parent) else Path(".")
+    pattern = re.compile(rf"\.{re.escape(target.name)}\.(\d+)\.[0-9a-f]+\.tmp")
+    removed = []
+    try:
+        entries = list(os.scandir(directory))
+    except OSError:
+        return removed
+    for entry in entries:
+        match = pattern.fullmatch(entry.name)
+        if match is None or _pid_alive(int(match.group(1))):
+            continue
+        with contextlib.suppress(OSError):
+            if entry.is_file(follow_symlinks=False):
+                os.unlink(entry.path)
+                removed.append(Path(entry.path))
+    return removed
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a fresh temporary path in ``path``'s directory; on clean exit replace ``path`` with it.
@@ -39,11 +81,14 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     fsynced and moved onto ``path`` with :func:`os.replace` (atomic on POSIX and Windows), and the
     directory is fsynced so the rename survives a power cut. If the block raises, the temporary is
     removed and ``path`` keeps its previous contents. The temporary is created empty with the usual
-    permissions (``0o666`` minus the umask) so the final file is not private by accident.
+    permissions (``0o666`` minus the umask) so the final file is not private by accident. Its name
+    ``.<name>.<pid>.<hex>.tmp`` carries this process's pid; debris of dead writers of the same
+    target is removed first (:func:`remove_debris`).
     """
     target = Path(path)
     directory = target.parent if str(target.parent) else Path(".")
-    tmp = directory / f".{target.name}.{secrets.token_hex(6)}.tmp"
+    remove_debris(target)
+    tmp = directory / f".{target.name}.{os.getpid()}.{secrets.token_hex(6)}.tmp"
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     os.close(fd)
     try:

@@ -29,7 +29,9 @@ def map_local(
         return out
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    from skincal.processes import worker_initializer
+
+    with ProcessPoolExecutor(max_workers=workers, initializer=worker_initializer) as pool:  # workers die with us
         futures = [pool.submit(fn, job) for job in jobs]
         for fut in as_completed(futures):
             record = fut.result()

@@ -1,0 +1,186 @@
+"""The command line against careless and hostile input: every bad input ends as a one-line error with
+exit 2 (never ``internal error``), outputs are never left half-written or as debris, workers die with
+their parent, names reach the terminal escaped, and the viewer refuses cross-site connections."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from skincal.cli import main
+from skincal.data.atomic import atomic_path, remove_debris
+
+pytestmark = pytest.mark.adversarial
+
+LINUX = sys.platform.startswith("linux")
+
+
+def _python(code: str, *args: str) -> subprocess.Popen:
+    """A real Python process running ``code`` (stdout piped, line by line)."""
+    return subprocess.Popen(
+        [sys.executable, "-c", textwrap.dedent(code), *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def _wait_for(predicate, timeout_s: float = 30.0, poll_s: float = 0.05):
+    """Poll ``predicate`` until it returns something truthy (returned) or ``timeout_s`` passes (None)."""
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(poll_s)
+    return None
+
+
+def _children(pid: int) -> list[int]:
+    """Pids of the live processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2 :].split()
+        if int(fields[1]) == pid and fields[0] != "Z":
+            out.append(int(entry.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat[stat.rindex(")") + 2] != "Z"
+
+
+# ------------------------------------------------------------------------------ temporaries
+def test_atomic_path_removes_debris_of_dead_writers_only(tmp_path):
+    target = tmp_path / "data.h5"
+    done = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead_pid = int(done.stdout)  # a finished process: its pid is no longer alive
+    assert not _alive(dead_pid)
+    dead = tmp_path / f".data.h5.{dead_pid}.0123456789ab.tmp"
+    live = tmp_path / f".data.h5.{os.getppid()}.0123456789ab.tmp"  # the test runner's parent is alive
+    other = tmp_path / f".other.h5.{dead_pid}.0123456789ab.tmp"  # another target's: not ours to judge
+    for path in (dead, live, other):
+        path.write_bytes(b"x" * 1000)
+    with atomic_path(target) as tmp:
+        assert tmp.name.startswith(f".data.h5.{os.getpid()}.") and tmp.name.endswith(".tmp")
+        tmp.write_bytes(b"new")
+    assert target.read_bytes() == b"new"
+    assert not dead.exists() and live.exists() and other.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([target.name, live.name, other.name])
+    assert remove_debris(target) == []  # nothing more to remove
+
+
+SLOW_WRITER = """
+    import sys, time
+    from pathlib import Path
+    from skincal.cli import app, main
+    from skincal.data.atomic import atomic_path
+
+    @app.command("slow-write")
+    def slow_write(out: Path) -> None:
+        with atomic_path(out) as tmp:
+            tmp.write_bytes(b"x" * 100000)
+            print("writing", tmp, flush=True)
+            time.sleep(120)
+
+    sys.exit(main(["slow-write", sys.argv[1]]))
+"""
+
+
+@pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
+def test_sigterm_during_a_write_leaves_no_temporary(tmp_path):
+    out = tmp_path / "out.bin"
+    proc = _python(SLOW_WRITER, str(out))
+    try:
+        line = proc.stdout.readline()
+        assert line.startswith("writing"), proc.stderr.read()
+        tmp = Path(line.split(maxsplit=1)[1].strip())
+        assert tmp.exists()
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM
+    assert err.strip() == "error: terminated"
+    assert not tmp.exists() and not out.exists()
+    assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------------------ workers
+POOL_PARENT = """
+    import sys, time
+    import numpy as np
+    which = sys.argv[1]
+    if which == "sweep":
+        from skincal.workflows.sweep import map_local
+        print("ready", flush=True)
+        map_local(time.sleep, [120.0, 120.0], workers=2)
+    else:
+        from skincal.calib.api import MethodSpec, calibrate, register
+        from skincal.data.hdf5 import read_dataset
+
+        def sleepy(problem):
+            time.sleep(120.0)
+
+        register("sleepy", MethodSpec(run_unit=sleepy, description="sleeps", exact_joint_states=False))
+        ds = read_dataset(sys.argv[2])
+        print("ready", flush=True)
+        calibrate(ds, "sleepy", links={u: 2 for u in ds.units}, workers=2)
+"""
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """A small simulated session (2 units, fast protocol) and its result."""
+    root = tmp_path_factory.mktemp("adversarial")
+    data = root / "data.h5"
+    args = "simulate --robot panda --placement random --units 2 --protocol fast --seed 4 --out".split()
+    assert main([*args, str(data)]) == 0
+    result = root / "result.json"
+    assert main(["calibrate", str(data), "--out", str(result), "--workers", "1"]) == 0
+    return data, result
+
+
+def _kill_parent_then_workers_die(*args: str) -> None:
+    proc = _python(POOL_PARENT, *args)
+    workers: list[int] = []
+    try:
+        assert proc.stdout.readline().strip() == "ready", proc.stderr.read()
+        workers = _wait_for(lambda: (lambda c: c if len(c) >= 2 else None)(_children(proc.pid)), 60.0) or []
+        assert len(workers) >= 2, "the pool did not start two workers"
+        time.sleep(0.5)  # let the initializers run (a worker that forked later still learns of the death)
+        proc.kill()  # SIGKILL: nothing runs in the parent
+        proc.wait(timeout=10)
+        assert _wait_for(lambda: not any(_alive(w) for w in workers), 20.0), "workers outlived their parent"
+    finally:
+        proc.kill()
+        for w in workers:
+            if _alive(w):
+                os.kill(w, signal.SIGKILL)
+
+
+@pytest.mark.skipif(not LINUX, reason="PR_SET_PDEATHSIG is Linux only")
+def test_calibrate_workers_die_when_their_parent_is_killed(small):
+    _kill_parent_then_workers_die("calibrate", str(small[0]))
+
+
+@pytest.mark.skipif(not LINUX, reason="PR_SET_PDEATHSIG is Linux only")
+def test_sweep_workers_die_when_their_parent_is_killed():
+    _kill_parent_then_workers_die("sweep")
