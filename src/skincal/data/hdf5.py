@@ -17,6 +17,15 @@ Layout (optional parts in brackets)::
 
 Reading opens the file read-only, checks the structure, builds a :class:`Dataset` and runs
 :func:`~skincal.data.validate.validate_dataset`; writing validates first, then writes atomically.
+
+The reader trusts nothing in the file's structure: it follows only hard links (a soft or external
+link, an external raw-data file or a virtual dataset could put another file's data, or another
+unit's, in place of a stream), refuses two paths that are the same HDF5 object (a hard link making
+``/imu/su1`` a second name of ``/imu/su2``), and checks each dataset's declared shape and type
+before reading it: a dataset may not declare more bytes than it stores (times
+:data:`MAX_COMPRESSION_RATIO` when compressed, plus :data:`SMALL_ARRAY_BYTES`), and all arrays of
+a file together may not declare more than ``max(MAX_READ_BYTES, READ_BYTES_PER_FILE_BYTE * file
+size)``; so a small file cannot make the reader allocate gigabytes.
 Written datasets carry Fletcher-32 checksums (and the HDF5 1.8+ format, whose metadata is
 checksummed too), so bit rot becomes a read error instead of silently different samples; files
 without checksums (other writers) read just as well. Unit groups keep their creation order.
@@ -24,6 +33,7 @@ without checksums (other writers) read just as well. Unit groups keep their crea
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import h5py
@@ -31,7 +41,8 @@ import numpy as np
 
 from skincal.data.atomic import atomic_path
 from skincal.data.dataset import Dataset, ImuStream, JointStates, Segments, TofStream
-from skincal.data.validate import validate_dataset
+from skincal.data.jsonio import regular_file
+from skincal.data.validate import check_unit_name, validate_dataset
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.chain import CONVENTIONS, SerialChain
 from skincal.skin.pose import SkinUnitPose
@@ -39,6 +50,18 @@ from skincal.skin.pose import SkinUnitPose
 FORMAT = "skincal-dataset"
 VERSION = 1
 _QUAT_NORM_TOL = 1e-3
+
+MAX_COMPRESSION_RATIO = 1100
+"""Largest declared/stored size ratio accepted for a compressed dataset (deflate cannot beat ~1032:1)."""
+SMALL_ARRAY_BYTES = 1 << 20
+"""Declared bytes a dataset may have beyond what it stores (fill values of small arrays), 1 MiB."""
+MAX_READ_BYTES = 1 << 31
+"""Bytes the arrays of any file may declare in total (2 GiB), more only in proportion to its size."""
+READ_BYTES_PER_FILE_BYTE = 8
+"""Beyond :data:`MAX_READ_BYTES`, the arrays of a file may declare this many bytes per byte of file."""
+MAX_ATTR_BYTES = 1 << 20
+"""Largest attribute read, bytes (the contract's attributes are a few numbers)."""
+_NO_COMPRESSION = {h5py.h5z.FILTER_FLETCHER32, h5py.h5z.FILTER_SHUFFLE}
 
 
 def _first_line(exc: BaseException) -> str:
@@ -49,53 +72,142 @@ def _first_line(exc: BaseException) -> str:
 class _Reader:
     """Reads fields of one open file, turning every structural problem into a one-line DatasetError."""
 
-    def __init__(self, f: h5py.File, source: str) -> None:
+    def __init__(self, f: h5py.File, source: str, file_size: int) -> None:
         self.f = f
         self.source = source
+        self.file_size = file_size
+        self.budget = max(MAX_READ_BYTES, READ_BYTES_PER_FILE_BYTE * file_size)
+        self.declared = 0  # bytes declared by the arrays read so far
+        self.seen: dict[object, str] = {}  # HDF5 object id -> the first path it was reached by
 
     def fail(self, field: str, problem: str) -> DatasetError:
         return DatasetError(f"{self.source}: {field} {problem}")
 
+    def link(self, path: str) -> bool:
+        """Whether ``path`` exists, following hard links only: a soft or external link on the way is refused."""
+        parts = [p for p in path.split("/") if p]
+        grp: h5py.Group = self.f
+        for i, name in enumerate(parts):
+            here = "/" + "/".join(parts[: i + 1])
+            try:
+                link = grp.get(name, getlink=True)
+            except (OSError, KeyError, ValueError, TypeError) as exc:
+                raise self.fail(here, f"cannot be read ({_first_line(exc)})") from None
+            if link is None:
+                return False
+            if isinstance(link, h5py.SoftLink):
+                raise self.fail(here, f"is a soft link to {link.path}; only ordinary (hard-linked) objects are read")
+            if isinstance(link, h5py.ExternalLink):
+                raise self.fail(
+                    here, f"is an external link to {link.filename}:{link.path}; only data inside the file is read"
+                )
+            if not isinstance(link, h5py.HardLink):
+                raise self.fail(here, f"is a {type(link).__name__}; only ordinary (hard-linked) objects are read")
+            if i < len(parts) - 1:
+                try:
+                    grp = grp[name]
+                except (OSError, KeyError, ValueError) as exc:
+                    raise self.fail(here, f"cannot be read ({_first_line(exc)})") from None
+                if not isinstance(grp, h5py.Group):
+                    raise self.fail(here, "must be a group")
+        return True
+
     def node(self, path: str, kind: type, required: bool = True) -> h5py.Group | h5py.Dataset | None:
+        if not self.link(path):
+            if required:
+                raise self.fail(path, "is missing")
+            return None
         try:
             obj = self.f.get(path)
         except (OSError, KeyError, ValueError) as exc:
             raise self.fail(path, f"cannot be read ({_first_line(exc)})") from None
-        if obj is None:
-            if required:
-                raise self.fail(path, "is missing")
-            return None
         if not isinstance(obj, kind):
             want = "a group" if kind is h5py.Group else "a dataset"
             raise self.fail(path, f"must be {want}")
+        first = self.seen.setdefault(obj.id, path)
+        if first != path:
+            raise self.fail(
+                path, f"is the same HDF5 object as {first} (a hard link); every group and dataset is stored once"
+            )
         return obj
+
+    def check_declared(self, path: str, obj: h5py.Dataset) -> None:
+        """Refuse a dataset whose declared size the file cannot back, before reading it."""
+        if obj.external:
+            files = ", ".join(str(e[0]) for e in obj.external[:3])
+            raise self.fail(path, f"keeps its samples in external file(s) {files}; only data inside the file is read")
+        if obj.is_virtual:
+            raise self.fail(path, "is a virtual dataset mapping other files; only data inside the file is read")
+        if obj.shape is None:
+            return  # an empty dataspace: no samples (refused by the dtype/shape checks)
+        declared = math.prod(obj.shape) * obj.dtype.itemsize
+        stored = min(int(obj.id.get_storage_size()), self.file_size)
+        plist = obj.id.get_create_plist()
+        filters = {plist.get_filter(i)[0] for i in range(plist.get_nfilters())}
+        ratio = 1 if filters <= _NO_COMPRESSION else MAX_COMPRESSION_RATIO
+        if declared > SMALL_ARRAY_BYTES + ratio * stored:
+            raise self.fail(
+                path,
+                f"declares shape {obj.shape} of {obj.dtype} ({declared} bytes) but stores {stored} bytes; "
+                "refused before reading",
+            )
+        self.declared += declared
+        if self.declared > self.budget:
+            raise self.fail(
+                path,
+                f"brings the arrays read to {self.declared} bytes, more than a {self.file_size}-byte file may "
+                f"declare ({self.budget}); refused before reading",
+            )
 
     def group(self, path: str, required: bool = True) -> h5py.Group | None:
         return self.node(path, h5py.Group, required)  # type: ignore[return-value]
+
+    def unit_names(self, grp: h5py.Group, path: str) -> list[str]:
+        """Member names of a unit group (``/imu``, ``/tof``, ``/truth``), each checked by the one name rule."""
+        try:
+            names = list(grp)
+        except (OSError, KeyError, ValueError, TypeError) as exc:
+            raise self.fail(path, f"cannot be read ({_first_line(exc)})") from None
+        for unit in names:
+            check_unit_name(unit, self.source, path)
+        return names
 
     def array(self, path: str, required: bool = True, dtype: type | None = None) -> np.ndarray | None:
         """Dataset ``path`` as an array; numbers are converted to ``dtype`` (float64 by default)."""
         obj = self.node(path, h5py.Dataset, required)
         if obj is None:
             return None
+        want = dtype or np.float64
+        allowed = "iu" if np.issubdtype(want, np.integer) else "fiu"
+        what = "integers" if allowed == "iu" else "real numbers"
+        try:
+            declared_dtype = obj.dtype
+        except (OSError, KeyError, ValueError, TypeError) as exc:
+            raise self.fail(path, f"cannot be read ({_first_line(exc)})") from None
+        if declared_dtype.kind not in allowed:  # checked before reading: no strings or objects are read
+            raise self.fail(path, f"has dtype {declared_dtype}, expected {what}")
+        self.check_declared(path, obj)
         try:
             value = np.asarray(obj[()])
         except (OSError, KeyError, ValueError, TypeError) as exc:
             raise self.fail(path, f"cannot be read ({_first_line(exc)})") from None
-        want = dtype or np.float64
-        allowed = "iu" if np.issubdtype(want, np.integer) else "fiu"
         if value.dtype.kind not in allowed:
-            what = "integers" if allowed == "iu" else "real numbers"
             raise self.fail(path, f"has dtype {value.dtype}, expected {what}")
         return value.astype(want, copy=False)
 
     def attr(self, path: str, name: str, required: bool = True) -> object:
         obj = self.f if path == "/" else self.group(path)
+        size = 0
         try:
             present = name in obj.attrs
-            value = obj.attrs[name] if present else None
+            if present:
+                aid = obj.attrs.get_id(name)
+                size = (math.prod(aid.shape) if aid.shape is not None else 0) * aid.dtype.itemsize
+            value = obj.attrs[name] if present and size <= MAX_ATTR_BYTES else None
         except (OSError, ValueError, TypeError) as exc:
             raise self.fail(self.attr_field(path, name), f"cannot be read ({_first_line(exc)})") from None
+        if size > MAX_ATTR_BYTES:
+            raise self.fail(self.attr_field(path, name), f"declares {size} bytes (at most {MAX_ATTR_BYTES})")
         if not present and required:
             raise self.fail(self.attr_field(path, name), "is missing")
         return value
@@ -158,8 +270,12 @@ class _Reader:
             raise self.fail("/robot/dh", f"has shape {dh.shape}, expected (n, 4) with n >= 1")
         n = dh.shape[0]
         optional = {}
-        for key, shape in (("joint_lower", (n,)), ("joint_upper", (n,)), ("velocity_limit", (n,)),
-                           ("T_link_flange", (4, 4))):
+        for key, shape in (
+            ("joint_lower", (n,)),
+            ("joint_upper", (n,)),
+            ("velocity_limit", (n,)),
+            ("T_link_flange", (4, 4)),
+        ):
             value = self.array(f"/robot/{key}", required=False)
             if value is not None:
                 if value.shape != shape:
@@ -183,7 +299,7 @@ class _Reader:
     def imu(self) -> dict[str, ImuStream]:
         grp = self.group("/imu")
         out = {}
-        for unit in grp:
+        for unit in self.unit_names(grp, "/imu"):
             base = f"/imu/{unit}"
             self.group(base)
             out[unit] = ImuStream(
@@ -196,7 +312,7 @@ class _Reader:
     def tof(self) -> dict[str, TofStream]:
         grp = self.group("/tof", required=False)
         out = {}
-        for unit in grp or ():
+        for unit in self.unit_names(grp, "/tof") if grp is not None else ():
             base = f"/tof/{unit}"
             self.group(base)
             out[unit] = TofStream(t=self.array(f"{base}/t"), range=self.array(f"{base}/range"))
@@ -217,7 +333,7 @@ class _Reader:
         grp = self.group("/truth", required=False)
         poses: dict[str, SkinUnitPose] = {}
         sensor: dict[str, dict[str, np.ndarray | float]] = {}
-        for unit in grp or ():
+        for unit in self.unit_names(grp, "/truth") if grp is not None else ():
             base = f"/truth/{unit}"
             node = self.group(base)
             link = int(self.num_attr(base, "link", (), integer=True))
@@ -252,16 +368,13 @@ def read_dataset(path: str | Path) -> Dataset:
     """
     path = Path(path)
     source = str(path)
-    if not path.exists():
-        raise DatasetError(f"{source}: no such file")
-    if path.is_dir():
-        raise DatasetError(f"{source}: is a directory, expected a dataset file (.h5)")
+    size = regular_file(path, "dataset file (.h5)", DatasetError)  # before opening: a FIFO would block
     try:
         f = h5py.File(path, "r")
     except OSError as exc:
         raise DatasetError(f"{source}: not a readable HDF5 file ({_first_line(exc)})") from None
     with f:
-        r = _Reader(f, source)
+        r = _Reader(f, source, size)
         try:
             description = r.header()
             robot, gravity = r.robot()

@@ -12,6 +12,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from skincal.data.dataset import DYNAMIC, STATIC, Dataset, Segments
+from skincal.data.names import name_problem, printable
 from skincal.errors import DatasetError
 from skincal.kinematics.chain import CONVENTIONS, SerialChain
 from skincal.skin.pose import SkinUnitPose
@@ -80,15 +81,25 @@ def _time_field(value: object, source: str, field: str, *, min_samples: int) -> 
     return t
 
 
-def _check_unit_name(name: object, source: str, group: str) -> None:
-    if not isinstance(name, str) or not name or "/" in name or name in (".", ".."):
-        raise _fail(source, group, f"has an invalid unit name {name!r} (a non-empty string without '/')")
+def _shown(name: object) -> str:
+    text = repr(name)
+    return printable(text if len(text) <= 60 else text[:57] + "...")
+
+
+def check_unit_name(name: object, source: str, group: str) -> None:
+    """Refuse a unit name that :func:`skincal.data.names.name_problem` refuses (the one rule for names)."""
+    problem = name_problem(name)
+    if problem is not None:
+        raise _fail(source, group, f"has an invalid unit name {_shown(name)}: it {problem}")
 
 
 def validate_robot(robot: object, gravity: object, source: str) -> int:
     """Check the chain and gravity; returns the number of joints ``n``."""
     if not isinstance(robot, SerialChain):
         raise _fail(source, "/robot", f"must be a SerialChain, got {type(robot).__name__}")
+    problem = name_problem(robot.name)
+    if problem is not None:
+        raise _fail(source, "/robot attr 'name'", f"{_shown(robot.name)} is not a valid robot name: it {problem}")
     if robot.convention not in CONVENTIONS:
         raise _fail(source, "/robot attr 'convention'", f"is '{robot.convention}', expected one of {CONVENTIONS}")
     dh = _float_field(robot.dh, (None, 4), source, "/robot/dh")
@@ -129,7 +140,7 @@ def validate_segments(segments: Segments, n: int, source: str) -> None:
 def validate_truth(ds: Dataset, n: int, source: str) -> None:
     """Check true poses (units exist in ``imu``, link in ``1..n``) and true sensor errors."""
     for unit, pose in ds.truth.items():
-        _check_unit_name(unit, source, "/truth")
+        check_unit_name(unit, source, "/truth")
         field = f"/truth/{unit}"
         if unit not in ds.imu:
             raise _fail(source, field, f"names unit '{unit}' which has no /imu/{unit} stream")
@@ -177,7 +188,7 @@ def validate_dataset(ds: Dataset, source: str = "<dataset>") -> None:
         _float_field(js.qdd, (N, n), source, "/joints/qdd")
 
     for unit, imu in ds.imu.items():
-        _check_unit_name(unit, source, "/imu")
+        check_unit_name(unit, source, "/imu")
         ti = _time_field(imu.t, source, f"/imu/{unit}/t", min_samples=1)
         M = ti.shape[0]
         _float_field(imu.accel, (M, 3), source, f"/imu/{unit}/accel")
@@ -185,7 +196,7 @@ def validate_dataset(ds: Dataset, source: str = "<dataset>") -> None:
             _float_field(imu.gyro, (M, 3), source, f"/imu/{unit}/gyro")
 
     for unit, tof in ds.tof.items():
-        _check_unit_name(unit, source, "/tof")
+        check_unit_name(unit, source, "/tof")
         if unit not in ds.imu:
             raise _fail(source, f"/tof/{unit}", f"names unit '{unit}' which has no /imu/{unit} stream")
         tt = _time_field(tof.t, source, f"/tof/{unit}/t", min_samples=0)
