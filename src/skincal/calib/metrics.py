@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from skincal.data.dataset import Dataset
-from skincal.data.result import CalibrationResult
+from skincal.data.result import CalibrationResult, check_links
 from skincal.errors import DatasetError
 from skincal.kinematics.transforms import quat_wxyz_from_matrix, quaternion_distance, rotation_angle
 from skincal.skin.pose import SkinUnitPose
@@ -45,6 +45,7 @@ def evaluate(result: CalibrationResult, truth: Dataset) -> dict[str, Any]:
     missing = [u for u in result.units if u not in truth.truth]
     if missing:
         raise DatasetError(f"the truth dataset has no truth for unit(s) {', '.join(missing)}")
+    check_links(result, truth.robot, "result")
     q0 = np.asarray(truth.joints.q[0], dtype=float)
     units: dict[str, Any] = {}
     for name, unit in result.units.items():
