@@ -16,7 +16,6 @@ import threading
 from collections.abc import Iterator
 
 from skincal.cli import avoid as _avoid  # noqa: E402,F401
-from skincal.cli import bench_more as _bench_more  # noqa: E402,F401
 from skincal.cli import bench_robustness as _bench_robustness  # noqa: E402,F401
 from skincal.cli import benchmark as _benchmark  # noqa: E402,F401
 from skincal.cli import calibrate as _calibrate  # noqa: E402,F401
