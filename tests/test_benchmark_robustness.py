@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from skincal.workflows import robustness as rb
-from skincal.workflows.sweep import map_local
 from skincal.cli import app, main
 from skincal.data.result import UnitResult
 from skincal.skin.pose import SkinUnitPose
+from skincal.workflows import robustness as rb
+from skincal.workflows.sweep import map_local
 
 CELL_FIELDS = {
     "robot", "backend", "fault", "seeds", "mean_position_error_mm", "max_position_error_mm",

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from skincal.calib import calibrate, evaluate
-from skincal.workflows.session import simulate_dataset
 from skincal.data.dataset import DYNAMIC, Segments
 from skincal.errors import CalibrationError, ConfigError
+from skincal.workflows.session import simulate_dataset
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from skincal.cli import main
-from skincal.workflows.session import resolve_timing, simulate_dataset
 from skincal.data.dataset import STATIC
 from skincal.data.hdf5 import read_dataset, write_dataset
 from skincal.errors import ConfigError
@@ -27,6 +26,7 @@ from skincal.sim.joint_states import (
 )
 from skincal.skin.imu import get_imu_model
 from skincal.skin.placement import paper_placement
+from skincal.workflows.session import resolve_timing, simulate_dataset
 
 CONFIG = ProtocolConfig(n_poses=3, amplitude=1.5, excite_duration=1.0, rest_duration=0.6, static_duration=0.3)
 CONTROLLER = get_joint_model("controller")

@@ -74,8 +74,8 @@ def robustness(
     per cell: errors, links right, z RMS, warnings and silent errors against targets."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from skincal.workflows.robustness import FAULTS, RobustnessConfig, config_dict, jobs, run, summarise
     from skincal.data.atomic import write_bytes_atomic
+    from skincal.workflows.robustness import FAULTS, RobustnessConfig, config_dict, jobs, run, summarise
 
     if list_faults:
         for f in FAULTS.values():

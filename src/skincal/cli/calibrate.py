@@ -13,14 +13,9 @@ from skincal.errors import ConfigError
 
 def read_links_file(path: Path) -> dict[str, int]:
     """A mapping ``unit -> 1-based link`` from a YAML or JSON file."""
-    import yaml
+    from skincal.data.jsonio import load_yaml
 
-    try:
-        doc = yaml.safe_load(path.read_text())  # JSON is YAML
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read links file ({exc.strerror or exc})") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML/JSON: {str(exc).splitlines()[0]}") from None
+    doc = load_yaml(path, "links file", ConfigError)  # JSON is YAML
     if not isinstance(doc, dict) or not all(isinstance(v, int) and not isinstance(v, bool) for v in doc.values()):
         raise ConfigError(f"{path}: a links file maps unit names to 1-based link numbers, e.g. 'su1: 3'")
     return {str(k): int(v) for k, v in doc.items()}

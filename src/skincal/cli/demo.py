@@ -22,8 +22,8 @@ def demo(
 
     from skincal.calib import calibrate, evaluate
     from skincal.cli.calibrate import std_cell
-    from skincal.workflows.session import simulate_dataset
     from skincal.data.result import failed_units
+    from skincal.workflows.session import simulate_dataset
 
     console.print(
         f"[bold]skincal demo[/]: Panda, the paper's six skin units (Table II), '{noise}' IMUs, "

@@ -86,10 +86,7 @@ def _transform(xyz: object, rpy: object, where: str) -> FloatArray:
 
 def load_link_map(path: str | Path) -> dict[int, LinkFrame]:
     """Read a link map YAML (see the module docstring) into ``{link: LinkFrame}``."""
-    try:
-        doc = yaml.safe_load(Path(path).read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f"{path}: cannot read the link map ({str(exc).splitlines()[0]})") from None
+    doc = load_yaml(path, "link map", ConfigError)
     links = doc.get("links") if isinstance(doc, dict) else None
     if not isinstance(links, dict) or not links:
         raise ConfigError(f"{path}: expected a mapping 'links: {{<link number>: <frame name> or {{frame, xyz, rpy}}}}'")

@@ -53,7 +53,7 @@ def regular_file(path: str | Path, what: str = "file", error: type[SkincalError]
     try:
         st = os.stat(path)
     except FileNotFoundError:
-        raise error(f"{path}: no such file") from None
+        raise error(f"{path}: no such file; cannot read the {what}") from None
     except OSError as exc:
         raise error(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
     if not stat.S_ISREG(st.st_mode):

@@ -90,10 +90,7 @@ def topic_map(imu: list[str] | None = None, joints: str | None = None, range_: l
     (``TOPIC`` or ``TOPIC=UNIT`` strings)."""
     doc: dict[str, Any] = {}
     if path is not None:
-        try:
-            doc = yaml.safe_load(Path(path).read_text()) or {}
-        except (OSError, yaml.YAMLError) as exc:
-            raise ConfigError(f"{path}: cannot read the topic map ({str(exc).splitlines()[0]})") from None
+        doc = load_yaml(path, "topic map", ConfigError) or {}
         if not isinstance(doc, dict) or set(doc) - {"imu", "joints", "range", "joint_names"}:
             raise ConfigError(f"{path}: a topic map has keys imu, joints, range, joint_names; got {doc!r:.80}")
     maps = {}

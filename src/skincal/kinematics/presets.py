@@ -103,20 +103,11 @@ def load_chain(path: str | Path) -> SerialChain:
         velocity_limit: [...]         # optional, rad/s
         T_link_flange: [[...], ...]   # optional 4x4
     """
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read chain file ({exc.strerror or exc})") from None
-    try:
-        if path.suffix.lower() == ".json":
-            spec = json.loads(text)
-        else:
-            import yaml
+    from skincal.data.jsonio import load_json, load_yaml
 
-            spec = yaml.safe_load(text)
-    except Exception as exc:  # noqa: BLE001 - parser errors vary; name the file and move on
-        raise ConfigError(f"{path}: not valid {path.suffix[1:].upper()}: {str(exc).splitlines()[0]}") from None
+    path = Path(path)
+    load = load_json if path.suffix.lower() == ".json" else load_yaml
+    spec = load(path, "chain file", ConfigError)  # regular file, size, depth, duplicate keys
     if not isinstance(spec, dict):
         raise ConfigError(f"{path}: a chain file must be a mapping with at least 'convention' and 'dh'")
     unknown = set(spec) - {"name", "convention", "dh", "joint_lower", "joint_upper", "velocity_limit", "T_link_flange"}

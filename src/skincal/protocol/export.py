@@ -100,12 +100,7 @@ def read_trajectory_json(path: str | Path) -> Trajectory:
     The samples are re-evaluated from the piecewise form at ``config.rate_hz``.
     """
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except OSError as exc:
-        raise DatasetError(f"{path}: cannot read trajectory JSON ({exc.strerror or exc})") from None
-    except json.JSONDecodeError as exc:
-        raise DatasetError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    doc = load_json(path, "trajectory file (.json)", DatasetError)
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise DatasetError(f"{path}: field 'format' must be '{FORMAT}'")
     if doc.get("version") != VERSION:

@@ -8,15 +8,17 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from skincal.kinematics import get_robot
-from skincal.protocol import build_trajectory, get_protocol
-from skincal.sim.analytic import simulate
-from skincal.skin.imu import get_imu_model
-from skincal.skin.placement import random_placement
+from skincal.sim import simulate
+from skincal.workflows.session import make_session
+
+Progress = Callable[[int, int, str], None]
+"""``progress(done, total, what)``: steps finished out of all, and the step now running."""
 
 
 def _best_of(fn: Callable[[], Any], repeat: int) -> float:
@@ -29,13 +31,25 @@ def _best_of(fn: Callable[[], Any], repeat: int) -> float:
 
 
 def run_core_benchmark(
-    robot: str = "panda", units: tuple[int, ...] = (1, 10, 100), protocol: str = "paper-sim", repeat: int = 3
+    robot: str = "panda",
+    units: tuple[int, ...] = (1, 10, 100),
+    protocol: str = "paper-sim",
+    repeat: int = 3,
+    progress: Progress | None = None,
 ) -> dict[str, Any]:
-    """FK samples/s (N = 100k configurations) and simulation IMU samples/s for each unit count."""
+    """FK samples/s (N = 100k configurations) and simulation IMU samples/s for each unit count.
+
+    The sessions come from :func:`skincal.workflows.session.make_session` (``realistic`` IMUs, ideal
+    joint states and clocks): unit count ``k`` places its units with seed ``k``; every count runs the
+    same motion (that of seed 1) and simulates with seed 2.
+    """
+    note = progress or (lambda _done, _total, _what: None)
+    total = 3 + len(units)
     chain = get_robot(robot)
     rng = np.random.default_rng(0)
     N = 100_000
     q = rng.uniform(-1.0, 1.0, size=(N, chain.n_joints))
+    note(0, total, "forward kinematics")
     t_fk = _best_of(lambda: chain.link_frames(q), repeat)
     A = rng.normal(size=(N, 4, 4))
 
@@ -43,22 +57,26 @@ def run_core_benchmark(
         for _ in range(chain.n_joints):
             A @ A
 
+    note(1, total, "batched matmul floor")
     t_matmul = _best_of(floor, repeat)
     qd, qdd = rng.normal(size=q.shape), rng.normal(size=q.shape)
+    note(2, total, "link motion")
     t_motion = _best_of(lambda: chain.link_motion(q, qd, qdd), repeat)
-    traj = build_trajectory(chain, get_protocol(protocol), np.random.default_rng(1))
+    preset = dict(noise="realistic", protocol=protocol, joints="ideal", clock="ideal")
+    traj = make_session(robot, "paper", **preset, seed=1).trajectory  # the paper placement draws nothing
     sims = []
-    for k in units:
-        placements = random_placement(chain, k, np.random.default_rng(k))
-        model = get_imu_model("realistic")
+    for i, k in enumerate(units):
+        note(3 + i, total, f"simulating {k} unit(s)")
+        session = replace(make_session(robot, "random", k, **preset, seed=k), trajectory=traj)
         holder: dict[str, Any] = {}
 
-        def run(placements=placements, model=model, holder=holder) -> None:
-            holder["ds"] = simulate(chain, placements, traj, model, np.random.default_rng(2))
+        def run(session=session, holder=holder) -> None:
+            holder["ds"] = simulate(replace(session, rng=np.random.default_rng(2)))
 
         elapsed = _best_of(run, 1 if k >= 100 else repeat)
         n_samples = sum(len(s.t) for s in holder["ds"].imu.values())
         sims.append({"units": k, "seconds": elapsed, "imu_samples": n_samples, "samples_per_s": n_samples / elapsed})
+    note(total, total, "done")
     return {
         "robot": chain.name,
         "protocol": protocol,

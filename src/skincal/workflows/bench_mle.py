@@ -17,42 +17,28 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from skincal.calib import calibrate, evaluate
-from skincal.kinematics import get_robot
-from skincal.protocol import build_trajectory, get_protocol
-from skincal.sim.analytic import simulate
-from skincal.sim.joint_states import get_joint_model
-from skincal.skin.clock import get_clock_model
-from skincal.skin.imu import get_imu_model
-from skincal.skin.placement import paper_placement, random_placement
-
-
-def protocol_for(chain, name: str):
-    """A protocol preset that respects the robot's velocity limits (the paper's 2 rad/s exceeds
-    the Sawyer's joint 1-2 limits: those amplitudes are capped at 95 % of the limit)."""
-    config = get_protocol(name).for_chain(chain)
-    if chain.velocity_limit is not None:
-        amp = np.minimum(config.amplitude_per_joint(chain.n_joints), 0.95 * chain.velocity_limit)
-        config = replace(config, amplitude=tuple(float(a) for a in amp))
-    return config
+from skincal.sim import simulate
+from skincal.workflows.session import make_session
 
 
 def simulate_session(
-    robot: str, placement: str, n_units: int, noise: str, protocol: str, seed: int,
-    joints: str = "ideal", clock: str = "ideal",
+    robot: str,
+    placement: str,
+    n_units: int,
+    noise: str,
+    protocol: str,
+    seed: int,
+    joints: str = "ideal",
+    clock: str = "ideal",
 ):
     """A simulated session (analytic simulator) with the given IMU, joint-state and clock presets."""
-    chain = get_robot(robot)
-    rng = np.random.default_rng(seed)
-    pl = paper_placement(chain) if placement == "paper" else random_placement(chain, n_units, rng)
-    traj = build_trajectory(chain, protocol_for(chain, protocol), rng)
-    return simulate(chain, pl, traj, get_imu_model(noise), rng, joint_model=get_joint_model(joints),
-                    clock_model=get_clock_model(clock))
+    units = None if placement == "paper" else n_units
+    return simulate(make_session(robot, placement, units, noise, protocol, seed, joints=joints, clock=clock))
 
 
 def _summary(ds, result) -> dict[str, Any]:
@@ -103,8 +89,9 @@ def run_mle_benchmark(
         rows = []
         for seed in range(max(1, runs // 4)):
             note(f"real IMUs, controller joints, wifi-resync clocks, {robot}, placement {seed + 1}/{max(1, runs // 4)}")
-            ds = simulate_session(robot, "random", 6, "real", protocol, seed=400 + seed, joints="controller",
-                                  clock="wifi-resync")
+            ds = simulate_session(
+                robot, "random", 6, "real", protocol, seed=400 + seed, joints="controller", clock="wifi-resync"
+            )
             rows.append(_summary(ds, calibrate(ds, "mle", workers=2)))
         out[f"real_clock_{robot}"] = _aggregate(rows)
     rows = []
@@ -145,8 +132,14 @@ def run_mle_benchmark(
 
 
 def _aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    keys = ("mean_position_error_mm", "max_position_error_mm", "mean_rotation_error_deg", "mean_position_std_mm",
-            "runtime_s", "z_rms")
+    keys = (
+        "mean_position_error_mm",
+        "max_position_error_mm",
+        "mean_rotation_error_deg",
+        "mean_position_std_mm",
+        "runtime_s",
+        "z_rms",
+    )
     agg: dict[str, Any] = {
         k: float(np.mean(vals)) if (vals := [r[k] for r in rows if r[k] is not None]) else None for k in keys
     }

@@ -49,8 +49,11 @@ from skincal.errors import ConfigError
 from skincal.skin.clock import ClockModel, get_clock_model
 
 ROBOTS = ("panda", "sawyer", "ur5e")
-BACKENDS = {"analytic": ("analytic", "kinematic"), "mujoco": ("mujoco", "kinematic"),
-            "mujoco-dynamic": ("mujoco", "dynamic")}
+BACKENDS = {
+    "analytic": ("analytic", "kinematic"),
+    "mujoco": ("mujoco", "kinematic"),
+    "mujoco-dynamic": ("mujoco", "dynamic"),
+}
 """Backend name -> (simulator, MuJoCo mode)."""
 DEFAULT_BACKENDS = ("analytic", "mujoco")
 
@@ -129,28 +132,62 @@ def _faults() -> dict[str, Fault]:
         Fault("qd-3e-3", "controller joints, velocity noise 3e-3 rad/s (the base session)", target_mean_mm=0.3),
         Fault("qd-1e-2", "controller joints, velocity noise 1e-2 rad/s", velocity_noise=1e-2, target_mean_mm=0.3),
         Fault("imu-real", "IMU preset real (measured IMUs)", imu="real", target_mean_mm=1.0),
-        Fault("clock-wifi", "clock wifi: offsets up to 0.5 s, 100 ppm std free-running, 1 ms jitter", clock="wifi",
-              target_mean_mm=1.0),
-        Fault("clock-offset", f"every IMU stamp {CLOCK_OFFSET_S} s late", stamp_offset_s=CLOCK_OFFSET_S,
-              target_mean_mm=1.0),
-        Fault("clock-drift", f"free-running clocks, {CLOCK_DRIFT_PPM:.0f} ppm fast", clock="drift",
-              target_mean_mm=1.0),
-        Fault("clock-driver", "clock driver: 440 ppm slow, re-synced every 2.51 s (stamp steps)", clock="driver",
-              target_mean_mm=1.0),
-        Fault("saturation", "accelerometer +-2 g with brisk motion (frequencies x 1.5)", brisk=True,
-              saturation_mps2=SATURATION_RANGE_MPS2),
-        Fault("stuck-axis", f"one unit's accelerometer axis stuck from {STUCK_AT:.0%} of the session",
-              stuck_axis=True),
-        Fault("bias-drift", f"accelerometer bias drift {BIAS_DRIFT_MPS2} m/s^2 over the session",
-              bias_drift_mps2=BIAS_DRIFT_MPS2),
-        Fault("knock", f"one unit knocked {KNOCK_TRANSLATION_M * 100:.0f} cm / {KNOCK_ROTATION_DEG:.0f} deg at "
-              f"{KNOCK_AT:.0%} of the session", knock=True),
-        Fault("gravity", f"simulated |g| = {GRAVITY_TRUE_MPS2}, dataset says {GRAVITY_DECLARED_MPS2}",
-              gravity_true_mps2=GRAVITY_TRUE_MPS2),
-        Fault("all", "all at once: qd noise 1e-2, real IMUs, wifi-resync clocks, brisk +-2 g, stuck axis, "
-              "bias drift, knock, gravity", imu="real", velocity_noise=1e-2, clock="wifi-resync", brisk=True,
-              saturation_mps2=SATURATION_RANGE_MPS2, stuck_axis=True, bias_drift_mps2=BIAS_DRIFT_MPS2, knock=True,
-              gravity_true_mps2=GRAVITY_TRUE_MPS2),
+        Fault(
+            "clock-wifi",
+            "clock wifi: offsets up to 0.5 s, 100 ppm std free-running, 1 ms jitter",
+            clock="wifi",
+            target_mean_mm=1.0,
+        ),
+        Fault(
+            "clock-offset",
+            f"every IMU stamp {CLOCK_OFFSET_S} s late",
+            stamp_offset_s=CLOCK_OFFSET_S,
+            target_mean_mm=1.0,
+        ),
+        Fault("clock-drift", f"free-running clocks, {CLOCK_DRIFT_PPM:.0f} ppm fast", clock="drift", target_mean_mm=1.0),
+        Fault(
+            "clock-driver",
+            "clock driver: 440 ppm slow, re-synced every 2.51 s (stamp steps)",
+            clock="driver",
+            target_mean_mm=1.0,
+        ),
+        Fault(
+            "saturation",
+            "accelerometer +-2 g with brisk motion (frequencies x 1.5)",
+            brisk=True,
+            saturation_mps2=SATURATION_RANGE_MPS2,
+        ),
+        Fault("stuck-axis", f"one unit's accelerometer axis stuck from {STUCK_AT:.0%} of the session", stuck_axis=True),
+        Fault(
+            "bias-drift",
+            f"accelerometer bias drift {BIAS_DRIFT_MPS2} m/s^2 over the session",
+            bias_drift_mps2=BIAS_DRIFT_MPS2,
+        ),
+        Fault(
+            "knock",
+            f"one unit knocked {KNOCK_TRANSLATION_M * 100:.0f} cm / {KNOCK_ROTATION_DEG:.0f} deg at "
+            f"{KNOCK_AT:.0%} of the session",
+            knock=True,
+        ),
+        Fault(
+            "gravity",
+            f"simulated |g| = {GRAVITY_TRUE_MPS2}, dataset says {GRAVITY_DECLARED_MPS2}",
+            gravity_true_mps2=GRAVITY_TRUE_MPS2,
+        ),
+        Fault(
+            "all",
+            "all at once: qd noise 1e-2, real IMUs, wifi-resync clocks, brisk +-2 g, stuck axis, "
+            "bias drift, knock, gravity",
+            imu="real",
+            velocity_noise=1e-2,
+            clock="wifi-resync",
+            brisk=True,
+            saturation_mps2=SATURATION_RANGE_MPS2,
+            stuck_axis=True,
+            bias_drift_mps2=BIAS_DRIFT_MPS2,
+            knock=True,
+            gravity_true_mps2=GRAVITY_TRUE_MPS2,
+        ),
     ]
     return {x.name: x for x in f}
 
@@ -178,8 +215,11 @@ class RobustnessConfig:
         from skincal.kinematics.presets import PRESETS as ROBOT_PRESETS
         from skincal.protocol import PROTOCOLS
 
-        for what, given, known in (("robot", self.robots, ROBOT_PRESETS), ("backend", self.backends, BACKENDS),
-                                   ("fault", self.faults, FAULTS)):
+        for what, given, known in (
+            ("robot", self.robots, ROBOT_PRESETS),
+            ("backend", self.backends, BACKENDS),
+            ("fault", self.faults, FAULTS),
+        ):
             if not given:
                 raise ConfigError(f"robustness: no {what} given")
             unknown = [x for x in given if x not in known]
@@ -210,8 +250,13 @@ class Job:
 
 def jobs(config: RobustnessConfig) -> list[Job]:
     """Every job, the slow ones (MuJoCo, two simulations) first so that the last ones finish together."""
-    todo = [Job(r, b, f, config.seed + s, config.protocol, config.n_units)
-            for r in config.robots for b in config.backends for f in config.faults for s in range(config.seeds)]
+    todo = [
+        Job(r, b, f, config.seed + s, config.protocol, config.n_units)
+        for r in config.robots
+        for b in config.backends
+        for f in config.faults
+        for s in range(config.seeds)
+    ]
     cost = {"analytic": 1.0, "mujoco": 2.0, "mujoco-dynamic": 6.0}
     return sorted(todo, key=lambda j: -cost[j.backend] * (2.0 if FAULTS[j.fault].knock else 1.0))
 
@@ -220,9 +265,9 @@ def jobs(config: RobustnessConfig) -> list[Job]:
 def session_protocol(chain, name: str, brisk: bool = False):
     """The protocol preset for ``chain`` with amplitudes capped at 95 % of the velocity limits;
     ``brisk``: every frequency x :data:`BRISK_FREQUENCY_FACTOR`."""
-    from skincal.calib.bench_mle import protocol_for
+    from skincal.workflows.session import fit_protocol
 
-    config = protocol_for(chain, name)
+    config = fit_protocol(chain, name)
     if brisk:
         f = config.frequency_per_joint(chain.n_joints) * BRISK_FREQUENCY_FACTOR
         config = replace(config, frequency=tuple(float(x) for x in f))
@@ -276,15 +321,11 @@ def build_dataset(job: Job):
     text = f"robustness: robot={job.robot} backend={job.backend} fault={job.fault} seed={job.seed}"
 
     def simulate(pl: Mapping[str, Any]):
+        from skincal.sim import Session, simulate
+
         rng = np.random.default_rng([job.seed, 1])
-        if simulator == "mujoco":
-            from skincal.sim.mujoco_backend import simulate_mujoco
-
-            return simulate_mujoco(chain, pl, trajectory, imu_model, rng, mode=mode, gravity=gravity,
-                                   description=text, **timing)
-        from skincal.sim.analytic import simulate as simulate_analytic
-
-        return simulate_analytic(chain, pl, trajectory, imu_model, rng, gravity=gravity, description=text, **timing)
+        session = Session(chain, pl, trajectory, imu_model, rng, gravity=gravity, description=text, **timing)
+        return simulate(session, simulator, **({"mode": mode} if simulator == "mujoco" else {}))
 
     t0, t1 = float(trajectory.t[0]), float(trajectory.t[-1])
     if fault.knock:
@@ -363,8 +404,13 @@ def run_job(job: Job) -> dict[str, Any]:
 
     from skincal.calib import calibrate, evaluate
 
-    record: dict[str, Any] = {"robot": job.robot, "backend": job.backend, "fault": job.fault, "seed": job.seed,
-                              "error": None}
+    record: dict[str, Any] = {
+        "robot": job.robot,
+        "backend": job.backend,
+        "fault": job.fault,
+        "seed": job.seed,
+        "error": None,
+    }
     with threadpool_limits(1):
         start = time.perf_counter()
         ds, affected = build_dataset(job)
@@ -416,7 +462,9 @@ def summarise_cell(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     silent = [f"seed {r['seed']} {n}" for r in records for n, u in r["units"].items() if u.get("silent")]
     beyond = int(sum(bool(u.get("beyond_3sigma")) for u in done))
     cell: dict[str, Any] = {
-        "robot": first["robot"], "backend": first["backend"], "fault": first["fault"],
+        "robot": first["robot"],
+        "backend": first["backend"],
+        "fault": first["fault"],
         "seeds": sorted(r["seed"] for r in records),
         "mean_position_error_mm": float(np.mean(pos)) if pos else None,
         "max_position_error_mm": float(np.max(pos)) if pos else None,
@@ -461,8 +509,13 @@ def summarise(config: RobustnessConfig, records: Sequence[Mapping[str, Any]]) ->
     by_cell: dict[tuple[str, str, str], list[Mapping[str, Any]]] = {}
     for r in records:
         by_cell.setdefault((r["robot"], r["backend"], r["fault"]), []).append(r)
-    return [summarise_cell(by_cell[(r, b, f)])
-            for r in config.robots for b in config.backends for f in config.faults if (r, b, f) in by_cell]
+    return [
+        summarise_cell(by_cell[(r, b, f)])
+        for r in config.robots
+        for b in config.backends
+        for f in config.faults
+        if (r, b, f) in by_cell
+    ]
 
 
 def run(
@@ -483,9 +536,9 @@ def config_dict(config: RobustnessConfig) -> dict[str, Any]:
         **asdict(config),
         "faults_run": {name: asdict(FAULTS[name]) for name in config.faults},
         "base_session": "realistic IMUs, controller joint states (500 Hz, encoder steps, no qdd) with "
-                        f"{BASE_VELOCITY_NOISE} rad/s velocity noise, ideal unit clocks, |g| = 9.81",
+        f"{BASE_VELOCITY_NOISE} rad/s velocity noise, ideal unit clocks, |g| = 9.81",
         "truth": "each unit's simulated pose; for the knocked unit the pose before the knock "
-                 f"(held for {KNOCK_AT:.0%} of the session)",
+        f"(held for {KNOCK_AT:.0%} of the session)",
         "silent_error": SILENT_RULE,
         "z": "e_i / sigma_i: position error on link axis i over the reported std (link right, finite std)",
         "warned": "calibrated units with at least one warning",

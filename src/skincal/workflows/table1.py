@@ -30,17 +30,33 @@ from skincal.protocol import ProtocolConfig, get_protocol
 PAPER_TABLE_I: dict[str, dict[str, list[tuple[float, float]]]] = {
     "om": {
         "position_cm": [
-            (0.28, 0.15), (0.39, 0.15), (0.78, 0.39), (1.15, 0.88), (0.80, 0.36), (0.25, 0.095), (0.66, 0.60),
+            (0.28, 0.15),
+            (0.39, 0.15),
+            (0.78, 0.39),
+            (1.15, 0.88),
+            (0.80, 0.36),
+            (0.25, 0.095),
+            (0.66, 0.60),
         ],
         "quaternion_distance": [
-            (0.010, 0.0058), (0.0054, 0.0041), (0.0023, 0.0012), (0.0019, 0.0013), (0.0021, 0.0023),
-            (0.0045, 0.0053), (0.0044, 0.0059),
+            (0.010, 0.0058),
+            (0.0054, 0.0041),
+            (0.0023, 0.0012),
+            (0.0019, 0.0013),
+            (0.0021, 0.0023),
+            (0.0045, 0.0053),
+            (0.0044, 0.0059),
         ],
     },
     "mmm": {
         "position_cm": [(5.3, 7.1), (2.6, 0.23), (5.4, 4.9), (9.5, 9.0), (1.4, 0.91), (2.3, 2.4), (4.4, 5.9)],
         "quaternion_distance": [
-            (0.55, 0.59), (0.016, 0.011), (0.36, 0.61), (0.0057, 0.0022), (0.0044, 0.0015), (0.25, 0.43),
+            (0.55, 0.59),
+            (0.016, 0.011),
+            (0.36, 0.61),
+            (0.0057, 0.0022),
+            (0.0044, 0.0015),
+            (0.25, 0.43),
             (0.20, 0.44),
         ],
     },
@@ -100,8 +116,12 @@ class Table1Config:
     def quick(cls, methods: tuple[str, ...] = ("om", "mmm", "mm"), **kw: Any) -> Table1Config:
         """The reduced benchmark of ``--quick``: 1 set x 1 run, 2 units, short protocol, small budgets."""
         base = dict(
-            sets=1, runs=1, methods=methods, links=(4, 7),
-            protocol=replace(get_protocol("paper-sim"), **QUICK_PROTOCOL), options=dict(QUICK_OPTIONS),
+            sets=1,
+            runs=1,
+            methods=methods,
+            links=(4, 7),
+            protocol=replace(get_protocol("paper-sim"), **QUICK_PROTOCOL),
+            options=dict(QUICK_OPTIONS),
         )
         return cls(**{**base, **kw})
 
@@ -124,17 +144,11 @@ def jobs(config: Table1Config) -> list[Job]:
 def _dataset(robot: str, protocol_key: str, links: tuple[int, ...], seed: int, set_index: int):
     import json
 
-    from skincal.kinematics import get_robot
-    from skincal.protocol import build_trajectory
-    from skincal.sim.analytic import simulate
-    from skincal.skin.imu import get_imu_model
-    from skincal.skin.placement import random_placement
+    from skincal.sim import simulate
+    from skincal.workflows.session import make_session
 
-    chain = get_robot(robot)
     protocol = ProtocolConfig.from_dict(json.loads(protocol_key))
-    rng = np.random.default_rng([seed, set_index])
-    placements = random_placement(chain, len(links), rng, links=list(links))
-    return simulate(chain, placements, build_trajectory(chain, protocol, rng), get_imu_model("none"), rng)
+    return simulate(make_session(robot, "random", None, "none", protocol, [seed, set_index], links=links))
 
 
 def set_dataset(config: Table1Config, set_index: int):
@@ -231,7 +245,12 @@ def summarise(config: Table1Config, records: list[dict[str, Any]]) -> dict[str, 
 def config_dict(config: Table1Config) -> dict[str, Any]:
     """JSON-ready description of the configuration."""
     return {
-        "sets": config.sets, "runs": config.runs, "methods": list(config.methods), "links": list(config.links),
-        "robot": config.robot, "protocol": config.protocol.to_dict(), "seed": config.seed,
+        "sets": config.sets,
+        "runs": config.runs,
+        "methods": list(config.methods),
+        "links": list(config.links),
+        "robot": config.robot,
+        "protocol": config.protocol.to_dict(),
+        "seed": config.seed,
         "options": dict(config.options),
     }
