@@ -117,7 +117,7 @@ def test_round_trip_all_fields(good_file: Path) -> None:
 
 
 def test_round_trip_minimal_standard_chain(tmp_path: Path) -> None:
-    chain = SerialChain(name="two-link", convention="standard", dh=np.array([[0, 0.2, 0.3, 0.0], [0.1, 0, 0.25, 0]]))
+    chain = SerialChain.from_dh("two-link", "standard", np.array([[0, 0.2, 0.3, 0.0], [0.1, 0, 0.25, 0]]))
     t = np.linspace(0, 1, 11)
     ds = Dataset(
         robot=chain,

@@ -118,7 +118,7 @@ def test_batched_equals_single_sample(rng):
 def test_bad_chains_are_rejected(kwargs, message):
     kwargs = {"name": "bad", "convention": "modified", **kwargs}
     with pytest.raises(ConfigError, match=message):
-        SerialChain(**kwargs)
+        SerialChain.from_dh(**kwargs)
 
 
 def test_bad_joint_arrays_are_rejected():

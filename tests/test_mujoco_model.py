@@ -44,7 +44,7 @@ def random_chain(n: int, convention: str, rng: np.random.Generator) -> SerialCha
             rng.choice([-np.pi / 2, 0.0, np.pi / 2, 0.3], n),
         ]
     )
-    return SerialChain(f"random{n}{convention[0]}", convention, dh, -np.full(n, 3.0), np.full(n, 3.0))
+    return SerialChain.from_dh(f"random{n}{convention[0]}", convention, dh, joint_lower=-np.full(n, 3.0), joint_upper=np.full(n, 3.0))
 
 
 def random_state(chain: SerialChain, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -148,9 +148,9 @@ def test_other_chains_get_capsule_masses_and_boards_do_not_change_dynamics() -> 
 
 def test_malformed_input_gives_config_error() -> None:
     with pytest.raises(ConfigError, match="NaN"):
-        SerialChain("bad", "modified", [[0.0, np.nan, 0.0, 0.0]])
+        SerialChain.from_dh("bad", "modified", [[0.0, np.nan, 0.0, 0.0]])
     with pytest.raises(ConfigError, match="empty"):
-        SerialChain("bad", "standard", np.zeros((0, 4)))
+        SerialChain.from_dh("bad", "standard", np.zeros((0, 4)))
     chain = get_robot("ur5e")
     with pytest.raises(ConfigError, match="link 7"):
         build_mjcf(chain, {"x": SkinUnitPose(7, np.eye(3), np.zeros(3))})

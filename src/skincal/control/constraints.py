@@ -54,8 +54,8 @@ def approach_speed_bound(distance: ArrayLike, critical: float, notice: float, v_
 
 
 class FrameCache:
-    """Link frames of one configuration, fast: ``T_{i-1,i}(q) = A_i Rz(q_i)`` (modified DH) or
-    ``Rz(q_i) A_i`` (standard DH) with the constant ``A_i = T_{i-1,i}(0)`` computed once.
+    """Link frames of one configuration, fast: all joint transforms at once
+    (:meth:`SerialChain.joint_transforms`), then their running product.
 
     Same result as :meth:`SerialChain.link_frames` for one sample, without its batching overhead
     (the control loop evaluates one configuration per millisecond).
@@ -63,18 +63,11 @@ class FrameCache:
 
     def __init__(self, chain: SerialChain) -> None:
         self.chain = chain
-        self._A = chain.dh_transforms(np.zeros(chain.n_joints))[0]
-        self._modified = chain.convention == "modified"
 
     def frames(self, q: ArrayLike) -> FloatArray:
-        """``T_base_link`` ``(n + 1, 4, 4)`` at joint angles ``q`` ``(n,)`` rad."""
-        q = np.asarray(q, dtype=float).reshape(-1)
-        n = q.size
-        cq, sq = np.cos(q), np.sin(q)
-        Rz = np.zeros((n, 4, 4))
-        Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1] = cq, -sq, sq, cq
-        Rz[:, 2, 2] = Rz[:, 3, 3] = 1.0
-        steps = self._A @ Rz if self._modified else Rz @ self._A
+        """``T_base_link`` ``(n + 1, 4, 4)`` at joint positions ``q`` ``(n,)`` (rad or m)."""
+        steps = self.chain.joint_transforms(np.asarray(q, dtype=float).reshape(1, -1))[0]
+        n = steps.shape[0]
         T = np.empty((n + 1, 4, 4))
         T[0] = np.eye(4)
         for i in range(n):

@@ -28,6 +28,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from skincal.data.atomic import write_bytes_atomic
+from skincal.data.jsonio import load_yaml
 from skincal.data.result import CalibrationResult
 from skincal.errors import ConfigError
 from skincal.kinematics.transforms import FloatArray

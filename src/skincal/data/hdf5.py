@@ -282,7 +282,7 @@ class _Reader:
                     raise self.fail(f"/robot/{key}", f"has shape {value.shape}, expected {shape}")
                 optional[key] = value
         try:
-            chain = SerialChain(name=name, convention=convention, dh=dh, **optional)
+            chain = SerialChain.from_dh(name, convention, dh, **optional)
         except ConfigError as exc:
             raise self.fail("/robot", f"is not a valid chain: {exc}") from None
         return chain, gravity

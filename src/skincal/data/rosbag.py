@@ -29,9 +29,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from skincal.data.dataset import Dataset, ImuStream, JointStates, TofStream
+from skincal.data.jsonio import load_yaml
 from skincal.data.validate import validate_dataset
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.chain import SerialChain

@@ -9,7 +9,6 @@ Presets:
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -33,10 +32,10 @@ def panda() -> SerialChain:
     ]
     flange = np.eye(4)
     flange[2, 3] = 0.107
-    return SerialChain(
-        name="panda",
-        convention="modified",
-        dh=np.array(dh),
+    return SerialChain.from_dh(
+        "panda",
+        "modified",
+        np.array(dh),
         joint_lower=np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973]),
         joint_upper=np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973]),
         velocity_limit=np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61]),
@@ -50,10 +49,10 @@ def sawyer() -> SerialChain:
     a = [0.081, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
     alpha = [-_PI / 2] * 6 + [0.0]
     dh = np.column_stack([np.zeros(7), d, a, alpha])
-    return SerialChain(
-        name="sawyer",
-        convention="standard",
-        dh=dh,
+    return SerialChain.from_dh(
+        "sawyer",
+        "standard",
+        dh,
         joint_lower=np.array([-3.0503, -3.8095, -3.0426, -3.0439, -2.9761, -2.9761, -4.7124]),
         joint_upper=np.array([3.0503, 2.2736, 3.0426, 3.0439, 2.9761, 2.9761, 4.7124]),
         velocity_limit=np.array([1.74, 1.328, 1.957, 1.957, 3.485, 3.485, 4.545]),
@@ -67,10 +66,10 @@ def ur5e() -> SerialChain:
     alpha = [_PI / 2, 0.0, 0.0, _PI / 2, -_PI / 2, 0.0]
     dh = np.column_stack([np.zeros(6), d, a, alpha])
     lim = np.array([2 * _PI, 2 * _PI, _PI, 2 * _PI, 2 * _PI, 2 * _PI])
-    return SerialChain(
-        name="ur5e",
-        convention="standard",
-        dh=dh,
+    return SerialChain.from_dh(
+        "ur5e",
+        "standard",
+        dh,
         joint_lower=-lim,
         joint_upper=lim,
         velocity_limit=np.full(6, _PI),
@@ -121,6 +120,6 @@ def load_chain(path: str | Path) -> SerialChain:
     except (TypeError, ValueError):
         raise ConfigError(f"{path}: numeric fields must hold numbers only") from None
     try:
-        return SerialChain(name=str(spec.get("name", path.stem)), convention=str(spec["convention"]), **kwargs)
+        return SerialChain.from_dh(str(spec.get("name", path.stem)), str(spec["convention"]), **kwargs)
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None

@@ -21,6 +21,7 @@ import numpy as np
 
 from skincal.data.atomic import atomic_path
 from skincal.data.dataset import Segments
+from skincal.data.jsonio import load_json
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.transforms import FloatArray
 from skincal.protocol.config import ProtocolConfig

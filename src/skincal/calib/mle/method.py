@@ -426,10 +426,9 @@ def _describe_null(basis: FloatArray, R: FloatArray, axis_link: FloatArray, join
 
 
 def _joint_axis_in_link(chain: SerialChain, link: int) -> FloatArray:
-    """Unit direction of joint ``link``'s axis in link frame ``link`` (constant)."""
-    T = chain.link_frames(np.zeros(chain.n_joints), upto=link)[0]
-    z = T[link - 1, :3, 2] if chain.convention == "standard" else T[link, :3, 2]
-    return T[link, :3, :3].T @ z
+    """Unit direction of joint ``link``'s axis in link frame ``link`` (constant): the joint axis
+    ``T_joint_link^-1`` maps into the link frame (it is fixed on both sides of the joint)."""
+    return chain.T_joint_link[link - 1, :3, :3].T @ chain.axis[link - 1]
 
 
 def _distinct_orientations(u_link: FloatArray, min_angle_deg: float = 5.0) -> int:

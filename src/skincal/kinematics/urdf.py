@@ -1,0 +1,181 @@
+"""A :class:`~skincal.kinematics.chain.SerialChain` from a URDF (parsed by ``yourdfpy``).
+
+The serial chain runs from ``base_link`` (default: the tree's root) to ``tip_link`` (default: the
+last link before the tree branches into several moving sub-chains, e.g. a gripper's fingers, or the
+single leaf of a serial arm). Along it:
+
+* every ``revolute``, ``continuous`` (revolute without position limits) and ``prismatic`` joint is
+  a joint of the chain; link frame ``i`` is the URDF frame of the child link of the ``i``-th of
+  them, and the base frame {0} is ``base_link``'s frame;
+* ``fixed`` joints are folded into the next joint's origin (``T_parent_joint``), or, after the last
+  moving joint, into ``T_link_flange`` (the flange is then ``tip_link``'s frame);
+* URDF joint ``origin`` (xyz, rpy: fixed-axis roll-pitch-yaw, ``R = Rz(yaw) Ry(pitch) Rx(roll)``) is
+  ``T_parent_joint``; ``T_joint_link`` is the identity; ``axis`` is the joint's ``<axis>`` (default
+  ``1 0 0``) in the joint frame;
+* ``<limit>`` gives position (rad or m), velocity and effort limits; a chain whose joints do not all
+  state a velocity (or effort) has none of that kind. ``mimic``, ``floating`` and ``planar`` joints
+  in the chain are refused: they are not independent serial joints.
+
+Every failure is one :class:`~skincal.errors.ConfigError` line naming the file.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+
+from skincal.errors import ConfigError
+from skincal.kinematics.chain import PRISMATIC, REVOLUTE, SerialChain
+
+_MOVING = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
+MAX_URDF_BYTES = 32 * 1024 * 1024
+"""Largest URDF text read, bytes (robot descriptions are kilobytes; meshes live in other files)."""
+
+
+def _parse(text: str, source: str):  # -> yourdfpy.URDF
+    try:
+        import yourdfpy
+    except ImportError:  # pragma: no cover - a core dependency
+        raise ConfigError("reading a URDF needs yourdfpy (pip install yourdfpy)") from None
+    from lxml import etree  # yourdfpy's own XML library
+
+    data = text.encode("utf-8")
+    try:  # strictly well-formed, no entities, no network (yourdfpy alone would "recover" broken XML)
+        etree.fromstring(data, parser=etree.XMLParser(resolve_entities=False, no_network=True, recover=False))
+    except etree.XMLSyntaxError as exc:
+        raise ConfigError(f"{source}: not a valid URDF (XML: {exc})") from None
+    try:
+        return yourdfpy.URDF.load(
+            io.BytesIO(data), build_scene_graph=False, load_meshes=False, load_collision_meshes=False
+        )
+    except Exception as exc:  # noqa: BLE001 - XML, attribute and reference errors of the parser alike
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise ConfigError(f"{source}: not a valid URDF ({first})") from None
+
+
+def read_urdf_text(path: str | Path) -> str:
+    """The text of a URDF file, with the file named in any error."""
+    path = Path(path)
+    try:
+        if not path.is_file():
+            raise ConfigError(f"{path}: no such URDF file" if not path.exists() else f"{path}: not a regular file")
+        if path.stat().st_size > MAX_URDF_BYTES:
+            raise ConfigError(f"{path}: {path.stat().st_size} bytes is too large for a URDF")
+        return path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the URDF ({exc.strerror or exc})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not UTF-8 text") from None
+
+
+def chain_from_urdf(
+    path: str | Path | None = None,
+    *,
+    text: str | None = None,
+    base_link: str | None = None,
+    tip_link: str | None = None,
+    name: str | None = None,
+) -> SerialChain:
+    """The serial chain of a URDF file (``path``) or text (``text``) from ``base_link`` to
+    ``tip_link`` (see the module docstring for the defaults and the frames)."""
+    if (path is None) == (text is None):
+        raise ConfigError("give a URDF file or its text, not both")
+    source = str(path) if path is not None else "URDF"
+    if text is None:
+        text = read_urdf_text(path)  # type: ignore[arg-type]
+    urdf = _parse(text, source)
+    robot = urdf.robot
+    joints = {j.child: j for j in robot.joints}
+    links = [link.name for link in robot.links]
+    known = set(links)
+    children: dict[str, list[str]] = {link: [] for link in links}
+    for j in robot.joints:
+        if j.parent not in known or j.child not in known:
+            raise ConfigError(f"{source}: joint '{j.name}' connects unknown link(s) '{j.parent}' -> '{j.child}'")
+        children[j.parent].append(j.child)
+    roots = [link for link in links if link not in joints]
+    for link, what in ((base_link, "--base-link"), (tip_link, "--tip-link")):
+        if link is not None and link not in known:
+            raise ConfigError(f"{source}: {what} '{link}' is not a link of the URDF (links: {', '.join(links)})")
+    if base_link is None:
+        if len(roots) != 1:
+            raise ConfigError(f"{source}: the URDF has {len(roots)} root links ({', '.join(roots)}); give --base-link")
+        base_link = roots[0]
+
+    def moving_below(link: str) -> bool:
+        return any(joints[c].type != "fixed" or moving_below(c) for c in children[link])
+
+    branches: list[str] = []
+    if tip_link is None:
+        tip_link = base_link
+        while True:
+            branches = [c for c in children[tip_link] if joints[c].type != "fixed" or moving_below(c)]
+            if len(branches) != 1:
+                break
+            tip_link = branches[0]
+    path_joints = []
+    link = tip_link
+    while link != base_link:
+        if link not in joints:
+            raise ConfigError(f"{source}: '{tip_link}' is not below '{base_link}' in the URDF tree")
+        path_joints.append(joints[link])
+        link = joints[link].parent
+    path_joints.reverse()
+    origins, axes, types, lower, upper, velocity, effort, joint_names, link_names = [], [], [], [], [], [], [], [], []
+    pending = np.eye(4)
+    for j in path_joints:
+        origin = np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float)
+        if j.type == "fixed":
+            pending = pending @ origin
+            continue
+        if j.type not in _MOVING:
+            raise ConfigError(f"{source}: joint '{j.name}' is {j.type}; a serial chain takes revolute, continuous, "
+                              "prismatic and fixed joints")
+        if j.mimic is not None:
+            raise ConfigError(f"{source}: joint '{j.name}' mimics '{j.mimic.joint}'; mimic joints are not independent "
+                              "serial joints (end the chain before it with --tip-link)")
+        origins.append(pending @ origin)
+        pending = np.eye(4)
+        axes.append(np.array([1.0, 0.0, 0.0]) if j.axis is None else np.asarray(j.axis, dtype=float))
+        types.append(_MOVING[j.type])
+        limit = j.limit
+        if j.type == "continuous" or limit is None or limit.lower is None or limit.upper is None:
+            if j.type != "continuous" and (limit is None or limit.lower is None or limit.upper is None):
+                raise ConfigError(f"{source}: {j.type} joint '{j.name}' has no position limits (<limit lower upper>)")
+            lower.append(-np.inf)
+            upper.append(np.inf)
+        else:
+            lower.append(float(limit.lower))
+            upper.append(float(limit.upper))
+        velocity.append(None if limit is None or not limit.velocity else float(limit.velocity))
+        effort.append(None if limit is None or not limit.effort else float(limit.effort))
+        joint_names.append(j.name)
+        link_names.append(j.child)
+    if not origins and len(branches) > 1:
+        raise ConfigError(
+            f"{source}: not a serial chain: it branches at '{tip_link}' into "
+            f"{', '.join(repr(b) for b in branches)}; give --tip-link (and --base-link)"
+        )
+    if not origins:
+        raise ConfigError(f"{source}: no moving joint between '{base_link}' and '{tip_link}'")
+    try:
+        return SerialChain(
+            name=name or robot.name or Path(source).stem,
+            T_parent_joint=np.array(origins),
+            axis=np.array(axes),
+            T_joint_link=np.tile(np.eye(4), (len(origins), 1, 1)),
+            joint_type=tuple(types),
+            joint_lower=np.array(lower),
+            joint_upper=np.array(upper),
+            velocity_limit=None if None in velocity else np.array(velocity),
+            effort_limit=None if None in effort else np.array(effort),
+            T_link_flange=pending,
+            joint_names=tuple(joint_names),
+            link_names=(base_link, *link_names),
+            convention="urdf",
+            source=text,
+        )
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None

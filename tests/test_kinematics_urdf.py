@@ -1,0 +1,172 @@
+"""The general chain and its URDF constructor, checked against independent computations: the DH
+presets, Pinocchio (its own URDF parser and kinematics), and finite differences of the frames."""
+
+from __future__ import annotations
+
+import importlib.metadata
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from skincal.errors import ConfigError
+from skincal.kinematics import panda
+from skincal.kinematics.chain import SerialChain
+from skincal.kinematics.transforms import homogeneous, matrix_from_quat_wxyz
+from skincal.kinematics.urdf import chain_from_urdf
+
+
+def robots_dir() -> Path:
+    """The URDFs shipped by the ``example-robot-data`` package (a test dependency)."""
+    dist = importlib.metadata.distribution("example-robot-data")
+    return Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")))
+
+
+REGISTRY_URDFS = {
+    "panda": "panda_description/urdf/panda.urdf",
+    "ur5": "ur_description/urdf/ur5_robot.urdf",
+    "ur10": "ur_description/urdf/ur10_robot.urdf",
+    "xarm7": "xarm_description/urdf/xarm7.urdf",
+    "kinova": "kinova_description/robots/kinova.urdf",
+}
+
+
+def random_chain(rng: np.random.Generator, n: int) -> SerialChain:
+    """A chain with random joint origins, random axes, and prismatic joints among revolute ones."""
+    T = []
+    for _ in range(n):
+        q = rng.normal(size=4)
+        T.append(homogeneous(matrix_from_quat_wxyz(q / np.linalg.norm(q)), rng.uniform(-0.3, 0.3, 3)))
+    after = [homogeneous(np.eye(3), rng.uniform(-0.1, 0.1, 3)) for _ in range(n)]
+    types = tuple("prismatic" if k % 3 == 1 else "revolute" for k in range(n))
+    return SerialChain(
+        name="random", T_parent_joint=np.array(T), axis=rng.normal(size=(n, 3)), T_joint_link=np.array(after),
+        joint_type=types,
+    )
+
+
+def test_panda_urdf_frames_are_the_dh_presets_frames():
+    """Franka's URDF link frames are the modified-DH frames of the preset: FK agrees to 1e-9 m."""
+    chain = chain_from_urdf(robots_dir() / REGISTRY_URDFS["panda"])
+    q = np.random.default_rng(0).uniform(chain.joint_lower, chain.joint_upper, (20, 7))
+    np.testing.assert_allclose(chain.link_frames(q), panda().link_frames(q), atol=1e-9)
+    np.testing.assert_allclose(chain.joint_lower, panda().joint_lower)
+    np.testing.assert_allclose(chain.velocity_limit, panda().velocity_limit)
+    assert chain.link_names == tuple(f"panda_link{i}" for i in range(8))
+    assert chain.joint_names == tuple(f"panda_joint{i}" for i in range(1, 8))
+    # the tree branches into the two fingers at panda_hand: the chain ends there
+    np.testing.assert_allclose(chain.T_link_flange[:3, 3], [0.0, 0.0, 0.107], atol=1e-12)
+
+
+@pytest.mark.parametrize("robot", sorted(REGISTRY_URDFS))
+def test_urdf_kinematics_match_pinocchio(robot):
+    """Frames, link velocities and accelerations of every link against Pinocchio's own parser and
+    algorithms (classical acceleration of the frame origins, world-aligned), 20 random states."""
+    pin = pytest.importorskip("pinocchio")
+    path = robots_dir() / REGISTRY_URDFS[robot]
+    chain = chain_from_urdf(path)
+    model = pin.buildModelFromUrdf(str(path))
+    data = model.createData()
+    rng = np.random.default_rng(1)
+    lo = np.where(np.isfinite(chain.joint_lower), chain.joint_lower, -np.pi)
+    hi = np.where(np.isfinite(chain.joint_upper), chain.joint_upper, np.pi)
+    idx = [model.getJointId(name) for name in chain.joint_names]
+    for _ in range(20):
+        q, qd, qdd = rng.uniform(lo, hi), rng.normal(size=chain.n_joints), rng.normal(size=chain.n_joints)
+        Q, V, A = (pin.neutral(model), np.zeros(model.nv), np.zeros(model.nv))
+        for k, j in enumerate(idx):
+            joint = model.joints[j]
+            if joint.nq == 2:  # continuous joint: Pinocchio stores (cos q, sin q)
+                Q[joint.idx_q : joint.idx_q + 2] = np.cos(q[k]), np.sin(q[k])
+            else:
+                Q[joint.idx_q] = q[k]
+            V[joint.idx_v], A[joint.idx_v] = qd[k], qdd[k]
+        pin.forwardKinematics(model, data, Q, V, A)
+        pin.updateFramePlacements(model, data)
+        motion = chain.link_motion(q, qd, qdd)
+        for k, link in enumerate(chain.link_names):
+            fid = model.getFrameId(link)
+            M = data.oMf[fid]
+            np.testing.assert_allclose(motion.T_base_link[0, k, :3, :3], M.rotation, atol=1e-9)
+            np.testing.assert_allclose(motion.T_base_link[0, k, :3, 3], M.translation, atol=1e-9)
+            v = pin.getFrameVelocity(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+            a = pin.getFrameClassicalAcceleration(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+            np.testing.assert_allclose(motion.omega[0, k], v.angular, atol=1e-9)
+            np.testing.assert_allclose(motion.v_origin[0, k], v.linear, atol=1e-9)
+            np.testing.assert_allclose(motion.omega_dot[0, k], a.angular, atol=1e-9)
+            np.testing.assert_allclose(motion.a_origin[0, k], a.linear, atol=1e-9)
+
+
+def test_general_chain_motion_matches_finite_differences():
+    """Random origins, axes and prismatic joints: velocities and accelerations of every link frame
+    are the time derivatives of its pose along a smooth joint trajectory (central differences)."""
+    rng = np.random.default_rng(2)
+    chain = random_chain(rng, 6)
+    w = rng.uniform(0.5, 2.0, 6)
+    ph = rng.uniform(0, 2 * np.pi, 6)
+    q = lambda t: np.sin(w * t + ph)  # noqa: E731
+    qd = lambda t: w * np.cos(w * t + ph)  # noqa: E731
+    qdd = lambda t: -w * w * np.sin(w * t + ph)  # noqa: E731
+    t, h = 0.37, 1e-5
+    m = chain.link_motion(q(t), qd(t), qdd(t))
+    T = [chain.link_frames(q(t + k * h))[0] for k in (-1, 0, 1)]
+    p = [x[:, :3, 3] for x in T]
+    np.testing.assert_allclose(m.v_origin[0], (p[2] - p[0]) / (2 * h), atol=1e-7)
+    np.testing.assert_allclose(m.a_origin[0], (p[2] - 2 * p[1] + p[0]) / h**2, atol=2e-4)
+    dR = (T[2][:, :3, :3] - T[0][:, :3, :3]) / (2 * h)
+    W = dR @ np.swapaxes(T[1][:, :3, :3], 1, 2)  # skew(omega)
+    np.testing.assert_allclose(m.omega[0], np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], 1), atol=1e-7)
+    # the point Jacobian maps qd to the point's velocity
+    p_link = np.array([0.05, -0.02, 0.1])
+    J = chain.point_jacobian(q(t), 6, p_link)[0]
+    x = lambda s: chain.link_frames(q(s))[0, 6] @ np.append(p_link, 1.0)  # noqa: E731
+    np.testing.assert_allclose(J[:3] @ qd(t), (x(t + h) - x(t - h))[:3] / (2 * h), atol=1e-7)
+    np.testing.assert_allclose(J[3:] @ qd(t), m.omega[0, 6], atol=1e-12)
+
+
+URDF_HEAD = '<?xml version="1.0"?>\n<robot name="r">'
+
+
+def _link(name: str) -> str:
+    return f'<link name="{name}"/>'
+
+
+def _joint(name: str, parent: str, child: str, kind: str = "revolute", extra: str = "") -> str:
+    limit = '<limit lower="-1" upper="1" velocity="1" effort="1"/>' if kind in ("revolute", "prismatic") else ""
+    return (f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+            f'<origin xyz="0 0 0.1"/><axis xyz="0 0 1"/>{limit}{extra}</joint>')
+
+
+def test_a_continuous_joint_is_a_revolute_joint_without_position_limits(tmp_path):
+    text = URDF_HEAD + "".join(map(_link, "abc")) + _joint("j1", "a", "b", "continuous") + _joint("j2", "b", "c") + "</robot>"
+    chain = chain_from_urdf(text=text)
+    assert chain.joint_type == ("revolute", "revolute")
+    assert chain.joint_lower[0] == -np.inf and chain.joint_upper[0] == np.inf and chain.joint_upper[1] == 1.0
+
+
+@pytest.mark.parametrize(
+    ("body", "kwargs", "message"),
+    [
+        ("".join(map(_link, "abcd")) + _joint("j1", "a", "b") + _joint("j2", "a", "c") + _joint("j3", "a", "d"),
+         {}, "not a serial chain: it branches at 'a'"),
+        ("".join(map(_link, "abc")) + _joint("j1", "a", "b") + _joint("j2", "b", "c", extra='<mimic joint="j1"/>'),
+         {}, "joint 'j2' mimics 'j1'"),
+        ("".join(map(_link, "ab")) + _joint("j1", "a", "b"), {"tip_link": "zz"}, "--tip-link 'zz' is not a link"),
+        ("".join(map(_link, "ab")) + _joint("j1", "a", "b"), {"base_link": "b", "tip_link": "a"}, "'a' is not below 'b'"),
+        ("".join(map(_link, "ab")) + _joint("j1", "a", "b", "floating"), {}, "joint 'j1' is floating"),
+        ("".join(map(_link, "ab")) + _joint("j1", "a", "b", "fixed"), {}, "no moving joint between 'a'"),
+        ("<link name='a'", {}, "not a valid URDF"),
+        ('<!DOCTYPE r [<!ENTITY x "y">]><link name="&x;"/>', {}, "not a valid URDF"),
+    ],
+)
+def test_urdf_errors_are_one_line(body, kwargs, message):
+    with pytest.raises(ConfigError, match=message) as info:
+        chain_from_urdf(text=URDF_HEAD + body + "</robot>", **kwargs)
+    assert "\n" not in str(info.value)
+
+
+def test_a_missing_urdf_file_is_named(tmp_path):
+    with pytest.raises(ConfigError, match="no such URDF file"):
+        chain_from_urdf(tmp_path / "nope.urdf")
+    with pytest.raises(ConfigError, match="not a regular file"):
+        chain_from_urdf(tmp_path)
