@@ -138,15 +138,20 @@ def export_cmd(
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Export calibrated unit poses onto the robot's link frames (URDF, YAML, static TF launch, CSV)."""
+    from rich.markup import escape
+
     from skincal.data.atomic import check_output
     from skincal.data.export import export_result
+    from skincal.data.names import printable
     from skincal.data.result import failed_units, read_result
 
     check_output(out, force=force, inputs=(result,))
     res = read_result(result)
     frames = export_result(res, fmt, out, link_map=robot_links, prefix=prefix)
-    console.print(f"wrote {out}: {len(frames)} unit(s) as {fmt} onto " + ", ".join(
-        sorted({f.parent for f in frames})), highlight=False)
+    # names come from the result and the link map: no markup, control characters shown escaped
+    console.print(printable(f"wrote {out}: {len(frames)} unit(s) as {fmt} onto " + ", ".join(
+        sorted({f.parent for f in frames}))), highlight=False, markup=False)
     for name, reason in failed_units(res).items():
         if name not in res.units:
-            console.print(f"[yellow]warning[/]: unit {name} not exported (not calibrated: {reason})", highlight=False)
+            console.print("[yellow]warning[/]: " + escape(printable(f"unit {name} not exported (not calibrated: "
+                                                                     f"{reason})")), highlight=False)
