@@ -27,12 +27,12 @@ import time
 import numpy as np
 
 from skincal.control import AvoidanceController, ControllerConfig, get_scenario
-from skincal.control.loop import run_scenario
-from skincal.control.metrics import summarize
-from skincal.control.scenarios import Q_START, degrade_poses
 from skincal.kinematics import panda
 from skincal.perception import RobotBody
 from skincal.skin.placement import paper_placement, ring_placement
+from skincal.workflows.avoid_metrics import summarize
+from skincal.workflows.avoidance import run_scenario
+from skincal.workflows.scenarios import Q_START, degrade_poses
 
 
 def mle_poses(truth, placement: str, quick: bool):
@@ -127,7 +127,7 @@ def main() -> None:
                 flush=True,
             )
             if args.plots and label == "mle" and seed == seeds[0]:
-                from skincal.control.plot import plot_run
+                from skincal.workflows.avoid_plot import plot_run
 
                 plot_run(log, f"{args.plots}/avoid_{name}.png")
     if args.json:

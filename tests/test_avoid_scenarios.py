@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 
 from skincal.cli import main
-from skincal.control.loop import run_scenario
-from skincal.control.metrics import summarize
-from skincal.control.playback import recording_from_run
-from skincal.control.plot import below_intervals, plot_run
-from skincal.control.scenarios import degrade_poses, get_scenario
 from skincal.kinematics import panda, rotation_angle
 from skincal.perception import RobotBody
 from skincal.skin.placement import paper_placement, ring_placement
 from skincal.skin.tof import Sphere
+from skincal.workflows.avoid_metrics import summarize
+from skincal.workflows.avoid_plot import below_intervals, plot_run
+from skincal.workflows.avoidance import run_scenario
+from skincal.workflows.playback import recording_from_run
+from skincal.workflows.scenarios import degrade_poses, get_scenario
 
 pytest.importorskip("mujoco")
 

@@ -8,53 +8,6 @@ from pathlib import Path
 import typer
 
 from skincal.cli.app import app, console
-from skincal.errors import ConfigError
-
-
-def simulated_skin(placement: str, chain) -> dict:
-    """The true unit poses of the skin the avoidance loop simulates: ``ring`` (dense) or ``paper`` (Table II)."""
-    from skincal.workflows.session import make_placements
-
-    if placement not in ("ring", "paper"):
-        raise ConfigError(f"unknown placement '{placement}' (use ring or paper)")
-    return make_placements(chain, placement, None, None)
-
-
-def believed_poses(true_poses: dict, result: Path | None, degrade: str | None, blind: bool, seed: int):
-    """The poses the controller believes and their label: a result file's, degraded truth, none, or truth."""
-    import numpy as np
-
-    chosen = [x for x in (result is not None, degrade is not None, blind) if x]
-    if len(chosen) > 1:
-        raise ConfigError("give at most one of --result, --degrade, --blind (--truth is the default)")
-    if blind:
-        return {}, "blind (no perception)"
-    if result is not None:
-        from skincal.data.result import read_result
-
-        res = read_result(result)
-        unknown = sorted(set(res.units) - set(true_poses))
-        if unknown:
-            raise ConfigError(
-                f"result {result.name} has unit(s) {', '.join(unknown[:5])} that the simulated skin lacks "
-                "(calibrate a dataset of the same --placement)"
-            )
-        moved = [u for u, r in res.units.items() if r.pose.link != true_poses[u].link]
-        if moved:
-            raise ConfigError(
-                f"result {result.name} puts {', '.join(moved[:5])} on other links than the simulated skin "
-                "(was it calibrated from a dataset of another --placement?)"
-            )
-        return {u: r.pose for u, r in res.units.items()}, f"result {result.name} ({res.method})"
-    if degrade is not None:
-        from skincal.control.scenarios import degrade_poses
-
-        try:
-            pos, ang = (float(x) for x in degrade.split(","))
-        except ValueError:
-            raise ConfigError(f"--degrade must be 'METRES,DEGREES' (e.g. 0.05,5), got '{degrade}'") from None
-        return degrade_poses(true_poses, pos, ang, np.random.default_rng(seed + 1)), f"truth degraded {pos} m/{ang} deg"
-    return dict(true_poses), "truth"
 
 
 @app.command()
@@ -75,11 +28,11 @@ def avoid(
     the chosen calibration (a result file must come from a dataset of the same --placement)."""
     import numpy as np
 
-    from skincal.control.loop import run_scenario
-    from skincal.control.metrics import summarize
-    from skincal.control.scenarios import get_scenario
     from skincal.kinematics import panda
     from skincal.perception.body import RobotBody
+    from skincal.workflows.avoid_metrics import summarize
+    from skincal.workflows.avoidance import believed_poses, run_scenario, simulated_skin
+    from skincal.workflows.scenarios import get_scenario
 
     chain = panda()
     true_poses = simulated_skin(placement, chain)
@@ -89,7 +42,7 @@ def avoid(
     metrics = summarize(log, RobotBody.of(chain), label)
     written = []
     if plot is not None:
-        from skincal.control.plot import plot_run
+        from skincal.workflows.avoid_plot import plot_run
 
         written = [str(p) for p in plot_run(log, plot)]
     if as_json:

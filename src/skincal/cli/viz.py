@@ -78,13 +78,12 @@ def _view_scenario(
 
     import numpy as np
 
-    from skincal.cli.avoid import believed_poses, simulated_skin
-    from skincal.control.loop import run_scenario
-    from skincal.control.playback import recording_from_run
-    from skincal.control.scenarios import get_scenario
     from skincal.data.result import CalibrationResult, UnitResult
     from skincal.kinematics import panda
     from skincal.viz.viewer import serve_forever, start_viewer
+    from skincal.workflows.avoidance import believed_poses, run_scenario, simulated_skin
+    from skincal.workflows.playback import recording_from_run
+    from skincal.workflows.scenarios import get_scenario
 
     chain = panda()
     true_poses = simulated_skin(placement, chain)

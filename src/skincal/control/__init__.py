@@ -1,4 +1,8 @@
-"""Obstacle avoidance: the QP controller, its constraints, human-approach scenarios, metrics and plots."""
+"""Obstacle avoidance control: the QP controller and its constraints (kinematics, skin and perception only).
+
+The closed-loop experiment in MuJoCo, the human-approach scenarios, run metrics, plots and playback are
+in :mod:`skincal.workflows` (``avoidance``, ``scenarios``, ``avoid_metrics``, ``avoid_plot``, ``playback``).
+"""
 
 from skincal.control.constraints import (
     FrameCache,
@@ -10,22 +14,16 @@ from skincal.control.constraints import (
     point_jacobians,
 )
 from skincal.control.qp import AvoidanceController, ControllerConfig, QpProblem, StepResult
-from skincal.control.scenarios import Q_START, SCENARIOS, Circle, Scenario, get_scenario
 
 __all__ = [
-    "Q_START",
-    "SCENARIOS",
     "AvoidanceController",
-    "Circle",
     "ControllerConfig",
     "FrameCache",
     "ObstacleRows",
     "QpProblem",
-    "Scenario",
     "StepResult",
     "approach_speed_bound",
     "cap_candidates",
-    "get_scenario",
     "joint_velocity_bounds",
     "obstacle_rows",
     "point_jacobians",

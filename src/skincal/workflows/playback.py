@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from skincal.control.loop import RunLog
 from skincal.sim.scene import Scene
 from skincal.skin import tof
 from skincal.viz.model import ObstacleTrack, Recording
+from skincal.workflows.avoidance import RunLog
 
 
 def obstacle_tracks(log: RunLog, step_s: float = 0.02) -> dict[str, ObstacleTrack]:

@@ -23,11 +23,11 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from skincal.control.qp import AvoidanceController, ControllerConfig
-from skincal.control.scenarios import Scenario
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.geometry import DEFAULT_LINK_RADIUS
@@ -38,6 +38,7 @@ from skincal.perception.tracker import ProximityTracker
 from skincal.sim.mujoco_model import SensorIndex, build_model, link_body_ids, require_mujoco
 from skincal.skin.pose import SkinUnitPose
 from skincal.skin.tof import TofModel, cone_directions, get_tof_model
+from skincal.workflows.scenarios import Scenario
 
 
 @dataclass(frozen=True)
@@ -194,3 +195,48 @@ def run_scenario(
         tof_t[: count.max()],
         tof_range[: count.max()],
     )
+
+
+def simulated_skin(placement: str, chain) -> dict:
+    """The true unit poses of the skin the avoidance loop simulates: ``ring`` (dense) or ``paper`` (Table II)."""
+    from skincal.workflows.session import make_placements
+
+    if placement not in ("ring", "paper"):
+        raise ConfigError(f"unknown placement '{placement}' (use ring or paper)")
+    return make_placements(chain, placement, None, None)
+
+
+def believed_poses(true_poses: dict, result: Path | None, degrade: str | None, blind: bool, seed: int):
+    """The poses the controller believes and their label: a result file's, degraded truth (``degrade``
+    ``'METRES,DEGREES'``, seeded by ``seed + 1``), none (``blind``), or truth."""
+    chosen = [x for x in (result is not None, degrade is not None, blind) if x]
+    if len(chosen) > 1:
+        raise ConfigError("give at most one of --result, --degrade, --blind (--truth is the default)")
+    if blind:
+        return {}, "blind (no perception)"
+    if result is not None:
+        from skincal.data.result import read_result
+
+        res = read_result(result)
+        unknown = sorted(set(res.units) - set(true_poses))
+        if unknown:
+            raise ConfigError(
+                f"result {result.name} has unit(s) {', '.join(unknown[:5])} that the simulated skin lacks "
+                "(calibrate a dataset of the same --placement)"
+            )
+        moved = [u for u, r in res.units.items() if r.pose.link != true_poses[u].link]
+        if moved:
+            raise ConfigError(
+                f"result {result.name} puts {', '.join(moved[:5])} on other links than the simulated skin "
+                "(was it calibrated from a dataset of another --placement?)"
+            )
+        return {u: r.pose for u, r in res.units.items()}, f"result {result.name} ({res.method})"
+    if degrade is not None:
+        from skincal.workflows.scenarios import degrade_poses
+
+        try:
+            pos, ang = (float(x) for x in degrade.split(","))
+        except ValueError:
+            raise ConfigError(f"--degrade must be 'METRES,DEGREES' (e.g. 0.05,5), got '{degrade}'") from None
+        return degrade_poses(true_poses, pos, ang, np.random.default_rng(seed + 1)), f"truth degraded {pos} m/{ang} deg"
+    return dict(true_poses), "truth"

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from skincal.control.loop import RunLog
 from skincal.errors import ConfigError
+from skincal.workflows.avoidance import RunLog
 
 
 def below_intervals(t: np.ndarray, r: np.ndarray, threshold: float) -> list[tuple[float, float]]:

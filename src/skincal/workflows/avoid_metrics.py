@@ -12,11 +12,11 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from skincal.control.loop import RunLog
 from skincal.errors import ConfigError
 from skincal.kinematics.transforms import FloatArray
 from skincal.perception.body import RobotBody, segment_distance
 from skincal.skin import tof
+from skincal.workflows.avoidance import RunLog
 
 RECOVERY_THRESHOLD = 0.005
 """Tracking error below which the task counts as recovered, m."""
