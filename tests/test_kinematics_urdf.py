@@ -40,7 +40,10 @@ def random_chain(rng: np.random.Generator, n: int) -> SerialChain:
     after = [homogeneous(np.eye(3), rng.uniform(-0.1, 0.1, 3)) for _ in range(n)]
     types = tuple("prismatic" if k % 3 == 1 else "revolute" for k in range(n))
     return SerialChain(
-        name="random", T_parent_joint=np.array(T), axis=rng.normal(size=(n, 3)), T_joint_link=np.array(after),
+        name="random",
+        T_parent_joint=np.array(T),
+        axis=rng.normal(size=(n, 3)),
+        T_joint_link=np.array(after),
         joint_type=types,
     )
 
@@ -133,12 +136,20 @@ def _link(name: str) -> str:
 
 def _joint(name: str, parent: str, child: str, kind: str = "revolute", extra: str = "") -> str:
     limit = '<limit lower="-1" upper="1" velocity="1" effort="1"/>' if kind in ("revolute", "prismatic") else ""
-    return (f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
-            f'<origin xyz="0 0 0.1"/><axis xyz="0 0 1"/>{limit}{extra}</joint>')
+    return (
+        f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+        f'<origin xyz="0 0 0.1"/><axis xyz="0 0 1"/>{limit}{extra}</joint>'
+    )
 
 
 def test_a_continuous_joint_is_a_revolute_joint_without_position_limits(tmp_path):
-    text = URDF_HEAD + "".join(map(_link, "abc")) + _joint("j1", "a", "b", "continuous") + _joint("j2", "b", "c") + "</robot>"
+    text = (
+        URDF_HEAD
+        + "".join(map(_link, "abc"))
+        + _joint("j1", "a", "b", "continuous")
+        + _joint("j2", "b", "c")
+        + "</robot>"
+    )
     chain = chain_from_urdf(text=text)
     assert chain.joint_type == ("revolute", "revolute")
     assert chain.joint_lower[0] == -np.inf and chain.joint_upper[0] == np.inf and chain.joint_upper[1] == 1.0
@@ -147,12 +158,22 @@ def test_a_continuous_joint_is_a_revolute_joint_without_position_limits(tmp_path
 @pytest.mark.parametrize(
     ("body", "kwargs", "message"),
     [
-        ("".join(map(_link, "abcd")) + _joint("j1", "a", "b") + _joint("j2", "a", "c") + _joint("j3", "a", "d"),
-         {}, "not a serial chain: it branches at 'a'"),
-        ("".join(map(_link, "abc")) + _joint("j1", "a", "b") + _joint("j2", "b", "c", extra='<mimic joint="j1"/>'),
-         {}, "joint 'j2' mimics 'j1'"),
+        (
+            "".join(map(_link, "abcd")) + _joint("j1", "a", "b") + _joint("j2", "a", "c") + _joint("j3", "a", "d"),
+            {},
+            "not a serial chain: it branches at 'a'",
+        ),
+        (
+            "".join(map(_link, "abc")) + _joint("j1", "a", "b") + _joint("j2", "b", "c", extra='<mimic joint="j1"/>'),
+            {},
+            "joint 'j2' mimics 'j1'",
+        ),
         ("".join(map(_link, "ab")) + _joint("j1", "a", "b"), {"tip_link": "zz"}, "--tip-link 'zz' is not a link"),
-        ("".join(map(_link, "ab")) + _joint("j1", "a", "b"), {"base_link": "b", "tip_link": "a"}, "'a' is not below 'b'"),
+        (
+            "".join(map(_link, "ab")) + _joint("j1", "a", "b"),
+            {"base_link": "b", "tip_link": "a"},
+            "'a' is not below 'b'",
+        ),
         ("".join(map(_link, "ab")) + _joint("j1", "a", "b", "floating"), {}, "joint 'j1' is floating"),
         ("".join(map(_link, "ab")) + _joint("j1", "a", "b", "fixed"), {}, "no moving joint between 'a'"),
         ("<link name='a'", {}, "not a valid URDF"),
@@ -170,3 +191,36 @@ def test_a_missing_urdf_file_is_named(tmp_path):
         chain_from_urdf(tmp_path / "nope.urdf")
     with pytest.raises(ConfigError, match="not a regular file"):
         chain_from_urdf(tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("preset", "urdf", "tip", "tol"),
+    [
+        ("panda", "panda", "panda_hand", 1e-12),
+        ("ur5", "ur5", "tool0", 1e-9),
+        # xarm_description writes pi/2 as 1.5708 (3.7e-6 rad off), hence micrometres
+        ("xarm7", "xarm7", "link_eef", 3e-5),
+    ],
+)
+def test_dh_presets_match_the_registry_urdfs(preset, urdf, tip, tol):
+    """The same robot from its DH preset and from the URDF its maker publishes: every joint axis is
+    the same line in space with the same direction (frames may differ by convention) and the flange is
+    the same point, over
+    20 random configurations. The UR URDF's base_link is the DH base turned by pi about z."""
+    from skincal.kinematics import get_robot
+
+    pin = pytest.importorskip("pinocchio")
+    path = robots_dir() / REGISTRY_URDFS[urdf]
+    u, d = chain_from_urdf(path, tip_link=tip), get_robot(preset)
+    model = pin.buildModelFromUrdf(str(path))
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    frame = "base" if model.existFrame("base") else u.link_names[0]
+    T_base_root = np.linalg.inv(data.oMf[model.getFrameId(frame)].homogeneous)
+    q = np.random.default_rng(3).uniform(-2.0, 2.0, (20, d.n_joints))
+    Fu, Fd = T_base_root @ u.link_frames(q), d.link_frames(q)
+    (cu, zu), (cd, zd) = u.joint_axes(Fu), d.joint_axes(Fd)
+    np.testing.assert_allclose(zu, zd, atol=tol)
+    np.testing.assert_allclose(np.linalg.norm(np.cross(cu - cd, zd), axis=-1), 0.0, atol=tol)
+    flange_u, flange_d = (Fu[:, -1] @ u.T_link_flange)[:, :3, 3], (Fd[:, -1] @ d.T_link_flange)[:, :3, 3]
+    np.testing.assert_allclose(flange_u, flange_d, atol=tol)  # the point; its axes are a convention

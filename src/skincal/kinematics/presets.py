@@ -5,6 +5,10 @@ Presets:
   limits, flange ``d = 0.107`` m along z of frame 7 (the paper's robot).
 * ``sawyer``: Rethink Sawyer, standard DH (Layeghi 2017 table, as in Corke's Robotics Toolbox).
 * ``ur5e``: Universal Robots UR5e, standard DH (UR's published table).
+* ``ur5``, ``ur10e``: Universal Robots UR5 (CB3) and UR10e, standard DH (UR's published tables).
+* ``xarm7``: UFactory xArm7, modified DH and limits of UFactory's URDF.
+
+``--robot`` also takes a URDF (``.urdf``, :mod:`skincal.kinematics.urdf`) or a DH chain file.
 """
 
 from __future__ import annotations
@@ -76,7 +80,51 @@ def ur5e() -> SerialChain:
     )
 
 
-PRESETS = {"panda": panda, "sawyer": sawyer, "ur5e": ur5e}
+def _ur(name: str, d: list[float], a: list[float], velocity: list[float]) -> SerialChain:
+    """A Universal Robots arm from UR's published standard-DH table (``alpha`` is the same for all)."""
+    alpha = [_PI / 2, 0.0, 0.0, _PI / 2, -_PI / 2, 0.0]
+    lim = np.array([2 * _PI, 2 * _PI, _PI, 2 * _PI, 2 * _PI, 2 * _PI])
+    dh = np.column_stack([np.zeros(6), d, a, alpha])
+    return SerialChain.from_dh(name, "standard", dh, joint_lower=-lim, joint_upper=lim, velocity_limit=velocity)
+
+
+def ur5() -> SerialChain:
+    """Universal Robots UR5 (CB3), standard DH (UR's published table)."""
+    return _ur("ur5", [0.089159, 0.0, 0.0, 0.10915, 0.09465, 0.0823], [0.0, -0.425, -0.39225, 0.0, 0.0, 0.0], [_PI] * 6)
+
+
+def ur10e() -> SerialChain:
+    """Universal Robots UR10e, standard DH (UR's published table); base and shoulder 120 deg/s."""
+    return _ur(
+        "ur10e",
+        [0.1807, 0.0, 0.0, 0.17415, 0.11985, 0.11655],
+        [0.0, -0.6127, -0.57155, 0.0, 0.0, 0.0],
+        [2 * _PI / 3, 2 * _PI / 3, _PI, _PI, _PI, _PI],
+    )
+
+
+def xarm7() -> SerialChain:
+    """UFactory xArm7, modified DH and limits of UFactory's URDF (``xarm_description``)."""
+    dh = [
+        [0.0, 0.267, 0.0, 0.0],
+        [0.0, 0.0, 0.0, -_PI / 2],
+        [0.0, 0.293, 0.0, _PI / 2],
+        [0.0, 0.0, 0.0525, _PI / 2],
+        [0.0, 0.3425, 0.0775, _PI / 2],
+        [0.0, 0.0, 0.0, _PI / 2],
+        [0.0, 0.097, 0.076, -_PI / 2],
+    ]
+    return SerialChain.from_dh(
+        "xarm7",
+        "modified",
+        np.array(dh),
+        joint_lower=np.array([-2 * _PI, -2.059, -2 * _PI, -0.19198, -2 * _PI, -1.69297, -2 * _PI]),
+        joint_upper=np.array([2 * _PI, 2.0944, 2 * _PI, 3.927, 2 * _PI, _PI, 2 * _PI]),
+        velocity_limit=np.full(7, 3.14),
+    )
+
+
+PRESETS = {"panda": panda, "sawyer": sawyer, "ur5": ur5, "ur5e": ur5e, "ur10e": ur10e, "xarm7": xarm7}
 
 
 def get_robot(name: str) -> SerialChain:
