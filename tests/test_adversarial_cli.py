@@ -184,3 +184,76 @@ def test_calibrate_workers_die_when_their_parent_is_killed(small):
 @pytest.mark.skipif(not LINUX, reason="PR_SET_PDEATHSIG is Linux only")
 def test_sweep_workers_die_when_their_parent_is_killed():
     _kill_parent_then_workers_die("sweep")
+
+
+# ------------------------------------------------------------------------------ reachable bad inputs
+def _variant(src: Path, dst: Path, edit) -> Path:
+    """A copy of dataset ``src`` changed by ``edit(h5py.File)`` directly (no skincal writer in between)."""
+    import shutil
+
+    import h5py
+
+    shutil.copy(src, dst)
+    with h5py.File(dst, "r+") as f:
+        edit(f)
+    return dst
+
+
+def _replace(f, path: str, value) -> None:
+    del f[path]
+    f[path] = value
+
+
+def _one_line_error(capsys, *needles: str) -> str:
+    out = capsys.readouterr()
+    err = out.err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("error: "), out.err
+    assert "internal error" not in err and "Traceback" not in out.err + out.out
+    for needle in needles:
+        assert needle in err, err
+    return err
+
+
+def test_zero_gravity_is_refused_on_read(small, tmp_path, capsys):
+    import numpy as np
+
+    data = _variant(small[0], tmp_path / "g0.h5", lambda f: f["robot"].attrs.__setitem__("gravity", np.zeros(3)))
+    capsys.readouterr()
+    assert main(["calibrate", str(data), "--out", str(tmp_path / "r.json")]) == 2
+    _one_line_error(capsys, "g0.h5", "gravity", "magnitude 0")
+    assert main(["info", str(data)]) == 2
+    _one_line_error(capsys, "gravity")
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_imu_stamps_barely_overlapping_the_joint_stream(small, tmp_path, capsys):
+    def shift(f):
+        end = float(f["joints/t"][-1])
+        for unit in f["imu"]:
+            t = f[f"imu/{unit}/t"][...]
+            _replace(f, f"imu/{unit}/t", t - t[0] + end - 0.1)  # the last 0.1 s of the joint stream only
+
+    data = _variant(small[0], tmp_path / "late.h5", shift)
+    capsys.readouterr()
+    assert main(["calibrate", str(data), "--out", str(tmp_path / "r.json")]) == 2
+    _one_line_error(capsys, "do not overlap the joint stream", "another clock")
+
+
+def test_a_joint_glitch_far_beyond_the_limits_is_refused(small, tmp_path, capsys):
+    def glitch(f):
+        q = f["joints/q"][...]
+        q[100, 2] = 1e30
+        _replace(f, "joints/q", q)
+
+    data = _variant(small[0], tmp_path / "glitch.h5", glitch)
+    capsys.readouterr()
+    assert main(["calibrate", str(data), "--out", str(tmp_path / "r.json")]) == 2
+    _one_line_error(capsys, "joint 3", "sample 100", "1e+30", "limits")
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_calibrate_into_a_missing_folder_fails_before_reading_the_dataset(tmp_path, capsys):
+    png = tmp_path / "x.png"
+    png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(100))  # not a dataset: reading it would fail differently
+    assert main(["calibrate", str(png), "-o", str(tmp_path / "nonexistent" / "dir" / "r.json")]) == 2
+    _one_line_error(capsys, "does not exist")

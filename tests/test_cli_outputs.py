@@ -35,11 +35,14 @@ def test_calibrate_refuses_its_input_an_existing_file_and_bad_folders(files, cap
     assert main(["calibrate", str(data), "--out", str(result)]) == 2
     assert main(["calibrate", str(data), "--out", str(root)]) == 2
     assert main(["calibrate", str(data), "--out", str(root / "nowhere" / "r.json")]) == 2
-    assert main(["calibrate", str(data), "--out", str(root / "w.json"), "--workers", "0"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 6 and all(line.startswith("error:") for line in err)
+    assert len(err) == 5 and all(line.startswith("error:") for line in err)
     assert "is the input" in err[0] and "is the input" in err[1] and "pass --force" in err[2]
-    assert "folder" in err[3] and "does not exist" in err[4] and "--workers" in err[5]
+    assert "folder" in err[3] and "does not exist" in err[4]
+    for workers in ("0", "-1"):  # a usage error, with the usage message
+        assert main(["calibrate", str(data), "--out", str(root / "w.json"), "--workers", workers]) == 2
+        out = capsys.readouterr()
+        assert "Invalid value for '--workers'" in out.err and "internal error" not in out.err + out.out
     assert _digest(data) == before_data and _digest(result) == before_result
     assert not (root / "w.json").exists()
     assert main(["calibrate", str(data), "--out", str(result), "--force"]) == 0  # asked for: replaced

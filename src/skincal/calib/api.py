@@ -199,6 +199,7 @@ def calibrate(
     for u in names:
         if u not in dataset.imu:
             raise ConfigError(f"unknown unit '{u}' (dataset has: {', '.join(dataset.units)})")
+    check_joint_range(dataset)
     start = time.perf_counter()
     tagged, notes = dataset, []
     if dataset.segments is None or len(dataset.segments) == 0:
@@ -279,18 +280,59 @@ def calibrate(
     )
 
 
-def _check_overlap(dataset: Dataset, unit: str, slack_s: float = 1.0) -> None:
-    """A unit's stamps must overlap the joint stream (within ``slack_s``): stamps on another clock
-    (Unix time, a device's boot time) would otherwise fail deep inside a method."""
+JOINT_LIMIT_MARGIN_RAD = 0.25
+"""How far a joint position may lie beyond the robot's stated limits before :func:`check_joint_range`
+refuses the dataset, rad (encoder offsets and a controller's overshoot stay well inside it)."""
+JOINT_ABS_MAX_RAD = 1000.0
+"""Largest joint position accepted for a joint without stated limits, rad (160 turns)."""
+
+
+def check_joint_range(dataset: Dataset, margin_rad: float = JOINT_LIMIT_MARGIN_RAD) -> None:
+    """Refuse joint positions beyond the robot's limits by more than ``margin_rad`` (beyond
+    +-:data:`JOINT_ABS_MAX_RAD` for a joint without limits) with a one-line :class:`DatasetError`
+    naming the joint, the sample and its time: a glitch such as ``1e30`` would otherwise be
+    differentiated into huge velocities and accelerations and silently skew every unit."""
+    from skincal.errors import DatasetError
+
+    chain = dataset.robot
+    q = np.asarray(dataset.joints.q, dtype=float)
+    n = q.shape[1]
+    lower = np.full(n, -JOINT_ABS_MAX_RAD) if chain.joint_lower is None else chain.joint_lower - margin_rad
+    upper = np.full(n, JOINT_ABS_MAX_RAD) if chain.joint_upper is None else chain.joint_upper + margin_rad
+    bad = (q < lower) | (q > upper)
+    if not bad.any():
+        return
+    i, j = (int(x) for x in np.argwhere(bad)[0])
+    if chain.joint_lower is None or chain.joint_upper is None:
+        beyond = f"+-{JOINT_ABS_MAX_RAD:g} rad"
+    else:
+        limits = f"{chain.joint_lower[j]:.4g}..{chain.joint_upper[j]:.4g}"
+        beyond = f"the robot's limits {limits} rad by more than {margin_rad:g} rad"
+    raise DatasetError(
+        f"/joints/q: joint {j + 1} at sample {i} (t = {dataset.joints.t[i]:.3f} s) is {q[i, j]:.6g} rad, beyond "
+        f"{beyond} ({int(bad.sum())} such value(s)): a glitch in the joint stream, or limits of another robot"
+    )
+
+
+MIN_OVERLAP_S = 2.0
+"""Least time a unit's stamps must share with the joint stream, s: less cannot hold a rest and a move,
+and a coarse clock alignment (up to 0.5 s) could shift the rest off the joint stream."""
+
+
+def _check_overlap(dataset: Dataset, unit: str, min_overlap_s: float = MIN_OVERLAP_S) -> None:
+    """A unit's stamps must overlap the joint stream for at least ``min_overlap_s`` (and 10 samples):
+    stamps on another clock (Unix time, a device's boot time) would otherwise fail deep inside a method."""
     t = np.asarray(dataset.imu[unit].t, dtype=float)
     tj = np.asarray(dataset.joints.t, dtype=float)
     if t.size == 0:
         raise CalibrationError(f"unit '{unit}': no IMU samples")
-    inside = np.count_nonzero((t >= tj[0] - slack_s) & (t <= tj[-1] + slack_s))
-    if inside < 10:
+    inside = t[(t >= tj[0]) & (t <= tj[-1])]
+    overlap = float(inside[-1] - inside[0]) if inside.size else 0.0
+    if inside.size < 10 or overlap < min(min_overlap_s, 0.5 * float(tj[-1] - tj[0])):
         raise CalibrationError(
             f"unit '{unit}': its stamps {t[0]:.3f}..{t[-1]:.3f} s do not overlap the joint stream "
-            f"{tj[0]:.3f}..{tj[-1]:.3f} s (stamped by another clock? put both on one clock first)"
+            f"{tj[0]:.3f}..{tj[-1]:.3f} s enough ({overlap:.3g} s, {inside.size} samples; at least {min_overlap_s:g} s "
+            f"needed): stamped by another clock? put both on one clock first"
         )
 
 

@@ -74,7 +74,7 @@ def calibrate(
     use_truth_links: bool = typer.Option(False, help="take each unit's link from the dataset truth"),
     use_dataset_qdd: bool = typer.Option(False, help="use the dataset's qdd instead of estimating it"),
     unit: list[str] | None = typer.Option(None, help="calibrate only this unit (repeatable)"),
-    workers: int = typer.Option(2, help="units calibrated at once (forked processes on Linux, else threads)"),
+    workers: int = typer.Option(2, min=1, help="units calibrated at once (forked processes on Linux, else threads)"),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Calibrate the skin units of a dataset and write the result JSON."""
@@ -86,8 +86,6 @@ def calibrate(
     from skincal.data.result import sha256_file, write_result
 
     check_output(out, force=force, inputs=(dataset,))
-    if workers < 1:
-        raise ConfigError(f"--workers must be at least 1, got {workers}")
     ds = read_dataset(dataset)
     link_map = read_links_file(links) if links is not None else None
     names = unit or ds.units

@@ -30,6 +30,9 @@ TRUTH_SENSOR_SHAPES: dict[str, tuple[int, ...]] = {
 be added (any finite numbers)."""
 
 _TRUTH_POSE_ATTRS = ("link", "position", "quaternion_wxyz")
+GRAVITY_NORM_MPS2 = (1.0, 100.0)
+"""Accepted magnitude of the dataset's gravity, m/s^2: the accelerometers' only reference (zero
+leaves a unit's orientation undetermined), about 9.81 on Earth."""
 
 
 def _fail(source: str, field: str, problem: str) -> DatasetError:
@@ -111,7 +114,11 @@ def validate_robot(robot: object, gravity: object, source: str) -> int:
         if value is not None:
             _float_field(value, (n,), source, f"/robot/{name}")
     _float_field(robot.T_link_flange, (4, 4), source, "/robot/T_link_flange")
-    _float_field(gravity, (3,), source, "/robot attr 'gravity'")
+    g = _float_field(gravity, (3,), source, "/robot attr 'gravity'")
+    g_norm = float(np.linalg.norm(g))
+    if not GRAVITY_NORM_MPS2[0] <= g_norm <= GRAVITY_NORM_MPS2[1]:
+        raise _fail(source, "/robot attr 'gravity'", f"has magnitude {g_norm:.6g} m/s^2, expected "
+                    f"{GRAVITY_NORM_MPS2[0]:g}..{GRAVITY_NORM_MPS2[1]:g} (about 9.81, e.g. [0, 0, -9.81])")
     return n
 
 
