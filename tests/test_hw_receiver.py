@@ -143,18 +143,23 @@ def test_late_packet_moves_from_lost_to_late():
 
 
 def test_device_restart_is_not_a_flood_of_duplicates():
+    """A reboot (sequence numbers and device clock start again, packets keep arriving in real time) is
+    one restart once a consistent run of new packets has been seen: nothing lost, nothing duplicated."""
     got: list[Delivery] = []
-    rx = SkinReceiver(on_packet=got.append, reorder_timeout_s=0.05)
-    for s in range(100):  # 100 packets, device up for 10^3 s
-        rx.handle_datagram(encode_packet(4, s, [10**9 + 10_000 * s], range=[1.0]), host_s=0.0)
-    rx.handle_datagram(encode_packet(4, 99, [10**9 + 990_000], range=[1.0]), host_s=0.0)  # a real duplicate
+    restarted: list = []
+    rx = SkinReceiver(on_packet=got.append, reorder_timeout_s=0.05, on_restart=lambda k, f: restarted.append((k, f)))
+    for s in range(100):  # 100 packets, device up for 10^3 s, one every 10 ms
+        rx.handle_datagram(encode_packet(4, s, [10**9 + 10_000 * s], range=[1.0]), host_s=0.01 * s)
+    rx.handle_datagram(encode_packet(4, 99, [10**9 + 990_000], range=[1.0]), host_s=1.0)  # a real duplicate
     for s in range(50):  # reboot: sequence numbers and device clock start again
-        rx.handle_datagram(encode_packet(4, s, [10_000 * s], range=[2.0]), host_s=0.0)
+        rx.handle_datagram(encode_packet(4, s, [10_000 * s], range=[2.0]), host_s=1.5 + 0.01 * s)
     rx.flush()
     st = rx.stats().streams[("skin", 4)]
-    assert (st.restarts, st.duplicates, st.received, st.delivered, st.lost) == (1, 1, 150, 150, 0)
+    assert (st.restarts, st.duplicates, st.received, st.delivered, st.lost, st.stale) == (1, 1, 150, 150, 0, 0)
     assert [d.packet.range[0] for d in got] == [1.0] * 100 + [2.0] * 50
     assert rx.clock_fit(("skin", 4)).n_points == 5  # the fit restarted with the new clock
+    assert len(restarted) == 1 and restarted[0][0] == ("skin", 4)
+    assert restarted[0][1].offset_s == pytest.approx(-1000.0)  # the old epoch's fit, handed over before the reset
 
 
 def test_clock_lower_envelope_synthetic():

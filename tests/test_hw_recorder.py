@@ -34,33 +34,35 @@ def _delivery(data: bytes, host_s: float) -> Delivery:
     return Delivery(key, p, host_s)
 
 
-def test_layout_nan_gyro_flush_thresholds_and_final_remap(tmp_path):
+def test_layout_gyro_flush_thresholds_and_final_remap(tmp_path):
     path = tmp_path / "r.h5"
     flushes: list[int] = []
     rec = Recorder(path, flush_every_samples=4, flush_every_s=1e9, t_origin_s=100.0, host_clock=lambda: 0.0,
                    unit_names={7: "forearm"}, on_flush=flushes.append, robot=get_robot("panda"))
     a = np.arange(9.0).reshape(3, 3)
     rec.add(_delivery(encode_packet(7, 0, [1_000_000, 1_010_000, 1_020_000], accel=a, gyro=-a), 101.0))
-    rec.add(_delivery(encode_packet(7, 1, [1_030_000], accel=a[:1], range=[0.5]), 101.1))  # no gyro: NaN row
+    # no gyro in a group with gyro: the contract wants gyro finite, so the IMU sample is ignored (range kept)
+    rec.add(_delivery(encode_packet(7, 1, [1_030_000], accel=a[:1], range=[0.5]), 101.1))
     rec.add(_delivery(encode_packet(7, 2, [1_040_000], gyro=a[:1]), 101.2))  # gyro only: no place, ignored
     rec.add(_delivery(encode_joint_packet(0, 0, [5, 6], np.zeros((2, 7)), np.ones((2, 7))), 101.3))
     rec.add(_delivery(encode_joint_packet(0, 1, [7], np.zeros((1, 3)), np.ones((1, 3))), 101.4))  # other robot
     provisional = {("skin", 7): ClockFit(99.0, 0.0, 1.0), ("joints", 0): ClockFit(100.0, 0.0, 0.0)}
-    assert rec.maybe_flush(provisional) and flushes == [7]  # 4 imu + 1 tof + 2 joints samples
+    assert rec.maybe_flush(provisional) and flushes == [6]  # 3 imu + 1 tof + 2 joints samples
     with h5py.File(path, "r") as f:  # readable while the recorder still has it open
-        np.testing.assert_allclose(f["imu/forearm/t"][...], [0.0, 0.01, 0.02, 0.03], atol=1e-9)
+        np.testing.assert_allclose(f["imu/forearm/t"][...], [0.0, 0.01, 0.02], atol=1e-9)
     final = {("skin", 7): ClockFit(99.5, 1e-3, 1.0), ("joints", 0): ClockFit(100.0, 0.0, 0.0)}
     summary = rec.finish(final)
-    assert summary.samples == {"imu/forearm": 4, "tof/forearm": 1, "joints": 2} and summary.ignored_samples == 2
+    assert summary.samples == {"imu/forearm": 3, "tof/forearm": 1, "joints": 2} and summary.ignored_samples == 3
+    assert {k: v for k, v in summary.ignored.items() if v} == {"no_gyro": 1, "no_place": 1, "other_robot": 1}
     with h5py.File(path, "r") as f:
         assert f.attrs["recording_complete"] and f.attrs["format"] == "skincal-dataset"
+        assert f.attrs["ignored_no_gyro_samples"] == 1 and f.attrs["ignored_samples"] == 3
         g = f["imu/forearm"]
-        np.testing.assert_array_equal(g["accel"][...], np.vstack([a, a[:1]]))
-        np.testing.assert_array_equal(g["gyro"][:3], -a)
-        assert np.all(np.isnan(g["gyro"][3]))
-        d = np.array([1.0, 1.01, 1.02, 1.03])
+        np.testing.assert_array_equal(g["accel"][...], a)
+        np.testing.assert_array_equal(g["gyro"][...], -a)
+        d = np.array([1.0, 1.01, 1.02])
         np.testing.assert_allclose(g["t"][...], d + 99.5 + 1e-3 * (d - 1.0) - 100.0, atol=1e-9)
-        np.testing.assert_allclose(g["host_receive_t"][...], [1.0, 1.0, 1.0, 1.1])
+        np.testing.assert_allclose(g["host_receive_t"][...], [1.0, 1.0, 1.0])
         np.testing.assert_array_equal(g["device_t_us"][...], (d * 1e6).round())
         assert g["t"].chunks is not None and g["t"].maxshape == (None,)
         assert f["tof/forearm/range"][0] == 0.5
@@ -107,11 +109,17 @@ def test_emulated_recording_matches_dataset_and_validates(tmp_path):
 
 
 _KILLED_RECORDER = textwrap.dedent("""
-    import asyncio, sys
+    import asyncio, sys, time
     from skincal.hw.session import record
-    asyncio.run(record(sys.argv[1], flush_every_s=0.05, flush_every_samples=10**9, reorder_timeout_s=0.05,
-                       on_start=lambda p: print("port", p, flush=True),
-                       on_flush=lambda n: print("flushed", n, flush=True)))
+    from skincal.kinematics.presets import get_robot
+
+    def flushed(n):
+        print("flushed", n, flush=True)
+        if n >= int(sys.argv[2]):  # hold here (between two flushes, loop blocked) until killed
+            time.sleep(120)
+
+    asyncio.run(record(sys.argv[1], robot=get_robot("panda"), flush_every_s=0.05, flush_every_samples=10**9,
+                       reorder_timeout_s=0.05, on_start=lambda p: print("port", p, flush=True), on_flush=flushed))
 """)
 
 
@@ -127,19 +135,26 @@ def _readline(proc: subprocess.Popen, deadline: float) -> str:
 
 
 def test_recording_killed_mid_way_keeps_flushed_samples(tmp_path):
+    """SIGKILL while packets still arrive, between two flushes: the file holds every flushed sample in
+    order and passes the validating reader and ``skincal info`` (no timing is asserted here: the
+    latency of the provisional times is measured in benchmarks/bench_receiver.py)."""
+    from skincal.data.hdf5 import read_dataset
+
     path = tmp_path / "killed.h5"
-    proc = subprocess.Popen([sys.executable, "-c", _KILLED_RECORDER, str(path)], stdout=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, "-c", _KILLED_RECORDER, str(path), "300"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 30
+    deadline = time.monotonic() + 60
     try:
         port = int(_readline(proc, deadline).split()[1])
         flushed = 0
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
             seq = stamp_us = 0
-            while flushed < 300:  # keep sending until several flushes with data have happened
+            while flushed < 300:  # keep sending until the recorder holds after a flush with >= 300 samples
                 for _ in range(20):
                     stamp_us = max(stamp_us + 1, time.monotonic_ns() // 1000 + 7_000_000)  # a device clock
                     sock.sendto(encode_packet(3, seq, [stamp_us], accel=[[0.0, 1.0, float(seq)]]),
+                                ("127.0.0.1", port))
+                    sock.sendto(encode_joint_packet(0, seq, [stamp_us], np.full((1, 7), 0.1), np.zeros((1, 7))),
                                 ("127.0.0.1", port))
                     seq += 1
                 time.sleep(0.01)
@@ -149,21 +164,23 @@ def test_recording_killed_mid_way_keeps_flushed_samples(tmp_path):
                 counts = [int(x.split()[1]) for x in lines if x.startswith("flushed")]
                 flushed = max([flushed, *counts])
                 assert time.monotonic() < deadline and seq < 100_000
-        proc.send_signal(signal.SIGKILL)  # mid-stream: packets still arriving, not finished
+            for _ in range(50):  # packets still arriving when the kill comes
+                sock.sendto(encode_packet(3, seq, [stamp_us + 1000], accel=[[0.0, 1.0, float(seq)]]),
+                            ("127.0.0.1", port))
+                seq, stamp_us = seq + 1, stamp_us + 1000
+        proc.send_signal(signal.SIGKILL)
     finally:
         proc.kill()
         proc.wait(10)
     assert proc.returncode == -signal.SIGKILL
     with h5py.File(path, "r") as f:
-        assert not f.attrs["recording_complete"] and f.attrs["flushed_samples"] >= flushed
-        accel = f["imu/su3/accel"][...]
-        t = f["imu/su3/t"][...]
-        host_t = f["imu/su3/host_receive_t"][...]
-    assert accel.shape[0] == t.shape[0] >= flushed >= 300
+        assert not f.attrs["recording_complete"] and f.attrs["flushed_samples"] == flushed
+    ds = read_dataset(path)  # the contract's checks: strictly increasing times, shapes, finite values
+    accel = ds.imu["su3"].accel
+    assert accel.shape[0] + ds.joints.t.shape[0] == flushed >= 300
     np.testing.assert_array_equal(accel[:, 2], np.arange(accel.shape[0]))  # in order, none lost
-    # provisional times (fit at each flush): the lower envelope puts them before arrival, mostly close,
-    # and a changing fit steps them back by less than a millisecond
-    assert np.all(t - host_t < 1e-3) and np.median(host_t - t) < 5e-3 and np.all(np.diff(t) > -1e-3)
+    info = subprocess.run([*_CLI, "info", str(path)], capture_output=True, text=True, timeout=60)
+    assert info.returncode == 0 and "su3" in info.stdout, info.stderr
 
 
 def test_cli_record_stops_cleanly_on_sigterm(tmp_path):
@@ -230,10 +247,36 @@ def test_cli_emulate_sends_dataset_with_faults(tmp_path, capsys):
 
 def test_final_remap_only_since_device_restart(tmp_path):
     rec = Recorder(tmp_path / "r.h5", t_origin_s=0.0, host_clock=lambda: 0.0)
-    rec.add(_delivery(encode_packet(1, 0, [5_000_000, 5_010_000], range=[1.0, 1.0]), 1.0))
-    rec.flush({("skin", 1): ClockFit(-4.0, 0.0, 5.0)})  # before the reboot: host = device - 4 s
-    rec.add(_delivery(encode_packet(1, 0, [0, 10_000], range=[2.0, 2.0]), 2.0))  # rebooted clock
+    before = ClockFit(-4.0, 0.0, 5.0)  # before the reboot: host = device - 4 s
+    rec.add(_delivery(encode_packet(1, 0, [5_000_000, 5_010_000], accel=np.ones((2, 3))), 1.0))
+    rec.flush({("skin", 1): before})
+    rec.add(_delivery(encode_packet(1, 1, [5_020_000], accel=np.ones((1, 3))), 1.02))  # pending at the reboot
+    rec.restart(("skin", 1), before)  # what the receiver reports once the reboot is confirmed
+    rec.add(_delivery(encode_packet(1, 0, [0, 10_000], accel=2 * np.ones((2, 3))), 2.0))  # rebooted clock
     summary = rec.finish({("skin", 1): ClockFit(2.0, 0.0, 0.0)})  # the fit after the reboot
-    assert summary.samples == {"tof/su1": 4}
+    assert summary.samples == {"imu/su1": 5} and summary.ignored_samples == 0
     with h5py.File(tmp_path / "r.h5", "r") as f:
-        np.testing.assert_allclose(f["tof/su1/t"][...], [1.0, 1.01, 2.0, 2.01], atol=1e-9)
+        np.testing.assert_allclose(f["imu/su1/t"][...], [1.0, 1.01, 1.02, 2.0, 2.01], atol=1e-9)
+
+
+def test_device_time_going_back_without_restart_is_ignored(tmp_path):
+    """Without a confirmed restart, samples not after the previous device time (a replay that got
+    through, a crafted time) are ignored, so ``t`` stays strictly increasing."""
+    rec = Recorder(tmp_path / "r.h5", t_origin_s=0.0, host_clock=lambda: 0.0)
+    fit = {("skin", 1): ClockFit(0.0, 0.0, 0.0)}
+    rec.add(_delivery(encode_packet(1, 0, [1_000_000, 1_010_000], accel=np.ones((2, 3))), 1.0))
+    rec.add(_delivery(encode_packet(1, 1, [1_005_000, 1_010_000, 1_020_000], accel=np.ones((3, 3))), 1.0))
+    rec.flush(fit)
+    rec.add(_delivery(encode_packet(1, 2, [0, 1_030_000], accel=np.ones((2, 3))), 1.0))
+    summary = rec.finish(fit)
+    assert summary.samples == {"imu/su1": 4} and summary.ignored == {**summary.ignored, "not_increasing": 3}
+    with h5py.File(tmp_path / "r.h5", "r") as f:
+        np.testing.assert_array_equal(f["imu/su1/device_t_us"][...], [1_000_000, 1_010_000, 1_020_000, 1_030_000])
+        assert np.all(np.diff(f["imu/su1/t"][...]) > 0)
+
+
+def test_unit_names_go_through_the_one_name_rule(tmp_path):
+    for bad in ("a/b", "", "..", "x\x1b[31m", " pad"):
+        with pytest.raises(ConfigError, match="name of unit 3"):
+            Recorder(tmp_path / "n.h5", unit_names={3: bad})
+    assert not (tmp_path / "n.h5").exists()

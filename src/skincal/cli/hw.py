@@ -18,15 +18,17 @@ from skincal.errors import ConfigError
 def _status_table(stats, recorder, receiver) -> Table:  # noqa: ANN001  (types from skincal.hw)
     table = Table(title=f"skincal record -> {recorder.path}  (flushed {recorder.flushed_samples} samples)",
                   title_justify="left")
-    for col in ("stream", "packets", "samples", "lost", "late", "dup", "reordered", "offset s", "drift ppm"):
+    for col in ("stream", "packets", "samples", "lost", "late", "dup", "reordered", "stale", "restarts", "offset s",
+                "drift ppm"):
         table.add_column(col, justify="left" if col == "stream" else "right")
     for key, s in stats.streams.items():
         fit = receiver.clock_fit(key)
         table.add_row(f"{key[0]} {key[1]}", str(s.received), str(s.samples), str(s.lost), str(s.late),
-                      str(s.duplicates), str(s.out_of_order), "-" if fit is None else f"{fit.offset_s:.6f}",
+                      str(s.duplicates), str(s.out_of_order), str(s.stale), str(s.restarts),
+                      "-" if fit is None else f"{fit.offset_s:.6f}",
                       "-" if fit is None else f"{fit.drift_ppm:.1f}")
     bad = ", ".join(f"{k} {v}" for k, v in sorted(stats.malformed.items())) or "none"
-    table.caption = f"datagrams {stats.datagrams}; malformed: {bad}"
+    table.caption = f"datagrams {stats.datagrams}; malformed: {bad}; refused (beyond --max-units): {stats.refused}"
     return table
 
 
@@ -35,18 +37,29 @@ def record(
     port: int = typer.Option(..., "--port", help="UDP port to listen on (0: any free port, printed)"),
     out: Path = typer.Option(..., "--out", help="output recording (.h5)"),
     duration: float | None = typer.Option(None, "--duration", help="stop after this many seconds"),
-    bind: str = typer.Option("127.0.0.1", "--bind", help="address to bind (loopback by default)"),
+    bind: str = typer.Option("127.0.0.1", "--bind", help="address to bind; anything but loopback needs --public"),
+    public: bool = typer.Option(False, "--public", help="allow a non-loopback --bind (any sender can then record)"),
+    max_units: int = typer.Option(64, "--max-units", help="skin unit ids accepted (first seen); more are refused"),
+    max_unit_samples: int | None = typer.Option(
+        None, "--max-unit-samples", help="samples kept per unit stream (imu, tof) and joints; more are ignored "
+        "(default 2^22: 11.6 h at 100 Hz)"),
     robot: str | None = typer.Option(None, "--robot", help="robot preset written to /robot (e.g. panda)"),
     flush_every: float = typer.Option(1.0, "--flush-every", help="flush to disk at least every S seconds"),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Record skin (and joint-state) UDP packets into an HDF5 dataset; Ctrl-C or SIGTERM stop cleanly."""
+    from skincal.hw.net import check_bind
+    from skincal.hw.recorder import MAX_UNIT_SAMPLES
     from skincal.hw.session import record as run_record
     from skincal.kinematics.presets import get_robot
 
+    max_unit_samples = MAX_UNIT_SAMPLES if max_unit_samples is None else max_unit_samples
+    check_bind(bind, public, "--bind", "receive from beyond this machine")
     chain = get_robot(robot) if robot else None
     if flush_every <= 0:
         raise ConfigError(f"--flush-every {flush_every} s must be > 0")
+    if max_units < 1 or max_unit_samples < 1:
+        raise ConfigError(f"--max-units {max_units} and --max-unit-samples {max_unit_samples} must be >= 1")
 
     async def main() -> tuple:
         stop = asyncio.Event()
@@ -56,7 +69,7 @@ def record(
         with Live(console=console, refresh_per_second=4, transient=False) as live:
             return await run_record(
                 out, host=bind, port=port, duration_s=duration, stop=stop, robot=chain, overwrite=force,
-                flush_every_s=flush_every,
+                flush_every_s=flush_every, max_units=max_units, max_unit_samples=max_unit_samples,
                 on_start=lambda p: console.print(f"listening on {bind}:{p}", highlight=False),
                 on_tick=lambda st, rec, rx: live.update(_status_table(st, rec, rx)),
             )
@@ -65,8 +78,13 @@ def record(
     if not console.is_terminal:
         console.line()
     lost = sum(s.lost for s in stats.streams.values())
+    stale = sum(s.stale for s in stats.streams.values())
     console.print(f"wrote {summary.path}: {sum(summary.samples.values())} samples in {len(summary.samples)} "
-                  f"streams; lost {lost} packets, malformed {stats.malformed_total}", highlight=False)
+                  f"streams; lost {lost} packets, malformed {stats.malformed_total}, stale {stale}, refused "
+                  f"{stats.refused}, ignored {summary.ignored_samples} samples", highlight=False)
+    if chain is None or "joints" not in summary.samples:
+        console.print("note: no --robot or no joint-state stream: a dataset needs both, so read_dataset, "
+                      "skincal info and calibrate will refuse this recording", highlight=False)
 
 
 @app.command()

@@ -27,6 +27,10 @@ from scipy.optimize import linprog
 
 from skincal.errors import ConfigError
 
+MAX_DRIFT = 0.01
+"""Largest clock drift fitted, dimensionless (10,000 ppm; crystals drift < 100 ppm): the fitted mapping
+always increases with device time, whatever timestamps a sender makes up."""
+
 
 @dataclass(frozen=True)
 class ClockFit:
@@ -130,7 +134,8 @@ def fit_lower_envelope(x: np.ndarray, y: np.ndarray, device_ref_s: float = 0.0, 
     """Line ``a + b x`` below all points ``(x_i, y_i)`` maximising ``sum(a + b x_i)`` (see module doc).
 
     ``x``: ``(N,)`` device time minus ``device_ref_s``, s; ``y``: ``(N,)`` host minus device time, s.
-    Fits the offset only (``b = 0``, ``a = min y``) when the span of ``x`` is below ``min_span_s``.
+    Fits the offset only (``b = 0``, ``a = min y``) when the span of ``x`` is below ``min_span_s``;
+    ``|b|`` is at most :data:`MAX_DRIFT`.
     """
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
@@ -143,7 +148,7 @@ def fit_lower_envelope(x: np.ndarray, y: np.ndarray, device_ref_s: float = 0.0, 
         c=[-1.0, 0.0],  # maximise a_c (sum(xc) = 0)
         A_ub=np.column_stack([np.ones_like(xc), xc]),
         b_ub=y,
-        bounds=[(None, None), (None, None)],
+        bounds=[(None, None), (-MAX_DRIFT, MAX_DRIFT)],
         method="highs",
     )
     if res.status != 0:  # cannot happen for >= 2 distinct x; keep the offset-only fit

@@ -11,10 +11,21 @@ numbers. Per stream the receiver:
   is exactly the number of sequence numbers never received between the first and last delivered;
 * feeds (host receive time, device timestamp of the packet's last sample) to a
   :class:`~skincal.hw.clock.ClockEstimator`;
-* treats a packet as a device *restart* when its sequence number is already behind but its device
-  timestamp is newer than any seen, or more than ``restart_s`` older (duplicates and late packets
-  carry the old timestamps): buffered packets are delivered, sequence state and clock fit start
-  afresh, and ``restarts`` counts it.
+* tells a device *restart* from replayed or stale packets. A packet is *off the stream's epoch* when
+  its device timestamp is more than ``restart_s`` older than the newest one of the stream, or more
+  than ``restart_s`` ahead of it beyond the host time elapsed since, or newer while its sequence
+  number is already passed. The packet format has no boot id, so one such packet proves nothing (a
+  replay looks the same): off-epoch packets are held as a candidate run, and only a consistent run
+  (sequence numbers within ``reorder_window`` of each other and device times ordered like them) of
+  ``restart_packets`` packets spanning ``restart_confirm_s`` of host time, with no new packet of the
+  running epoch arriving meanwhile, is a restart: buffered packets are delivered,
+  ``on_restart(key, last_fit)`` is called, sequence state and clock fit start afresh, the run is
+  replayed into them, and ``restarts`` counts it. A run broken by a packet of the running epoch, or
+  by an inconsistent one, or still unconfirmed when the receiver stops, counts as ``stale`` packets
+  (never delivered, never in the clock fit);
+* accepts at most ``max_units`` skin unit ids and ``max_robots`` joint-state sources (the first seen);
+  datagrams of further sources are counted as ``refused`` and dropped, so a flood of ids cannot grow
+  memory or the recording.
 
 Invalid datagrams are counted by :attr:`PacketError.reason`; nothing a sender does stops the
 receiver. In-order packets go to ``on_packet(Delivery)``. Sequence numbers are unwrapped (u32) into
@@ -26,6 +37,7 @@ from __future__ import annotations
 import asyncio
 import socket
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -37,6 +49,7 @@ StreamKey = tuple[str, int]
 """``("skin", unit_id)`` or ``("joints", robot_id)``."""
 
 _LATE_MEMORY = 1 << 16  # skipped sequence numbers remembered to tell "late" from "duplicate"
+_RUN_MEMORY = 4096  # off-epoch packets held per stream while a restart is unconfirmed (older ones: stale)
 
 
 @dataclass(frozen=True)
@@ -61,15 +74,18 @@ class StreamStats:
     late: int = 0
     restarts: int = 0
     buffered: int = 0
+    stale: int = 0
 
 
 @dataclass(frozen=True)
 class ReceiverStats:
-    """Snapshot of every stream's counters, malformed datagrams by reason and the datagram total."""
+    """Snapshot of every stream's counters, malformed datagrams by reason, the datagram total and the
+    datagrams refused because their source was beyond ``max_units`` / ``max_robots``."""
 
     streams: dict[StreamKey, StreamStats]
     malformed: dict[str, int]
     datagrams: int
+    refused: int = 0
 
     @property
     def malformed_total(self) -> int:
@@ -86,8 +102,11 @@ class _Stream:
     oldest_s: float = 0.0
     skipped: set[int] = field(default_factory=set)
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
-        ("received", "samples", "delivered", "duplicates", "out_of_order", "lost", "late", "restarts"), 0))
-    max_device_us: int = -1
+        ("received", "samples", "delivered", "duplicates", "out_of_order", "lost", "late", "restarts", "stale"), 0))
+    max_device_us: int = -1  # newest device timestamp of the epoch, µs (-1: none yet)
+    max_host_s: float = 0.0  # host time it arrived at
+    run: deque[tuple[SkinPacket | JointPacket, float]] = field(default_factory=deque)  # restart candidates
+    run_top: SkinPacket | JointPacket | None = None  # the run's packet with the newest device time
 
     def unwrap(self, seq: int) -> int:
         ref = self.highest if self.highest is not None else seq
@@ -116,8 +135,12 @@ class SkinReceiver:
         host_clock: host time source, s (``time.monotonic``).
         rcvbuf_bytes: requested socket receive buffer (the kernel may cap it).
         clock_estimator: factory of the per-stream :class:`ClockEstimator` (e.g. to change ``min_span_s``).
-        restart_s: how far back (s of device time) an already-passed sequence number must be stamped
-            to count as a device restart rather than a duplicate or late packet.
+        restart_s: device-time jump (s) that puts a packet off the stream's epoch (see module docstring).
+        restart_packets, restart_confirm_s: a restart needs a consistent run of this many off-epoch
+            packets spanning this many seconds of host time.
+        max_units, max_robots: skin unit ids and joint-state sources accepted (first come); more are refused.
+        on_restart: called with the stream key and its last clock fit (``None`` if none) when a restart
+            is confirmed, after the buffered packets of the old epoch were delivered.
     """
 
     def __init__(
@@ -132,9 +155,18 @@ class SkinReceiver:
         rcvbuf_bytes: int = 4 << 20,
         clock_estimator: Callable[[], ClockEstimator] = ClockEstimator,
         restart_s: float = 5.0,
+        restart_packets: int = 8,
+        restart_confirm_s: float = 0.2,
+        max_units: int = 64,
+        max_robots: int = 4,
+        on_restart: Callable[[StreamKey, ClockFit | None], None] | None = None,
     ) -> None:
         if reorder_window < 1 or reorder_timeout_s <= 0:
             raise ConfigError("receiver: reorder_window must be >= 1 packet and reorder_timeout_s > 0 s")
+        if not restart_s > 0 or restart_packets < 1 or not restart_confirm_s >= 0:
+            raise ConfigError("receiver: restart_s > 0 s, restart_packets >= 1 and restart_confirm_s >= 0 s required")
+        if max_units < 0 or max_robots < 0:
+            raise ConfigError(f"receiver: max_units {max_units} and max_robots {max_robots} must be >= 0")
         if not 0 <= port <= 65535:
             raise ConfigError(f"receiver: port {port} out of range 0..65535")
         self.host, self._requested_port = host, port
@@ -145,9 +177,14 @@ class SkinReceiver:
         self.rcvbuf_bytes = rcvbuf_bytes
         self.clock_estimator = clock_estimator
         self.restart_us = int(restart_s * 1e6)
+        self.restart_packets, self.restart_confirm_s = int(restart_packets), float(restart_confirm_s)
+        self.max_sources = {"skin": int(max_units), "joints": int(max_robots)}
+        self.on_restart = on_restart
         self._streams: dict[StreamKey, _Stream] = {}
+        self._n_sources = {"skin": 0, "joints": 0}
         self._malformed: dict[str, int] = {}
         self._datagrams = 0
+        self._refused = 0
         self._transport: asyncio.DatagramTransport | None = None
         self._sweeper: asyncio.Task | None = None
         self.port: int | None = None
@@ -215,19 +252,28 @@ class SkinReceiver:
             key = ("joints", packet.source_id)
         stream = self._streams.get(key)
         if stream is None:
+            if self._n_sources[key[0]] >= self.max_sources[key[0]]:
+                self._refused += 1
+                return
+            self._n_sources[key[0]] += 1
             stream = self._streams[key] = _Stream(self.clock_estimator())
         self._accept(key, stream, packet, host_s)
+
+    def _off_epoch(self, s: _Stream, seq: int, t_last: int, host_s: float) -> bool:
+        if s.max_device_us < 0:
+            return False
+        behind = s.next_seq is not None and seq < s.next_seq
+        ahead_us = t_last - s.max_device_us - max(host_s - s.max_host_s, 0.0) * 1e6
+        return t_last < s.max_device_us - self.restart_us or ahead_us > self.restart_us or (
+            behind and t_last > s.max_device_us)
 
     def _accept(self, key: StreamKey, s: _Stream, packet: SkinPacket | JointPacket, host_s: float) -> None:
         seq = s.unwrap(packet.seq)
         c = s.counts
         t_last = int(packet.t_us[-1])
-        if s.next_seq is not None and seq < s.next_seq and (
-            t_last > s.max_device_us or t_last < s.max_device_us - self.restart_us
-        ):
-            self._restart(key, s)
-            seq = packet.seq
-        s.max_device_us = max(s.max_device_us, t_last)
+        if self._off_epoch(s, seq, t_last, host_s):
+            self._candidate(key, s, packet, host_s)
+            return
         if s.next_seq is not None and seq < s.next_seq:
             if s.first_seq is not None and seq < s.first_seq:  # before the stream's start: late
                 c["late"] += 1
@@ -241,6 +287,10 @@ class SkinReceiver:
         if seq in s.buffer:
             c["duplicates"] += 1
             return
+        if s.run:  # the running epoch goes on: the candidate run was replayed or stale
+            self._drop_run(s)
+        if t_last > s.max_device_us:
+            s.max_device_us, s.max_host_s = t_last, host_s
         c["received"] += 1
         c["samples"] += packet.n_samples
         if s.highest is not None and seq < s.highest:
@@ -251,6 +301,37 @@ class SkinReceiver:
             s.oldest_s = host_s
         s.buffer[seq] = (packet, host_s)
         self._release(key, s, force=len(s.buffer) > self.reorder_window)
+
+    def _candidate(self, key: StreamKey, s: _Stream, packet: SkinPacket | JointPacket, host_s: float) -> None:
+        """Hold an off-epoch packet in the candidate run; confirm a restart when the run is long enough."""
+        t_last = int(packet.t_us[-1])
+        top = s.run_top
+        if top is not None:
+            step = (packet.seq - top.seq + (1 << 31)) % (1 << 32) - (1 << 31)
+            dt = t_last - int(top.t_us[-1])
+            if step == 0 and dt == 0:
+                s.counts["duplicates"] += 1
+                return
+            if not (0 < abs(step) <= self.reorder_window and step * dt > 0 and abs(dt) <= self.restart_us):
+                self._drop_run(s)  # not one device counting on: start over from this packet
+        if s.run_top is None or t_last > int(s.run_top.t_us[-1]):
+            s.run_top = packet
+        s.run.append((packet, host_s))
+        if len(s.run) > max(_RUN_MEMORY, self.restart_packets):
+            s.run.popleft()
+            s.counts["stale"] += 1
+        if len(s.run) >= self.restart_packets and host_s - s.run[0][1] >= self.restart_confirm_s:
+            run = sorted(s.run, key=lambda ph: int(ph[0].t_us[-1]))
+            s.run.clear()
+            s.run_top = None
+            self._restart(key, s)
+            for p, h in run:
+                self._accept(key, s, p, h)
+
+    def _drop_run(self, s: _Stream) -> None:
+        s.counts["stale"] += len(s.run)
+        s.run.clear()
+        s.run_top = None
 
     # -- ordering --------------------------------------------------------------------------
     def _release(self, key: StreamKey, s: _Stream, force: bool) -> None:
@@ -278,6 +359,8 @@ class SkinReceiver:
     def _restart(self, key: StreamKey, s: _Stream) -> None:
         while s.buffer:
             self._release(key, s, force=True)
+        if self.on_restart is not None:
+            self.on_restart(key, s.clock.fit())
         s.next_seq = s.first_seq = s.highest = None
         s.skipped.clear()
         s.clock = self.clock_estimator()
@@ -299,10 +382,11 @@ class SkinReceiver:
                 self._release(key, s, force=True)
 
     def flush(self) -> None:
-        """Deliver everything buffered now, counting the holes as lost."""
+        """Deliver everything buffered now, counting the holes as lost; an unconfirmed restart run is stale."""
         for key, s in self._streams.items():
             while s.buffer:
                 self._release(key, s, force=True)
+            self._drop_run(s)
 
     # -- output ----------------------------------------------------------------------------
     def stats(self) -> ReceiverStats:
@@ -310,7 +394,7 @@ class SkinReceiver:
         streams = {
             key: StreamStats(**s.counts, buffered=len(s.buffer)) for key, s in sorted(self._streams.items())
         }
-        return ReceiverStats(streams, dict(self._malformed), self._datagrams)
+        return ReceiverStats(streams, dict(self._malformed), self._datagrams, self._refused)
 
     def clock_fit(self, key: StreamKey) -> ClockFit | None:
         """Current device-to-host clock fit of one stream (``None`` if unseen)."""

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from skincal.errors import ConfigError
 from skincal.hw.receiver import ReceiverStats, SkinReceiver
-from skincal.hw.recorder import Recorder, RecordingSummary
+from skincal.hw.recorder import MAX_UNIT_SAMPLES, Recorder, RecordingSummary
 from skincal.kinematics.chain import SerialChain
 
 
@@ -32,12 +32,17 @@ async def record(
     on_start: Callable[[int], None] | None = None,
     on_tick: Callable[[ReceiverStats, Recorder, SkinReceiver], None] | None = None,
     on_flush: Callable[[int], None] | None = None,
+    max_units: int = 64,
+    max_robots: int = 4,
+    max_unit_samples: int = MAX_UNIT_SAMPLES,
 ) -> tuple[RecordingSummary, ReceiverStats]:
     """Receive on ``host:port`` and record to ``path`` until ``duration_s`` (s) elapses or ``stop`` is set.
 
     ``on_start(port)`` is called once bound; ``on_tick(stats, recorder, receiver)`` every ``tick_s``
     seconds (live status); ``on_flush(total_samples)`` after each flush. On the way out (normal end,
-    ``stop``, or cancellation) the reorder buffers are drained and the file finished atomically.
+    ``stop``, or cancellation) the reorder buffers are drained and the file finished atomically, with
+    the receiver's counters as root attributes. ``max_units``/``max_robots`` cap the sources accepted
+    (:class:`SkinReceiver`), ``max_unit_samples`` the samples kept per group (:class:`Recorder`).
     Returns the recording summary and the final receiver counters.
     """
     if duration_s is not None and duration_s <= 0:
@@ -45,18 +50,20 @@ async def record(
     stop = stop or asyncio.Event()
     if Path(path).exists() and not overwrite:  # fail before binding, and bind before creating the file
         raise ConfigError(f"{path}: file exists (choose another --out or allow overwriting)")
-    receiver = SkinReceiver(host, port, reorder_window=reorder_window, reorder_timeout_s=reorder_timeout_s)
+    receiver = SkinReceiver(host, port, reorder_window=reorder_window, reorder_timeout_s=reorder_timeout_s,
+                            max_units=max_units, max_robots=max_robots)
     bound = await receiver.start()
     try:  # no await between binding and attaching the recorder: no datagram is handled in between
         recorder = Recorder(
             path, robot=robot, unit_names=unit_names, flush_every_s=flush_every_s,
             flush_every_samples=flush_every_samples, overwrite=overwrite, description=description,
-            on_flush=on_flush,
+            on_flush=on_flush, max_unit_samples=max_unit_samples,
         )
     except BaseException:
         await receiver.stop()
         raise
     receiver.on_packet = recorder.add
+    receiver.on_restart = recorder.restart
     if on_start is not None:
         on_start(bound)
     t_end = None if duration_s is None else time.monotonic() + duration_s
@@ -72,5 +79,5 @@ async def record(
                 on_tick(receiver.stats(), recorder, receiver)
     finally:
         await receiver.stop()
-        summary = recorder.finish(receiver.clock_fits())
+        summary = recorder.finish(receiver.clock_fits(), receiver.stats())
     return summary, receiver.stats()
