@@ -307,3 +307,15 @@ def test_trajectory_export_carries_crafted_names_as_json_data(tmp_path):
     assert (tmp_path / "t.json").read_bytes().isascii()
     assert (tmp_path / "t.csv").read_text().splitlines()[0] == "t," + ",".join(
         [f"q{i}" for i in range(1, 8)] + [f"qd{i}" for i in range(1, 8)])
+
+
+def test_urdf_with_crafted_names_loads_in_yourdfpy(tmp_path):
+    """Beyond well-formed XML: a URDF library reads the same link and joint names back."""
+    yourdfpy = pytest.importorskip("yourdfpy")
+    result = _result(UNIT_NAMES, method=METHODS[2])
+    export_result(result, "urdf", tmp_path / "s.urdf", prefix="skin_")
+    urdf = yourdfpy.URDF.load(str(tmp_path / "s.urdf"), build_scene_graph=False, load_meshes=False,
+                              build_collision_scene_graph=False)
+    assert [link.name for link in urdf.robot.links] == [f"skin_{u}" for u in result.units]
+    assert [(j.parent, j.child) for j in urdf.robot.joints] == [
+        (f"panda_link{r.pose.link}", f"skin_{u}") for u, r in result.units.items()]
