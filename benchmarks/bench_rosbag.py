@@ -2,15 +2,8 @@
 
     python benchmarks/bench_rosbag.py --seeds 0 1 2 --joint-rate 200 --ros 2 --storage mcap
 
-For each seed: simulate the paper-sim protocol (Panda, paper placement, 6 units, realistic IMU)
-with the joint stream at ``--joint-rate`` Hz (a typical ``/joint_states`` rate), then
-
-* HDF5 path: write/read the dataset with the simulator's protocol segments, calibrate with mle;
-* bag path: write a real bag with rosbags (accelerations in g, rates in deg/s, as the paper's skin
-  sent them), ``read_bag`` (unit detection), ``segment_dataset`` (automatic segments), mle.
-
-Both are evaluated against the simulation truth; prints per-seed errors, timings and the ratio of
-the mean errors (bag / HDF5), and optionally writes JSON.
+A thin script over :mod:`skincal.workflows.bench_rosbag` (what is run, per seed); prints per-seed
+errors, timings and the ratio of the mean errors (bag / HDF5), and optionally writes JSON.
 """
 
 from __future__ import annotations
@@ -18,60 +11,12 @@ from __future__ import annotations
 import argparse
 import json
 import tempfile
-import time
-from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-from skincal.calib import calibrate, evaluate
-from skincal.data.hdf5 import read_dataset, write_dataset
-from skincal.data.rosbag import read_bag, write_bag
-from skincal.data.segment import segment_dataset
-from skincal.kinematics import get_robot
-from skincal.protocol import build_trajectory, get_protocol
-from skincal.sim.analytic import simulate
-from skincal.skin.imu import get_imu_model
-from skincal.skin.placement import paper_placement
-
-
-def run_seed(seed: int, args: argparse.Namespace, workdir: Path) -> dict:
-    chain = get_robot("panda")
-    rng = np.random.default_rng(seed)
-    config = replace(get_protocol(args.protocol), rate_hz=float(args.joint_rate))
-    ds = simulate(chain, paper_placement(chain), build_trajectory(chain, config, rng), get_imu_model(args.noise), rng)
-    h5 = workdir / f"s{seed}.h5"
-    bag = workdir / (f"s{seed}.bag" if args.ros == 1 else f"s{seed}_bag")
-    t = time.perf_counter()
-    write_dataset(ds, h5)
-    ref = calibrate(read_dataset(h5), "mle", seed=seed)
-    t_h5 = time.perf_counter() - t
-    t = time.perf_counter()
-    write_bag(ds, bag, ros_version=args.ros, storage=args.storage, accel_unit="g", gyro_unit="deg")
-    t_write = time.perf_counter() - t
-    t = time.perf_counter()
-    imported, report = read_bag(bag, "panda")
-    t_read = time.perf_counter() - t
-    t = time.perf_counter()
-    imported, seg = segment_dataset(imported)
-    t_seg = time.perf_counter() - t
-    t = time.perf_counter()
-    res = calibrate(imported, "mle", seed=seed)
-    t_cal = time.perf_counter() - t
-    shifted = replace(ds, joints=replace(ds.joints, t=ds.joints.t - ds.joints.t[0]))  # the bag's time origin
-    ev_ref, ev_bag = evaluate(ref, ds), evaluate(res, shifted)
-    n_msgs = sum(report.counts.values())
-    return {
-        "seed": seed, "duration_s": ds.duration, "messages": n_msgs,
-        "segments_true": len(ds.segments), "segments_found": len(seg.segments), "rejected": len(seg.rejected),
-        "hdf5": {k: ev_ref[k] for k in ("mean_position_error_mm", "mean_rotation_error_deg", "links_correct")},
-        "bag": {k: ev_bag[k] for k in ("mean_position_error_mm", "mean_rotation_error_deg", "links_correct")},
-        "units_total": ev_ref["units_total"],
-        "time_s": {"hdf5_total": t_h5, "bag_write": t_write, "bag_read": t_read, "segment": t_seg,
-                   "bag_calibrate": t_cal},
-    }
+from skincal.workflows.bench_rosbag import run_seed, summarise
 
 
 def main() -> None:
@@ -88,31 +33,57 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for seed in args.seeds:
-            rows.append(run_seed(seed, args, Path(tmp)))
+            rows.append(
+                run_seed(
+                    seed,
+                    Path(tmp),
+                    joint_rate=args.joint_rate,
+                    protocol=args.protocol,
+                    noise=args.noise,
+                    ros=args.ros,
+                    storage=args.storage,
+                )
+            )
             console.print(f"seed {seed} done", highlight=False)
-    table = Table(title=f"bag (ROS {args.ros}{'' if args.ros == 1 else ' ' + args.storage}) vs HDF5, mle, "
-                        f"{args.protocol}, {args.noise} IMU, joints at {args.joint_rate:g} Hz")
-    for col in ("seed", "msgs", "segments true/found/rej.", "pos err h5 [mm]", "pos err bag [mm]", "rot h5 [deg]",
-                "rot bag [deg]", "links h5/bag", "write/read/seg/cal [s]"):
+    table = Table(
+        title=f"bag (ROS {args.ros}{'' if args.ros == 1 else ' ' + args.storage}) vs HDF5, mle, "
+        f"{args.protocol}, {args.noise} IMU, joints at {args.joint_rate:g} Hz"
+    )
+    for col in (
+        "seed",
+        "msgs",
+        "segments true/found/rej.",
+        "pos err h5 [mm]",
+        "pos err bag [mm]",
+        "rot h5 [deg]",
+        "rot bag [deg]",
+        "links h5/bag",
+        "write/read/seg/cal [s]",
+    ):
         table.add_column(col)
     for r in rows:
         h, b, ts = r["hdf5"], r["bag"], r["time_s"]
-        table.add_row(str(r["seed"]), str(r["messages"]), f"{r['segments_true']}/{r['segments_found']}/{r['rejected']}",
-                      f"{h['mean_position_error_mm']:.3f}", f"{b['mean_position_error_mm']:.3f}",
-                      f"{h['mean_rotation_error_deg']:.4f}", f"{b['mean_rotation_error_deg']:.4f}",
-                      f"{h['links_correct']}/{b['links_correct']} of {r['units_total']}",
-                      f"{ts['bag_write']:.1f}/{ts['bag_read']:.1f}/{ts['segment']:.2f}/{ts['bag_calibrate']:.1f}")
+        table.add_row(
+            str(r["seed"]),
+            str(r["messages"]),
+            f"{r['segments_true']}/{r['segments_found']}/{r['rejected']}",
+            f"{h['mean_position_error_mm']:.3f}",
+            f"{b['mean_position_error_mm']:.3f}",
+            f"{h['mean_rotation_error_deg']:.4f}",
+            f"{b['mean_rotation_error_deg']:.4f}",
+            f"{h['links_correct']}/{b['links_correct']} of {r['units_total']}",
+            f"{ts['bag_write']:.1f}/{ts['bag_read']:.1f}/{ts['segment']:.2f}/{ts['bag_calibrate']:.1f}",
+        )
     console.print(table)
-    summary = {}
-    for key in ("mean_position_error_mm", "mean_rotation_error_deg"):
-        h5 = float(np.mean([r["hdf5"][key] for r in rows]))
-        bag = float(np.mean([r["bag"][key] for r in rows]))
-        summary[key] = {"hdf5": h5, "bag": bag, "ratio": bag / h5}
+    summary = summarise(rows)
+    for key, s in summary.items():
+        h5, bag = s["hdf5"], s["bag"]
         verdict = "within 10 %" if bag <= 1.1 * h5 else "NOT within 10 %"
         console.print(f"{key}: HDF5 {h5:.4g}, bag {bag:.4g}, ratio {bag / h5:.3f} ({verdict})", highlight=False)
     if args.json:
-        args.json.write_text(json.dumps({"args": {k: str(v) for k, v in vars(args).items()}, "runs": rows,
-                                         "summary": summary}, indent=2))
+        args.json.write_text(
+            json.dumps({"args": {k: str(v) for k, v in vars(args).items()}, "runs": rows, "summary": summary}, indent=2)
+        )
 
 
 if __name__ == "__main__":

@@ -1,0 +1,97 @@
+"""Bag path vs HDF5 path: the same calibration accuracy within 10 % (issue 8 target;
+``benchmarks/bench_rosbag.py``).
+
+For each seed: a simulated session from :func:`skincal.workflows.session.make_session` (Panda, paper
+placement, 6 units, ideal joint states and clocks) with the joint stream at ``joint_rate`` Hz (a typical
+``/joint_states`` rate), then
+
+* HDF5 path: write/read the dataset with the simulator's protocol segments, calibrate with mle;
+* bag path: write a real bag with rosbags (accelerations in g, rates in deg/s, as the paper's skin
+  sent them), ``read_bag`` (unit detection), ``segment_dataset`` (automatic segments), mle.
+
+Both are evaluated against the simulation truth.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ERROR_KEYS = ("mean_position_error_mm", "mean_rotation_error_deg")
+
+
+def run_seed(
+    seed: int,
+    workdir: Path,
+    *,
+    joint_rate: float = 200.0,
+    protocol: str = "paper-sim",
+    noise: str = "realistic",
+    ros: int = 2,
+    storage: str = "mcap",
+) -> dict[str, Any]:
+    """Both paths for one seed: errors, segments found, messages and timings."""
+    from skincal.calib import calibrate, evaluate
+    from skincal.data.hdf5 import read_dataset, write_dataset
+    from skincal.data.rosbag import read_bag, write_bag
+    from skincal.data.segment import segment_dataset
+    from skincal.protocol import get_protocol
+    from skincal.sim import simulate
+    from skincal.workflows.session import make_session
+
+    config = replace(get_protocol(protocol), rate_hz=float(joint_rate))
+    ds = simulate(make_session("panda", "paper", None, noise, config, seed, joints="ideal", clock="ideal"))
+    h5 = workdir / f"s{seed}.h5"
+    bag = workdir / (f"s{seed}.bag" if ros == 1 else f"s{seed}_bag")
+    t = time.perf_counter()
+    write_dataset(ds, h5)
+    ref = calibrate(read_dataset(h5), "mle", seed=seed)
+    t_h5 = time.perf_counter() - t
+    t = time.perf_counter()
+    write_bag(ds, bag, ros_version=ros, storage=storage, accel_unit="g", gyro_unit="deg")
+    t_write = time.perf_counter() - t
+    t = time.perf_counter()
+    imported, report = read_bag(bag, "panda")
+    t_read = time.perf_counter() - t
+    t = time.perf_counter()
+    imported, seg = segment_dataset(imported)
+    t_seg = time.perf_counter() - t
+    t = time.perf_counter()
+    res = calibrate(imported, "mle", seed=seed)
+    t_cal = time.perf_counter() - t
+    shifted = replace(ds, joints=replace(ds.joints, t=ds.joints.t - ds.joints.t[0]))  # the bag's time origin
+    ev_ref, ev_bag = evaluate(ref, ds), evaluate(res, shifted)
+    keys = (*ERROR_KEYS, "links_correct")
+    return {
+        "seed": seed,
+        "duration_s": ds.duration,
+        "messages": sum(report.counts.values()),
+        "segments_true": len(ds.segments),
+        "segments_found": len(seg.segments),
+        "rejected": len(seg.rejected),
+        "hdf5": {k: ev_ref[k] for k in keys},
+        "bag": {k: ev_bag[k] for k in keys},
+        "units_total": ev_ref["units_total"],
+        "time_s": {
+            "hdf5_total": t_h5,
+            "bag_write": t_write,
+            "bag_read": t_read,
+            "segment": t_seg,
+            "bag_calibrate": t_cal,
+        },
+    }
+
+
+def summarise(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """Mean error of each path over the seeds and their ratio (bag / HDF5), per error kind."""
+    out = {}
+    for key in ERROR_KEYS:
+        h5 = float(np.mean([r["hdf5"][key] for r in rows]))
+        bag = float(np.mean([r["bag"][key] for r in rows]))
+        out[key] = {"hdf5": h5, "bag": bag, "ratio": bag / h5}
+    return out
