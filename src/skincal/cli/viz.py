@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console
+from skincal.cli.app import app, console, err_console
 from skincal.errors import ConfigError
 
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
@@ -124,14 +124,24 @@ def report(
         from skincal.data.atomic import check_output
 
         check_output(out, force=force, inputs=(result, dataset))
-    res = read_result(result)
-    ds = read_dataset(dataset)
-    if out is None:
-        if fmt != "md":
-            raise ConfigError("--out is required for --format html")
-        typer.echo(render_markdown(collect(res, ds, use_dataset_qdd=use_dataset_qdd)), nl=False)
-        return
-    from skincal.viz.report import write_report
+    if out is None and fmt != "md":
+        raise ConfigError("--out is required for --format html")
+    from rich.markup import escape
 
-    write_report(res, ds, out, fmt, dataset_sha256=sha256_file(dataset), use_dataset_qdd=use_dataset_qdd)
+    from skincal.data.names import printable
+
+    with err_console.status("reading the result and the dataset") as status:  # transient, on stderr
+        progress = lambda message: status.update(escape(printable(f"report: {message}")))  # noqa: E731
+        res = read_result(result)
+        ds = read_dataset(dataset)
+        if out is None:
+            text = render_markdown(collect(res, ds, use_dataset_qdd=use_dataset_qdd, shown=0, progress=progress))
+        else:
+            from skincal.viz.report import write_report
+
+            write_report(res, ds, out, fmt, dataset_sha256=sha256_file(dataset), use_dataset_qdd=use_dataset_qdd,
+                         progress=progress)
+    if out is None:
+        typer.echo(text, nl=False)
+        return
     console.print(f"wrote {out}", highlight=False)

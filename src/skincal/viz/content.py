@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -13,7 +14,10 @@ from skincal.data.dataset import Dataset
 from skincal.data.result import CalibrationResult, failed_units
 from skincal.errors import DatasetError
 from skincal.kinematics.transforms import FloatArray
-from skincal.viz.residuals import UnitResiduals, activity_matrix, sensor_model, unit_residuals
+from skincal.viz.residuals import PLOT_POINTS, UnitResiduals, sensor_model, unit_activity, unit_residuals
+
+WORST_SHOWN = 10
+"""Units whose residuals the HTML report plots: the worst by the report's key figure (:class:`Ranking`)."""
 
 
 @dataclass(frozen=True)
@@ -36,6 +40,31 @@ class UnitRow:
 
 
 @dataclass(frozen=True)
+class Ranking:
+    """The calibrated units from worst to best by the report's key figure: the position error against
+    the truth (mm) when the dataset has truth for every unit, else the accelerometer residual RMS
+    (m/s^2). Units whose figure is NaN come last.
+
+    Attributes:
+        figure: what ``values`` are, with their unit (a column heading).
+        values: unit -> key figure, worst first.
+    """
+
+    figure: str
+    values: dict[str, float]
+
+    def worst(self, n: int) -> list[str]:
+        """The ``n`` worst units."""
+        return list(self.values)[: max(0, n)]
+
+
+def rank_units(values: dict[str, float], figure: str) -> Ranking:
+    """A :class:`Ranking` of ``values`` (larger is worse; NaN last; ties in the given order)."""
+    order = sorted(values, key=lambda u: (not np.isfinite(values[u]), -np.nan_to_num(values[u], nan=0.0)))
+    return Ranking(figure, {u: float(values[u]) for u in order})
+
+
+@dataclass(frozen=True)
 class ReportContent:
     """Inputs of a calibration report.
 
@@ -43,10 +72,13 @@ class ReportContent:
         result: the calibration result.
         dataset: the dataset it was computed from.
         rows: per-unit table rows, in the result's unit order.
-        residuals: per-unit accelerometer residuals (:func:`unit_residuals`).
+        residuals: accelerometer residuals (:func:`unit_residuals`, thinned for plotting with
+            :meth:`UnitResiduals.thinned`) of the units the report plots: the worst ``shown`` units of
+            ``ranking``, worst first. The full residual RMS of every unit is in ``rows``.
         activity: ``(units, n)`` data coverage (:func:`activity_matrix`), rows in ``rows`` order.
         evaluation: the ``skincal evaluate`` document when the dataset has truth for every unit, else None.
         failed: units the method could not calibrate, with the reason.
+        ranking: every calibrated unit, worst first by the key figure (:class:`Ranking`).
     """
 
     result: CalibrationResult
@@ -56,20 +88,53 @@ class ReportContent:
     activity: FloatArray
     evaluation: dict[str, Any] | None
     failed: dict[str, str]
+    ranking: Ranking = field(default_factory=lambda: Ranking("", {}))
 
 
-def collect(result: CalibrationResult, dataset: Dataset, *, use_dataset_qdd: bool = False) -> ReportContent:
+def collect(
+    result: CalibrationResult,
+    dataset: Dataset,
+    *,
+    use_dataset_qdd: bool = False,
+    shown: int = WORST_SHOWN,
+    max_points: int = PLOT_POINTS,
+    progress: Callable[[str], None] | None = None,
+) -> ReportContent:
     """Recompute residuals and coverage for every unit of ``result`` on ``dataset``.
 
     ``use_dataset_qdd``: predict with the dataset's joint accelerations instead of estimating them
-    from the velocities (as ``skincal calibrate --use-dataset-qdd`` does)."""
+    from the velocities (as ``skincal calibrate --use-dataset-qdd`` does). ``shown``: how many of
+    the worst units keep their residual traces (thinned to ``max_points`` samples) for plots; the
+    others keep only their RMS figures, so memory does not grow with the recording times the units.
+    ``progress``: called with a short message as each unit is done."""
     missing = [u for u in result.units if u not in dataset.imu]
     if missing:
         raise DatasetError(f"dataset has no IMU data for unit(s) {', '.join(missing)} of the result")
     if result.robot and dataset.robot.name and result.robot != dataset.robot.name:
         raise DatasetError(f"result is for robot '{result.robot}' but the dataset is of '{dataset.robot.name}'")
+    note = progress or (lambda _message: None)
     interp = JointInterpolator(dataset.joints, use_dataset_qdd=use_dataset_qdd)
-    residuals = {name: unit_residuals(dataset, name, unit, interp) for name, unit in result.units.items()}
+    evaluation = evaluate(result, dataset) if dataset.truth and all(u in dataset.truth for u in result.units) else None
+    ranking = None
+    if evaluation is not None:  # the key figure is known before the residuals: keep only the shown units' traces
+        ranking = rank_units({u: evaluation["units"][u]["position_error_mm"] for u in result.units},
+                             "position error against the truth [mm]")
+        keep = set(ranking.worst(shown))
+    traces: dict[str, UnitResiduals] = {}
+    rms: dict[str, float] = {}
+    activity = np.full((len(result.units), dataset.robot.n_joints), np.nan)
+    total = len(result.units)
+    for i, (name, unit) in enumerate(result.units.items()):
+        r = unit_residuals(dataset, name, unit, interp)
+        rms[name] = r.rms
+        if ranking is None or name in keep:
+            traces[name] = r.thinned(max_points)
+        del r
+        activity[i] = unit_activity(dataset, name, interp)
+        note(f"residuals and coverage {i + 1}/{total}: {name}")
+    if ranking is None:
+        ranking = rank_units(rms, "accelerometer residual RMS [m/s²]")
+    residuals = {u: traces[u] for u in ranking.worst(shown)}
     rows = []
     for name, unit in result.units.items():
         ex = unit.extras
@@ -86,12 +151,8 @@ def collect(result: CalibrationResult, dataset: Dataset, *, use_dataset_qdd: boo
                 bias_mps2=b if "accel_bias_mps2" in ex else None,
                 scale=np.diag(A).copy() if ex.get("scale_estimated", "accel_scale_misalignment" in ex) else None,
                 time_offset_s=tau if ex.get("time_offset_s") is not None else None,
-                residual_rms_mps2=residuals[name].rms,
+                residual_rms_mps2=rms[name],
                 warnings=unit.warnings,
             )
         )
-    evaluation = evaluate(result, dataset) if dataset.truth and all(u in dataset.truth for u in result.units) else None
-    failed = failed_units(result)
-    return ReportContent(
-        result, dataset, rows, residuals, activity_matrix(dataset, list(result.units), interp), evaluation, failed
-    )
+    return ReportContent(result, dataset, rows, residuals, activity, evaluation, failed_units(result), ranking)

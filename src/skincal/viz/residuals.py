@@ -25,6 +25,9 @@ from skincal.data.dataset import Dataset
 from skincal.data.result import UnitResult
 from skincal.kinematics.transforms import FloatArray
 
+PLOT_POINTS = 2000
+"""Samples per residual curve in the report's plots (:meth:`UnitResiduals.thinned`): a picture, not the data."""
+
 
 @dataclass(frozen=True)
 class UnitResiduals:
@@ -38,6 +41,9 @@ class UnitResiduals:
         kind: ``(M,)`` 0 static, 1 dynamic, -1 outside.
         joint: ``(M,)`` 0-based excited joint, -1 when static or outside.
         segment_rms: ``(S,)`` RMS residual norm per dataset segment, m/s^2 (NaN: no samples).
+        rms_mps2: RMS residual norm over every sample when the arrays are a thinned copy
+            (:meth:`thinned`), else None (computed from ``residual``).
+        n_samples: samples before thinning, None when not thinned.
     """
 
     unit: str
@@ -49,11 +55,48 @@ class UnitResiduals:
     kind: np.ndarray
     joint: np.ndarray
     segment_rms: FloatArray
+    rms_mps2: float | None = None
+    n_samples: int | None = None
 
     @property
     def rms(self) -> float:
-        """RMS residual norm over every sample, m/s^2."""
+        """RMS residual norm over every sample (of the full data, also for a thinned copy), m/s^2."""
+        if self.rms_mps2 is not None:
+            return self.rms_mps2
         return float(np.sqrt(np.mean(np.sum(self.residual**2, axis=1)))) if len(self.t) else float("nan")
+
+    def thinned(self, max_points: int = PLOT_POINTS) -> UnitResiduals:
+        """A copy with at most ``max_points`` samples for plotting (:func:`envelope_indices` of the
+        residual: each component's minimum and maximum in every time bucket are kept, so spikes stay
+        visible); ``rms``, ``segment_rms`` and ``n_samples`` still describe the full data."""
+        n = len(self.t) if self.n_samples is None else self.n_samples
+        idx = envelope_indices(self.residual, max_points)
+        if len(idx) == len(self.t):
+            return replace(self, rms_mps2=self.rms, n_samples=n)
+        return UnitResiduals(
+            self.unit, self.t[idx], self.measured[idx], self.predicted[idx], self.residual[idx], self.segment[idx],
+            self.kind[idx], self.joint[idx], self.segment_rms, self.rms, n,
+        )
+
+
+def envelope_indices(values: FloatArray, max_points: int = PLOT_POINTS) -> np.ndarray:
+    """Sorted indices of at most ``max_points`` rows of ``values`` ``(M,)`` or ``(M, k)`` that keep
+    the envelope: the rows are cut into equal time buckets and, per bucket, the rows of each column's
+    minimum and maximum are kept (plus the first and last row). NaN is never chosen over a number."""
+    v = np.asarray(values, dtype=float).reshape(len(values), -1)
+    m, k = v.shape
+    if m <= max(max_points, 2):
+        return np.arange(m)
+    n_buckets = max(1, (max_points - 2) // (2 * k))
+    size = -(-m // n_buckets)
+    pad = n_buckets * size - m
+    lo = np.pad(np.where(np.isnan(v), np.inf, v), ((0, pad), (0, 0)), constant_values=np.inf)
+    hi = np.pad(np.where(np.isnan(v), -np.inf, v), ((0, pad), (0, 0)), constant_values=-np.inf)
+    base = (np.arange(n_buckets) * size)[:, None]
+    i_min = base + np.argmin(lo.reshape(n_buckets, size, k), axis=1)
+    i_max = base + np.argmax(hi.reshape(n_buckets, size, k), axis=1)
+    idx = np.unique(np.concatenate([i_min.ravel(), i_max.ravel(), [0, m - 1]]))
+    return idx[idx < m]
 
 
 def sensor_model(unit: UnitResult) -> tuple[FloatArray, FloatArray, float]:
@@ -88,11 +131,10 @@ def unit_residuals(
     predicted = (v_link @ pose.R_link_su) @ A.T + b
     residual = s.accel - predicted
     n_seg = len(dataset.segments) if dataset.segments is not None else 0
-    sq = np.zeros(n_seg)
-    count = np.zeros(n_seg)
     inside = s.segment >= 0
-    np.add.at(sq, s.segment[inside], np.sum(residual[inside] ** 2, axis=1))
-    np.add.at(count, s.segment[inside], 1.0)
+    sq = np.bincount(s.segment[inside], weights=np.einsum("ij,ij->i", residual[inside], residual[inside]),
+                     minlength=n_seg)[:n_seg]
+    count = np.bincount(s.segment[inside], minlength=n_seg)[:n_seg].astype(float)
     with np.errstate(invalid="ignore", divide="ignore"):
         seg_rms = np.where(count > 0, np.sqrt(sq / np.maximum(count, 1.0)), np.nan)
     return UnitResiduals(name, s.t, s.accel, predicted, residual, s.segment, s.kind, s.joint, seg_rms)
@@ -104,9 +146,14 @@ def activity_matrix(dataset: Dataset, units: list[str], interpolator: JointInter
     NaN: joint never excited). Uses the gyroscope too when the dataset has it."""
     if interpolator is None:
         interpolator = JointInterpolator(dataset.joints)
-    n = dataset.robot.n_joints
-    rows = []
-    for name in units:
-        s = unit_samples(dataset, name, interpolator=interpolator)
-        rows.append(discover_link(s, n, use_gyro=True).activity)
-    return np.array(rows).reshape(len(units), n)
+    rows = [unit_activity(dataset, name, interpolator) for name in units]
+    return np.array(rows).reshape(len(units), dataset.robot.n_joints)
+
+
+def unit_activity(dataset: Dataset, name: str, interpolator: JointInterpolator | None = None) -> FloatArray:
+    """One row of :func:`activity_matrix`: ``(n,)`` activity of each joint on unit ``name``."""
+    if interpolator is None:
+        interpolator = JointInterpolator(dataset.joints)
+    s = unit_samples(dataset, name, interpolator=interpolator)
+    return discover_link(s, dataset.robot.n_joints, use_gyro=True).activity
+

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from skincal.viz.content import ReportContent
+from skincal.viz.content import WORST_SHOWN, ReportContent
 
 
 def _cell(text: str) -> str:
@@ -23,13 +23,34 @@ def _table(header: list[str], rows: list[list[str]]) -> list[str]:
     return lines
 
 
-def render_markdown(content: ReportContent) -> str:
-    """The summary: header line, per-unit table (pose, std, residual, sensor parameters, warnings),
-    errors against the truth when available, data coverage (joints that moved each unit)."""
+def _worst(content: ReportContent, n: int) -> list[str]:
+    """The ``n`` worst units by the report's key figure (empty when there is no ranking or ``n`` is 0)."""
+    ranking = content.ranking
+    worst = ranking.worst(n)
+    if not worst:
+        return []
+    by_name = {r.name: r for r in content.rows}
+    total = len(ranking.values)
+    what = f"The {len(worst)} worst of {total} unit(s)" if len(worst) < total else f"All {total} unit(s)"
+    rows = []
+    for i, name in enumerate(worst):
+        r, value = by_name[name], ranking.values[name]
+        notes = ([] if r.observable else ["UNOBSERVABLE"]) + list(r.warnings)
+        rows.append([str(i + 1), name, "n/a" if not np.isfinite(value) else f"{value:.4g}", str(r.link),
+                     f"{r.residual_rms_mps2:.4f}", "; ".join(notes) or "-"])
+    return ["", "## Worst units", "", f"{what} by {ranking.figure}, worst first.", "",
+            *_table(["#", "unit", ranking.figure, "link", "resid RMS [m/s2]", "warnings"], rows)]
+
+
+def render_markdown(content: ReportContent, worst: int = WORST_SHOWN) -> str:
+    """The summary: header line, the ``worst`` worst units by the key figure, per-unit table (pose,
+    std, residual, sensor parameters, warnings), errors against the truth when available, data
+    coverage (joints that moved each unit)."""
     res, ds = content.result, content.dataset
     out = [f"# skincal calibration: {res.method} on {res.robot}", ""]
     out.append(f"{len(res.units)} unit(s), runtime {res.runtime_s:.2f} s; dataset {ds.duration:.1f} s"
                + (f" ({ds.description})" if ds.description else ""))
+    out += _worst(content, worst)
     out += ["", "## Units", ""]
     rows = []
     for r in content.rows:
