@@ -256,9 +256,9 @@ def _write_doc(path, doc) -> None:
 
 @pytest.mark.parametrize(("unit", "robot", "shown"), [
     ("su\x1b[2J\nx", "panda", "su\\x1b[2J\\nx"),  # refused by the result reader or the exporter
-    ("su\ud800", "panda", "su\\ud800"),  # a lone surrogate: the reader lets it through
+    ("su\ud800", "panda", "su\\ud800"),  # a lone surrogate (no UTF-8 for it)
     ("su\uffff", "panda", "su\\uffff"),  # not an XML character
-    ("su2", "panda\ud800", "panda\\ud800"),
+    ("su2", "panda\ud800", "robot"),  # the result reader names the field
 ])
 def test_cli_refuses_a_bad_unit_or_robot_name_with_one_line(tmp_path, capsys, unit, robot, shown):
     doc = result_to_dict(_result(["su1", "su2"]))

@@ -171,30 +171,18 @@ def _num(x: float) -> str:
 
 
 # ---------------------------------------------------------------------- names and escaping
-_NOT_XML = re.compile("[\ud800-\udfff\ufffe\uffff]")
-"""Characters that :func:`name_problem` lets through but no UTF-8 XML document can carry."""
-
-
 def _shown(text: str) -> str:
-    """``text`` for a one-line message: control characters (:func:`printable`), lone surrogates,
-    U+FFFE and U+FFFF escaped."""
-    return _NOT_XML.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), printable(text))
-
-
-def _name_problem(name: object) -> str | None:
-    problem = name_problem(name)
-    if problem is None and _NOT_XML.search(str(name)):
-        return "contains a character that XML and UTF-8 cannot carry (a lone surrogate, U+FFFE or U+FFFF)"
-    return problem
+    """``text`` for a one-line message (:func:`printable`)."""
+    return printable(text)
 
 
 def _frame_problem(frame: object) -> str | None:
     """A ROS frame id may be namespaced (``robot1/base_link``): each ``/``-separated part must be a
     name (:func:`_name_problem`)."""
     if not isinstance(frame, str) or "/" not in frame:
-        return _name_problem(frame)
+        return name_problem(frame)
     for part in frame.split("/"):
-        problem = _name_problem(part)
+        problem = name_problem(part)
         if problem is not None:
             return f"has a part '{_shown(part)}' that {problem}"
     return None
@@ -204,11 +192,11 @@ def check_names(result: CalibrationResult, frames: list[UnitFrame], prefix: str 
     """Refuse, with a one-line :class:`DatasetError` (names from the result) or :class:`ConfigError`
     (frame names from the link map or the prefix), any name an export would carry that
     :func:`skincal.data.names.name_problem` refuses. Every writer calls it before writing a byte."""
-    problem = _name_problem(result.robot)
+    problem = name_problem(result.robot)
     if problem is not None:
         raise DatasetError(f"robot name '{_shown(str(result.robot))}' {problem}; the result cannot be exported")
     for f in frames:
-        problem = _name_problem(f.unit)
+        problem = name_problem(f.unit)
         if problem is not None:
             raise DatasetError(f"unit name '{_shown(str(f.unit))}' {problem}; rename the unit in the result to "
                                "export it")

@@ -23,8 +23,9 @@ MAX_NAME_CHARS = 128
 def _is_control(ch: str) -> bool:
     # Cc: C0/C1 controls (ESC, NUL, newline, DEL ...); Cf: format characters such as the bidi
     # overrides (U+202E) that make a terminal show text in another order than it is stored;
-    # Zl/Zp: line and paragraph separators.
-    return unicodedata.category(ch) in ("Cc", "Cf", "Zl", "Zp")
+    # Zl/Zp: line and paragraph separators; Cs: lone surrogates and the non-characters U+FFFE and
+    # U+FFFF, which neither UTF-8 nor an XML document can carry.
+    return unicodedata.category(ch) in ("Cc", "Cf", "Zl", "Zp", "Cs") or ch in "\ufffe\uffff"
 
 
 def name_problem(name: object) -> str | None:
@@ -40,7 +41,7 @@ def name_problem(name: object) -> str | None:
     if "/" in name:
         return "contains '/'"
     if any(_is_control(ch) for ch in name):
-        return "contains a control character"
+        return "contains a control character (or one UTF-8 and XML cannot carry)"
     if name != name.strip():
         return "starts or ends with white space"
     return None
