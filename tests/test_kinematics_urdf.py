@@ -224,3 +224,35 @@ def test_dh_presets_match_the_registry_urdfs(preset, urdf, tip, tol):
     np.testing.assert_allclose(np.linalg.norm(np.cross(cu - cd, zd), axis=-1), 0.0, atol=tol)
     flange_u, flange_d = (Fu[:, -1] @ u.T_link_flange)[:, :3, 3], (Fd[:, -1] @ d.T_link_flange)[:, :3, 3]
     np.testing.assert_allclose(flange_u, flange_d, atol=tol)  # the point; its axes are a convention
+
+
+def test_get_robot_takes_a_urdf_and_its_chain_options(tmp_path):
+    from skincal.kinematics import get_robot
+
+    path = robots_dir() / REGISTRY_URDFS["ur5"]
+    assert get_robot(str(path)).n_joints == 6
+    assert get_robot(str(path), tip_link="wrist_1_link").n_joints == 4
+    with pytest.raises(ConfigError, match="apply to a URDF robot only"):
+        get_robot("panda", tip_link="panda_link3")
+    with pytest.raises(ConfigError, match="no such URDF file"):
+        get_robot(str(tmp_path / "arm.urdf"))
+
+
+@pytest.mark.parametrize("robot", ["ur5", "xarm7", "kinova"])
+def test_urdf_link_capsules_form_one_connected_body(robot):
+    """Each link's capsule core starts where the previous link's ends (at the joint between them),
+    in the base frame at random configurations: the body has no gaps and no detached pieces."""
+    from skincal.kinematics.chain import transform_points
+    from skincal.kinematics.geometry import link_capsules
+
+    chain = chain_from_urdf(robots_dir() / REGISTRY_URDFS[robot])
+    capsules = link_capsules(chain)
+    q = np.random.default_rng(4).uniform(-2.0, 2.0, (5, chain.n_joints))
+    T = chain.link_frames(q)
+    first = {c.link: c for c in reversed(capsules)}  # each link's first piece
+    last = {c.link: c for c in capsules}  # each link's last piece
+    assert sorted(first) == list(range(chain.n_joints + 1))
+    for k in range(chain.n_joints):
+        end = transform_points(T[:, k], last[k].p1)
+        start = transform_points(T[:, k + 1], first[k + 1].p0)
+        np.testing.assert_allclose(end, start, atol=1e-12)

@@ -1,4 +1,7 @@
-"""Simple collision/surface geometry of a DH chain: capsules along the link polylines.
+"""Simple collision/surface geometry of a chain: capsules along the link polylines.
+
+A link of a general (URDF) chain is the polyline from the point of its own joint through its frame
+origin to the point of the next joint (the flange for the last link).
 
 A DH link is a polyline between consecutive joint axes. In modified DH, link ``k`` (fixed to DH
 frame {k}) runs from the origin of frame {k} along ``x_k`` by ``a_{k+1}`` and then along
@@ -54,7 +57,14 @@ def link_capsules(chain: SerialChain, radius: float | FloatArray = DEFAULT_LINK_
     radii = np.broadcast_to(np.asarray(radius, dtype=float), (n + 1,))
     polylines: list[list[FloatArray]] = [[] for _ in range(n + 1)]
     zero = np.zeros(3)
-    if chain.convention == "modified":
+    if chain.dh is None:
+        # General chain: link k runs from joint k's point (on its axis, fixed in link k) through its
+        # frame origin to joint k+1's point; the last link to the flange; the base to joint 1.
+        for k in range(n + 1):
+            start = invert(chain.T_joint_link[k - 1])[:3, 3] if k >= 1 else zero
+            end = chain.T_parent_joint[k][:3, 3] if k < n else chain.T_link_flange[:3, 3]
+            polylines[k] = [start, zero, end]
+    elif chain.convention == "modified":
         # Link k (0..n-1) ends at frame {k+1}: T_{k,k+1} = Rx(alpha) Tx(a) Rz(theta) Tz(d).
         for k in range(n):
             _, d, a, alpha = chain.dh[k]

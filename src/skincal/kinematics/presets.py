@@ -127,13 +127,24 @@ def xarm7() -> SerialChain:
 PRESETS = {"panda": panda, "sawyer": sawyer, "ur5": ur5, "ur5e": ur5e, "ur10e": ur10e, "xarm7": xarm7}
 
 
-def get_robot(name: str) -> SerialChain:
-    """A preset by name, or a chain file (``.yaml``, ``.yml``, ``.json``) by path."""
+def get_robot(name: str, *, base_link: str | None = None, tip_link: str | None = None) -> SerialChain:
+    """A preset by name, a URDF (``.urdf``; ``base_link``/``tip_link`` pick the serial chain, see
+    :func:`skincal.kinematics.urdf.chain_from_urdf`) or a DH chain file (``.yaml``, ``.yml``,
+    ``.json``) by path."""
+    suffix = Path(name).suffix.lower()
+    if (base_link is not None or tip_link is not None) and suffix != ".urdf":
+        raise ConfigError("--base-link and --tip-link apply to a URDF robot only")
     if name in PRESETS:
         return PRESETS[name]()
-    if Path(name).suffix.lower() in (".yaml", ".yml", ".json"):
+    if suffix == ".urdf":
+        from skincal.kinematics.urdf import chain_from_urdf
+
+        return chain_from_urdf(name, base_link=base_link, tip_link=tip_link)
+    if suffix in (".yaml", ".yml", ".json"):
         return load_chain(name)
-    raise ConfigError(f"unknown robot '{name}' (presets: {', '.join(PRESETS)}; or a .yaml/.json chain file)")
+    raise ConfigError(
+        f"unknown robot '{name}' (presets: {', '.join(PRESETS)}; or a .urdf file, or a .yaml/.json DH chain file)"
+    )
 
 
 def load_chain(path: str | Path) -> SerialChain:
