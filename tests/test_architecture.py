@@ -3,7 +3,7 @@
 Every import counts, at module level and inside functions (a lazy import is still a dependency). The rules:
 library packages (kinematics, skin, protocol, sim, data, calib, perception, control, hw) import neither ``cli``
 nor ``workflows`` nor ``viz``; ``control`` and ``calib`` import no ``sim``; ``viz`` is imported only by ``cli``
-and ``workflows``; ``workflows`` does not import ``cli``.
+and ``workflows``; neither ``workflows`` nor ``viz`` imports ``cli``.
 """
 
 from __future__ import annotations
@@ -83,8 +83,8 @@ def violations(all_edges: list[tuple[str, str, str]]) -> list[str]:
             bad.append(f"{src} depends on sim: {where}")
         elif dst == "viz" and src not in ("cli", "workflows"):
             bad.append(f"viz imported by {src}: {where}")
-        elif src == "workflows" and dst == "cli":
-            bad.append(f"workflows depends on cli: {where}")
+        elif src in ("workflows", "viz") and dst == "cli":
+            bad.append(f"{src} depends on cli: {where}")
     return sorted(set(bad))
 
 
@@ -118,8 +118,10 @@ def test_checker_sees_function_level_and_relative_imports(fake_tree):
     (fake_tree / "control" / "play.py").write_text("from ..viz import model\n")
     (fake_tree / "sim" / "x.py").write_text("import skincal.workflows.sweep\n")
     (fake_tree / "workflows" / "ok.py").write_text("from skincal.viz.model import Recording\nfrom skincal import sim\n")
+    (fake_tree / "viz" / "up.py").write_text("import skincal.cli.app\n")
     bad = violations(edges())
     assert any("control depends on sim: skincal/control/loop.py:2" in b for b in bad)
     assert any("library package control depends on viz: skincal/control/play.py:1" in b for b in bad)
     assert any("library package sim depends on workflows: skincal/sim/x.py:1" in b for b in bad)
+    assert any("viz depends on cli: skincal/viz/up.py:1" in b for b in bad)
     assert not any("workflows/ok.py" in b for b in bad)
