@@ -3,32 +3,15 @@ presets, Pinocchio (its own URDF parser and kinematics), and finite differences 
 
 from __future__ import annotations
 
-import importlib.metadata
-from pathlib import Path
-
 import numpy as np
 import pytest
+from registry_robots import REGISTRY_URDFS, robots_dir
 
 from skincal.errors import ConfigError
 from skincal.kinematics import panda
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import homogeneous, matrix_from_quat_wxyz
 from skincal.kinematics.urdf import chain_from_urdf
-
-
-def robots_dir() -> Path:
-    """The URDFs shipped by the ``example-robot-data`` package (a test dependency)."""
-    dist = importlib.metadata.distribution("example-robot-data")
-    return Path(str(dist.locate_file("cmeel.prefix/share/example-robot-data/robots")))
-
-
-REGISTRY_URDFS = {
-    "panda": "panda_description/urdf/panda.urdf",
-    "ur5": "ur_description/urdf/ur5_robot.urdf",
-    "ur10": "ur_description/urdf/ur10_robot.urdf",
-    "xarm7": "xarm_description/urdf/xarm7.urdf",
-    "kinova": "kinova_description/robots/kinova.urdf",
-}
 
 
 def random_chain(rng: np.random.Generator, n: int) -> SerialChain:

@@ -12,6 +12,7 @@ from scipy.spatial.transform import Rotation
 from skincal.errors import ConfigError
 from skincal.kinematics import GRAVITY_BASE, SerialChain, get_robot
 from skincal.kinematics.geometry import link_capsules
+from skincal.kinematics.urdf import chain_from_urdf
 from skincal.sim.mujoco_model import (
     PANDA_INERTIALS,
     SensorIndex,
@@ -44,7 +45,8 @@ def random_chain(n: int, convention: str, rng: np.random.Generator) -> SerialCha
             rng.choice([-np.pi / 2, 0.0, np.pi / 2, 0.3], n),
         ]
     )
-    return SerialChain.from_dh(f"random{n}{convention[0]}", convention, dh, joint_lower=-np.full(n, 3.0), joint_upper=np.full(n, 3.0))
+    name, lim = f"random{n}{convention[0]}", np.full(n, 3.0)
+    return SerialChain.from_dh(name, convention, dh, joint_lower=-lim, joint_upper=lim)
 
 
 def random_state(chain: SerialChain, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -65,10 +67,20 @@ def analytic_imu(chain: SerialChain, placements: dict[str, SkinUnitPose], q, qd,
     return np.array(f), np.array(w), np.array(T_su)
 
 
-CHAINS = ["panda", "sawyer", "ur5e", "random12m", "random12s"]
+CHAINS = ["panda", "sawyer", "ur5e", "random12m", "random12s", "urdf:ur5", "urdf:xarm7", "urdf:kinova", "general"]
 
 
 def get_chain(name: str) -> SerialChain:
+    """A preset, a random DH chain, a registry URDF, or a random general chain (random joint
+    origins and axes, prismatic joints among the revolute ones)."""
+    if name.startswith("urdf:"):
+        from registry_robots import registry_urdf
+
+        return chain_from_urdf(registry_urdf(name[5:]))
+    if name == "general":
+        from test_kinematics_urdf import random_chain as random_general_chain
+
+        return random_general_chain(np.random.default_rng(8), 7)
     if name.startswith("random"):
         return random_chain(12, "modified" if name.endswith("m") else "standard", np.random.default_rng(7))
     return get_robot(name)

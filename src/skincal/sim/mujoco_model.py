@@ -1,17 +1,19 @@
-"""MuJoCo model (MJCF) of any DH chain, with skin-unit sites and IMU / range sensors.
+"""MuJoCo model (MJCF) of any chain (DH or URDF), with skin-unit sites and IMU / range sensors.
 
 Frames
 ------
-Body ``link{i}`` IS link frame ``i`` = DH frame {i} of the chain's convention (``docs/interfaces.md``),
-so a unit pose ``T_link_su`` becomes a site at that pose on body ``link{i}`` with no conversion.
-``link0`` is a static body at the base frame {0} (= MuJoCo world frame).
+Body ``link{i}`` IS link frame ``i`` of the chain (DH frame {i}, or the URDF frame of the child link
+of the i-th movable joint; ``docs/interfaces.md``), so a unit pose ``T_link_su`` becomes a site at
+that pose on body ``link{i}`` with no conversion. ``link0`` is a static body at the base frame {0}
+(= MuJoCo world frame).
 
-* Modified DH (Craig): ``T_{i-1,i}(q) = Rx(alpha) Tx(a) Rz(theta + q) Tz(d) = B_i Rz(q)`` with
-  ``B_i = T_{i-1,i}(0)``; ``Rz(q)`` commutes with ``Tz(d)``, so the hinge is the body's own z axis
-  through its origin.
-* Standard DH: ``T_{i-1,i}(q) = Rz(theta + q) Tz(d) Tx(a) Rx(alpha) = Rz(q) B_i = B_i (B_i^-1 Rz(q) B_i)``:
-  a rotation by ``q`` about the axis ``R_B^T e_z`` through the point ``-R_B^T p_B`` (the origin of
-  frame {i-1} seen from frame {i}), both constant in body ``i``'s frame: no intermediate body.
+A joint moves its link by ``T_{i-1,i}(q) = A M(q) B`` (``A = T_parent_joint``, ``B = T_joint_link``,
+``M`` a rotation about / translation along ``u = axis``; :mod:`skincal.kinematics.chain`)
+``= (A B) (B^-1 M(q) B)``: body ``i`` sits at ``A B`` in body ``i-1`` and its hinge (slide) joint
+is the axis ``R_B^T u`` through the point ``-R_B^T p_B``, both constant in body ``i``'s frame: no
+intermediate body. (Modified DH: ``B = Tz(d)``, the hinge is the body's z axis; standard DH:
+``A = Rz(theta)``, the axis passes through the origin of frame {i-1}.) A continuous joint has no
+range.
 
 Sensors per unit ``u`` (site ``su/u``, site frame = SU frame): ``su/u/accel`` (MuJoCo's
 accelerometer: ``f = R_base_su^T (a - g)``, +9.81 m/s^2 along "up" at rest), ``su/u/gyro``
@@ -37,7 +39,7 @@ from skincal.errors import ConfigError
 from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
 from skincal.kinematics.geometry import DEFAULT_LINK_RADIUS, link_capsules
 from skincal.kinematics.presets import panda
-from skincal.kinematics.transforms import FloatArray, modified_dh, quat_wxyz_from_matrix, standard_dh
+from skincal.kinematics.transforms import FloatArray, quat_wxyz_from_matrix
 from skincal.skin.pose import SkinUnitPose
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -103,9 +105,13 @@ def require_mujoco() -> Any:
 
 
 def is_panda(chain: SerialChain) -> bool:
-    """True when ``chain`` has the Panda's DH table (modified DH), whatever its name."""
+    """True when ``chain`` moves its link frames as the Panda's (from the DH preset or Franka's
+    URDF), whatever its name."""
     ref = panda()
-    return chain.convention == ref.convention and chain.dh.shape == ref.dh.shape and bool(np.allclose(chain.dh, ref.dh))
+    if chain.n_joints != ref.n_joints or chain.joint_type != ref.joint_type:
+        return False
+    q = np.linspace(-1.0, 1.0, 3 * ref.n_joints).reshape(3, ref.n_joints)
+    return bool(np.allclose(chain.link_frames(q), ref.link_frames(q), atol=1e-9))
 
 
 def default_inertials(chain: SerialChain) -> list[LinkInertial] | None:
@@ -142,16 +148,14 @@ def _fmt(values: FloatArray | Sequence[float] | float) -> str:
 
 
 def _body_offset(chain: SerialChain, i: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Body ``i`` (1-based) in body ``i-1`` at ``q_i = 0``, and its hinge: ``(pos, quat_wxyz, axis, anchor)``."""
-    theta, d, a, alpha = chain.dh[i - 1]
-    if chain.convention == "modified":
-        B = modified_dh(theta, d, a, alpha)
-        axis, anchor = np.array([0.0, 0.0, 1.0]), np.zeros(3)
-    else:
-        B = standard_dh(theta, d, a, alpha)
-        R_B, p_B = B[:3, :3], B[:3, 3]
-        axis, anchor = R_B.T @ np.array([0.0, 0.0, 1.0]), -R_B.T @ p_B
-    return B[:3, 3], quat_wxyz_from_matrix(B[:3, :3]), axis, anchor
+    """Body ``i`` (1-based) in body ``i-1`` at ``q_i = 0``, and its joint: ``(pos, quat_wxyz, axis,
+    anchor)``. With ``T_{i-1,i}(q) = A M(q) B = (A B) (B^-1 M(q) B)`` (module docstring) the body sits
+    at ``A B`` and moves about (or along) the axis ``R_B^T u`` through the point ``-R_B^T p_B``, both
+    constant in its own frame."""
+    A, B, u = chain.T_parent_joint[i - 1], chain.T_joint_link[i - 1], chain.axis[i - 1]
+    AB = A @ B
+    R_B, p_B = B[:3, :3], B[:3, 3]
+    return AB[:3, 3], quat_wxyz_from_matrix(AB[:3, :3]), R_B.T @ u, -R_B.T @ p_B
 
 
 def _add_capsules(body: ET.Element, chain: SerialChain, link: int, radius: float | FloatArray, density: float) -> None:
@@ -240,8 +244,14 @@ def build_mjcf(
         if gravity_compensation:
             battrs["gravcomp"] = "1"
         body = ET.SubElement(parent, "body", battrs)
-        jattrs = {"name": joint_name(i), "type": "hinge", "axis": _fmt(axis), "pos": _fmt(anchor)}
-        if chain.joint_lower is not None and chain.joint_upper is not None:
+        kind = "hinge" if chain.joint_type[i - 1] == "revolute" else "slide"
+        jattrs = {"name": joint_name(i), "type": kind, "axis": _fmt(axis), "pos": _fmt(anchor)}
+        if (
+            chain.joint_lower is not None
+            and chain.joint_upper is not None
+            and np.isfinite(chain.joint_lower[i - 1])
+            and np.isfinite(chain.joint_upper[i - 1])
+        ):
             jattrs["range"] = _fmt([chain.joint_lower[i - 1], chain.joint_upper[i - 1]])
         ET.SubElement(body, "joint", jattrs)
         if inertials is not None:
