@@ -24,7 +24,7 @@ from skincal.skin.imu import ImuModel, get_imu_model
 from skincal.skin.placement import paper_placement
 from skincal.skin.pose import SkinUnitPose
 from skincal.viz.content import collect
-from skincal.viz.report import render_html
+from skincal.viz.report import render_html, write_report
 from skincal.viz.residuals import activity_matrix, unit_residuals
 from skincal.viz.summary import render_markdown
 
@@ -230,3 +230,102 @@ def test_report_of_a_result_with_undetermined_std_and_failed_units(tmp_path: Pat
     assert "## Not calibrated" in md and f"- {names[2]}: diverged <badly>" in md
     assert not re.search(r"\bnan\b", md, re.IGNORECASE)
     assert "0.160 0.660 n/a" in md
+
+
+# ---------------------------------------------------------------------------- at scale (issue 19)
+def test_worst_units_on_top_and_residual_plots_only_for_them(calibrated):
+    """The page opens with the worst units by error against the truth and plots residuals only for
+    those; every unit is still in the tables with its full-data residual RMS."""
+    ds, result = calibrated
+    ev = evaluate(result, ds)
+    content = collect(result, ds, shown=2)
+    expected = sorted(result.units, key=lambda u: -ev["units"][u]["position_error_mm"])
+    assert content.ranking.figure == "position error against the truth [mm]"
+    assert list(content.ranking.values) == expected
+    assert list(content.residuals) == expected[:2]
+    interp = JointInterpolator(ds.joints)
+    for name, r in content.residuals.items():
+        full = unit_residuals(ds, name, result.units[name], interp)
+        assert r.rms == pytest.approx(full.rms, rel=1e-12) and r.n_samples == len(full.t)
+        np.testing.assert_array_equal(r.segment_rms, full.segment_rms)
+    page = render_html(content, worst=2)
+    top = page.split("<h2>Units</h2>")[0]
+    assert "<h2>Worst units</h2>" in top and "The 2 worst of 6 unit(s)" in top
+    cells = re.findall(r'<td class="l">(\d+)</td><td class="l">([^<]+)</td><td>([^<]+)</td>', top)
+    assert [(int(i), n) for i, n, _ in cells] == [(1, expected[0]), (2, expected[1])]
+    assert float(cells[0][2]) == pytest.approx(ev["units"][expected[0]]["position_error_mm"], rel=1e-3)
+    assert re.findall(r"<h3>([^<]+)</h3>", page) == expected[:2]
+    assert "Shown for the 2 worst of 6 units" in page
+    assert len(re.findall(r'src="data:image/png', page)) == 3 + 2
+    for row in content.rows:  # the unit table keeps every unit's full-data RMS
+        assert f"<td>{row.residual_rms_mps2:.4f}</td>" in page
+    md = render_markdown(content, worst=3)
+    assert "## Worst units" in md.split("## Units")[0]
+    assert [line.split("|")[2].strip() for line in md.splitlines() if re.match(r"\| [123] \|", line)] == expected[:3]
+
+
+def test_without_truth_units_are_ranked_by_residual_rms(calibrated):
+    ds, result = calibrated
+    real = dataclasses.replace(ds, truth={}, truth_sensor={})
+    content = collect(result, real, shown=3)
+    assert content.evaluation is None
+    assert content.ranking.figure == "accelerometer residual RMS [m/s²]"
+    rms = {r.name: r.residual_rms_mps2 for r in content.rows}
+    assert list(content.ranking.values) == sorted(rms, key=lambda u: -rms[u])
+    assert list(content.residuals) == list(content.ranking.values)[:3]
+
+
+def test_thinned_residuals_keep_the_envelope():
+    """At most max_points samples; every component's minimum and maximum in each bucket kept, so a
+    one-sample spike anywhere survives; fewer samples than max_points are kept as they are."""
+    from skincal.viz.residuals import envelope_indices
+
+    rng = np.random.default_rng(4)
+    for m, max_points in ((100_000, 2000), (8163, 2000), (12_345, 500), (3, 2000), (2000, 2000)):
+        v = rng.normal(size=(m, 3))
+        spike = int(rng.integers(m))
+        v[spike, 1] = 50.0
+        if m > 10:
+            v[rng.integers(m, size=5), 2] = np.nan
+        idx = envelope_indices(v, max_points)
+        assert len(idx) <= max_points and np.all(np.diff(idx) > 0) and idx[0] == 0 and idx[-1] == m - 1
+        assert spike in idx
+        if m <= max_points:
+            np.testing.assert_array_equal(idx, np.arange(m))
+            continue
+        assert len(idx) > 0.5 * max_points  # thinned to near the budget, not to a handful
+        n_buckets = (max_points - 2) // 6
+        size = -(-m // n_buckets)
+        for b in rng.integers(n_buckets, size=20):  # per bucket, both extremes of every component kept
+            sel = idx[(idx >= b * size) & (idx < (b + 1) * size)]
+            block = v[b * size:(b + 1) * size]
+            np.testing.assert_array_equal(np.nanmax(v[sel], axis=0), np.nanmax(block, axis=0))
+            np.testing.assert_array_equal(np.nanmin(v[sel], axis=0), np.nanmin(block, axis=0))
+
+
+def test_progress_reports_every_unit_and_figure(calibrated, tmp_path: Path):
+    ds, result = calibrated
+    seen: list[str] = []
+    write_report(result, ds, tmp_path / "r.html", worst=2, progress=seen.append)
+    units = [m for m in seen if m.startswith("residuals and coverage ")]
+    assert units == [f"residuals and coverage {i + 1}/6: {n}" for i, n in enumerate(result.units)]
+    assert sum(m.startswith("residual plot ") for m in seen) == 2
+    assert seen[-1] == f"writing {tmp_path / 'r.html'}"
+
+
+def test_figures_stay_page_sized_for_many_units():
+    """Old code: figure widths/heights grew with the unit count (200 units: a 16000-pixel-wide bias
+    plot, a 7600-pixel-tall coverage heatmap with 1400 written values)."""
+    from skincal.viz import plots
+
+    rng = np.random.default_rng(2)
+    names = [f"unit{i}" for i in range(200)]
+    ev = {"units": {u: {"position_error_mm": float(rng.uniform()), "rotation_error_deg": 0.1, "observable": i % 7 > 0}
+                    for i, u in enumerate(names)}}
+    for fig in (plots.activity_figure(rng.uniform(0.01, 30, (200, 7)), names),
+                plots.bias_figure(names, rng.normal(size=(200, 3)), rng.normal(size=(200, 3))),
+                plots.error_figure(ev)):
+        png = base64.b64decode(plots.png_data_uri(fig).split(",", 1)[1])
+        width, height = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
+        assert width <= 1000 and height <= 400, (width, height)
+        assert len(png) < 150_000
