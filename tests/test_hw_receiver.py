@@ -79,22 +79,48 @@ def test_malformed_counted_by_reason_and_receiver_survives():
 
 
 def test_random_flood_all_counted_receiver_alive():
+    """Random bytes, the right magic with garbage after it, and frames with a *valid* CRC-32 whose
+    header fields and payload are random (t0_us up to 2^64, any flags and sample count, sizes that match
+    or not): every datagram is counted, malformed ones by the decoder's reason, and the receiver lives on."""
+    import struct
+    import zlib
+
+    from skincal.hw.packet import HEADER, PacketError, decode_packet, joint_sample_dtype, skin_sample_dtype
+
     rng = np.random.default_rng(4)
     flood = [rng.bytes(int(n)) for n in rng.integers(0, 300, 3000)]
     flood += [b"SU" + rng.bytes(int(n)) for n in rng.integers(22, 120, 500)]  # right magic, garbage after
+    for _ in range(1500):  # valid CRC, random fields
+        magic = (b"SU", b"SJ")[int(rng.integers(2))]
+        flags = int(rng.integers(1, 8) if rng.random() < 0.8 else rng.integers(256))
+        n = int(rng.integers(0, 4))
+        item = skin_sample_dtype(flags & 7 or 1) if magic == b"SU" else joint_sample_dtype(max(1, min(flags, 32)))
+        size = n * item.itemsize + int(rng.integers(-2, 3)) * int(rng.random() < 0.2)
+        t0 = int(rng.integers(2**62)) * int(rng.integers(1, 5))  # a quarter beyond int64
+        header = HEADER.pack(magic, 1, flags, int(rng.integers(100, 110)), n, int(rng.integers(2**32)), t0)
+        body = header + rng.bytes(max(size, 0))
+        flood.append(body + struct.pack("<I", zlib.crc32(body)))
+    expected: dict[str, int] = {}
+    for d in flood:
+        try:
+            decode_packet(d)
+        except PacketError as exc:
+            expected[exc.reason] = expected.get(exc.reason, 0) + 1
     got: list[Delivery] = []
 
     async def main():
         async with SkinReceiver(on_packet=got.append, reorder_timeout_s=0.05) as rx:
             await _send_all(rx.port, flood, rx)
             await _send_all(rx.port, [_pkt(5, unit=2)], rx)
-            await _until(lambda: len(got) == 1)
+            await _until(lambda: any(d.packet.unit_id == 2 for d in got if d.key[0] == "skin"))
             return rx.stats()
 
     st = _run(main())
-    assert st.malformed_total == len(flood) and st.datagrams == len(flood) + 1
-    assert st.malformed["bad_checksum"] >= 500
-    assert got[0].packet.unit_id == 2
+    assert st.malformed == expected and st.datagrams == len(flood) + 1
+    assert {"bad_field", "bad_length", "bad_value"} <= set(expected) and expected["bad_checksum"] >= 500
+    accepted = len(flood) - st.malformed_total
+    counted = sum(s.received + s.duplicates + s.late + s.stale + s.held for s in st.streams.values()) + st.refused
+    assert accepted > 0 and counted == accepted + 1  # the valid frames that decoded, and the real packet
 
 
 def test_duplicates_and_reordering_put_back_in_order():

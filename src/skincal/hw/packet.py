@@ -284,6 +284,12 @@ def decode_packet(data: bytes) -> SkinPacket | JointPacket:
         raise BadLengthError(f"packet (source {source}, seq {seq}): {size} bytes, header implies {expected}")
     rec = np.frombuffer(data, dtype=dtype, count=n, offset=HEADER.size)
     t_us = rec["dt_us"].astype(np.int64) + np.int64(t0)
+    with np.errstate(invalid="ignore"):  # signalling NaNs from arbitrary bytes: refused below, no warning
+        return _samples(magic, flags, source, seq, t_us, rec)
+
+
+def _samples(magic: bytes, flags: int, source: int, seq: int, t_us: np.ndarray, rec: np.ndarray
+             ) -> SkinPacket | JointPacket:
     if magic == MAGIC_JOINTS:
         q, qd = rec["q"].astype(float), rec["qd"].astype(float)
         if not (np.isfinite(q).all() and np.isfinite(qd).all()):

@@ -63,7 +63,10 @@ class Delivery:
 
 @dataclass(frozen=True)
 class StreamStats:
-    """Counters of one stream (packets unless named ``samples``)."""
+    """Counters of one stream (packets unless named ``samples``). ``buffered``: waiting in the reorder
+    buffer; ``held``: off-epoch packets held while a restart is unconfirmed (they end up delivered or
+    ``stale``). Every decoded datagram of the stream is in exactly one of ``received``, ``duplicates``,
+    ``late``, ``stale``, ``held``."""
 
     received: int = 0
     samples: int = 0
@@ -75,6 +78,7 @@ class StreamStats:
     restarts: int = 0
     buffered: int = 0
     stale: int = 0
+    held: int = 0
 
 
 @dataclass(frozen=True)
@@ -392,7 +396,8 @@ class SkinReceiver:
     def stats(self) -> ReceiverStats:
         """A snapshot of all counters."""
         streams = {
-            key: StreamStats(**s.counts, buffered=len(s.buffer)) for key, s in sorted(self._streams.items())
+            key: StreamStats(**s.counts, buffered=len(s.buffer), held=len(s.run))
+            for key, s in sorted(self._streams.items())
         }
         return ReceiverStats(streams, dict(self._malformed), self._datagrams, self._refused)
 
