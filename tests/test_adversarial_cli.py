@@ -257,3 +257,214 @@ def test_calibrate_into_a_missing_folder_fails_before_reading_the_dataset(tmp_pa
     png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(100))  # not a dataset: reading it would fail differently
     assert main(["calibrate", str(png), "-o", str(tmp_path / "nonexistent" / "dir" / "r.json")]) == 2
     _one_line_error(capsys, "does not exist")
+
+
+# ------------------------------------------------------------------------------ names reaching the terminal
+MARKUP_NAME = "[bold red]su1"
+"""A valid unit name (no control characters) that rich would read as markup and show as a red ``su1``."""
+CONTROL_NAME = "su\x1b[2J1\nforged line"
+"""ESC (clear the screen) and a newline: refused by the readers, or shown escaped."""
+
+
+def _rename_unit(f, old: str, new: str) -> None:
+    for group in ("imu", "truth", "tof"):
+        if group in f and old in f[group]:
+            f.move(f"{group}/{old}", f"{group}/{new}")
+
+
+def _raw_control(text: str) -> bool:
+    return any(ch in text for ch in ("\x1b", "\r")) or "\nforged line" in text
+
+
+def test_info_and_calibrate_show_names_and_free_text_as_stored(small, tmp_path, capsys):
+    def edit(f):
+        _rename_unit(f, "su1", MARKUP_NAME)
+        f.attrs["description"] = "session \x1b[31mred\x1b[0m\nsecond [blink]line[/]"
+
+    data = _variant(small[0], tmp_path / "markup.h5", edit)
+    capsys.readouterr()
+    assert main(["info", str(data)]) == 0
+    out = capsys.readouterr().out
+    assert MARKUP_NAME in out  # shown literally, not as red text
+    assert "\\x1b[31mred\\x1b[0m\\nsecond [blink]line[/]" in out and not _raw_control(out)
+    result = tmp_path / "r.json"
+    assert main(["calibrate", str(data), "--out", str(result), "--workers", "1"]) == 0
+    out = capsys.readouterr().out
+    assert MARKUP_NAME in out
+    assert main(["evaluate", str(result), "--truth", str(data)]) == 0
+    assert MARKUP_NAME in capsys.readouterr().out
+
+
+def test_control_characters_in_names_never_reach_the_terminal_raw(small, tmp_path, capsys):
+    import json
+
+    data = _variant(small[0], tmp_path / "esc.h5", lambda f: _rename_unit(f, "su1", CONTROL_NAME))
+    doc = json.loads(small[1].read_text())
+    doc["units"][CONTROL_NAME] = doc["units"].pop("su1")
+    doc["robot"] = "panda\x1b]0;owned\x07"
+    result = tmp_path / "esc.json"
+    result.write_text(json.dumps(doc))  # json.dumps writes the controls as \u001b escapes: a valid file
+    for args in (
+        ["info", str(data)],
+        ["calibrate", str(data), "--out", str(tmp_path / "r.json"), "--workers", "1"],
+        ["evaluate", str(result), "--truth", str(small[0]), "--allow-other-dataset"],
+        ["report", str(result), "--dataset", str(small[0]), "--allow-other-dataset"],
+        ["export", str(result), "-f", "csv", "-o", str(tmp_path / "e.csv")],
+    ):
+        code = main(args)
+        out = capsys.readouterr()
+        assert not _raw_control(out.out) and not _raw_control(out.err), args
+        assert "internal error" not in out.err, args
+        if code != 0:  # the reader refuses the name: one line saying why
+            assert code == 2 and len(out.err.strip().splitlines()) == 1 and "control character" in out.err, args
+
+
+# ------------------------------------------------------------------------------ the viewer's origin check
+def _handshake(port: int, uri_host: str, origin: str | None = None, connect_to: str = "127.0.0.1") -> str:
+    """Open a websocket to the viewer at ``connect_to:port`` with ``Host: uri_host:port`` (and
+    ``Origin``) using the websockets client; ``"accepted"`` or ``"status <code>"``."""
+    import asyncio
+
+    import viser
+    import websockets
+    from websockets.asyncio.client import connect
+
+    async def attempt() -> str:
+        try:
+            async with connect(
+                f"ws://{uri_host}:{port}",
+                host=connect_to,
+                port=port,
+                origin=origin,
+                open_timeout=10,
+                subprotocols=[f"viser-v{viser.__version__}"],
+            ):
+                return "accepted"
+        except websockets.exceptions.InvalidStatus as exc:
+            return f"status {exc.response.status_code}"
+
+    return asyncio.run(attempt())
+
+
+@pytest.fixture
+def viewer(small):
+    pytest.importorskip("viser")
+    from skincal.data.result import read_result
+    from skincal.kinematics import get_robot
+    from skincal.viz.viewer import start_viewer
+
+    v = start_viewer(read_result(small[1]), get_robot("panda"), host="127.0.0.1")
+    yield v
+    v.close()
+
+
+def test_viewer_refuses_cross_site_and_rebinding_requests_with_403(viewer):
+    import urllib.error
+    import urllib.request
+
+    port = viewer.server.get_port()
+    assert viewer.url == f"http://127.0.0.1:{port}"
+    own = f"http://127.0.0.1:{port}"
+    assert _handshake(port, "127.0.0.1") == "accepted"  # a local client without Origin
+    assert _handshake(port, "127.0.0.1", origin=own) == "accepted"  # the viewer's own page
+    assert _handshake(port, "localhost", origin=f"http://localhost:{port}") == "accepted"
+    assert _handshake(port, "127.0.0.1", origin="http://evil.example") == "status 403"  # cross-site
+    assert _handshake(port, "127.0.0.1", origin=f"http://evil.example:{port}") == "status 403"
+    assert _handshake(port, "127.0.0.1", origin="null") == "status 403"  # sandboxed frame, file://
+    assert _handshake(port, "evil.example") == "status 403"  # DNS rebinding: a hostile name for 127.0.0.1
+    assert _handshake(port, "evil.example", origin=f"http://evil.example:{port}") == "status 403"
+    assert _handshake(port, "192.168.1.7") == "status 403"  # not the bound interface
+    page = urllib.request.Request(own + "/", headers={"Host": "evil.example"})
+    with pytest.raises(urllib.error.HTTPError) as refused:  # the client files too
+        urllib.request.urlopen(page, timeout=10)
+    assert refused.value.code == 403
+    with urllib.request.urlopen(own + "/", timeout=10) as ok:
+        assert ok.status == 200
+
+
+def test_viewer_on_ipv6_loopback_prints_a_valid_url(small, capsys):
+    import socket
+
+    pytest.importorskip("viser")
+    if not socket.has_ipv6:
+        pytest.skip("no IPv6")
+    try:
+        socket.create_server(("::1", 0), family=socket.AF_INET6).close()
+    except OSError:
+        pytest.skip("no IPv6 loopback")
+    assert main(["view", str(small[1]), "--host", "::1", "--duration", "0.2"]) == 0
+    url = capsys.readouterr().out.split("skincal viewer:")[1].split()[0]
+    assert url.startswith("http://[::1]:")
+    from urllib.parse import urlsplit
+
+    assert urlsplit(url).hostname == "::1" and urlsplit(url).port > 0
+
+
+# ------------------------------------------------------------------------------ does the result belong to the dataset?
+@pytest.fixture(scope="module")
+def other(small, tmp_path_factory):
+    """Another session of the same robot and unit names (another seed), and a copy of the small
+    session whose robot is named differently."""
+    import h5py
+
+    root = tmp_path_factory.mktemp("other")
+    data = root / "other.h5"
+    args = "simulate --robot panda --placement random --units 2 --protocol fast --seed 5 --out".split()
+    assert main([*args, str(data)]) == 0
+    renamed = _variant(small[0], root / "renamed.h5", lambda f: f["robot"].attrs.__setitem__("name", "panda-2"))
+    with h5py.File(renamed, "r") as f:
+        assert f["robot"].attrs["name"] == "panda-2"
+    return data, renamed
+
+
+def test_evaluate_refuses_a_result_of_another_dataset(small, other, tmp_path, capsys):
+    import json
+
+    data, result = small
+    capsys.readouterr()
+    assert main(["evaluate", str(result), "--truth", str(other[0]), "--json"]) == 2
+    _one_line_error(capsys, "result.json was computed from another dataset than", "other.h5", "--allow-other-dataset")
+    assert main(["evaluate", str(result), "--truth", str(other[1])]) == 2  # same file content but for the robot
+    _one_line_error(capsys, "robot 'panda'", "robot 'panda-2'")
+    assert main(["evaluate", str(result), "--truth", str(other[0]), "--json", "--allow-other-dataset"]) == 0
+    out = capsys.readouterr()
+    assert json.loads(out.out)["units_total"] == 2  # stdout stays JSON; the warning goes to stderr
+    assert out.err.startswith("warning: ") and "another dataset" in out.err
+    assert main(["evaluate", str(result), "--truth", str(data), "--json"]) == 0  # its own dataset: no warning
+    out = capsys.readouterr()
+    assert out.err == "" and json.loads(out.out)["mean_position_error_mm"] < 1.0
+    doc = json.loads(result.read_text())
+    doc["dataset_sha256"] = ""
+    unknown = tmp_path / "nohash.json"
+    unknown.write_text(json.dumps(doc))
+    assert main(["evaluate", str(unknown), "--truth", str(data), "--json"]) == 0  # accepted, with a warning
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("warning: ") and "does not record the SHA-256" in err and len(err.splitlines()) == 1
+
+
+def test_report_and_view_refuse_a_result_of_another_dataset(small, other, tmp_path, capsys):
+    _, result = small
+    capsys.readouterr()
+    assert main(["report", str(result), "--dataset", str(other[0]), "--out", str(tmp_path / "r.html")]) == 2
+    _one_line_error(capsys, "another dataset", "--allow-other-dataset")
+    assert not (tmp_path / "r.html").exists()
+    assert main(["report", str(result), "--dataset", str(other[0]), "--allow-other-dataset", "--format", "md"]) == 0
+    out = capsys.readouterr()
+    assert out.out.startswith("# skincal") and "warning: " in out.err
+    pytest.importorskip("viser")
+    assert main(["view", str(result), "--truth", str(other[0]), "--duration", "0"]) == 2
+    _one_line_error(capsys, "another dataset")
+    assert main(["view", str(result), "--play", str(other[1]), "--duration", "0"]) == 2  # another robot
+    _one_line_error(capsys, "robot 'panda-2'")
+    assert main(["view", str(result), "--play", str(other[0]), "--duration", "0"]) == 0  # another recording: fine
+    assert "skincal viewer: http://127.0.0.1:" in capsys.readouterr().out
+
+
+def test_report_without_out_prints_markdown_and_html_needs_out(small, capsys):
+    data, result = small
+    capsys.readouterr()
+    assert main(["report", str(result), "--dataset", str(data)]) == 0  # the help's promise: markdown on stdout
+    assert capsys.readouterr().out.startswith("# skincal calibration")
+    assert main(["report", str(result), "--dataset", str(data), "--format", "html"]) == 2
+    out = capsys.readouterr()
+    assert "Invalid value for '--format'" in out.err and "--out" in out.err and "internal error" not in out.err

@@ -25,3 +25,22 @@ def console_error(message: str) -> None:
     from skincal.data.names import printable
 
     err_console.print(f"error: {printable(message)}", markup=False, highlight=False, soft_wrap=True)
+
+
+def console_warning(message: str) -> None:
+    """Print a one-line warning to stderr (kept off stdout, where ``--json`` output goes), escaped as
+    :func:`console_error` escapes."""
+    from skincal.data.names import printable
+
+    err_console.print(f"warning: {printable(message)}", markup=False, highlight=False, soft_wrap=True)
+
+
+def shown(text: object) -> str:
+    """``text`` (a name, a note, a file name: anything that came from a file or a user) for a rich
+    table cell or a markup string: control characters escaped (:func:`skincal.data.names.printable`)
+    and rich markup neutralised, so it shows as stored and cannot restyle or rewrite the terminal."""
+    from rich.markup import escape
+
+    from skincal.data.names import printable
+
+    return escape(printable(str(text)))

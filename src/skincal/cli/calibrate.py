@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console
+from skincal.cli.app import app, console, console_warning, shown
 from skincal.errors import ConfigError
 
 
@@ -36,13 +36,13 @@ def std_cell(values, scale: float = 1.0) -> str:
 
 
 def _unit_table(result, title: str):
-    """The per-unit table; units without a pose (``failed_units``) get a row saying why."""
-    from rich.markup import escape
+    """The per-unit table; units without a pose (``failed_units``) get a row saying why. Names and
+    notes are shown escaped (:func:`skincal.cli.app.shown`)."""
     from rich.table import Table
 
     from skincal.data.result import failed_units
 
-    table = Table(title=title)
+    table = Table(title=shown(title))
     for col in ("unit", "link", "position (m)", "quaternion (w,x,y,z)", "pos std (mm)", "rot std (deg)", "notes"):
         table.add_column(col)
     for name, unit in result.units.items():
@@ -50,17 +50,17 @@ def _unit_table(result, title: str):
         std_r = std_cell(unit.rotation_std_deg)
         notes = ("unobservable; " if not unit.observable else "") + "; ".join(unit.warnings)
         table.add_row(
-            escape(name),
+            shown(name),
             str(unit.pose.link),
             " ".join(f"{x:+.4f}" for x in unit.pose.p_link_su),
             " ".join(f"{x:+.4f}" for x in unit.pose.quaternion_wxyz),
             std_p,
             std_r,
-            escape(notes or ""),
+            shown(notes or ""),
         )
     for name, reason in failed_units(result).items():
         if name not in result.units:
-            table.add_row(escape(str(name)), "-", "-", "-", "-", "-", escape(f"not calibrated: {reason}"))
+            table.add_row(shown(name), "-", "-", "-", "-", "-", shown(f"not calibrated: {reason}"))
     return table
 
 
@@ -99,36 +99,43 @@ def calibrate(
     write_result(result, out)
     console.print(_unit_table(result, f"{method}: {len(result.units)} units in {result.runtime_s:.2f} s"))
     for note in result.extras.get("notes", []):
-        console.print(f"note: {note}", highlight=False, markup=False)
+        console.print(f"note: {shown(note)}", highlight=False)
     for name, reason in result.extras.get("failed_units", {}).items():
-        console.print(f"[yellow]warning[/]: unit {name} not calibrated: {reason}", highlight=False)
-    console.print(f"wrote {out}")
+        console.print(f"[yellow]warning[/]: unit {shown(name)} not calibrated: {shown(reason)}", highlight=False)
+    console.print(f"wrote {shown(out)}", highlight=False)
 
 
 @app.command()
 def evaluate(
     result: Path = typer.Argument(..., help="calibration result (.json)"),
-    truth: Path = typer.Option(..., help="simulated dataset with /truth (.h5)"),
+    truth: Path = typer.Option(..., help="the simulated dataset the result was computed from, with /truth (.h5)"),
     as_json: bool = typer.Option(False, "--json", help="print JSON for scripts instead of a table"),
+    allow_other: bool = typer.Option(
+        False, "--allow-other-dataset", help="compare even if --truth is not the result's dataset (other file or robot)"
+    ),
 ) -> None:
-    """Compare a calibration result with the true poses of a simulated dataset."""
+    """Compare a calibration result with the true poses of the simulated dataset it was computed from."""
     from rich.table import Table
 
     from skincal.calib.metrics import evaluate as run
     from skincal.data.hdf5 import read_dataset
+    from skincal.data.provenance import check_result_dataset
     from skincal.data.result import read_result
 
-    doc = run(read_result(result), read_dataset(truth))
+    res, ds = read_result(result), read_dataset(truth)
+    for warning in check_result_dataset(res, result, ds, truth, allow_other=allow_other)[1]:
+        console_warning(warning)
+    doc = run(res, ds)
     if as_json:
         typer.echo(json.dumps(doc, indent=2))
         return
-    table = Table(title=f"{result.name} vs truth")
+    table = Table(title=f"{shown(result.name)} vs truth")
     for col in ("unit", "link true/est", "position error (mm)", "rotation error (deg)", "quat. distance"):
         table.add_column(col, justify="right")
     for name, u in doc["units"].items():
         mark = "" if u["observable"] else " (unobservable)"
         table.add_row(
-            name + mark,
+            shown(name) + mark,
             f"{u['link_true']}/{u['link_estimated']}",
             f"{u['position_error_mm']:.3f}",
             f"{u['rotation_error_deg']:.4f}",

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from skincal.cli.app import app, console
+from skincal.cli.app import app, console, shown
 
 
 @app.command()
@@ -57,10 +57,10 @@ def info(path: Path = typer.Argument(..., help="dataset file (.h5)")) -> None:
     head = Table.grid(padding=(0, 2))
     head.add_column(style="bold")
     head.add_column()
-    head.add_row("file", str(path))
+    head.add_row("file", shown(path))  # names and free text as stored, escaped (shown)
     if ds.description:
-        head.add_row("description", ds.description)
-    head.add_row("robot", f"{robot.name} ({robot.convention} DH, {robot.n_joints} joints)")
+        head.add_row("description", shown(ds.description))
+    head.add_row("robot", f"{shown(robot.name)} ({robot.convention} DH, {robot.n_joints} joints)")
     head.add_row("duration", f"{ds.duration:.3f} s (t = {js.t[0]:.3f} .. {js.t[-1]:.3f} s)")
     qdd = "with qdd" if js.qdd is not None else "no qdd"
     head.add_row("joint stream", f"{len(js.t)} samples, {_fmt_rate(_rate_hz(js.t))} Hz, {qdd}")
@@ -89,7 +89,7 @@ def info(path: Path = typer.Argument(..., help="dataset file (.h5)")) -> None:
     for name, imu in ds.imu.items():
         truth = ds.truth.get(name)
         units.add_row(
-            name,
+            shown(name),
             str(len(imu.t)),
             _fmt_rate(_rate_hz(imu.t)),
             "yes" if imu.gyro is not None else "no",

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console, err_console
+from skincal.cli.app import app, console, console_warning, err_console, shown
 from skincal.errors import ConfigError
 
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
@@ -27,15 +27,21 @@ def view(
     ),
     seed: int = typer.Option(0, help="sensor-noise seed of the --scenario run"),
     placement: str = typer.Option("ring", help="the --scenario run's skin: ring (dense) or paper (Table II)"),
+    allow_other: bool = typer.Option(
+        False, "--allow-other-dataset",
+        help="show even if --truth is not the result's dataset (other file or robot), or --play another robot",
+    ),
 ) -> None:
     """Show a calibration result on the robot in the browser (viser); with --scenario, play an avoidance run."""
     import time
 
     from skincal.data.hdf5 import read_dataset
+    from skincal.data.provenance import check_result_dataset
     from skincal.data.result import read_result
     from skincal.viz.model import Recording
     from skincal.viz.viewer import serve_forever, start_viewer
 
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host  # [::1] as in a URL
     if host not in LOOPBACK_HOSTS and not public:
         raise ConfigError(f"--host {host} is not a loopback address; add --public to serve beyond this machine")
     if scenario is not None:
@@ -48,6 +54,13 @@ def view(
     res = read_result(result)
     truth_ds = read_dataset(truth) if truth is not None else None
     play_ds = read_dataset(play) if play is not None else None
+    warnings: list[str] = []
+    if truth_ds is not None:
+        warnings += check_result_dataset(res, result, truth_ds, truth, allow_other=allow_other)[1]
+    if play_ds is not None:  # another recording of the same robot is fine
+        warnings += check_result_dataset(res, result, play_ds, play, allow_other=allow_other, same_file=False)[1]
+    for warning in warnings:
+        console_warning(warning)
     source = play_ds or truth_ds
     if source is not None:
         chain = source.robot
@@ -60,7 +73,7 @@ def view(
         res, chain, truth=None if truth_ds is None else truth_ds.truth, recording=recording, host=host, port=port,
         q0=None if truth_ds is None or recording is not None else truth_ds.joints.q[0],
     )
-    console.print(f"skincal viewer: [bold]{viewer.url}[/]  (Ctrl-C to stop)", highlight=False)
+    console.print(f"skincal viewer: [bold]{shown(viewer.url)}[/]  (Ctrl-C to stop)", highlight=False)
     if duration is not None:
         try:
             time.sleep(duration)
@@ -93,7 +106,7 @@ def _view_scenario(
     log = run_scenario(chain, sc, true_poses, poses, np.random.default_rng(seed))
     shown = CalibrationResult(label, chain.name, "", 0.0, {u: UnitResult(p) for u, p in poses.items()})
     viewer = start_viewer(shown, chain, truth=true_poses, recording=recording_from_run(log), host=host, port=port)
-    console.print(f"skincal viewer: [bold]{viewer.url}[/]  (Ctrl-C to stop)", highlight=False)
+    console.print(f"skincal viewer: [bold]{shown(viewer.url)}[/]  (Ctrl-C to stop)", highlight=False)
     if duration is not None:
         try:
             time.sleep(duration)
@@ -107,25 +120,40 @@ def _view_scenario(
 def report(
     result: Path = typer.Argument(..., help="calibration result (.json)"),
     dataset: Path = typer.Option(..., help="the dataset the result was computed from (.h5)"),
-    out: Path | None = typer.Option(None, "--out", "-o", help="file to write (default: print markdown)"),
-    fmt: str = typer.Option("html", "--format", help="html (one self-contained file) or md (markdown summary)"),
+    out: Path | None = typer.Option(
+        None, "--out", "-o", help="file to write (default: print the markdown summary on stdout)"
+    ),
+    fmt: str | None = typer.Option(
+        None, "--format", show_default=False,
+        help="html (one self-contained file; needs --out) or md (markdown summary); default: html with --out, "
+        "md without",
+    ),
     use_dataset_qdd: bool = typer.Option(False, help="predict with the dataset's qdd (as calibrate --use-dataset-qdd)"),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
+    allow_other: bool = typer.Option(
+        False, "--allow-other-dataset",
+        help="report even if --dataset is not the result's dataset (other file or robot)",
+    ),
 ) -> None:
     """Write a calibration report: per-unit table, residuals, sensor parameters, coverage, errors."""
     from skincal.data.hdf5 import read_dataset
-    from skincal.data.result import read_result, sha256_file
+    from skincal.data.provenance import check_result_dataset
+    from skincal.data.result import read_result
     from skincal.viz.content import collect
     from skincal.viz.summary import render_markdown
 
+    if fmt is None:
+        fmt = "md" if out is None else "html"
     if fmt not in ("html", "md"):
         raise ConfigError(f"--format must be 'html' or 'md', got '{fmt}'")
+    if out is None and fmt == "html":
+        raise typer.BadParameter(
+            "html needs --out FILE (without --out the markdown summary is printed)", param_hint="'--format'"
+        )
     if out is not None:
         from skincal.data.atomic import check_output
 
         check_output(out, force=force, inputs=(result, dataset))
-    if out is None and fmt != "md":
-        raise ConfigError("--out is required for --format html")
     from rich.markup import escape
 
     from skincal.data.names import printable
@@ -134,14 +162,16 @@ def report(
         progress = lambda message: status.update(escape(printable(f"report: {message}")))  # noqa: E731
         res = read_result(result)
         ds = read_dataset(dataset)
+        digest, warnings = check_result_dataset(res, result, ds, dataset, allow_other=allow_other)
+        for warning in warnings:
+            console_warning(warning)
         if out is None:
             text = render_markdown(collect(res, ds, use_dataset_qdd=use_dataset_qdd, shown=0, progress=progress))
         else:
             from skincal.viz.report import write_report
 
-            write_report(res, ds, out, fmt, dataset_sha256=sha256_file(dataset), use_dataset_qdd=use_dataset_qdd,
-                         progress=progress)
+            write_report(res, ds, out, fmt, dataset_sha256=digest, use_dataset_qdd=use_dataset_qdd, progress=progress)
     if out is None:
         typer.echo(text, nl=False)
         return
-    console.print(f"wrote {out}", highlight=False)
+    console.print(f"wrote {shown(out)}", highlight=False)

@@ -12,12 +12,20 @@ Scene graph (names are viser paths; a child moves with its parent):
 
 GUI: one slider per joint (deg), and with a recording a time slider and a play checkbox. viser is
 an optional dependency (``pip install skincal[viz]``); it is imported only when a viewer starts.
+
+Cross-site and DNS-rebinding access: the viewer has no login, so any web page the user opens could
+otherwise connect to it (``Origin: http://evil.example``) or reach it under a hostile name that
+resolves to 127.0.0.1 (``Host: evil.example``). Every HTTP request and websocket handshake must carry
+a ``Host`` naming the viewer's own address (:func:`allowed_hosts`) and, when it has an ``Origin``,
+that same origin; anything else gets HTTP 403 before the websocket upgrade (:func:`refusal`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import http
 import io
+import ipaddress
 import threading
 import time
 from dataclasses import dataclass, field
@@ -56,6 +64,120 @@ CAMERA_POSITION = (1.3, -1.3, 1.0)
 CAMERA_LOOK_AT = (0.0, 0.0, 0.4)
 CAMERA_FOV_DEG = 50.0
 """Initial vertical field of view, deg."""
+
+
+LOOPBACK_NAMES = ("127.0.0.1", "localhost", "::1")
+"""Names of the loopback interface a browser may use for a viewer bound there."""
+WILDCARD_HOSTS = ("", "0.0.0.0", "::")
+"""Bind addresses meaning every interface (``--public``)."""
+
+
+def url_host(host: str) -> str:
+    """``host`` as it appears in a URL: IPv6 addresses in brackets (``[::1]``)."""
+    return f"[{host}]" if ":" in host and not host.startswith("[") else host
+
+
+def viewer_url(host: str, port: int) -> str:
+    """The URL of a viewer bound to ``host:port`` (a wildcard bind is shown as 127.0.0.1)."""
+    return f"http://{url_host('127.0.0.1' if host in WILDCARD_HOSTS else host)}:{port}"
+
+
+def _split_host(value: str) -> tuple[str, int | None] | None:
+    """``(host, port)`` of a ``Host`` header value (``name``, ``name:port``, ``[v6]:port``), host in lower
+    case without brackets; ``None`` when malformed."""
+    value = value.strip().lower()
+    if value.startswith("["):
+        end = value.find("]")
+        if end < 0:
+            return None
+        host, rest = value[1:end], value[end + 1 :]
+        if rest and not rest.startswith(":"):
+            return None
+        port_text = rest[1:] if rest else ""
+    else:
+        host, _, port_text = value.partition(":")
+        if ":" in port_text:
+            return None
+    if not host or (port_text and not port_text.isdigit()):
+        return None
+    return host, int(port_text) if port_text else None
+
+
+def allowed_hosts(host: str) -> frozenset[str]:
+    """Host names (lower case, IPv6 without brackets) under which a viewer bound to ``host`` may be
+    addressed: the loopback names always, and the bound host itself (``--public``). A wildcard bind
+    also accepts every IP address literal, since a DNS-rebinding attacker's
+    ``Host`` is a name of their own."""
+    names = set(LOOPBACK_NAMES)
+    if host not in WILDCARD_HOSTS:
+        names.add(host.strip("[]").lower())
+    return frozenset(names)
+
+
+def _is_ip_literal(host: str) -> bool:
+    try:
+        ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    return True
+
+
+def refusal(headers: Any, bound_host: str, port: int | None) -> str | None:
+    """Why a request with these HTTP ``headers`` must be refused by a viewer bound to
+    ``bound_host:port`` (``None``: accept). ``Host`` must name the viewer (:func:`allowed_hosts`, the
+    right port); an ``Origin``, when present, must be ``http://`` + that same host and port."""
+    if port is None:
+        return "the viewer is starting"
+    values = headers.get_all("Host") if hasattr(headers, "get_all") else [headers.get("Host")]
+    if len(values) != 1 or not values[0]:
+        return "one Host header needed"
+    parsed = _split_host(values[0])
+    if parsed is None:
+        return "malformed Host header"
+    name, host_port = parsed
+    if (host_port if host_port is not None else 80) != port:
+        return f"Host port {host_port} is not this viewer's"
+    if name not in allowed_hosts(bound_host) and not (bound_host in WILDCARD_HOSTS and _is_ip_literal(name)):
+        return f"Host {name!r} is not this viewer's address"
+    origins = headers.get_all("Origin") if hasattr(headers, "get_all") else [headers.get("Origin")]
+    origins = [o for o in origins if o is not None]
+    if origins:
+        if len(origins) != 1 or not origins[0].lower().startswith("http://"):
+            return "cross-site Origin"
+        if _split_host(origins[0][len("http://") :].rstrip("/")) != parsed:
+            return "cross-site Origin"
+    return None
+
+
+_SERVE_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _guarded_serving(bound_host: str, port_of: Any) -> Any:
+    """While a viser server starts, every websockets server it creates refuses requests that
+    :func:`refusal` refuses with HTTP 403 (its ``process_request`` hook, composed with viser's own,
+    which serves the client files). Yields a list that holds ``True`` once the hook is in place."""
+    import websockets.asyncio.server as ws_server
+
+    original = ws_server.serve
+    installed: list[bool] = []
+
+    def guarded(handler: Any, *args: Any, process_request: Any = None, **kwargs: Any) -> Any:
+        def process(connection: Any, request: Any) -> Any:
+            reason = refusal(request.headers, bound_host, port_of())
+            if reason is not None:
+                return connection.respond(http.HTTPStatus.FORBIDDEN, f"skincal viewer: refused ({reason})\n")
+            return None if process_request is None else process_request(connection, request)
+
+        installed.append(True)
+        return original(handler, *args, process_request=process, **kwargs)
+
+    with _SERVE_LOCK:
+        ws_server.serve = guarded
+        try:
+            yield installed
+        finally:
+            ws_server.serve = original
 
 
 def _viser():
@@ -222,9 +344,14 @@ def start_viewer(
     ``chain``; returns at once (the server runs in its own threads). ``q0`` ``(n,)`` rad is the
     initial posture (default: the recording's first sample, else zeros)."""
     viser = _viser()
-    with contextlib.redirect_stdout(io.StringIO()):  # viser prints a banner; the CLI prints the URL
-        server = viser.ViserServer(host=host, port=port, verbose=False)
+    bound: dict[str, int] = {}  # the port, once known: requests before that are refused
+    with _guarded_serving(host, lambda: bound.get("port")) as installed:
+        with contextlib.redirect_stdout(io.StringIO()):  # viser prints a banner; the CLI prints the URL
+            server = viser.ViserServer(host=host, port=port, verbose=False)
+    bound["port"] = int(server.get_port())
     try:
+        if not installed:  # fail closed: a viser that no longer serves through websockets.asyncio.server.serve
+            raise ConfigError("cannot guard this viser version's server against cross-site access; not serving")
         server.gui.configure_theme(show_share_button=False)  # sharing would tunnel through a public relay
         # No image-based lighting: plain lights render at once (also in software WebGL) and look the same
         # on every machine.
@@ -237,7 +364,7 @@ def start_viewer(
         server.initial_camera.position = CAMERA_POSITION
         server.initial_camera.look_at = CAMERA_LOOK_AT
         server.initial_camera.fov = np.radians(CAMERA_FOV_DEG)
-        url = f"http://{host}:{server.get_port()}"
+        url = viewer_url(host, bound["port"])
         viewer = Viewer(server, chain, url, frames, [], recording, {n: u.pose for n, u in result.units.items()})
         _add_gui(viewer, result, errors, np.asarray(q0, dtype=float))
         if recording is not None:
