@@ -1,0 +1,90 @@
+"""``skincal report`` at scale: wall time, peak memory and page size for a many-unit dataset (issue 19
+target: 100 units in <= 20 s and <= 300 MB peak RSS; run by hand).
+
+    python benchmarks/bench_report.py --units 100 --protocol fast --workdir /tmp/bench-report
+
+Simulates (``skincal simulate --placement random --noise realistic``) and calibrates (``skincal
+calibrate``) once into ``--workdir`` (reused when the files are there), then runs ``skincal report``
+(HTML, and ``--format md``) as child processes and reads each one's peak resident set size from the
+kernel (``wait4``, the figure ``/usr/bin/time -v`` prints as "Maximum resident set size"). For
+reference it also measures ``skincal info`` on the same dataset: reading and validating the dataset
+alone, the floor under the report's memory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+TARGET_S, TARGET_MB = 20.0, 300.0
+
+
+def _skincal() -> list[str]:
+    exe = shutil.which("skincal")
+    return [exe] if exe else [sys.executable, "-m", "skincal"]
+
+
+def measure(args: list[str]) -> dict[str, float]:
+    """Run ``skincal ARGS`` and return its wall time (s) and peak RSS (MB, this child only)."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([*_skincal(), *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise SystemExit(f"skincal {' '.join(args)} failed: {err.strip()}")
+    return {"wall_s": wall, "max_rss_mb": usage.ru_maxrss / 1024.0}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--units", type=int, default=100)
+    parser.add_argument("--protocol", default="fast", help="simulation protocol (fast: 83 s of motion)")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--workdir", type=Path, default=Path("bench-report"), help="dataset and result (reused)")
+    parser.add_argument("--repeat", type=int, default=1, help="report runs (the best is kept)")
+    parser.add_argument("--json", type=Path, default=None, help="write the numbers here")
+    args = parser.parse_args()
+    work = args.workdir
+    work.mkdir(parents=True, exist_ok=True)
+    tag = f"{args.units}u-{args.protocol}-s{args.seed}"
+    ds, res = work / f"ds-{tag}.h5", work / f"res-{tag}.json"
+    if not ds.exists():
+        print(f"simulating {ds} ...", flush=True)
+        subprocess.run([*_skincal(), "simulate", "-o", str(ds), "--placement", "random", "--units", str(args.units),
+                        "--protocol", args.protocol, "--noise", "realistic", "--seed", str(args.seed)],
+                       check=True, stdout=subprocess.DEVNULL)
+    if not res.exists():
+        print(f"calibrating {res} ...", flush=True)
+        subprocess.run([*_skincal(), "calibrate", str(ds), "-o", str(res)], check=True, stdout=subprocess.DEVNULL)
+    runs = []
+    for fmt in ("html", "md"):
+        out = work / f"report-{tag}.{fmt}"
+        best = None
+        for _ in range(args.repeat):
+            m = measure(["report", str(res), "--dataset", str(ds), "--format", fmt, "-o", str(out), "--force"])
+            best = m if best is None or m["wall_s"] < best["wall_s"] else best
+        runs.append({"what": f"report --format {fmt}", **best, "page_mb": out.stat().st_size / 2**20})
+    runs.append({"what": "info (read the dataset only)", **measure(["info", str(ds)]), "page_mb": float("nan")})
+    print(f"{args.units} units, protocol {args.protocol}, dataset {ds.stat().st_size / 2**20:.1f} MB "
+          f"(targets for the HTML report: <= {TARGET_S:g} s, <= {TARGET_MB:g} MB)")
+    print(f"{'command':32} {'wall [s]':>9} {'peak RSS [MB]':>14} {'output [MB]':>12}")
+    for r in runs:
+        print(f"{r['what']:32} {r['wall_s']:9.1f} {r['max_rss_mb']:14.0f} {r['page_mb']:12.2f}")
+    html = runs[0]
+    verdict = {"time_ok": html["wall_s"] <= TARGET_S, "memory_ok": html["max_rss_mb"] <= TARGET_MB}
+    print(f"time {'within' if verdict['time_ok'] else 'OVER'} target, memory "
+          f"{'within' if verdict['memory_ok'] else 'OVER'} target")
+    if args.json is not None:
+        args.json.write_text(json.dumps({"units": args.units, "protocol": args.protocol, "runs": runs, **verdict},
+                                        indent=2))
+
+
+if __name__ == "__main__":
+    main()
