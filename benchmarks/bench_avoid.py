@@ -16,6 +16,7 @@ import json
 
 from skincal.kinematics import panda
 from skincal.workflows.bench_avoid import beliefs, qp_step_time, run_avoid_benchmark
+from skincal.workflows.script import run_script
 
 
 def main() -> None:
@@ -59,4 +60,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(run_script(main))

@@ -17,6 +17,7 @@ from rich.console import Console
 from rich.table import Table
 
 from skincal.workflows.bench_rosbag import run_seed, summarise
+from skincal.workflows.script import run_script
 
 
 def main() -> None:
@@ -87,4 +88,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(run_script(main))

@@ -91,3 +91,23 @@ def run_core_benchmark(
         "link_motion": {"seconds": t_motion, "samples_per_s": N / t_motion},
         "simulation": sims,
     }
+
+
+def core_report(doc: dict[str, Any]) -> list[Any]:
+    """What ``skincal benchmark core`` prints: the FK line and the simulation table."""
+    from rich.table import Table
+
+    fk = doc["fk"]
+    line = (
+        f"FK ({fk['joints']} joints): {fk['samples_per_s']:.3g} configurations/s "
+        f"({fk['ratio_to_matmul_floor']:.2f}x the floor of {fk['joints']} batched 4x4 matmuls); "
+        f"link motion (frames, velocities, accelerations): {doc['link_motion']['samples_per_s']:.3g} /s"
+    )
+    table = Table(title=f"analytic simulation, {doc['protocol']} ({doc['protocol_duration_s']:.0f} s of motion)")
+    for col in ("units", "wall time (s)", "IMU samples", "samples/s"):
+        table.add_column(col, justify="right")
+    for row in doc["simulation"]:
+        table.add_row(
+            str(row["units"]), f"{row['seconds']:.2f}", str(row["imu_samples"]), f"{row['samples_per_s']:.3g}"
+        )
+    return [line, table]

@@ -545,3 +545,129 @@ def config_dict(config: RobustnessConfig) -> dict[str, Any]:
         "beyond_3sigma": "calibrated units wrong beyond their reported uncertainty by the silent-error rule, "
         "warned or not",
     }
+
+
+# --------------------------------------------------------------------------- the benchmark as run and shown
+def names(text: str | None) -> tuple[str, ...] | None:
+    """``"a, b"`` -> ``("a", "b")``; ``None`` stays ``None`` (the default)."""
+    if text is None:
+        return None
+    return tuple(x.strip() for x in text.split(",") if x.strip())
+
+
+def config_from_options(
+    robots: str | None = None,
+    backends: str | None = None,
+    faults: str | None = None,
+    seeds: int | None = None,
+    quick: bool = False,
+    protocol: str | None = None,
+    seed: int = 0,
+) -> RobustnessConfig:
+    """The configuration of the command's options (comma-separated lists; ``None``: the default)."""
+    overrides: dict[str, Any] = {"seed": seed}
+    for key, value in (("robots", names(robots)), ("backends", names(backends)), ("faults", names(faults))):
+        if value is not None:
+            overrides[key] = value
+    if seeds is not None:
+        overrides["seeds"] = seeds
+    if protocol is not None:
+        overrides["protocol"] = protocol
+    return RobustnessConfig.quick(**overrides) if quick else RobustnessConfig(**overrides)
+
+
+def fault_lines() -> list[str]:
+    """One line per fault: name, description and target (``--list``)."""
+    out = []
+    for f in FAULTS.values():
+        target = f"mean <= {f.target_mean_mm:g} mm" if f.target_mean_mm is not None else "no mean target"
+        out.append(f"{f.name:14s} {f.description} ({target})")
+    return out
+
+
+def run_benchmark(
+    config: RobustnessConfig,
+    workers: int = 1,
+    dask: Any = None,
+    progress: Callable[[dict[str, Any]], None] | None = None,
+) -> dict[str, Any]:
+    """Run every job (:func:`run`) and summarise.
+
+    Returns ``{"config", "cells", "records", "wall_time_s", "workers", "dask"}`` (the ``--out`` document).
+    """
+    import time
+
+    if workers < 1:
+        raise ConfigError(f"--workers must be at least 1, got {workers}")
+    start = time.perf_counter()
+    records = run(config, workers=workers, dask=dask, progress=progress)
+    wall = time.perf_counter() - start
+    return {
+        "config": config_dict(config),
+        "cells": summarise(config, records),
+        "records": records,
+        "wall_time_s": wall,
+        "workers": None if dask else workers,
+        "dask": dask,
+    }
+
+
+def _num(x: float | None, digits: int) -> str:
+    return "-" if x is None else f"{x:.{digits}f}"
+
+
+def robustness_table(config: RobustnessConfig, cells: list[dict[str, Any]]):
+    """A rich table with one row per cell (robot, backend, fault)."""
+    from rich.table import Table
+
+    table = Table(
+        title=f"robustness: mle, {config.protocol} protocol, {config.seeds} placement(s) of "
+        f"{config.n_units} units per cell"
+    )
+    for col, justify in (
+        ("robot", "left"), ("backend", "left"), ("fault", "left"), ("pos mean/max mm", "right"),
+        ("rot mean/max deg", "right"), ("links", "right"), ("z rms", "right"), ("calibrated", "right"),
+        ("warned", "right"), ("beyond", "right"), ("silent", "right"), ("targets", "left"),
+    ):  # fmt: skip
+        table.add_column(col, justify=justify, no_wrap=col in ("backend", "fault"))
+    previous = None
+    for c in cells:
+        if previous is not None and (c["robot"], c["backend"]) != previous:
+            table.add_section()
+        previous = (c["robot"], c["backend"])
+        n = c["units_total"]
+        verdict = "ok" if c["pass"] else "[red]" + ", ".join(c["failed_targets"]) + "[/red]"
+        table.add_row(
+            c["robot"], c["backend"], c["fault"],
+            f"{_num(c['mean_position_error_mm'], 3)} / {_num(c['max_position_error_mm'], 2)}",
+            f"{_num(c['mean_rotation_error_deg'], 3)} / {_num(c['max_rotation_error_deg'], 2)}",
+            f"{c['links_correct']}/{n}", _num(c["z_rms"], 2), f"{c['units_calibrated']}/{n}",
+            str(c["warned"]), str(c["beyond_3sigma"]),
+            ("[red]" + str(c["silent"]) + "[/red]") if c["silent"] else "0", verdict,
+        )  # fmt: skip
+    return table
+
+
+LEGEND = (
+    "errors of calibrated units (means over observable ones); z = position error / reported std per link axis; "
+    "warned: units with any warning; beyond: units on a wrong link or beyond 3 sigma (any axis, or sum z^2 > "
+    "chi2_3(0.9973)); silent: beyond and not warned. Targets: mean <= 0.3 mm (qd-*), <= 1 mm (imu-real, "
+    "clock-*); all links right and no silent error in every cell."
+)
+"""What the table's columns mean, printed under it."""
+
+
+def where(workers: int, dask: Any) -> str:
+    """Where the jobs ran, for the summary line."""
+    return f"dask {dask}" if dask else f"{workers} local process(es)"
+
+
+def report(config: RobustnessConfig, doc: Mapping[str, Any]) -> list[Any]:
+    """What the command prints after a run: the table, the legend and the summary line."""
+    cells = doc["cells"]
+    passed = sum(c["pass"] for c in cells)
+    line = (
+        f"{passed}/{len(cells)} cells meet their targets; {len(doc['records'])} jobs in {doc['wall_time_s']:.1f} s "
+        f"wall ({where(doc['workers'] or 1, doc['dask'])})"
+    )
+    return [robustness_table(config, cells), LEGEND, line]

@@ -254,3 +254,91 @@ def config_dict(config: Table1Config) -> dict[str, Any]:
         "seed": config.seed,
         "options": dict(config.options),
     }
+
+
+# --------------------------------------------------------------------------- the benchmark as run and shown
+def config_from_options(
+    quick: bool = False,
+    runs: int | None = None,
+    sets: int | None = None,
+    methods: str = "om,mmm,mm",
+    seed: int = 0,
+) -> Table1Config:
+    """The configuration of the command's options (``methods`` comma-separated; ``None``: the default)."""
+    names = tuple(m.strip() for m in methods.split(",") if m.strip())
+    overrides: dict[str, Any] = {"methods": names, "seed": seed}
+    if runs is not None:
+        overrides["runs"] = runs
+    if sets is not None:
+        overrides["sets"] = sets
+    return Table1Config.quick(**overrides) if quick else Table1Config(**overrides)
+
+
+def run_benchmark(
+    config: Table1Config,
+    workers: int = 1,
+    dask: Any = None,
+    progress: Callable[[dict[str, Any]], None] | None = None,
+) -> dict[str, Any]:
+    """Run every job (on Dask when a scheduler is given) and summarise.
+
+    Returns ``{"config", "summary", "records", "wall_time_s"}`` (the ``--json`` document; records by set, run).
+    """
+    if workers < 1:
+        raise ConfigError(f"--workers must be at least 1, got {workers}")
+    start = time.perf_counter()
+    records = run_dask(config, dask, progress) if dask is not None else run_local(config, workers, progress)
+    wall = time.perf_counter() - start
+    records.sort(key=lambda r: (r["set"], r["run"]))
+    return {"config": config_dict(config), "summary": summarise(config, records), "records": records,
+            "wall_time_s": wall}  # fmt: skip
+
+
+def _cell(stat: list[float] | None, scale: float = 1.0, digits: int = 2) -> str:
+    if stat is None:
+        return "-"
+    return f"{stat[0] * scale:.{digits}f} ± {stat[1] * scale:.{digits}f}"
+
+
+def table1_table(config: Table1Config, summary: dict[str, Any]):
+    """A rich table laid out like the paper's Table I, with the paper's rows beside ours."""
+    from rich.table import Table
+
+    n_units = len(config.links)
+    table = Table(
+        title=f"Table I: {config.sets} placement sets x {config.runs} runs, {config.robot}, noise-free "
+        f"(quaternion distance x 10 as in the paper)"
+    )
+    table.add_column("metric")
+    table.add_column("method")
+    for k in range(n_units):
+        table.add_column(f"SU{k + 1} (link {config.links[k]})", justify="right")
+    table.add_column("average", justify="right")
+    table.add_column("wall time / set (s)", justify="right")
+    metrics = (
+        ("position_cm", "position (cm)", 1.0, 2),
+        ("quaternion_distance", "quat. dist. x10", 10.0, 3),
+        ("rotation_deg", "rotation (deg)", 1.0, 2),
+    )
+    for key, label, scale, digits in metrics:
+        for method in config.methods:
+            s = summary["methods"][method]
+            cells = [_cell(u[key], scale, digits) for u in s["units"].values()]
+            cells += ["-"] * (n_units - len(cells))
+            runtime = _cell(s["runtime_s"], 1.0, 1)
+            table.add_row(label, method, *cells, _cell(s["average"][key], scale, digits), runtime)
+            paper = PAPER_TABLE_I.get(method, {}).get(key)
+            if paper is not None and n_units == 6:
+                ptime = f"{PAPER_RUNTIME_S[method]:.0f}" if method in PAPER_RUNTIME_S else ""
+                table.add_row(
+                    "", f"{method} (paper)", *[_cell(list(p), scale, digits) for p in paper], ptime, style="dim"
+                )
+        table.add_section()
+    return table
+
+
+def report(config: Table1Config, doc: dict[str, Any], workers: int = 1, dask: Any = None) -> list[Any]:
+    """What the command prints after a run: the table and the summary line."""
+    where = f"dask {dask}" if dask else f"{workers} local process(es)"
+    line = f"{len(doc['records'])} jobs in {doc['wall_time_s']:.1f} s wall ({where})"
+    return [table1_table(config, doc["summary"]), line]
