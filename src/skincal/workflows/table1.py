@@ -1,13 +1,13 @@
 """The paper's Table I benchmark: random placement sets x optimiser runs, per-unit errors per method.
 
-Protocol (paper Sec. V-A): ``sets`` random placements (default 4) of one unit per link 2..7 of the
-Panda (:func:`skincal.skin.placement.random_placement`), each simulated noise-free with the
-``paper-sim`` protocol (:mod:`skincal.sim.analytic`); every method calibrates each set ``runs``
-times (default 10) with different optimiser seeds, the link of each unit given (the table compares
-pose estimation, not link discovery). Per unit ``SU1..SU6`` (the unit on link ``k + 1``) and over all
-units: mean and standard deviation over the ``sets x runs`` trials of the position error (cm) and of
-the paper's quaternion distance ``min(|q1 - q2|, |q1 + q2|)``; also the rotation error in degrees
-and the wall time of each calibration (all units of a set, one process).
+Protocol (paper Sec. V-A): ``sets`` random placements (default 4) of one unit per link 2..7 of the Panda
+(:func:`skincal.skin.placement.random_placement`), each simulated noise-free with the ``paper-sim``
+protocol (:func:`skincal.workflows.session.make_session`, analytic simulator); every method calibrates
+each set ``runs`` times (default 10) with different optimiser seeds, the link of each unit given (the
+table compares pose estimation, not link discovery). Per unit ``SU1..SU6`` (the unit on link ``k + 1``)
+and over all units: mean and standard deviation over the ``sets x runs`` trials of the position error
+(cm) and of the paper's quaternion distance ``min(|q1 - q2|, |q1 + q2|)``; also the rotation error in
+degrees and the wall time of each calibration (all units of a set, one process).
 
 One job is one ``(set, run)`` pair and runs every method (:func:`run_job`): a pure function of a
 picklable :class:`Job`, so it runs the same in a local process pool or on a Dask cluster. The
