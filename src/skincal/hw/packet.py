@@ -284,25 +284,31 @@ def decode_packet(data: bytes) -> SkinPacket | JointPacket:
         raise BadLengthError(f"packet (source {source}, seq {seq}): {size} bytes, header implies {expected}")
     rec = np.frombuffer(data, dtype=dtype, count=n, offset=HEADER.size)
     t_us = rec["dt_us"].astype(np.int64) + np.int64(t0)
-    with np.errstate(invalid="ignore"):  # signalling NaNs from arbitrary bytes: refused below, no warning
-        return _samples(magic, flags, source, seq, t_us, rec)
-
-
-def _samples(magic: bytes, flags: int, source: int, seq: int, t_us: np.ndarray, rec: np.ndarray
-             ) -> SkinPacket | JointPacket:
     if magic == MAGIC_JOINTS:
-        q, qd = rec["q"].astype(float), rec["qd"].astype(float)
+        q, qd = rec["q"].astype(float), rec["qd"].astype(float)  # f64 -> f64: no signalling-NaN trap
         if not (np.isfinite(q).all() and np.isfinite(qd).all()):
             raise BadValueError(f"joint packet (source {source}, seq {seq}): non-finite q or qd")
         return JointPacket(source, seq, t_us, q, qd)
-    fields: dict[str, np.ndarray | None] = dict.fromkeys(("accel", "gyro", "range"))
-    for name, flag in (("accel", FLAG_ACCEL), ("gyro", FLAG_GYRO)):
-        if flags & flag:
-            fields[name] = value = rec[name].astype(float)
-            if not np.isfinite(value).all():
-                raise BadValueError(f"skin packet (unit {source}, seq {seq}): non-finite {name}")
+    # every skin field after dt_us is f32: check them all at once, before any cast (a cast of a
+    # signalling NaN from arbitrary bytes would raise the FP "invalid" flag)
+    words = dtype.itemsize // 4
+    values = np.frombuffer(data, dtype="<f4", count=n * words, offset=HEADER.size).reshape(n, words)[:, 1:]
+    ok = np.isfinite(values)
     if flags & FLAG_RANGE:
-        fields["range"] = r = rec["range"].astype(float)
-        if np.any(np.isinf(r) | (r < 0)):  # NaN (no target) passes both tests
-            raise BadValueError(f"skin packet (unit {source}, seq {seq}): infinite or negative range")
-    return SkinPacket(unit_id=source, seq=seq, t_us=t_us, **fields)
+        r = values[:, -1]
+        ok[:, -1] = ~(np.isinf(r) | (r < 0))  # NaN: no target
+    if not ok.all():
+        raise BadValueError(f"skin packet (unit {source}, seq {seq}): non-finite accel or gyro, or an infinite or "
+                            "negative range")
+    range_m = None
+    if flags & FLAG_RANGE:
+        with np.errstate(invalid="ignore"):
+            range_m = rec["range"].astype(float)
+    return SkinPacket(
+        unit_id=source,
+        seq=seq,
+        t_us=t_us,
+        accel=rec["accel"].astype(float) if flags & FLAG_ACCEL else None,
+        gyro=rec["gyro"].astype(float) if flags & FLAG_GYRO else None,
+        range=range_m,
+    )
