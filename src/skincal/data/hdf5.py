@@ -42,7 +42,8 @@ import numpy as np
 from skincal.data.atomic import atomic_path
 from skincal.data.dataset import Dataset, ImuStream, JointStates, Segments, TofStream
 from skincal.data.jsonio import regular_file
-from skincal.data.validate import check_unit_name, validate_dataset
+from skincal.data.names import printable
+from skincal.data.validate import check_unit_name, shown, validate_dataset
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.chain import CONVENTIONS, SerialChain
 from skincal.skin.pose import SkinUnitPose
@@ -81,7 +82,7 @@ class _Reader:
         self.seen: dict[object, str] = {}  # HDF5 object id -> the first path it was reached by
 
     def fail(self, field: str, problem: str) -> DatasetError:
-        return DatasetError(f"{self.source}: {field} {problem}")
+        return DatasetError(f"{self.source}: {printable(field)} {printable(problem)}")
 
     def link(self, path: str) -> bool:
         """Whether ``path`` exists, following hard links only: a soft or external link on the way is refused."""
@@ -228,7 +229,7 @@ class _Reader:
             except UnicodeDecodeError:
                 raise self.fail(self.attr_field(path, name), "is not valid UTF-8 text") from None
         if not isinstance(value, str):
-            raise self.fail(self.attr_field(path, name), f"must be a string, got {value!r}")
+            raise self.fail(self.attr_field(path, name), f"must be a string, got {shown(value)}")
         return str(value)
 
     def num_attr(self, path: str, name: str, shape: tuple[int, ...], integer: bool = False) -> np.ndarray:
@@ -247,13 +248,13 @@ class _Reader:
         if fmt is None:
             raise self.fail("root attr 'format'", f"is missing (not a {FORMAT} file)")
         if fmt != FORMAT:
-            raise self.fail("root attr 'format'", f"is '{fmt}', expected '{FORMAT}'")
+            raise self.fail("root attr 'format'", f"is {shown(fmt)}, expected '{FORMAT}'")
         version = self.attr("/", "version")
         if isinstance(version, np.ndarray) and version.shape == ():
             version = version[()]
         if isinstance(version, bool | np.bool_) or not isinstance(version, int | np.integer):
-            shown = version.item() if isinstance(version, np.generic) else version
-            raise self.fail("root attr 'version'", f"must be an integer, got {shown!r}")
+            version_shown = version.item() if isinstance(version, np.generic) else version
+            raise self.fail("root attr 'version'", f"must be an integer, got {shown(version_shown)}")
         if int(version) != VERSION:
             raise self.fail("root attr 'version'", f"is {int(version)}; this skincal reads version {VERSION}")
         return self.str_attr("/", "description", required=False) or ""
@@ -263,7 +264,7 @@ class _Reader:
         name = self.str_attr("/robot", "name")
         convention = self.str_attr("/robot", "convention")
         if convention not in CONVENTIONS:
-            raise self.fail("/robot attr 'convention'", f"is '{convention}', expected one of {CONVENTIONS}")
+            raise self.fail("/robot attr 'convention'", f"is {shown(convention)}, expected one of {CONVENTIONS}")
         gravity = self.num_attr("/robot", "gravity", (3,))
         dh = self.array("/robot/dh")
         if dh.ndim != 2 or dh.shape[1] != 4 or dh.shape[0] < 1:

@@ -36,7 +36,7 @@ leaves a unit's orientation undetermined), about 9.81 on Earth."""
 
 
 def _fail(source: str, field: str, problem: str) -> DatasetError:
-    return DatasetError(f"{source}: {field} {problem}")
+    return DatasetError(f"{source}: {printable(field)} {printable(problem)}")
 
 
 def _real_array(value: object, source: str, field: str, *, integer: bool = False) -> np.ndarray:
@@ -84,8 +84,10 @@ def _time_field(value: object, source: str, field: str, *, min_samples: int) -> 
     return t
 
 
-def _shown(name: object) -> str:
-    text = repr(name)
+def shown(value: object) -> str:
+    """``repr(value)`` for a one-line message: white space collapsed, at most 60 characters, control
+    characters escaped."""
+    text = " ".join(repr(value).split())
     return printable(text if len(text) <= 60 else text[:57] + "...")
 
 
@@ -93,7 +95,7 @@ def check_unit_name(name: object, source: str, group: str) -> None:
     """Refuse a unit name that :func:`skincal.data.names.name_problem` refuses (the one rule for names)."""
     problem = name_problem(name)
     if problem is not None:
-        raise _fail(source, group, f"has an invalid unit name {_shown(name)}: it {problem}")
+        raise _fail(source, group, f"has an invalid unit name {shown(name)}: it {problem}")
 
 
 def validate_robot(robot: object, gravity: object, source: str) -> int:
@@ -102,7 +104,7 @@ def validate_robot(robot: object, gravity: object, source: str) -> int:
         raise _fail(source, "/robot", f"must be a SerialChain, got {type(robot).__name__}")
     problem = name_problem(robot.name)
     if problem is not None:
-        raise _fail(source, "/robot attr 'name'", f"{_shown(robot.name)} is not a valid robot name: it {problem}")
+        raise _fail(source, "/robot attr 'name'", f"{shown(robot.name)} is not a valid robot name: it {problem}")
     if robot.convention not in CONVENTIONS:
         raise _fail(source, "/robot attr 'convention'", f"is '{robot.convention}', expected one of {CONVENTIONS}")
     dh = _float_field(robot.dh, (None, 4), source, "/robot/dh")
