@@ -279,4 +279,42 @@ def test_unit_names_go_through_the_one_name_rule(tmp_path):
     for bad in ("a/b", "", "..", "x\x1b[31m", " pad"):
         with pytest.raises(ConfigError, match="name of unit 3"):
             Recorder(tmp_path / "n.h5", unit_names={3: bad})
+    with pytest.raises(ConfigError, match="'arm' is given to two units"):
+        Recorder(tmp_path / "n.h5", unit_names={3: "arm", 4: "arm"})
     assert not (tmp_path / "n.h5").exists()
+
+
+def test_a_group_belongs_to_one_unit(tmp_path):
+    """Unit 1 mapped to the name unit 2 has by default: unit 2's samples are not mixed into the group."""
+    rec = Recorder(tmp_path / "g.h5", t_origin_s=0.0, host_clock=lambda: 0.0, unit_names={1: "su2"})
+    rec.add(_delivery(encode_packet(1, 0, [1_000_000], accel=np.ones((1, 3))), 1.0))
+    rec.add(_delivery(encode_packet(2, 0, [2_000_000], accel=np.zeros((1, 3))), 1.0))
+    summary = rec.finish({("skin", 1): ClockFit(0.0, 0.0, 0.0), ("skin", 2): ClockFit(0.0, 0.0, 0.0)})
+    assert summary.samples == {"imu/su2": 1} and summary.ignored["group_taken"] == 1
+    with h5py.File(tmp_path / "g.h5", "r") as f:
+        assert f["imu/su2"].attrs["source_id"] == 1 and f["imu/su2/accel"][0, 0] == 1.0
+
+
+def test_provisional_times_never_step_back_when_the_fit_does(tmp_path):
+    """The clock fit at a flush can move back by more than a sample period (a faster delivery lowers
+    the envelope): the provisional t of a killed recording still increases strictly (shifted, spacing
+    kept), and finish() maps the whole epoch with the final fit."""
+    key = ("skin", 1)
+    for finish in (False, True):
+        path = tmp_path / f"p{finish}.h5"
+        rec = Recorder(path, t_origin_s=0.0, host_clock=lambda: 0.0)
+        d = 1_000_000 + 10_000 * np.arange(6)
+        rec.add(_delivery(encode_packet(1, 0, d[:3], accel=np.ones((3, 3))), 1.0))
+        rec.flush({key: ClockFit(0.0, 0.0, 0.0)})
+        rec.add(_delivery(encode_packet(1, 1, d[3:], accel=np.ones((3, 3))), 1.0))
+        rec.flush({key: ClockFit(-0.05, 0.0, 0.0)})  # 50 ms back: 5 sample periods
+        if finish:
+            rec.finish({key: ClockFit(-0.05, 0.0, 0.0)})
+        else:
+            rec.close()
+        with h5py.File(path, "r") as f:
+            t = f["imu/su1/t"][...]
+        if finish:
+            np.testing.assert_allclose(t, d * 1e-6 - 0.05, atol=1e-12)
+        else:  # the second flush follows the first at half the device spacing, then keeps the spacing
+            np.testing.assert_allclose(t, [1.0, 1.01, 1.02, 1.025, 1.035, 1.045], atol=1e-9)

@@ -168,6 +168,10 @@ class Recorder:
             problem = name_problem(name)
             if problem is not None:
                 raise ConfigError(f"recorder: the name of unit {unit_id} ({printable(str(name))!r}) {problem}")
+        names = list(self.unit_names.values())
+        if len(set(names)) < len(names):  # (a default su<k> taken by a mapped name: group_taken at run time)
+            clash = sorted(n for n in names if names.count(n) > 1)[0]
+            raise ConfigError(f"recorder: unit name {printable(clash)!r} is given to two units")
         self.flush_every_samples, self.flush_every_s = int(flush_every_samples), float(flush_every_s)
         self.chunk_rows = int(chunk_rows)
         self.max_unit_samples = int(max_unit_samples)
