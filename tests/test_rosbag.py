@@ -17,7 +17,7 @@ from skincal.calib import calibrate, evaluate
 from skincal.cli import main
 from skincal.data.dataset import TofStream
 from skincal.data.hdf5 import read_dataset, write_dataset
-from skincal.data.rosbag import STANDARD_GRAVITY, read_bag, topic_map, write_bag
+from skincal.data.rosbag import PROGRESS_EVERY, STANDARD_GRAVITY, read_bag, topic_map, write_bag
 from skincal.data.segment import segment_dataset
 from skincal.errors import DatasetError
 from skincal.kinematics import get_robot
@@ -279,7 +279,9 @@ def test_cli_import(small, tmp_path, capsys):
     sim = small
     write_bag(sim, tmp_path / "b.bag", ros_version=1)
     assert main(["import", str(tmp_path / "b.bag"), "--out", str(tmp_path / "d.h5")]) == 0
-    out = capsys.readouterr().out
+    captured = capsys.readouterr()
+    out = captured.out
+    assert captured.err == ""  # the progress bar is transient and on stderr: nothing left in a log
     assert "segments found" in out and "multi-joint motion" in out
     ds = read_dataset(tmp_path / "d.h5")
     assert ds.segments is not None and len(ds.segments) > 0 and ds.units == sim.units
@@ -289,3 +291,26 @@ def test_cli_import(small, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: ") and "no sensor_msgs/JointState" in err and "\n" not in err
     assert not (tmp_path / "x.h5").exists()
+
+
+@pytest.mark.parametrize("ros,storage", [(1, "sqlite3"), (2, "mcap")])
+def test_progress_counts_the_messages_read(small, tmp_path, ros, storage):
+    """``progress(read, total)``: starts at 0, every PROGRESS_EVERY messages, ends at total; the
+    total is the messages of the selected topics only (from the bag's index)."""
+    bag = tmp_path / ("b.bag" if ros == 1 else "b")
+    write_bag(small, bag, ros_version=ros, storage=storage)
+    calls: list[tuple[int, int]] = []
+    _, report = read_bag(bag, "panda", progress=lambda done, total: calls.append((done, total)))
+    total = sum(report.counts.values())
+    assert total > 2 * PROGRESS_EVERY  # the bag is long enough for intermediate calls
+    assert calls[0] == (0, total) and calls[-1] == (total, total)
+    assert [c[0] for c in calls[1:-1]] == list(range(PROGRESS_EVERY, total, PROGRESS_EVERY))
+    assert all(t == total for _, t in calls)
+    unit = small.units[0]
+    calls.clear()
+    _, one = read_bag(bag, "panda", topic_map([f"/skin/{unit}/imu"], "/joint_states"),
+                      progress=lambda done, total: calls.append((done, total)))
+    assert one.counts["/joint_states"] == len(small.joints.t) and one.counts[f"/skin/{unit}/imu"] == len(
+        small.imu[unit].t)
+    selected = sum(one.counts.values())  # joints, one IMU and the (automatically selected) range topics
+    assert calls[0] == (0, selected) and calls[-1] == (selected, selected) and selected < total

@@ -80,12 +80,12 @@ def import_bag(
 
     from skincal.data.atomic import check_output
     from skincal.data.hdf5 import write_dataset
-    from skincal.data.rosbag import read_bag, topic_map
+    from skincal.data.rosbag import topic_map
     from skincal.data.segment import segment_dataset
 
     check_output(out, force=force, inputs=(bag,))
     tmap = topic_map(imu_topic, joint_topic, range_topic, path=map_file)
-    ds, report = read_bag(bag, robot, tmap, accel_unit=accel_unit, gyro_unit=gyro_unit)
+    ds, report = _read_bag_with_progress(bag, robot, tmap, accel_unit, gyro_unit)
     units = ", ".join(f"{u} <- {t}" for t, u in report.imu_topics.items())
     ranges = ", ".join(f"{u} <- {t}" for t, u in report.range_topics.items())
     console.print(f"read {bag} (ROS {report.ros_version}): joints from {report.joint_topic} "
@@ -101,6 +101,21 @@ def import_bag(
         ds = replace(ds, segments=None)
     write_dataset(ds, out)
     console.print(f"wrote {out}: {len(ds.units)} units, {ds.duration:.1f} s", highlight=False)
+
+
+def _read_bag_with_progress(bag: Path, robot: str, tmap, accel_unit: str, gyro_unit: str):
+    """:func:`~skincal.data.rosbag.read_bag` with a transient progress bar on stderr (messages read / total)."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from skincal.cli.app import err_console
+    from skincal.data.rosbag import read_bag
+
+    columns = (TextColumn("reading the bag"), BarColumn(), MofNCompleteColumn(), TextColumn("messages"),
+               TimeRemainingColumn())
+    with Progress(*columns, console=err_console, transient=True, disable=not err_console.is_terminal) as bar:
+        task = bar.add_task("read", total=None)
+        return read_bag(bag, robot, tmap, accel_unit=accel_unit, gyro_unit=gyro_unit,
+                        progress=lambda done, total: bar.update(task, completed=done, total=total))
 
 
 @app.command("segment")

@@ -24,6 +24,7 @@ are sorted; repeated stamps and NaN samples are dropped with a count in the repo
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,6 +37,8 @@ from skincal.data.validate import validate_dataset
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.chain import SerialChain
 
+PROGRESS_EVERY = 5000
+"""Messages between two calls of :func:`read_bag`'s ``progress`` callback."""
 STANDARD_GRAVITY = 9.80665
 """1 g in m/s^2 (the conversion for accelerometers that report in g)."""
 IMU, JOINTS, RANGE, SCAN = (f"sensor_msgs/msg/{x}" for x in ("Imu", "JointState", "Range", "LaserScan"))
@@ -199,8 +202,11 @@ def _open_reader(path: Path):
     return reader
 
 
-def _read_messages(path: Path, source: str, tmap: TopicMap) -> tuple[int, TopicMap, dict[str, list], list[str]]:
-    """One pass over the bag: per selected topic, a list of (stamp ns, bag ns, payload) rows."""
+def _read_messages(
+    path: Path, source: str, tmap: TopicMap, progress: Callable[[int, int], None] | None = None
+) -> tuple[int, TopicMap, dict[str, list], list[str]]:
+    """One pass over the bag: per selected topic, a list of (stamp ns, bag ns, payload) rows;
+    ``progress(read, total)`` every :data:`PROGRESS_EVERY` messages of the selected topics and at the end."""
     notes: list[str] = []
     try:
         reader = _open_reader(path)
@@ -241,7 +247,13 @@ def _read_messages(path: Path, source: str, tmap: TopicMap) -> tuple[int, TopicM
         selected = {joint_topic, *imu, *ranges}
         rows: dict[str, list] = {t: [] for t in selected}
         conns = [c for c in reader.connections if c.topic in selected]
+        total, done = sum(int(c.msgcount) for c in conns), 0
+        if progress is not None:
+            progress(0, total)
         for conn, bag_ns, raw in reader.messages(connections=conns):  # deserialisation is per message
+            done += 1
+            if progress is not None and done % PROGRESS_EVERY == 0:
+                progress(done, total)
             msg = reader.deserialize(raw, conn.msgtype)
             stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
             if conn.msgtype == IMU:
@@ -256,6 +268,8 @@ def _read_messages(path: Path, source: str, tmap: TopicMap) -> tuple[int, TopicM
                 r = r[(r >= msg.range_min) & (r <= msg.range_max)]
                 payload = (float(r.min()) if r.size else np.inf, msg.range_min, msg.range_max, msg.header.frame_id)
             rows[conn.topic].append((stamp, bag_ns, payload))
+        if progress is not None and done % PROGRESS_EVERY:
+            progress(done, total)
     except DatasetError:
         raise
     except Exception as exc:
@@ -270,7 +284,8 @@ def _read_messages(path: Path, source: str, tmap: TopicMap) -> tuple[int, TopicM
 
 
 def read_bag(path: str | Path, robot: SerialChain | str = "panda", tmap: TopicMap | None = None, *,
-             accel_unit: str = "auto", gyro_unit: str = "auto") -> tuple[Dataset, ImportReport]:
+             accel_unit: str = "auto", gyro_unit: str = "auto",
+             progress: Callable[[int, int], None] | None = None) -> tuple[Dataset, ImportReport]:
     """Read a ROS 1/ROS 2 bag into a :class:`Dataset` without segments (see the module docstring).
 
     Args:
@@ -278,6 +293,9 @@ def read_bag(path: str | Path, robot: SerialChain | str = "panda", tmap: TopicMa
         robot: preset name, chain file, or chain.
         tmap: topics to read (default: every Imu, JointState, Range and LaserScan topic).
         accel_unit: ``auto``, ``g`` or ``mps2``; gyro_unit: ``auto``, ``rad`` or ``deg`` (per second).
+        progress: called as ``progress(read, total)`` with the messages of the selected topics read so
+            far and their total (from the bag's index): at the start, every :data:`PROGRESS_EVERY`
+            messages and at the end.
 
     Raises:
         DatasetError: missing, empty, truncated or corrupt bag; no joint states; an unknown topic;
@@ -288,7 +306,7 @@ def read_bag(path: str | Path, robot: SerialChain | str = "panda", tmap: TopicMa
     chain = get_robot(robot) if isinstance(robot, str) else robot
     path = Path(path)
     source = str(path)
-    ros, used, rows, notes = _read_messages(path, source, tmap or TopicMap())
+    ros, used, rows, notes = _read_messages(path, source, tmap or TopicMap(), progress)
     counts = {t: len(r) for t, r in rows.items()}
 
     # Joint states.
