@@ -260,6 +260,23 @@ def test_replayed_old_packets_are_stale_not_restarts(tmp_path):
         assert (f.attrs["stale_packets"], f.attrs["restarts"], f.attrs["lost_packets"]) == (27, 0, 0)
 
 
+def test_crafted_sequence_jump_is_stale_not_a_phantom_loss(tmp_path):
+    """One packet whose sequence number jumps 2^30 ahead (current timestamp) used to be buffered, then
+    skipped to: a billion phantom losses and the live stream taken for duplicates."""
+    datagrams: list[bytes] = []
+    for i in range(200):
+        datagrams += _live(i)
+        if i in (100, 150):
+            jump = 2**30 if i == 100 else 2**31 - 5
+            t = [10**9 + 10_000 * i + 5_000]
+            datagrams.append(encode_packet(1, (i + jump) % 2**32, t, accel=[[0.0, 0.0, -1.0]]))
+    path = tmp_path / "jump.h5"
+    summary, stats, errors = _run(_record_traffic(path, _sender(datagrams)))
+    s = _skin(stats)
+    assert (s.lost, s.stale, s.restarts, s.duplicates, s.received) == (0, 2, 0, 0, 200) and not errors
+    np.testing.assert_array_equal(read_dataset(path).imu["su1"].accel[:, 2], np.arange(200))
+
+
 def test_real_reboot_is_one_restart_and_the_recording_stays_valid(tmp_path):
     """A device that really reboots (sequence numbers and clock start again, packets keep coming in real
     time) is one restart after a consistent run; every sample is kept, times strictly increasing."""

@@ -14,7 +14,9 @@ numbers. Per stream the receiver:
 * tells a device *restart* from replayed or stale packets. A packet is *off the stream's epoch* when
   its device timestamp is more than ``restart_s`` older than the newest one of the stream, or more
   than ``restart_s`` ahead of it beyond the host time elapsed since, or newer while its sequence
-  number is already passed. The packet format has no boot id, so one such packet proves nothing (a
+  number is already passed, or when its sequence number jumps ahead by more than ``reorder_window``
+  and more packets than one per 10 µs of device time (no phantom losses from one crafted number).
+  The packet format has no boot id, so one such packet proves nothing (a
   replay looks the same): off-epoch packets are held as a candidate run, and only a consistent run
   (sequence numbers within ``reorder_window`` of each other and device times ordered like them) of
   ``restart_packets`` packets spanning ``restart_confirm_s`` of host time, with no new packet of the
@@ -49,6 +51,7 @@ StreamKey = tuple[str, int]
 """``("skin", unit_id)`` or ``("joints", robot_id)``."""
 
 _LATE_MEMORY = 1 << 16  # skipped sequence numbers remembered to tell "late" from "duplicate"
+_MIN_PACKET_INTERVAL_US = 10  # no device sends packets faster: a longer sequence jump is off the epoch
 _RUN_MEMORY = 4096  # off-epoch packets held per stream while a restart is unconfirmed (older ones: stale)
 
 
@@ -268,7 +271,9 @@ class SkinReceiver:
             return False
         behind = s.next_seq is not None and seq < s.next_seq
         ahead_us = t_last - s.max_device_us - max(host_s - s.max_host_s, 0.0) * 1e6
-        return t_last < s.max_device_us - self.restart_us or ahead_us > self.restart_us or (
+        jump = 0 if s.highest is None else seq - s.highest  # more packets than the device could have sent
+        too_far = jump > self.reorder_window and jump > max(t_last - s.max_device_us, 0) // _MIN_PACKET_INTERVAL_US
+        return t_last < s.max_device_us - self.restart_us or ahead_us > self.restart_us or too_far or (
             behind and t_last > s.max_device_us)
 
     def _accept(self, key: StreamKey, s: _Stream, packet: SkinPacket | JointPacket, host_s: float) -> None:
