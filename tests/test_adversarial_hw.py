@@ -427,3 +427,6 @@ def test_record_refuses_a_public_bind_without_public(tmp_path):
                             capture_output=True, text=True, timeout=60)
         assert rc.returncode == 2 and rc.stderr.startswith("error: --bind") and "--public" in rc.stderr
         assert len(rc.stderr.strip().splitlines()) == 1 and not out.exists()
+    rc = subprocess.run([*cli, "record", "--port", "0", "--out", str(out), "--max-units", "0"],
+                        capture_output=True, text=True, timeout=60)
+    assert rc.returncode == 2 and rc.stderr.startswith("error: --max-units 0") and not out.exists()
