@@ -9,8 +9,6 @@ import typer
 from skincal.cli.app import app, console, console_warning, err_console, shown
 from skincal.errors import ConfigError
 
-LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
-
 
 @app.command()
 def view(
@@ -38,12 +36,12 @@ def view(
     from skincal.data.hdf5 import read_dataset
     from skincal.data.provenance import check_result_dataset
     from skincal.data.result import read_result
+    from skincal.hw.net import check_bind
     from skincal.viz.model import Recording
     from skincal.viz.viewer import serve_forever, start_viewer
 
     host = host[1:-1] if host.startswith("[") and host.endswith("]") else host  # [::1] as in a URL
-    if host not in LOOPBACK_HOSTS and not public:
-        raise ConfigError(f"--host {host} is not a loopback address; add --public to serve beyond this machine")
+    check_bind(host, public)  # one rule with skincal record: loopback unless --public
     if scenario is not None:
         if play is not None or truth is not None:
             raise ConfigError("--scenario plays its own run: give no --play or --truth with it")
