@@ -87,6 +87,18 @@ def test_atomic_path_removes_debris_of_dead_writers_only(tmp_path):
     assert remove_debris(target) == []  # nothing more to remove
 
 
+def test_atomic_path_refuses_a_folder_and_a_missing_folder_naming_the_target(tmp_path):
+    from skincal.errors import ConfigError
+
+    (tmp_path / "adir").mkdir()
+    with pytest.raises(ConfigError, match=r"adir is a folder"), atomic_path(tmp_path / "adir") as tmp:
+        tmp.write_bytes(b"x")
+    with pytest.raises(ConfigError, match=r"r\.json: the folder .*nowhere does not exist"):
+        with atomic_path(tmp_path / "nowhere" / "r.json") as tmp:
+            tmp.write_bytes(b"x")
+    assert [p.name for p in tmp_path.iterdir()] == ["adir"] and list((tmp_path / "adir").iterdir()) == []
+
+
 SLOW_WRITER = """
     import sys, time
     from pathlib import Path

@@ -83,13 +83,24 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     removed and ``path`` keeps its previous contents. The temporary is created empty with the usual
     permissions (``0o666`` minus the umask) so the final file is not private by accident. Its name
     ``.<name>.<pid>.<hex>.tmp`` carries this process's pid; debris of dead writers of the same
-    target is removed first (:func:`remove_debris`).
+    target is removed first (:func:`remove_debris`). A target that is a folder, or in a folder that
+    does not exist or cannot be written, is refused with a one-line :class:`~skincal.errors.ConfigError`
+    (callers that do work before writing should call :func:`check_output` first).
     """
+    from skincal.errors import ConfigError
+
     target = Path(path)
     directory = target.parent if str(target.parent) else Path(".")
+    if target.is_dir():  # os.replace would fail only after all the writing, naming the temporary
+        raise ConfigError(f"{target} is a folder; give a file name")
     remove_debris(target)
     tmp = directory / f".{target.name}.{os.getpid()}.{secrets.token_hex(6)}.tmp"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    except FileNotFoundError:
+        raise ConfigError(f"{target}: the folder {directory} does not exist") from None
+    except OSError as exc:
+        raise ConfigError(f"{target}: cannot write in {directory} ({exc.strerror or exc})") from None
     os.close(fd)
     try:
         yield tmp
