@@ -19,6 +19,9 @@ from numpy.typing import ArrayLike
 from skincal.errors import ConfigError
 from skincal.kinematics.transforms import FloatArray
 
+POSE_SELECTIONS = ("uniform", "diverse")
+"""How static poses are drawn (:attr:`ProtocolConfig.pose_selection`)."""
+
 
 def _scalar_or_tuple(value: Any, name: str) -> float | tuple[float, ...]:
     arr = np.asarray(value, dtype=float) if not isinstance(value, str) else None
@@ -53,6 +56,14 @@ class ProtocolConfig:
         velocity_fraction: when set, the amplitude of every joint is this fraction of the robot's
             velocity limit (replacing ``amplitude``; see :meth:`for_chain`), so that one preset fits
             any robot.
+        collision_check: static poses are drawn collision-free and the whole motion is checked
+            against self-collision and the floor (:mod:`skincal.protocol.collision`); ``False`` keeps
+            the plain uniform draw (``paper-sim``: a simulation protocol, kept as the benchmarks had it).
+        pose_selection: ``"uniform"`` (poses drawn uniformly within the limits) or ``"diverse"``
+            (drawn from a pool for gravity directions spread in every link frame; see
+            :func:`skincal.protocol.limits.sample_static_poses`).
+        notes: what :func:`skincal.protocol.limits.fit_to_limits` changed to fit a robot (amplitudes
+            scaled, frequencies adapted), one sentence each; empty when nothing was changed.
     """
 
     n_poses: int = 16
@@ -70,6 +81,9 @@ class ProtocolConfig:
     poses: FloatArray | None = None
     name: str = "custom"
     velocity_fraction: float | None = None
+    collision_check: bool = False
+    pose_selection: str = "uniform"
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
@@ -108,6 +122,16 @@ class ProtocolConfig:
             set_("n_poses", int(poses.shape[0]))
         if self.velocity_fraction is not None and not (0 < self.velocity_fraction <= 1):
             raise ConfigError(f"protocol: velocity_fraction must be in (0, 1], got {self.velocity_fraction!r}")
+        if not isinstance(self.collision_check, (bool, np.bool_)):
+            raise ConfigError(f"protocol: collision_check must be true or false, got {self.collision_check!r}")
+        set_("collision_check", bool(self.collision_check))
+        if self.pose_selection not in POSE_SELECTIONS:
+            raise ConfigError(
+                f"protocol: pose_selection must be one of {', '.join(POSE_SELECTIONS)}, got {self.pose_selection!r}"
+            )
+        if isinstance(self.notes, str) or not all(isinstance(x, str) for x in self.notes):
+            raise ConfigError("protocol: notes must be a list of strings")
+        set_("notes", tuple(self.notes))
         if not (isinstance(self.n_poses, (int, np.integer)) and self.n_poses >= 1):
             raise ConfigError(f"protocol: n_poses must be a positive integer, got {self.n_poses!r}")
         set_("n_poses", int(self.n_poses))
@@ -172,7 +196,7 @@ class ProtocolConfig:
         if unknown:
             raise ConfigError(f"{source}: unknown protocol field(s) {', '.join(unknown)}")
         kwargs = dict(data)
-        for key in ("amplitude", "frequency", "excited_joints"):
+        for key in ("amplitude", "frequency", "excited_joints", "notes"):
             if isinstance(kwargs.get(key), Sequence) and not isinstance(kwargs[key], str):
                 kwargs[key] = tuple(kwargs[key])
         if kwargs.get("poses") is not None:

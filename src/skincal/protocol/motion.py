@@ -158,3 +158,24 @@ def excitation_envelope(A: float, f: float, D: float, joint: int = 0) -> tuple[f
         offsets.append(np.polynomial.polynomial.polyval(np.linspace(0.0, T, 4001), c))
     allv = np.concatenate(offsets)
     return float(min(allv.min(), 0.0)), float(max(allv.max(), 0.0))
+
+
+def excitation_offsets(A: float, f: float, D: float, step: float, joint: int = 0) -> FloatArray:
+    """Offsets ``q - q0`` of one excitation and its return sampled every ``step`` s (ends included), ``(m,)``."""
+    w = 2 * np.pi * f
+    tau = np.append(np.arange(0.0, D, step), D)
+    parts = [A / w * (1 - np.cos(w * tau))]
+    T = stop_duration(A, f, D, joint)
+    if T > 0:
+        x0, v0, a0 = sine_end_state(A, f, D)
+        c = hermite_quintic_coef(x0, v0, a0, 0.0, T)
+        parts.append(np.polynomial.polynomial.polyval(np.append(np.arange(step, T, step), T), c))
+    return np.concatenate(parts)
+
+
+def quintic_move_samples(q_from: ArrayLike, q_to: ArrayLike, T: float, step: float) -> FloatArray:
+    """Configurations ``(m, n)`` of the rest-to-rest quintic move sampled every ``step`` s (ends included)."""
+    q_from = np.asarray(q_from, dtype=float)
+    u = np.append(np.arange(0.0, T, step), T) / T
+    s = 10 * u**3 - 15 * u**4 + 6 * u**5
+    return q_from + s[:, None] * (np.asarray(q_to, dtype=float) - q_from)

@@ -14,6 +14,14 @@
   provide; the time offset needs jerk, which a 2 Hz sine has 8x more of than the paper's 1 Hz. The
   selection was made from the model's covariance (``benchmarks/bench_mle.py --protocols``).
 
+Robots: every preset runs on any chain once fitted to it (:func:`skincal.protocol.limits.fit_to_limits`:
+amplitudes scaled into the velocity, acceleration and position limits, per-joint lists adapted to
+the number of joints, each change in ``config.notes``). ``paper-real`` and ``fast`` are meant for a
+real robot: their static poses are chosen for diverse gravity directions in every link frame and
+the whole motion is collision-free (``collision_check``, :mod:`skincal.protocol.collision`).
+``paper-sim`` keeps its plain uniform poses without collision check, exactly as the simulation
+benchmarks were made; ``skincal protocol`` (the motion handed to a real robot) always checks.
+
 The static window (not given in the paper) is 1 s of the 2 s rest in ``paper-sim`` and 2 s of the
 10 s rest in ``paper-real``.
 """
@@ -41,6 +49,8 @@ PROTOCOLS: dict[str, ProtocolConfig] = {
         excite_duration=3.0,
         rest_duration=10.0,
         static_duration=2.0,
+        collision_check=True,
+        pose_selection="diverse",
     ),
     "fast": ProtocolConfig(
         name="fast",
@@ -52,6 +62,8 @@ PROTOCOLS: dict[str, ProtocolConfig] = {
         static_duration=0.3,
         move_speed=1.5,
         min_move_duration=0.8,
+        collision_check=True,
+        pose_selection="diverse",
     ),
 }
 """Preset protocols by name (frozen configs; derive variants with ``dataclasses.replace``)."""

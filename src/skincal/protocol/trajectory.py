@@ -6,7 +6,8 @@ Timeline (paper Sec. II-A, IV), for each pose ``p = 0..P-1``::
 
 * *move*: rest-to-rest quintic (zero velocity and acceleration at both ends); not a segment.
   Its duration is ``config.move_duration`` or, when ``None``, ``max(min_move_duration,
-  15/8 max_j |dq_j| / min(move_speed, vmax_j))`` so that the peak speed is bounded.
+  15/8 max_j |dq_j| / min(move_speed, vmax_j))`` so that the peak speed is bounded, lengthened
+  where needed for the acceleration bounds (:func:`skincal.protocol.limits.move_duration`).
 * *rest*: ``rest_duration`` s at the pose; the middle ``static_duration`` s of the first rest at
   a pose is the STATIC segment (``(rest - static) / 2`` s of settling on either side, so that no
   sample of it touches the acceleration step where the first sine starts).
@@ -34,7 +35,13 @@ from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray
 from skincal.protocol.config import ProtocolConfig
-from skincal.protocol.limits import check_amplitudes, check_limits, sample_static_poses
+from skincal.protocol.limits import (
+    acceleration_bounds,
+    check_amplitudes,
+    check_limits,
+    move_duration,
+    sample_static_poses,
+)
 from skincal.protocol.motion import (
     eval_piece,
     hermite_quintic_coef,
@@ -137,15 +144,6 @@ class _Pieces:
         return start
 
 
-def _move_duration(chain: SerialChain, config: ProtocolConfig, q_from: FloatArray, q_to: FloatArray) -> float:
-    if config.move_duration is not None:
-        return config.move_duration
-    speed = np.full(chain.n_joints, config.move_speed)
-    if chain.velocity_limit is not None:
-        speed = np.minimum(speed, chain.velocity_limit)
-    return max(config.min_move_duration, float(15 / 8 * np.max(np.abs(q_to - q_from) / speed)))
-
-
 def _stop_durations(config: ProtocolConfig, n: int) -> FloatArray:
     A, f = config.amplitude_per_joint(n), config.frequency_per_joint(n)
     T = np.zeros(n)
@@ -178,7 +176,11 @@ def build_trajectory(
 
     Static poses come from ``poses`` ``(P, n)`` rad, else ``config.poses``, else
     :func:`sample_static_poses` with ``rng``. Raises :class:`ProtocolError` if an amplitude exceeds
-    a velocity limit or the motion leaves the margin-shrunk position limits (joint and time named).
+    a velocity limit, the motion leaves the margin-shrunk position limits or the acceleration bounds
+    (:func:`skincal.protocol.limits.acceleration_bounds`), or -- with ``config.collision_check`` --
+    collides with itself or the floor (:mod:`skincal.protocol.collision`, sampled every 50 ms);
+    joint, links and time named. Fit a preset to a robot first with
+    :func:`skincal.protocol.limits.fit_to_limits`.
     """
     n = chain.n_joints
     config = config.for_chain(chain)
@@ -199,7 +201,7 @@ def build_trajectory(
     pieces = _Pieces(n)
     for p, q0 in enumerate(poses):
         if p > 0:
-            T = _move_duration(chain, config, poses[p - 1], q0)
+            T = move_duration(chain, config, poses[p - 1], q0)
             pieces.add(T, quintic_move_coef(poses[p - 1], q0, T))
         rest_start = pieces.add(config.rest_duration, hold_coef(q0))
         settle = 0.5 * (config.rest_duration - config.static_duration)
@@ -242,7 +244,15 @@ def build_trajectory(
     )
     t = np.arange(int(np.floor(knots[-1] * config.rate_hz + 1e-9)) + 1) / config.rate_hz
     q, qd, qdd = traj.evaluate(t)
-    check_limits(chain, t, q, qd, margin=config.limit_margin)
+    check_limits(
+        chain, t, q, qd, margin=config.limit_margin, qdd=qdd, acceleration_limit=acceleration_bounds(chain, config)
+    )
+    if config.collision_check:
+        from skincal.protocol.collision import CHECK_STEP_S, CollisionModel, check_motion
+
+        t_check = np.append(np.arange(0.0, traj.duration, CHECK_STEP_S), traj.duration)
+        check_motion(CollisionModel(chain), t_check, traj.evaluate(t_check)[0],
+                     f"robot '{chain.name}', protocol '{config.name}': ")  # fmt: skip
     return _with_samples(traj, t, q, qd, qdd)
 
 
