@@ -214,13 +214,20 @@ async def _record_traffic(path, send, **options):
     return summary, stats, loop_errors
 
 
-def _sender(datagrams: list[bytes], pace_every: int = 40, pause_s: float = 0.002):
+def _sender(datagrams: list[bytes | list[bytes]], pace_every: int = 40, pause_s: float = 0.002):
+    """Send on loopback, pausing every ``pace_every`` datagrams so the receiver (same event loop) drains
+    the socket; an item that is a list is a burst, sent back to back without a pause inside."""
     async def send(sock: socket.socket, port: int) -> int:
-        for i, d in enumerate(datagrams):
-            sock.sendto(d, ("127.0.0.1", port))
-            if i % pace_every == pace_every - 1:
-                await asyncio.sleep(pause_s)  # lets the receiver drain the socket (same event loop)
-        return len(datagrams)
+        sent = since_pause = 0
+        for item in datagrams:
+            for d in [item] if isinstance(item, bytes) else item:
+                sock.sendto(d, ("127.0.0.1", port))
+            n = 1 if isinstance(item, bytes) else len(item)
+            sent, since_pause = sent + n, since_pause + n
+            if since_pause >= pace_every:
+                await asyncio.sleep(pause_s)
+                since_pause = 0
+        return sent
 
     return send
 
@@ -238,14 +245,13 @@ def test_replayed_old_packets_are_stale_not_restarts(tmp_path):
     consecutive ones). Each is counted as stale; no restart, no phantom loss, no duplicate row, and
     the recording passes the validating reader (it used to be refused: t not strictly increasing)."""
     n = 900  # 9 s of device time at 100 Hz (sent faster than real time)
-    datagrams: list[bytes] = []
+    datagrams: list[bytes | list[bytes]] = []
     for i in range(n):
         datagrams += _live(i)
         if i in range(700, 840, 20):  # 7 single replays of packets 6..6.2 s old
             datagrams += _live(i - 600 - i % 7)[:1]
         if i == 850:  # a burst of 20 consecutive old packets, back to back
-            for k in range(100, 120):
-                datagrams += _live(k)[:1]
+            datagrams.append([_live(k)[0] for k in range(100, 120)])
     path = tmp_path / "replay.h5"
     summary, stats, errors = _run(_record_traffic(path, _sender(datagrams)))
     s = _skin(stats)
