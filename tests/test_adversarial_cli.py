@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from skincal.cli import main
-from skincal.data.atomic import atomic_path, remove_debris
+from skincal.data.atomic import atomic_path
 
 pytestmark = pytest.mark.adversarial
 
@@ -84,6 +84,8 @@ def test_atomic_path_removes_debris_of_dead_writers_only(tmp_path):
     assert target.read_bytes() == b"new"
     assert not dead.exists() and live.exists() and other.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([target.name, live.name, other.name])
+    from skincal.data.atomic import remove_debris
+
     assert remove_debris(target) == []  # nothing more to remove
 
 
@@ -480,3 +482,51 @@ def test_report_without_out_prints_markdown_and_html_needs_out(small, capsys):
     assert main(["report", str(result), "--dataset", str(data), "--format", "html"]) == 2
     out = capsys.readouterr()
     assert "Invalid value for '--format'" in out.err and "--out" in out.err and "internal error" not in out.err
+
+
+# ------------------------------------------------------------------------------ wrong kinds of files
+@pytest.fixture(scope="module")
+def wrong_files(small, tmp_path_factory):
+    """Files of the wrong kind: an empty file, a folder, a PNG, and results a reader must refuse."""
+    import json
+
+    root = tmp_path_factory.mktemp("wrong")
+    (root / "empty").write_bytes(b"")
+    (root / "folder").mkdir()
+    (root / "x.png").write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR" + bytes(64))
+    doc = json.loads(small[1].read_text())
+    (root / "no_units.json").write_text(json.dumps({**doc, "units": {}}))
+    far = json.loads(small[1].read_text())
+    next(iter(far["units"].values()))["position_m"] = [1e308, 0.0, 0.0]
+    (root / "far.json").write_text(json.dumps(far))
+    return {"dataset": small[0], "result": small[1], **{p.name: p for p in root.iterdir()}}
+
+
+COMMANDS = [
+    ("info {d}", ["result", "empty", "folder", "x.png"]),
+    ("calibrate {d} -o {out}", ["result", "empty", "folder", "x.png"]),
+    ("segment {d} -o {out}", ["result", "empty", "folder", "x.png"]),
+    ("evaluate {r} --truth {dataset}", ["dataset", "empty", "folder", "x.png", "no_units.json", "far.json"]),
+    ("evaluate {result} --truth {d}", ["result", "empty", "folder", "x.png"]),
+    (
+        "report {r} --dataset {dataset} --format md",
+        ["dataset", "empty", "folder", "x.png", "no_units.json", "far.json"],
+    ),
+    ("report {result} --dataset {d} -o {out}", ["result", "empty", "folder", "x.png"]),
+    ("export {r} -f csv -o {out}", ["dataset", "empty", "folder", "x.png", "no_units.json", "far.json"]),
+    ("view {r} --duration 0", ["dataset", "empty", "folder", "x.png", "no_units.json", "far.json"]),
+    ("view {result} --truth {d} --duration 0", ["result", "empty", "folder", "x.png"]),
+    ("avoid --result {r} --duration 0.1", ["dataset", "empty", "folder", "x.png", "no_units.json"]),
+    ("import {d} -o {out}", ["dataset", "result", "empty", "x.png"]),
+]
+
+
+@pytest.mark.parametrize(("command", "kinds"), COMMANDS, ids=[c.split()[0] + "-" + c.split()[1] for c, _ in COMMANDS])
+def test_wrong_kinds_of_files_are_one_line_errors(command, kinds, wrong_files, tmp_path, capsys):
+    for kind in kinds:
+        out = tmp_path / f"out-{kind}"
+        args = command.format(d=wrong_files[kind], r=wrong_files[kind], out=out, **wrong_files).split()
+        capsys.readouterr()
+        assert main(args) == 2, (args, capsys.readouterr())
+        _one_line_error(capsys)
+        assert not out.exists()
