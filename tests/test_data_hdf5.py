@@ -134,7 +134,7 @@ def test_round_trip_minimal_standard_chain(tmp_path: Path) -> None:
 def test_file_layout_follows_contract(good_file: Path) -> None:
     """Checked with raw h5py against the field table of docs/interfaces.md."""
     with h5py.File(good_file, "r") as f:
-        assert f.attrs["format"] == "skincal-dataset" and int(f.attrs["version"]) == 1
+        assert f.attrs["format"] == "skincal-dataset" and int(f.attrs["version"]) == 2
         assert f["robot"].attrs["name"] == "panda" and f["robot"].attrs["convention"] == "modified"
         assert f["robot"].attrs["gravity"].shape == (3,)
         assert f["robot/dh"].dtype == np.float64 and f["robot/dh"].shape == (7, 4)
@@ -210,7 +210,7 @@ BAD_EDITS = {
     "string data": (lambda f: _replace(f, "joints/qd", np.array([b"x"] * 3)), "/joints/qd has dtype"),
     "unknown convention": (lambda f: f["robot"].attrs.__setitem__("convention", "craig"), "'convention' is 'craig'"),
     "dh shape": (lambda f: _replace(f, "robot/dh", np.zeros((7, 3))), "/robot/dh has shape (7, 3)"),
-    "wrong version": (lambda f: f.attrs.__setitem__("version", 2), "root attr 'version' is 2"),
+    "wrong version": (lambda f: f.attrs.__setitem__("version", 3), "root attr 'version' is 3; this skincal reads versions 1, 2"),
     "float version": (lambda f: f.attrs.__setitem__("version", 1.0), "root attr 'version' must be an integer, got 1.0"),
     "wrong format": (lambda f: f.attrs.__setitem__("format", "other"), "root attr 'format' is 'other'"),
     "no format": (lambda f: f.attrs.__delitem__("format"), "root attr 'format' is missing"),
@@ -360,3 +360,81 @@ def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+def _write_v1_by_hand(path: Path, chain_dh: np.ndarray) -> None:
+    """A version-1 file as the version-1 contract describes it, with raw h5py (no skincal writer)."""
+    t = np.linspace(0.0, 1.0, 11)
+    n = chain_dh.shape[0]
+    with h5py.File(path, "w") as f:
+        f.attrs["format"], f.attrs["version"] = "skincal-dataset", 1
+        robot = f.create_group("robot")
+        robot.attrs["name"], robot.attrs["convention"] = "two-link", "standard"
+        robot.attrs["gravity"] = [0.0, 0.0, -9.81]
+        robot["dh"] = chain_dh
+        robot["joint_lower"], robot["joint_upper"] = -np.ones(n), np.ones(n)
+        f["joints/t"], f["joints/q"], f["joints/qd"] = t, np.zeros((11, n)), np.zeros((11, n))
+        f["imu/su1/t"], f["imu/su1/accel"] = t, np.tile([0.0, 0.0, 9.81], (11, 1))
+
+
+def test_a_version_1_file_written_by_hand_still_reads(tmp_path: Path) -> None:
+    dh = np.array([[0.0, 0.2, 0.3, 0.5], [0.1, 0.0, 0.25, 0.0]])
+    _write_v1_by_hand(tmp_path / "v1.h5", dh)
+    back = read_dataset(tmp_path / "v1.h5")
+    ref = SerialChain.from_dh("two-link", "standard", dh)
+    q = np.random.default_rng(0).uniform(-1, 1, (5, 2))
+    np.testing.assert_allclose(back.robot.link_frames(q), ref.link_frames(q), atol=1e-15)
+    assert back.robot.convention == "standard" and back.robot.link_name(2) == "link2"
+
+
+def test_a_urdf_robot_round_trips_with_its_names_text_and_continuous_joints(tmp_path: Path) -> None:
+    """Version 2 stores the general chain: joint origins, axes, types, names, +-inf limits of a
+    continuous joint and the URDF text come back exactly."""
+    from skincal.kinematics.urdf import chain_from_urdf
+
+    urdf = """<robot name="arm"><link name="base"/><link name="upper"/><link name="fore"/><link name="tool"/>
+      <joint name="shoulder" type="continuous"><parent link="base"/><child link="upper"/>
+        <origin xyz="0 0 0.3" rpy="0.1 0.2 0.3"/><axis xyz="0 1 1"/><limit velocity="2" effort="10"/></joint>
+      <joint name="slide" type="prismatic"><parent link="upper"/><child link="fore"/>
+        <origin xyz="0.2 0 0"/><axis xyz="1 0 0"/><limit lower="0" upper="0.4" velocity="0.5" effort="100"/></joint>
+      <joint name="flange" type="fixed"><parent link="fore"/><child link="tool"/><origin xyz="0 0 0.05"/></joint>
+    </robot>"""
+    chain = chain_from_urdf(text=urdf)
+    t = np.linspace(0.0, 1.0, 11)
+    ds = Dataset(
+        robot=chain,
+        joints=JointStates(t, np.zeros((11, 2)), np.zeros((11, 2))),
+        imu={"a": ImuStream(t, np.tile([0, 0, 9.81], (11, 1)))},
+    )
+    write_dataset(ds, tmp_path / "urdf.h5")
+    back = read_dataset(tmp_path / "urdf.h5").robot
+    for key in ("T_parent_joint", "axis", "T_joint_link", "joint_lower", "joint_upper", "velocity_limit",
+                "effort_limit", "T_link_flange"):
+        np.testing.assert_array_equal(getattr(back, key), getattr(chain, key), err_msg=key)
+    assert back.joint_type == ("revolute", "prismatic") and back.convention == "urdf" and back.dh is None
+    assert back.link_names == ("base", "upper", "fore") and back.joint_names == ("shoulder", "slide")
+    assert back.source == urdf and back.joint_lower[0] == -np.inf
+
+
+def test_a_dh_table_that_disagrees_with_the_general_chain_is_refused(good_file: Path, tmp_path: Path) -> None:
+    import shutil
+
+    bad = tmp_path / "bad.h5"
+    shutil.copy(good_file, bad)
+    with h5py.File(bad, "r+") as f:
+        f["robot/dh"][0, 1] += 0.01
+    with pytest.raises(DatasetError, match="/robot/T_parent_joint disagrees with /robot/dh|/robot/T_joint_link"):
+        read_dataset(bad)
+
+
+def test_a_bad_link_name_is_refused(good_file: Path, tmp_path: Path) -> None:
+    import shutil
+
+    bad = tmp_path / "bad.h5"
+    shutil.copy(good_file, bad)
+    with h5py.File(bad, "r+") as f:
+        names = [str(x) for x in f["robot"].attrs["link_names"]]
+        names[3] = "fore\x1b[2Jarm"
+        f["robot"].attrs["link_names"] = np.array(names, dtype=h5py.string_dtype())
+    with pytest.raises(DatasetError, match="link_names.*not a valid name"):
+        read_dataset(bad)

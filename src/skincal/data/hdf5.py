@@ -1,13 +1,18 @@
-"""Dataset files: HDF5 ``format = "skincal-dataset"``, ``version = 1`` (``docs/interfaces.md``).
+"""Dataset files: HDF5 ``format = "skincal-dataset"``, ``version = 2`` (``docs/interfaces.md``);
+version 1 files (a DH robot only) read as well.
 
 Layout (optional parts in brackets)::
 
     /            attrs format, version, [description]
-    /robot       attrs name, convention, gravity (3,) m/s^2
-    /robot/dh    (n, 4) [theta_offset, d, a, alpha], rad and m
-    [/robot/joint_lower, /robot/joint_upper]   (n,) rad
-    [/robot/velocity_limit]                    (n,) rad/s     (skincal extra)
-    [/robot/T_link_flange]                     (4, 4)         (skincal extra)
+    /robot       attrs name, convention ("modified", "standard": DH; "urdf"), gravity (3,) m/s^2,
+                       joint_names (n,) str, link_names (n + 1,) str                  (version 2)
+    /robot/T_parent_joint (n, 4, 4), /robot/axis (n, 3), /robot/T_joint_link (n, 4, 4),
+    /robot/joint_type (n,) int8 0 = revolute, 1 = prismatic                          (version 2)
+    [/robot/dh]  (n, 4) [theta_offset, d, a, alpha], rad and m (a DH robot; version 1: required)
+    [/robot/urdf] uint8 UTF-8 text of the URDF the chain came from                   (version 2)
+    [/robot/joint_lower, /robot/joint_upper]   (n,) rad or m (+-inf: a continuous joint)
+    [/robot/velocity_limit, acceleration_limit, effort_limit]  (n,)
+    [/robot/T_link_flange]                     (4, 4)
     /joints/t (N,) s, /joints/q, /joints/qd (N, n), [/joints/qdd]
     /imu/<unit>/t (M,) s, accel (M, 3) m/s^2, [gyro (M, 3) rad/s]
     [/tof/<unit>/t (K,) s, range (K,) m, NaN = no target]
@@ -49,7 +54,11 @@ from skincal.kinematics.chain import CONVENTIONS, SerialChain
 from skincal.skin.pose import SkinUnitPose
 
 FORMAT = "skincal-dataset"
-VERSION = 1
+VERSION = 2
+"""Version written; :data:`READABLE_VERSIONS` are read."""
+READABLE_VERSIONS = (1, 2)
+JOINT_TYPE_CODES = {"revolute": 0, "prismatic": 1}
+"""``/robot/joint_type`` codes."""
 _QUAT_NORM_TOL = 1e-3
 
 MAX_COMPRESSION_RATIO = 1100
@@ -79,6 +88,7 @@ class _Reader:
         self.file_size = file_size
         self.budget = max(MAX_READ_BYTES, READ_BYTES_PER_FILE_BYTE * file_size)
         self.declared = 0  # bytes declared by the arrays read so far
+        self.version = VERSION  # set by header()
         self.seen: dict[object, str] = {}  # HDF5 object id -> the first path it was reached by
 
     def fail(self, field: str, problem: str) -> DatasetError:
@@ -255,26 +265,80 @@ class _Reader:
         if isinstance(version, bool | np.bool_) or not isinstance(version, int | np.integer):
             version_shown = version.item() if isinstance(version, np.generic) else version
             raise self.fail("root attr 'version'", f"must be an integer, got {shown(version_shown)}")
-        if int(version) != VERSION:
-            raise self.fail("root attr 'version'", f"is {int(version)}; this skincal reads version {VERSION}")
+        if int(version) not in READABLE_VERSIONS:
+            raise self.fail(
+                "root attr 'version'",
+                f"is {int(version)}; this skincal reads versions {', '.join(map(str, READABLE_VERSIONS))}",
+            )
+        self.version = int(version)
         return self.str_attr("/", "description", required=False) or ""
+
+    def str_list_attr(self, path: str, name: str, count: int) -> tuple[str, ...] | None:
+        value = self.attr(path, name, required=False)
+        if value is None:
+            return None
+        field = self.attr_field(path, name)
+        items = np.atleast_1d(np.asarray(value, dtype=object))
+        if items.ndim != 1 or items.shape[0] != count:
+            raise self.fail(field, f"has shape {items.shape}, expected ({count},)")
+        out = []
+        for item in items:
+            if isinstance(item, bytes | np.bytes_):
+                try:
+                    item = item.decode("utf-8")
+                except UnicodeDecodeError:
+                    raise self.fail(field, "is not valid UTF-8 text") from None
+            if not isinstance(item, str):
+                raise self.fail(field, f"must hold strings, got {shown(item)}")
+            out.append(str(item))
+        return tuple(out)
 
     def robot(self) -> tuple[SerialChain, np.ndarray]:
         self.group("/robot")
         name = self.str_attr("/robot", "name")
         convention = self.str_attr("/robot", "convention")
-        if convention not in CONVENTIONS:
-            raise self.fail("/robot attr 'convention'", f"is {shown(convention)}, expected one of {CONVENTIONS}")
+        allowed = CONVENTIONS if self.version == 1 else (*CONVENTIONS, "urdf")
+        if convention not in allowed:
+            raise self.fail("/robot attr 'convention'", f"is {shown(convention)}, expected one of {allowed}")
         gravity = self.num_attr("/robot", "gravity", (3,))
-        dh = self.array("/robot/dh")
-        if dh.ndim != 2 or dh.shape[1] != 4 or dh.shape[0] < 1:
+        dh = self.array("/robot/dh", required=self.version == 1 or convention in CONVENTIONS)
+        if dh is not None and (dh.ndim != 2 or dh.shape[1] != 4 or dh.shape[0] < 1):
             raise self.fail("/robot/dh", f"has shape {dh.shape}, expected (n, 4) with n >= 1")
-        n = dh.shape[0]
+        if self.version == 1:
+            n = dh.shape[0]
+            general: dict[str, object] = {}
+        else:
+            axis = self.array("/robot/axis")
+            if axis.ndim != 2 or axis.shape[1] != 3 or axis.shape[0] < 1:
+                raise self.fail("/robot/axis", f"has shape {axis.shape}, expected (n, 3) with n >= 1")
+            n = axis.shape[0]
+            general = {"axis": axis}
+            for key in ("T_parent_joint", "T_joint_link"):
+                general[key] = self.array(f"/robot/{key}")
+                if general[key].shape != (n, 4, 4):
+                    raise self.fail(f"/robot/{key}", f"has shape {general[key].shape}, expected ({n}, 4, 4)")
+            codes = self.array("/robot/joint_type", dtype=np.int8)
+            names = {v: k for k, v in JOINT_TYPE_CODES.items()}
+            if codes.shape != (n,) or any(int(c) not in names for c in codes):
+                raise self.fail("/robot/joint_type", f"must be ({n},) codes {JOINT_TYPE_CODES}")
+            general["joint_type"] = tuple(names[int(c)] for c in codes)
+            general["joint_names"] = self.str_list_attr("/robot", "joint_names", n)
+            general["link_names"] = self.str_list_attr("/robot", "link_names", n + 1)
+            text = self.array("/robot/urdf", required=False, dtype=np.uint8)
+            if text is not None:
+                try:
+                    general["source"] = bytes(text.astype(np.uint8)).decode("utf-8")
+                except UnicodeDecodeError:
+                    raise self.fail("/robot/urdf", "is not valid UTF-8 text") from None
+            if dh is not None and dh.shape[0] != n:
+                raise self.fail("/robot/dh", f"has {dh.shape[0]} rows for a chain of {n} joints")
         optional = {}
         for key, shape in (
             ("joint_lower", (n,)),
             ("joint_upper", (n,)),
             ("velocity_limit", (n,)),
+            ("acceleration_limit", (n,)),
+            ("effort_limit", (n,)),
             ("T_link_flange", (4, 4)),
         ):
             value = self.array(f"/robot/{key}", required=False)
@@ -283,7 +347,15 @@ class _Reader:
                     raise self.fail(f"/robot/{key}", f"has shape {value.shape}, expected {shape}")
                 optional[key] = value
         try:
-            chain = SerialChain.from_dh(name, convention, dh, **optional)
+            if self.version == 1:
+                chain = SerialChain.from_dh(name, convention, dh, **optional)
+            else:
+                chain = SerialChain(name=name, convention=convention, dh=dh, **general, **optional)
+                if dh is not None:  # the DH table and the general arrays must be one robot
+                    ref = SerialChain.from_dh(name, convention, dh)
+                    for key in ("T_parent_joint", "T_joint_link", "axis"):
+                        if not np.allclose(getattr(ref, key), getattr(chain, key), atol=1e-9):
+                            raise self.fail(f"/robot/{key}", "disagrees with /robot/dh")
         except ConfigError as exc:
             raise self.fail("/robot", f"is not a valid chain: {exc}") from None
         return chain, gravity
@@ -407,23 +479,41 @@ def _write_floats(grp: h5py.Group, name: str, value: object) -> None:
     grp.create_dataset(name, data=np.asarray(value, dtype=np.float64), fletcher32=True)
 
 
+def write_robot(f: h5py.File, chain: SerialChain, gravity: object) -> None:
+    """The ``/robot`` group of a version-2 file (the general chain; a DH robot's table besides)."""
+    robot = f.create_group("robot")
+    robot.attrs["name"] = chain.name
+    robot.attrs["convention"] = chain.convention
+    robot.attrs["gravity"] = np.asarray(gravity, dtype=np.float64)
+    n = chain.n_joints
+    text = h5py.string_dtype("utf-8")
+    robot.attrs["joint_names"] = np.array([chain.joint_name(i) for i in range(1, n + 1)], dtype=text)
+    robot.attrs["link_names"] = np.array([chain.link_name(i) for i in range(n + 1)], dtype=text)
+    _write_floats(robot, "T_parent_joint", chain.T_parent_joint)
+    _write_floats(robot, "axis", chain.axis)
+    _write_floats(robot, "T_joint_link", chain.T_joint_link)
+    robot.create_dataset(
+        "joint_type", data=np.array([JOINT_TYPE_CODES[t] for t in chain.joint_type], dtype=np.int8), fletcher32=True
+    )
+    if chain.dh is not None:
+        _write_floats(robot, "dh", chain.dh)
+    if chain.source is not None:
+        robot.create_dataset("urdf", data=np.frombuffer(chain.source.encode("utf-8"), dtype=np.uint8), fletcher32=True)
+    for key in ("joint_lower", "joint_upper", "velocity_limit", "acceleration_limit", "effort_limit"):
+        value = getattr(chain, key)
+        if value is not None:
+            _write_floats(robot, key, value)
+    if not np.array_equal(chain.T_link_flange, np.eye(4)):
+        _write_floats(robot, "T_link_flange", chain.T_link_flange)
+
+
 def _write(f: h5py.File, ds: Dataset) -> None:
     f.attrs["format"] = FORMAT
     f.attrs["version"] = np.int64(VERSION)
     if ds.description:
         f.attrs["description"] = ds.description
 
-    robot = f.create_group("robot")
-    robot.attrs["name"] = ds.robot.name
-    robot.attrs["convention"] = ds.robot.convention
-    robot.attrs["gravity"] = np.asarray(ds.gravity, dtype=np.float64)
-    _write_floats(robot, "dh", ds.robot.dh)
-    for key in ("joint_lower", "joint_upper", "velocity_limit"):
-        value = getattr(ds.robot, key)
-        if value is not None:
-            _write_floats(robot, key, value)
-    if not np.array_equal(ds.robot.T_link_flange, np.eye(4)):
-        _write_floats(robot, "T_link_flange", ds.robot.T_link_flange)
+    write_robot(f, ds.robot, ds.gravity)
 
     joints = f.create_group("joints")
     for key in ("t", "q", "qd", "qdd"):

@@ -105,22 +105,39 @@ def validate_robot(robot: object, gravity: object, source: str) -> int:
     problem = name_problem(robot.name)
     if problem is not None:
         raise _fail(source, "/robot attr 'name'", f"{shown(robot.name)} is not a valid robot name: it {problem}")
-    if robot.convention not in CONVENTIONS:
-        raise _fail(source, "/robot attr 'convention'", f"is '{robot.convention}', expected one of {CONVENTIONS}")
-    dh = _float_field(robot.dh, (None, 4), source, "/robot/dh")
-    if dh.shape[0] < 1:
-        raise _fail(source, "/robot/dh", "is empty (a chain needs at least one joint)")
-    n = dh.shape[0]
-    for name in ("joint_lower", "joint_upper", "velocity_limit"):
+    if robot.convention not in (*CONVENTIONS, "urdf"):
+        raise _fail(source, "/robot attr 'convention'", f"is '{robot.convention}', expected {CONVENTIONS} or 'urdf'")
+    n = robot.n_joints
+    if n < 1:
+        raise _fail(source, "/robot/axis", "is empty (a chain needs at least one joint)")
+    if robot.dh is not None:
+        _float_field(robot.dh, (n, 4), source, "/robot/dh")
+    _float_field(robot.T_parent_joint, (n, 4, 4), source, "/robot/T_parent_joint")
+    _float_field(robot.T_joint_link, (n, 4, 4), source, "/robot/T_joint_link")
+    _float_field(robot.axis, (n, 3), source, "/robot/axis")
+    for name in ("joint_lower", "joint_upper"):  # +-inf: a continuous joint
+        value = getattr(robot, name)
+        if value is not None and np.any(np.isnan(_real_array(value, source, f"/robot/{name}"))):
+            raise _fail(source, f"/robot/{name}", "contains NaN")
+    for name in ("velocity_limit", "acceleration_limit", "effort_limit"):
         value = getattr(robot, name)
         if value is not None:
             _float_field(value, (n,), source, f"/robot/{name}")
     _float_field(robot.T_link_flange, (4, 4), source, "/robot/T_link_flange")
+    for what, names in (("joint_names", robot.joint_names), ("link_names", robot.link_names)):
+        for item in names or ():
+            problem = name_problem(item)
+            if problem is not None:
+                raise _fail(source, f"/robot attr '{what}'", f"{shown(item)} is not a valid name: it {problem}")
     g = _float_field(gravity, (3,), source, "/robot attr 'gravity'")
     g_norm = float(np.linalg.norm(g))
     if not GRAVITY_NORM_MPS2[0] <= g_norm <= GRAVITY_NORM_MPS2[1]:
-        raise _fail(source, "/robot attr 'gravity'", f"has magnitude {g_norm:.6g} m/s^2, expected "
-                    f"{GRAVITY_NORM_MPS2[0]:g}..{GRAVITY_NORM_MPS2[1]:g} (about 9.81, e.g. [0, 0, -9.81])")
+        raise _fail(
+            source,
+            "/robot attr 'gravity'",
+            f"has magnitude {g_norm:.6g} m/s^2, expected "
+            f"{GRAVITY_NORM_MPS2[0]:g}..{GRAVITY_NORM_MPS2[1]:g} (about 9.81, e.g. [0, 0, -9.81])",
+        )
     return n
 
 

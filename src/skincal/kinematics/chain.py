@@ -131,7 +131,8 @@ class SerialChain:
         norm = np.linalg.norm(axis, axis=1)
         if not np.all(np.isfinite(norm)) or np.any(norm < 1e-9):
             raise ConfigError(f"robot '{self.name}': joint axes must be finite and non-zero")
-        axis = axis / norm[:, None]
+        if np.any(np.abs(norm - 1.0) > 1e-12):  # (already unit axes are kept bit for bit)
+            axis = axis / norm[:, None]
         axis.setflags(write=False)
         object.__setattr__(self, "axis", axis)
         for attr in ("T_parent_joint", "T_joint_link"):
