@@ -1,6 +1,6 @@
 """Crash-safe HDF5 recorder of received skin and joint-state packets.
 
-Layout (``docs/interfaces.md``, dataset version 1) plus recording fields, per stream group:
+Layout (``docs/interfaces.md``, dataset version 2) plus recording fields, per stream group:
 
 * ``/imu/<unit>/t`` (M,) s, ``accel`` (M, 3) m/s^2, ``gyro`` (M, 3) rad/s (if the unit's first IMU
   packet had it; later IMU samples without gyro are then ignored: the contract wants it finite);
@@ -45,6 +45,7 @@ import h5py
 import numpy as np
 
 from skincal.data.atomic import atomic_path
+from skincal.data.hdf5 import FORMAT, VERSION, write_robot
 from skincal.data.names import name_problem, printable
 from skincal.errors import ConfigError, DatasetError
 from skincal.hw.clock import ClockFit
@@ -192,13 +193,13 @@ class Recorder:
             raise DatasetError(f"{self.path}: cannot create the recording: {exc}") from exc
         f = self._file
         f.attrs.update(
-            format="skincal-dataset", version=1, description=description, recording_complete=False,
+            format=FORMAT, version=VERSION, description=description, recording_complete=False,
             t_origin_host_s=self.t_origin_s, host_clock=getattr(host_clock, "__name__", "host_clock"),
             started_utc=_dt.datetime.now(_dt.UTC).isoformat(), flushed_samples=0,
             max_unit_samples=self.max_unit_samples,
         )
         if robot is not None:
-            write_robot(f, robot)
+            write_robot(f, robot, GRAVITY_BASE)
         f.flush()
 
     @property
@@ -419,12 +420,3 @@ class Recorder:
         self.close()
 
 
-def write_robot(f: h5py.File, robot: SerialChain, gravity: np.ndarray | None = None) -> None:
-    """Write ``/robot`` (attrs ``name``, ``convention``, ``gravity``; ``dh``; joint limits if known)."""
-    g = f.require_group("robot")
-    g.attrs.update(name=robot.name, convention=robot.convention,
-                   gravity=np.asarray(GRAVITY_BASE if gravity is None else gravity, dtype=float))
-    g.create_dataset("dh", data=np.asarray(robot.dh, dtype=float))
-    if robot.joint_lower is not None and robot.joint_upper is not None:
-        g.create_dataset("joint_lower", data=np.asarray(robot.joint_lower, dtype=float))
-        g.create_dataset("joint_upper", data=np.asarray(robot.joint_upper, dtype=float))
