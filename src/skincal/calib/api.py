@@ -409,4 +409,5 @@ def calibrate_unit(
     _, screening = screen_readings(unit, dataset.imu[unit].accel, dataset.imu[unit].t)
     if screening:
         result = replace(result, warnings=tuple(screening) + tuple(result.warnings))
-    return result
+    # the link by name as well as index (a URDF robot's own link name; link<i> for a DH robot)
+    return replace(result, extras={**result.extras, "link_name": dataset.robot.link_name(result.pose.link)})

@@ -8,7 +8,8 @@ Example::
                        "observable": true, "position_std_m": [1e-5, 1e-5, 2e-5],
                        "rotation_std_deg": [0.01, 0.01, 0.02], "warnings": []}}}
 
-Poses are in link frame ``link`` (DH frame {link}); quaternions are (w, x, y, z). Fields beyond the
+Poses are in link frame ``link`` (a URDF robot's link frame, or DH frame {link}; ``docs/interfaces.md``),
+named by ``link_name`` too; quaternions are (w, x, y, z). Fields beyond the
 contract (per unit, e.g. ``link_confidence``, ``accel_bias_mps2``, ``dh6``; at the top level, e.g.
 ``options``) are written next to the contract fields and read back into ``extras``. In extras,
 NumPy arrays become JSON lists (non-finite numbers become ``null``) and numeric lists come back as
