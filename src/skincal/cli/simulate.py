@@ -9,11 +9,15 @@ import typer
 
 from skincal.cli.app import app, console, err_console
 
+ROBOT_HELP = "robot preset (panda, sawyer, ur5, ur5e, ur10e, xarm7), a .urdf file, or a DH chain .yaml/.json"
+
 
 @app.command()
 def simulate(
     out: Path = typer.Option(..., "--out", "-o", help="dataset file to write (.h5)"),
-    robot: str = typer.Option("panda", help="robot preset (panda, sawyer, ur5e) or a chain .yaml/.json"),
+    robot: str = typer.Option("panda", help=ROBOT_HELP),
+    base_link: str | None = typer.Option(None, help="URDF link the chain starts from (default: the root)"),
+    tip_link: str | None = typer.Option(None, help="URDF link the chain ends at (default: where the tree branches)"),
     placement: str = typer.Option("paper", help="paper (Table II, 6 units), random or ring (dense skin)"),
     units: int | None = typer.Option(None, help="number of units (random placement; default 6)"),
     noise: str = typer.Option("none", help="IMU preset: none, datasheet, realistic or real (measured IMUs)"),
@@ -36,14 +40,16 @@ def simulate(
 
     from skincal.data.atomic import check_output
     from skincal.data.hdf5 import write_dataset
+    from skincal.kinematics import get_robot
     from skincal.workflows.session import simulate_dataset
 
     check_output(out, force=force)
+    chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
     start = time.perf_counter()
     with Progress(console=err_console, transient=True) as bar:
         task = bar.add_task(f"simulating ({backend})", total=None)
         ds = simulate_dataset(
-            robot, placement, units, noise, protocol, seed, backend, mujoco_mode=mujoco_mode, joints=joints,
+            chain, placement, units, noise, protocol, seed, backend, mujoco_mode=mujoco_mode, joints=joints,
             clock=clock, progress=lambda done, total: bar.update(task, completed=done, total=total),
         )  # fmt: skip
     write_dataset(ds, out)

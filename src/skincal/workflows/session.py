@@ -17,6 +17,7 @@ from dataclasses import replace
 import numpy as np
 
 from skincal.errors import ConfigError
+from skincal.kinematics.chain import SerialChain
 from skincal.protocol import ProtocolConfig
 from skincal.sim import BACKENDS, Session
 from skincal.sim.session import Progress
@@ -85,7 +86,7 @@ def fit_protocol(chain, protocol: str | ProtocolConfig) -> ProtocolConfig:
 
 
 def make_session(
-    robot: str = "panda",
+    robot: str | SerialChain = "panda",
     placement: str = "paper",
     units: int | None = None,
     noise: str = "none",
@@ -97,7 +98,7 @@ def make_session(
     links: Sequence[int] | None = None,
     description: str = "",
 ) -> Session:
-    """A simulated session from preset names: robot (preset or chain file), placement, IMU preset
+    """A simulated session from preset names: robot (a chain, or a preset, URDF or chain file), placement, IMU preset
     (``noise``), protocol (fitted to the robot), joint-state and clock presets (``auto`` as
     :func:`resolve_timing`); ``seed`` (an int or a sequence of ints) seeds one generator used in the
     order of the module docstring."""
@@ -109,7 +110,7 @@ def make_session(
 
     if units is not None and units < 1:
         raise ConfigError(f"--units must be at least 1, got {units}")
-    chain = get_robot(robot)
+    chain = robot if isinstance(robot, SerialChain) else get_robot(robot)
     imu_model = get_imu_model(noise)
     joints, clock = resolve_timing(noise, joints, clock)
     config = fit_protocol(chain, protocol)
@@ -123,7 +124,7 @@ def make_session(
 
 
 def simulate_dataset(
-    robot: str = "panda",
+    robot: str | SerialChain = "panda",
     placement: str = "paper",
     units: int | None = None,
     noise: str = "none",
