@@ -119,7 +119,10 @@ SLOW_WRITER = """
 
 
 @pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
-def test_sigterm_during_a_write_leaves_no_temporary(tmp_path):
+@pytest.mark.parametrize(
+    ("sig", "code", "message"), [(signal.SIGTERM, 143, "error: terminated"), (signal.SIGINT, 130, "error: interrupted")]
+)
+def test_a_signal_during_a_write_leaves_no_temporary(sig, code, message, tmp_path):
     out = tmp_path / "out.bin"
     proc = _python(SLOW_WRITER, str(out))
     try:
@@ -127,12 +130,12 @@ def test_sigterm_during_a_write_leaves_no_temporary(tmp_path):
         assert line.startswith("writing"), proc.stderr.read()
         tmp = Path(line.split(maxsplit=1)[1].strip())
         assert tmp.exists()
-        proc.send_signal(signal.SIGTERM)
+        proc.send_signal(sig)
         _, err = proc.communicate(timeout=30)
     finally:
         proc.kill()
-    assert proc.returncode == 128 + signal.SIGTERM
-    assert err.strip() == "error: terminated"
+    assert proc.returncode == code  # Ctrl-C used to exit 0
+    assert err.strip() == message
     assert not tmp.exists() and not out.exists()
     assert list(tmp_path.iterdir()) == []
 
