@@ -51,6 +51,7 @@ UNIT_NAMES = [
     "@SUM(A1)",
     "Unterarm-links \u00fc\u00df \u65b9 \U0001f916",
     "\\",
+    "$(env HOME)${__import__('os').system('x')}$$(a)",
 ]
 ROBOT = 'panda"""; ' + CODE.replace("/", "") + '; """'
 
@@ -71,76 +72,110 @@ def _panda_map(tmp_path):
     return path
 
 
+def _skeleton(text: str) -> tuple[str, dict]:
+    """A TF node file with its three data literals (CALIBRATION, NODE_NAME, TRANSFORMS) replaced by
+    None: ``ast.dump`` of what is left (the code) and the literals (read with literal_eval)."""
+    tree = ast.parse(text)
+    data = {}
+    for stmt in tree.body:
+        if isinstance(stmt, ast.Assign):
+            data[stmt.targets[0].id] = ast.literal_eval(stmt.value)  # literals only, or this raises
+            stmt.value = ast.Constant(None)
+    return ast.dump(tree), data
+
+
 @functools.cache
 def _reference() -> dict[str, str]:
-    """The launch file's docstring and the URDF's per-unit comment for a plain result."""
+    """The TF nodes' code and the URDF's per-unit comment for a plain result."""
     import tempfile
     from pathlib import Path
 
     plain = _result(["su0"])
+    out = {}
     with tempfile.TemporaryDirectory() as tmp:
-        export_result(plain, "tf", Path(tmp) / "p.py")
+        for fmt in ("tf", "tf-ros1"):
+            export_result(plain, fmt, Path(tmp) / "p.py")
+            out[fmt] = _skeleton((Path(tmp) / "p.py").read_text())[0]
+            (Path(tmp) / "p.py").unlink()
         export_result(plain, "urdf", Path(tmp) / "p.urdf")
-        doc = ast.get_docstring(ast.parse((Path(tmp) / "p.py").read_text()))
         parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
         root = ET.fromstring((Path(tmp) / "p.urdf").read_bytes(), parser=parser)
     comments = [c.text for c in root if c.tag is ET.Comment]
-    assert len(comments) == 2 and not plain.units["su0"].observable and "su0" not in comments[1]
-    return {"doc": doc, "comment": comments[1]}
+    assert len(comments) == 3 and not plain.units["su0"].observable and "su0" not in comments[2]
+    return {**out, "robot": comments[1], "comment": comments[2]}
+
+
+def _check_node(fmt: str, text: str, result: CalibrationResult, prefix: str) -> None:
+    """The TF node parses; its code is the plain result's, node for node, and every crafted string
+    is a constant in the data literals that reads back exactly."""
+    code, data = _skeleton(text)
+    assert code == _reference()[fmt]  # fixed code and docstring, whatever the result holds
+    assert data["CALIBRATION"] == {"robot": result.robot, "method": result.method, "frame": "unit"}
+    assert data["NODE_NAME"] == "skincal_skin_tf"
+    assert [t[1] for t in data["TRANSFORMS"]] == [prefix + u for u in result.units]
+    assert all(isinstance(t[0], str) and len(t[2]) == 3 and len(t[3]) == 4 for t in data["TRANSFORMS"])
 
 
 def _check_launch(text: str, result: CalibrationResult, prefix: str) -> None:
-    """The launch file parses; its only names, imports and calls are the skeleton's; every crafted
-    string is a constant (robot, method, frames) that reads back exactly."""
-    tree = ast.parse(text)
-    body = tree.body
-    assert [type(s).__name__ for s in body] == ["Expr", "ImportFrom", "ImportFrom", "Assign", "FunctionDef"]
-    assert ast.get_docstring(tree) == _reference()["doc"]  # fixed text, whatever the result holds
-    assert [(s.module, [a.name for a in s.names]) for s in body[1:3]] == [("launch", ["LaunchDescription"]),
-                                                                          ("launch_ros.actions", ["Node"])]
-    assert body[3].targets[0].id == "CALIBRATION"
-    assert ast.literal_eval(body[3].value) == {"robot": result.robot, "method": result.method}
-    names = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
-    assert names <= {"CALIBRATION", "LaunchDescription", "Node"}
-    calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call)]
-    assert {c.func.id for c in calls} == {"LaunchDescription", "Node"}
-    assert not any(isinstance(n, ast.Attribute | ast.Import | ast.Lambda | ast.JoinedStr) for n in ast.walk(tree))
-    nodes = [c for c in calls if c.func.id == "Node"]
-    assert len(nodes) == len(result.units)
-    children, node_names = [], set()
-    for call in nodes:
-        kw = {k.arg: ast.literal_eval(k.value) for k in call.keywords}  # literals only, or this raises
-        assert set(kw) == {"package", "executable", "name", "arguments"}
-        assert re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", kw["name"]), kw["name"]  # a valid ROS 2 node name
-        node_names.add(kw["name"])
-        args = kw["arguments"]
-        assert all(isinstance(a, str) for a in args)
-        children.append(args[args.index("--child-frame-id") + 1])
-    assert len(node_names) == len(nodes)
-    assert children == [prefix + u for u in result.units]
-    # the payload's code text is only ever inside string constants
-    strings = [n.value for n in ast.walk(tree) if isinstance(n, ast.Constant) and isinstance(n.value, str)]
-    for payload in (result.method, result.robot, *result.units):
-        assert any(payload in s for s in strings)
+    _check_node("tf", text, result, prefix)
+
+
+def _check_ros1(text: str, result: CalibrationResult, prefix: str) -> None:
+    _check_node("tf-ros1", text, result, prefix)
+
+
+HEAD = re.compile(r' skin units calibrated by skincal, method ("(?:[^"\\]|\\.)*"), robot ("(?:[^"\\]|\\.)*"); '
+                  r"unit frames in the parent link frames ")
+
+
+def _comments(root) -> list[str]:
+    return [c.text for c in root.iter() if c.tag is ET.Comment]
+
+
+def _check_head(comment: str, result: CalibrationResult) -> None:
+    head = HEAD.fullmatch(comment)
+    assert head is not None, comment
+    assert json.loads(head.group(1)) == result.method and json.loads(head.group(2)) == result.robot
 
 
 def _check_urdf(data: bytes, result: CalibrationResult, prefix: str) -> None:
-    """Well-formed XML (ElementTree's expat), link names round-trip exactly, comments hold no
+    """Well-formed XML (ElementTree's expat), unit link names round-trip exactly, comments hold no
     crafted text except the method and robot as JSON string literals."""
     parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
     root = ET.fromstring(data, parser=parser)
     assert root.tag == "robot" and root.get("name") == f"{result.robot}_skin"
-    assert [link.get("name") for link in root.findall("link")] == [prefix + u for u in result.units]
-    joints = root.findall("joint")
-    assert [j.find("child").get("link") for j in joints] == [prefix + u for u in result.units]
+    units = [prefix + u for u in result.units]
+    names = [link.get("name") for link in root.findall("link")]
+    assert names[-len(units):] == units and not set(names[:-len(units)]) & set(units)
+    joints = root.findall("joint")[-len(units):]
+    assert [j.find("child").get("link") for j in joints] == units
     assert [j.get("name") for j in joints] == [f"{prefix}{u}_joint" for u in result.units]
-    comments = [c.text for c in root if c.tag is ET.Comment]
-    assert len(comments) == 1 + sum(not u.observable for u in result.units.values())
-    head = re.fullmatch(r' skin units calibrated by skincal, method ("(?:[^"\\]|\\.)*"), robot ("(?:[^"\\]|\\.)*"); '
-                        r"poses in the parent link frames ", comments[0])
-    assert head is not None, comments[0]
-    assert json.loads(head.group(1)) == result.method and json.loads(head.group(2)) == result.robot
-    assert set(comments[1:]) <= {_reference()["comment"]}  # fixed text, no unit name
+    comments = _comments(root)
+    assert len(comments) == 2 + sum(not u.observable for u in result.units.values())
+    _check_head(comments[0], result)
+    assert comments[1] == _reference()["robot"]
+    assert set(comments[2:]) <= {_reference()["comment"]}  # fixed text, no unit name
+
+
+def _xacro_literal(text: str) -> str:
+    """What xacro makes of attribute text without expressions: a run of $ before { or ( loses one."""
+    return re.sub(r"\$(\$+)(?=[{(])", r"\1", text)
+
+
+def _check_xacro(text: str, result: CalibrationResult, prefix: str) -> None:
+    """Well-formed XML; in the macro every name is ${prefix}/${parent} and then text that xacro
+    reads as exactly the name (no expression, no substitution argument)."""
+    parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
+    root = ET.fromstring(text.encode("utf-8"), parser=parser)
+    (macro,) = root.findall("{http://www.ros.org/wiki/xacro}macro")
+    links = [e.get("name") for e in macro.findall("link")]
+    assert all(n.startswith("${prefix}") for n in links)
+    rest = [n[len("${prefix}"):] for n in links]
+    assert not any(re.search(r"(?<!\$)\$[{(]", r) for r in rest)  # every ${ or $( is part of a $$ escape
+    assert [_xacro_literal(r) for r in rest] == [prefix + u for u in result.units]
+    parents = [j.find("parent").get("link") for j in macro.findall("joint")]
+    assert parents == [f"${{parent}}panda_link{r.pose.link}" for r in result.units.values()]
+    _check_head(_comments(root)[0], result)
 
 
 def _neutral(text: str) -> str:
@@ -161,13 +196,21 @@ def _check_csv(text: str, result: CalibrationResult, prefix: str) -> None:
 
 
 def _check_yaml(text: str, result: CalibrationResult, prefix: str) -> None:
-    doc = yaml.safe_load(text)
+    _check_doc(yaml.safe_load(text), result, prefix)
+
+
+def _check_doc(doc: dict, result: CalibrationResult, prefix: str) -> None:
     assert doc["robot"] == result.robot and doc["method"] == result.method
     assert list(doc["units"]) == list(result.units)
     assert [u["child"] for u in doc["units"].values()] == [prefix + u for u in result.units]
 
 
-CHECKS = {"tf": _check_launch, "csv": _check_csv, "yaml": _check_yaml}
+def _check_json(text: str, result: CalibrationResult, prefix: str) -> None:
+    _check_doc(json.loads(text), result, prefix)
+
+
+CHECKS = {"tf": _check_launch, "tf-ros1": _check_ros1, "csv": _check_csv, "yaml": _check_yaml, "json": _check_json,
+          "xacro": _check_xacro}
 
 
 @pytest.mark.parametrize("method", METHODS, ids=range(len(METHODS)))
@@ -177,7 +220,10 @@ def test_crafted_method_unit_and_robot_names_are_carried_as_data(tmp_path, metho
     link_map = _panda_map(tmp_path)  # the crafted robot name has no preset
     for fmt, check in {"urdf": None, **CHECKS}.items():
         out = tmp_path / f"skin.{fmt}"
-        export_result(result, fmt, out, link_map=link_map, prefix=prefix)
+        if fmt == "urdf":  # a complete URDF takes the robot, not a link map
+            export_result(result, fmt, out, robot="panda", prefix=prefix)
+        else:
+            export_result(result, fmt, out, link_map=link_map, prefix=prefix)
         if check is None:
             _check_urdf(out.read_bytes(), result, prefix)
         else:
@@ -198,7 +244,7 @@ BAD_NAMES = ["", "a/b", ".", "..", "su\x1b[2Jx", "su\n1", "su\x00", " su1", "su1
              "su\ud800", "su\uffff"]
 
 
-@pytest.mark.parametrize("fmt", ["urdf", "yaml", "tf", "csv"])
+@pytest.mark.parametrize("fmt", ["urdf", "xacro", "yaml", "json", "tf", "tf-ros1", "csv"])
 @pytest.mark.parametrize("bad", BAD_NAMES, ids=range(len(BAD_NAMES)))
 def test_bad_unit_and_robot_names_are_refused_before_writing(tmp_path, fmt, bad):
     out = tmp_path / "out"
@@ -206,8 +252,12 @@ def test_bad_unit_and_robot_names_are_refused_before_writing(tmp_path, fmt, bad)
         export_result(_result(["su0", bad]), fmt, out)
     assert "\n" not in str(info.value) and "\x1b" not in str(info.value) and "\x00" not in str(info.value)
     str(info.value).encode("utf-8")  # printable: no lone surrogate either
+    link_map = _panda_map(tmp_path)
     with pytest.raises(DatasetError, match=r"^robot name"):
-        export_result(_result(["su0"], robot=bad), fmt, out, link_map=_panda_map(tmp_path))
+        if fmt == "urdf":
+            export_result(_result(["su0"], robot=bad), fmt, out, robot="panda")
+        else:
+            export_result(_result(["su0"], robot=bad), fmt, out, link_map=link_map)
     assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["map.yaml"]
 
 
@@ -220,10 +270,10 @@ def test_frame_names_from_link_map_and_prefix_are_checked(tmp_path):
         load_link_map(tmp_path / "ns.yaml")
     (tmp_path / "ok.yaml").write_text("links:\n  1: robot1/panda_link1\n")
     result = _result(["su1"])
-    export_result(result, "urdf", tmp_path / "s.urdf", link_map=tmp_path / "ok.yaml", prefix="robot1/skin_")
-    joint = ET.parse(tmp_path / "s.urdf").getroot().find("joint")
-    assert joint.find("parent").get("link") == "robot1/panda_link1"
-    assert joint.find("child").get("link") == "robot1/skin_su1"
+    export_result(result, "xacro", tmp_path / "s.xacro", link_map=tmp_path / "ok.yaml", prefix="robot1/skin_")
+    joint = ET.parse(tmp_path / "s.xacro").getroot().find(".//joint")
+    assert joint.find("parent").get("link") == "${parent}robot1/panda_link1"
+    assert joint.find("child").get("link") == "${prefix}robot1/skin_su1"
     for prefix in ("/", "a//", "\x1b", " "):
         with pytest.raises(ConfigError, match="prefix"):
             export_result(result, "tf", tmp_path / "x.py", prefix=prefix)
@@ -266,10 +316,10 @@ def test_cli_refuses_a_bad_unit_or_robot_name_with_one_line(tmp_path, capsys, un
     doc["robot"] = robot
     _write_doc(tmp_path / "r.json", doc)
     link_map = _panda_map(tmp_path)
-    for fmt in ("urdf", "tf", "csv", "yaml"):
+    for fmt in ("urdf", "xacro", "tf", "tf-ros1", "csv", "yaml", "json"):
         capsys.readouterr()
-        code = main(["export", str(tmp_path / "r.json"), "-f", fmt, "-o", str(tmp_path / "out"),
-                     "--robot-links", str(link_map)])
+        robot = ["--robot", "panda"] if fmt == "urdf" else ["--robot-links", str(link_map)]
+        code = main(["export", str(tmp_path / "r.json"), "-f", fmt, "-o", str(tmp_path / "out"), *robot])
         err = capsys.readouterr().err
         assert code == 2, (fmt, err)
         assert err.startswith("error: ") and err.count("\n") == 1 and "\x1b" not in err, err
@@ -316,6 +366,6 @@ def test_urdf_with_crafted_names_loads_in_yourdfpy(tmp_path):
     export_result(result, "urdf", tmp_path / "s.urdf", prefix="skin_")
     urdf = yourdfpy.URDF.load(str(tmp_path / "s.urdf"), build_scene_graph=False, load_meshes=False,
                               build_collision_scene_graph=False)
-    assert [link.name for link in urdf.robot.links] == [f"skin_{u}" for u in result.units]
-    assert [(j.parent, j.child) for j in urdf.robot.joints] == [
+    assert [link.name for link in urdf.robot.links][-len(result.units):] == [f"skin_{u}" for u in result.units]
+    assert [(j.parent, j.child) for j in urdf.robot.joints][-len(result.units):] == [
         (f"panda_link{r.pose.link}", f"skin_{u}") for u, r in result.units.items()]

@@ -85,13 +85,23 @@ def test_panda_urdf_link_frames_are_our_modified_dh_frames():
 
 
 def test_urdf_parses_and_encodes_the_pose_through_the_franka_chain(tmp_path):
+    """The complete URDF of the panda: its joints are Franka's (same origins, about z), and the unit
+    joints put each unit at T_link_su on panda_link<i>."""
     result = _result()
     out = tmp_path / "skin.urdf"
     export_result(result, "urdf", out)
     root = ET.parse(out).getroot()
     assert root.tag == "robot"
-    joints = {j.find("child").get("link"): j for j in root.findall("joint")}
-    assert set(joints) == set(result.units) and {link.get("name") for link in root.findall("link")} == set(result.units)
+    all_joints = {j.find("child").get("link"): j for j in root.findall("joint")}
+    joints = {c: j for c, j in all_joints.items() if c in result.units}
+    assert set(joints) == set(result.units) and set(result.units) <= {link.get("name") for link in root.findall("link")}
+    for i, (xyz, rpy) in enumerate(FRANKA_JOINT_ORIGINS, start=1):
+        j = all_joints[f"panda_link{i}"]
+        assert j.get("name") == f"panda_joint{i}" and j.find("parent").get("link") == f"panda_link{i - 1}"
+        origin = j.find("origin")
+        T = _urdf_origin([float(v) for v in origin.get("xyz").split()], [float(v) for v in origin.get("rpy").split()])
+        np.testing.assert_allclose(T, _urdf_origin(xyz, rpy), atol=1e-15)
+        np.testing.assert_allclose([float(v) for v in j.find("axis").get("xyz").split()], [0, 0, 1], atol=1e-15)
     q = np.random.default_rng(9).uniform(-2, 2, 7)
     franka = _franka_link_frames(q)
     chain_frames = get_robot("panda").link_frames(q[None])[0]
@@ -129,37 +139,35 @@ def test_yaml_and_csv_round_trip_values(tmp_path):
             assert min(np.abs(q - q_ref).max(), np.abs(q + q_ref).max()) < 1e-12
 
 
-def _launch_nodes(text: str) -> list[dict]:
-    """Node(...) calls of a launch file: keyword args with literal values (the file is not run)."""
-    nodes = []
-    for call in ast.walk(ast.parse(text)):
-        if isinstance(call, ast.Call) and getattr(call.func, "id", None) == "Node":
-            nodes.append({kw.arg: ast.literal_eval(kw.value) for kw in call.keywords})
-    return nodes
+def _transforms(text: str) -> list[tuple]:
+    """The TRANSFORMS literal of a generated TF node (the file is not run)."""
+    for stmt in ast.parse(text).body:
+        if isinstance(stmt, ast.Assign) and stmt.targets[0].id == "TRANSFORMS":
+            return ast.literal_eval(stmt.value)
+    raise AssertionError("no TRANSFORMS")
 
 
-def test_tf_launch_passes_ros_quaternion_order_by_name(tmp_path):
+@pytest.mark.parametrize("fmt", ["tf", "tf-ros1"])
+def test_tf_node_holds_ros_quaternion_order(tmp_path, fmt):
     # 60 deg about x: (w, x, y, z) = (cos 30, sin 30, 0, 0): w and x differ, so a swap shows.
     pose = SkinUnitPose(3, _rx(np.pi / 3), [0.01, 0.02, 0.03])
     result = CalibrationResult("mle", "panda", "", 0.0, {"su1": UnitResult(pose=pose)})
-    export_result(result, "tf", tmp_path / "skin.launch.py")
-    (node,) = _launch_nodes((tmp_path / "skin.launch.py").read_text())
-    assert node["package"] == "tf2_ros" and node["executable"] == "static_transform_publisher"
-    args = node["arguments"]
-    named = {args[i]: args[i + 1] for i in range(0, len(args), 2)}
-    assert named["--frame-id"] == "panda_link3" and named["--child-frame-id"] == "su1"
-    assert float(named["--qw"]) == pytest.approx(np.cos(np.pi / 6), abs=1e-12)
-    assert float(named["--qx"]) == pytest.approx(np.sin(np.pi / 6), abs=1e-12)
-    assert float(named["--qy"]) == float(named["--qz"]) == 0.0
-    assert [float(named[k]) for k in ("--x", "--y", "--z")] == [0.01, 0.02, 0.03]
-    # ROS (x, y, z, w) as a positional order of the named values
-    assert args.index("--qx") < args.index("--qy") < args.index("--qz") < args.index("--qw")
+    export_result(result, fmt, tmp_path / "skin_tf.py")
+    ((parent, child, xyz, (qx, qy, qz, qw)),) = _transforms((tmp_path / "skin_tf.py").read_text())
+    assert parent == "panda_link3" and child == "su1"
+    assert qw == pytest.approx(np.cos(np.pi / 6), abs=1e-12) and qx == pytest.approx(np.sin(np.pi / 6), abs=1e-12)
+    assert qy == qz == 0.0
+    assert list(xyz) == [0.01, 0.02, 0.03]
+    text = (tmp_path / "skin_tf.py").read_text()
+    assert "rotation.x, rotation.y, rotation.z, rotation.w = quaternion" in text  # consumed in ROS order
 
 
 def test_user_link_map_with_offset(tmp_path):
     result = _result("ur5e", links=(2, 4))
-    with pytest.raises(ConfigError, match="--robot-links"):
-        unit_frames(result)
+    # a preset needs no map: its DH frames by name (not UR's URDF frames, which differ)
+    assert [f.parent for f in unit_frames(result)] == ["ur5e_dh_link2", "ur5e_dh_link4"]
+    with pytest.raises(ConfigError, match="is not a preset; give the robot .*--robot-links"):
+        unit_frames(_result("myarm", links=(2, 4)))
     (tmp_path / "map.yaml").write_text(
         "links:\n  2: upper_arm_link\n  4: {frame: wrist_1_link, xyz: [0.1, 0, -0.2], rpy: [0.3, -0.2, 1.0]}\n")
     links = load_link_map(tmp_path / "map.yaml")
@@ -168,10 +176,12 @@ def test_user_link_map_with_offset(tmp_path):
     for unit, res in result.units.items():
         f = frames[unit]
         T = np.eye(4)
-        T[:3, :3], T[:3, 3] = f.R_parent_su, f.p_parent_su
+        T[:3, :3], T[:3, 3] = f.R_parent_child, f.p_parent_child
         expect = (offset if res.pose.link == 4 else np.eye(4)) @ res.pose.T_link_su
         np.testing.assert_allclose(T, expect, atol=1e-12)
     assert frames["su2"].parent == "wrist_1_link"
+    with pytest.raises(ConfigError, match="--robot-links does not apply to -f urdf"):
+        export_result(result, "urdf", tmp_path / "x.urdf", link_map=tmp_path / "map.yaml")
     (tmp_path / "bad.yaml").write_text("links:\n  3: {frame: x, xyz: [1, 2]}\n")
     with pytest.raises(ConfigError, match="links.3"):
         load_link_map(tmp_path / "bad.yaml")
@@ -179,9 +189,11 @@ def test_user_link_map_with_offset(tmp_path):
 
 def test_cli_export_atomic_and_one_line_errors(tmp_path, capsys):
     write_result(_result(), tmp_path / "r.json")
-    for fmt, name in (("urdf", "s.urdf"), ("yaml", "s.yaml"), ("tf", "s.launch.py"), ("csv", "s.csv")):
+    written = {"urdf": "s.urdf", "xacro": "s.xacro", "yaml": "s.yaml", "json": "s.json", "tf": "s.launch.py",
+               "tf-ros1": "s_ros1.py", "csv": "s.csv"}
+    for fmt, name in written.items():
         assert main(["export", str(tmp_path / "r.json"), "--format", fmt, "--out", str(tmp_path / name)]) == 0
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "s.csv", "s.launch.py", "s.urdf", "s.yaml"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["r.json", *written.values()])
     capsys.readouterr()
     assert main(["export", str(tmp_path / "r.json"), "--format", "sdf", "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.strip()
@@ -199,7 +211,8 @@ def test_exports_of_a_result_with_undetermined_std_and_failed_units(tmp_path, ca
     result = CalibrationResult("mle", "panda", "", 0.1, units, extras={"failed_units": {"su3": "diverged"}})
     write_result(result, tmp_path / "r.json")
     capsys.readouterr()
-    for fmt, name in (("urdf", "s.urdf"), ("yaml", "s.yaml"), ("tf", "s.launch.py"), ("csv", "s.csv")):
+    for fmt, name in (("urdf", "s.urdf"), ("xacro", "s.xacro"), ("yaml", "s.yaml"), ("json", "s.json"),
+                      ("tf", "s.launch.py"), ("tf-ros1", "s.py"), ("csv", "s.csv")):
         assert main(["export", str(tmp_path / "r.json"), "--format", fmt, "--out", str(tmp_path / name)]) == 0
         text = (tmp_path / name).read_text()
         assert "nan" not in text.lower() and "su3" not in text, fmt

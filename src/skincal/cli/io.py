@@ -146,13 +146,21 @@ def segment_cmd(
 @app.command("export")
 def export_cmd(
     result: Path = typer.Argument(..., help="calibration result (.json)"),
-    fmt: str = typer.Option(..., "--format", "-f", help="urdf, yaml, tf (ROS 2 launch file) or csv"),
+    fmt: str = typer.Option(..., "--format", "-f", help="urdf (complete robot + units), xacro (macro adding the "
+                            "units), yaml, json (with 6x6 covariance), tf (ROS 2 node + launch file), tf-ros1 (ROS 1 "
+                            "node) or csv"),
     out: Path = typer.Option(..., "--out", "-o", help="file to write"),
-    robot_links: Path | None = typer.Option(None, help="YAML map of link number -> frame (+ xyz/rpy offset)"),
+    robot: str | None = typer.Option(None, help="robot: a preset or the robot's .urdf (default: the result's preset)"),
+    base_link: str | None = typer.Option(None, help="URDF link the chain starts from (with --robot arm.urdf)"),
+    tip_link: str | None = typer.Option(None, help="URDF link the chain ends at (with --robot arm.urdf)"),
+    robot_links: Path | None = typer.Option(None, help="YAML map of link number -> frame (+ xyz/rpy offset); "
+                                            "overrides the robot's link names"),
+    frame: str = typer.Option("unit", help="unit: the unit frames; range: Range frames <unit>_range, +x along the "
+                              "ToF beam (sensor_msgs/Range)"),
     prefix: str = typer.Option("", help="prefix of the unit frame names"),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
-    """Export calibrated unit poses onto the robot's link frames (URDF, YAML, static TF launch, CSV)."""
+    """Export calibrated unit poses onto the robot's link frames for ROS (URDF, xacro, YAML/JSON, TF node, CSV)."""
     from rich.markup import escape
 
     from skincal.data.atomic import check_output
@@ -160,12 +168,16 @@ def export_cmd(
     from skincal.data.names import printable
     from skincal.data.result import failed_units, read_result
 
-    check_output(out, force=force, inputs=(result,))
+    check_output(out, force=force, inputs=(result,) + ((Path(robot),) if robot and robot.endswith(".urdf") else ()))
     res = read_result(result)
-    frames = export_result(res, fmt, out, link_map=robot_links, prefix=prefix)
+    frames = export_result(res, fmt, out, link_map=robot_links, prefix=prefix, robot=robot, base_link=base_link,
+                           tip_link=tip_link, frame=frame)
     # names come from the result and the link map: no markup, control characters shown escaped
     console.print(printable(f"wrote {out}: {len(frames)} unit(s) as {fmt} onto " + ", ".join(
         sorted({f.parent for f in frames}))), highlight=False, markup=False)
+    if robot is not None and robot != res.robot and Path(robot).stem != res.robot:
+        console.print("[yellow]warning[/]: " + escape(printable(f"the result is for robot '{res.robot}', exported onto "
+                                                                 f"'{robot}'")), highlight=False)
     for name, reason in failed_units(res).items():
         if name not in res.units:
             console.print("[yellow]warning[/]: " + escape(printable(f"unit {name} not exported (not calibrated: "
