@@ -239,3 +239,18 @@ def test_urdf_link_capsules_form_one_connected_body(robot):
         end = transform_points(T[:, k], last[k].p1)
         start = transform_points(T[:, k + 1], first[k + 1].p0)
         np.testing.assert_allclose(end, start, atol=1e-12)
+
+
+def test_iiwa14_axes_at_zero_are_the_published_joint_twists():
+    """KUKA LBR iiwa 14 at q = 0: each joint axis passes through the published point with the
+    published direction (explicit-robotics' iiwa14 joint twist table, frame {S} = base)."""
+    from skincal.kinematics import get_robot
+
+    points = [(0, 0, 0.1525), (0, -0.013, 0.36), (0, 0, 0.5925), (0, 0.011, 0.78), (0, 0, 0.9925),
+              (0, -0.062, 1.18), (0, 0, 1.2596)]  # fmt: skip
+    directions = [(0, 0, 1), (0, 1, 0), (0, 0, 1), (0, -1, 0), (0, 0, 1), (0, 1, 0), (0, 0, 1)]
+    chain = get_robot("iiwa14")
+    c, z = chain.joint_axes(chain.link_frames(np.zeros(7)))
+    np.testing.assert_allclose(z[0], directions, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(np.cross(c[0] - np.array(points), z[0]), axis=-1), 0.0, atol=1e-12)
+    np.testing.assert_allclose(chain.flange_pose(np.zeros(7))[0, :3, 3], [0.0, 0.0, 1.306], atol=1e-12)

@@ -7,6 +7,7 @@ Presets:
 * ``ur5e``: Universal Robots UR5e, standard DH (UR's published table).
 * ``ur5``, ``ur10e``: Universal Robots UR5 (CB3) and UR10e, standard DH (UR's published tables).
 * ``xarm7``: UFactory xArm7, modified DH and limits of UFactory's URDF.
+* ``iiwa14``: KUKA LBR iiwa 14 R820, standard DH, KUKA's axis ranges and speeds.
 
 ``--robot`` also takes a URDF (``.urdf``, :mod:`skincal.kinematics.urdf`) or a DH chain file.
 """
@@ -124,7 +125,23 @@ def xarm7() -> SerialChain:
     )
 
 
-PRESETS = {"panda": panda, "sawyer": sawyer, "ur5": ur5, "ur5e": ur5e, "ur10e": ur10e, "xarm7": xarm7}
+def iiwa14() -> SerialChain:
+    """KUKA LBR iiwa 14 R820, standard DH; KUKA's axis ranges (170/120/170/120/170/120/175 deg) and
+    axis speeds (85/85/100/75/130/135/135 deg/s)."""
+    d = [0.36, 0.0, 0.42, 0.0, 0.4, 0.0, 0.126]
+    alpha = [-_PI / 2, _PI / 2, _PI / 2, -_PI / 2, -_PI / 2, _PI / 2, 0.0]
+    lim = np.radians([170.0, 120.0, 170.0, 120.0, 170.0, 120.0, 175.0])
+    return SerialChain.from_dh(
+        "iiwa14",
+        "standard",
+        np.column_stack([np.zeros(7), d, np.zeros(7), alpha]),
+        joint_lower=-lim,
+        joint_upper=lim,
+        velocity_limit=np.radians([85.0, 85.0, 100.0, 75.0, 130.0, 135.0, 135.0]),
+    )
+
+
+PRESETS = {"panda": panda, "iiwa14": iiwa14, "sawyer": sawyer, "ur5": ur5, "ur5e": ur5e, "ur10e": ur10e, "xarm7": xarm7}
 
 
 def get_robot(name: str, *, base_link: str | None = None, tip_link: str | None = None) -> SerialChain:
