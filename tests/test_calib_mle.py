@@ -11,7 +11,6 @@ from scipy.spatial.transform import Rotation
 from skincal.calib import calibrate, evaluate
 from skincal.calib.closed_form import position_and_bias, static_rotation_and_bias, wahba
 from skincal.data.dataset import ImuStream
-from skincal.errors import CalibrationError
 from skincal.kinematics import panda, sawyer
 from skincal.protocol import ProtocolConfig, build_trajectory
 from skincal.sim.analytic import simulate
@@ -73,17 +72,21 @@ def test_noise_free_recovery_without_given_links(robot):
 
 
 def test_realistic_sensor_errors_are_estimated(realistic_panda):
+    """Bounds ~2-3x the figures this session gives (seed 11: mean 0.157 mm / 0.0036 deg, time offset
+    within 0.034 ms, bias within 0.0019 m/s^2; seeds 20-25 of the same setup: 0.17-0.23 mm,
+    0.005-0.008 deg). README ("realistic IMUs + controller joints", paper protocol): 0.064 mm mean
+    and 0.002-0.003 deg; this shorter protocol (8 poses, 2 s per joint) is less precise."""
     ds, result = realistic_panda
     ev = evaluate(result, ds)
     assert ev["links_correct"] == 6
-    assert ev["mean_position_error_mm"] < 1.0
-    assert ev["mean_rotation_error_deg"] < 0.15
+    assert ev["mean_position_error_mm"] < 0.35
+    assert ev["mean_rotation_error_deg"] < 0.01
     for name, unit in result.units.items():
         truth = ds.truth_sensor[name]
-        assert unit.extras["time_offset_s"] == pytest.approx(truth["time_offset_s"], abs=1e-3)
+        assert unit.extras["time_offset_s"] == pytest.approx(truth["time_offset_s"], abs=1e-4)
         bias_err = unit.extras["accel_bias_mps2"] - truth["accel_bias"]
         assert np.all(np.abs(bias_err) < 4 * unit.extras["accel_bias_std_mps2"] + 1e-3), bias_err
-        assert np.all(np.abs(bias_err) < 0.02)  # the bias itself is up to ~0.8 m/s^2
+        assert np.all(np.abs(bias_err) < 0.005)  # the bias itself is up to ~0.8 m/s^2
         # The estimated symmetric matrix is the polar factor of diag(scale) @ (I + S).
         K = np.diag(truth["accel_scale"]) @ truth["accel_misalignment"]
         U, s, Vt = np.linalg.svd(K)
@@ -94,14 +97,17 @@ def test_realistic_sensor_errors_are_estimated(realistic_panda):
 
 
 def test_reported_uncertainty_is_calibrated(realistic_panda):
-    """Errors divided by the reported std behave like standard normal draws (within a factor 2)."""
+    """Errors divided by the reported std behave like standard normal draws: their RMS within a
+    factor 1.5 of 1 (this session: 0.82; seeds 20-25: 0.75-1.07; README: 0.85-1.02 over 20
+    placements per robot) and none beyond 3.5 std (this session's largest: 1.7)."""
     ds, result = realistic_panda
     z = []
     for name, unit in result.units.items():
         err = unit.pose.p_link_su - ds.truth[name].p_link_su
         z.extend(err / unit.position_std_m)
     rms = float(np.sqrt(np.mean(np.square(z))))
-    assert 0.4 < rms < 2.5, rms
+    assert 1 / 1.5 < rms < 1.5, rms
+    assert np.max(np.abs(z)) < 3.5, z
 
 
 def test_unit_on_link_one_is_flagged_unobservable():
@@ -171,23 +177,23 @@ def test_saturated_samples_are_dropped_with_a_warning():
 
 
 def test_too_few_static_orientations():
+    """One static pose: the calibrator still returns every unit (rotation, bias and scale then rest
+    on the moving data) and says so on each unit; it does not raise."""
     chain = panda()
     cfg = replace(CONFIG, n_poses=1)
     rng = np.random.default_rng(6)
     ds = simulate(chain, random_placement(chain, 2, rng), build_trajectory(chain, cfg, rng), get_imu_model("none"), rng)
-    result_or_error = None
-    try:
-        result_or_error = calibrate(ds, "mle")
-    except CalibrationError as exc:
-        assert "static" in str(exc) or "stationary" in str(exc)
-        return
-    for unit in result_or_error.units.values():
-        assert any("distinct static orientation" in w for w in unit.warnings)
+    result = calibrate(ds, "mle")
+    assert list(result.units) == ds.units and not result.extras.get("failed_units")
+    for unit in result.units.values():
+        assert any("only 1 distinct static orientation" in w for w in unit.warnings), unit.warnings
 
 
 @pytest.mark.slow
 def test_covariance_calibration_monte_carlo():
-    """Over 10 independent sessions the reported stds match the spread of the errors (factor 2)."""
+    """Over 10 independent sessions the reported stds match the spread of the errors within a factor
+    1.5 (measured: RMS of error / std 0.76 for the 90 position components, 1.02 for the 30 time
+    offsets; largest |error| / std 2.5) and no error exceeds 4 std."""
     chain = panda()
     z_pos, z_tau = [], []
     for seed in range(10):
@@ -199,4 +205,5 @@ def test_covariance_calibration_monte_carlo():
             z_tau.append(tau_err / unit.extras["time_offset_std_s"])
     for z in (z_pos, z_tau):
         rms = float(np.sqrt(np.mean(np.square(z))))
-        assert 0.5 < rms < 2.0, rms
+        assert 1 / 1.5 < rms < 1.5, rms
+        assert np.max(np.abs(z)) < 4.0, np.max(np.abs(z))

@@ -133,15 +133,17 @@ def test_om_near_exact_without_early_stop(two_units):
 
 def test_om_paper_settings_and_ordering(two_units):
     """Paper settings (stop at E_s < 0.01): OM within 3 mm / 1 deg; om-joint within 2 cm / 1 deg;
-    mm within 2 cm / 2 deg; mMM (double-counted centripetal term) within 10 cm; OM < mMM."""
+    mm within 1 cm / 2 deg; mMM (double-counted centripetal term) within 5 cm / 1.5 deg; OM < mMM.
+    The mMM and mm bounds are ~2-3x what they achieve here (mMM 21.8 and 7.0 mm, 0.68 and 0.16 deg;
+    mm 1.3 and 3.6 mm); README's Table I run gives mMM 28 +- 15 mm (the paper: 44 +- 59 mm)."""
     res = {
         m: _errors(calibrate(two_units, m, seed=0, use_truth_links=True, maxeval_joint=1500), two_units)
         for m in ("om", "om-joint", "mmm", "mm")
     }
     assert np.all(res["om"][:, 0] < 3.0) and np.all(res["om"][:, 1] < 1.0), res["om"]
     assert np.all(res["om-joint"][:, 0] < 20.0) and np.all(res["om-joint"][:, 1] < 1.0), res["om-joint"]
-    assert np.all(res["mm"][:, 0] < 20.0) and np.all(res["mm"][:, 1] < 2.0), res["mm"]
-    assert np.all(res["mmm"][:, 0] < 100.0), res["mmm"]
+    assert np.all(res["mm"][:, 0] < 10.0) and np.all(res["mm"][:, 1] < 2.0), res["mm"]
+    assert np.all(res["mmm"][:, 0] < 50.0) and np.all(res["mmm"][:, 1] < 1.5), res["mmm"]
     assert res["om"][:, 0].mean() < res["mmm"][:, 0].mean()
 
 
