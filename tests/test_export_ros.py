@@ -9,12 +9,15 @@ import json
 import re
 import shutil
 import subprocess
+import sys
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 from registry_robots import REGISTRY_URDFS, registry_urdf
+from test_kinematics_urdf import random_chain
 
 from skincal.cli import main
 from skincal.data.export import (
@@ -22,8 +25,11 @@ from skincal.data.export import (
     UNKNOWN_VARIANCE,
     export_result,
     export_text,
+    link_frames_for,
     robot_names,
     rpy_from_matrix,
+    to_urdf,
+    unit_frames,
 )
 from skincal.data.result import CalibrationResult, UnitResult, write_result
 from skincal.errors import ConfigError
@@ -92,7 +98,7 @@ def _parse_elsewhere(path) -> None:
     else:
         robot = URDF.from_xml_string(path.read_bytes())
         assert robot.get_root() and len(robot.links) == len(robot.joints) + 1
-    check = shutil.which("check_urdf")
+    check = shutil.which("check_urdf") or shutil.which("check_urdf", path=str(Path(sys.executable).parent))
     if check is not None:
         done = subprocess.run([check, str(path)], capture_output=True, text=True, timeout=60)
         assert done.returncode == 0 and "Successfully Parsed" in done.stdout, done.stdout + done.stderr
@@ -115,6 +121,26 @@ def test_complete_urdf_of_every_preset_gives_skincals_unit_frames(tmp_path, pres
         assert {"link_base", *(f"link{i}" for i in range(1, 8))} <= links
     else:  # DH frames that are not the maker's URDF frames are not called by the maker's names
         assert {f"{preset}_dh_link{i}" for i in range(chain.n_joints + 1)} <= links
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_complete_urdf_of_a_general_chain_folds_t_joint_link_exactly(tmp_path, seed):
+    """Random joint origins and axes, prismatic joints, and a T_joint_link that does not commute with
+    the joint's motion (URDF has no post-joint transform): the unit frames still match to 1e-9 m."""
+    chain = random_chain(np.random.default_rng(seed), 6)
+    chain = type(chain)(
+        **{
+            **{k: getattr(chain, k) for k in ("name", "T_parent_joint", "axis", "T_joint_link", "joint_type")},
+            "joint_lower": np.full(6, -1.0),
+            "joint_upper": np.full(6, 1.0),
+        }
+    )
+    result = _result("random", 6, seed=seed)
+    text = to_urdf(result, unit_frames(result, link_frames_for(chain)), chain)
+    (tmp_path / "g.urdf").write_text(text)
+    _check_unit_frames(tmp_path / "g.urdf", chain, result)
+    _parse_elsewhere(tmp_path / "g.urdf")
+    assert "link3_joint" in text  # a revolute joint whose T_joint_link is not along its axis: an extra link
 
 
 @pytest.mark.parametrize("robot", sorted(REGISTRY_URDFS))
@@ -358,3 +384,35 @@ def test_covariance_is_symmetric_with_the_variances_on_its_diagonal(tmp_path):
     assert frames[0].covariance_source == "full" and frames[1].covariance_source == "none"
     np.testing.assert_allclose(frames[0].covariance, full, atol=1e-22)
     assert frames[1].covariance[0, 0] == -1 and np.count_nonzero(frames[1].covariance) == 1
+
+
+def test_cli_urdf_robot_range_frames_and_one_line_errors(tmp_path, capsys):
+    path = registry_urdf("ur5")
+    chain = chain_from_urdf(path)
+    write_result(_result(chain.name, 6, per_link=1), tmp_path / "r.json")
+    out = tmp_path / "ur5_skin.urdf"
+    args = ["export", str(tmp_path / "r.json"), "-f", "urdf", "-o", str(out), "--robot", str(path)]
+    assert main([*args, "--frame", "range"]) == 0
+    printed = capsys.readouterr().out
+    assert "shoulder_link" in printed and "warning" not in printed
+    links = {link.get("name") for link in ET.parse(out).getroot().findall("link")}
+    assert {f"su{i}_0_range" for i in range(1, 7)} <= links and "upper_arm_link" in links
+    # the same result onto another robot: exported with a warning naming both
+    write_result(_result("panda", 6, per_link=1), tmp_path / "p.json")
+    assert (
+        main(["export", str(tmp_path / "p.json"), "-f", "yaml", "-o", str(tmp_path / "p.yaml"), "--robot", str(path)])
+        == 0
+    )
+    assert "warning: the result is for robot 'panda', exported onto 'ur5'" in capsys.readouterr().out
+    for extra, message in (
+        (["--frame", "beam"], "unknown frame 'beam' (use unit or range)"),
+        (["--base-link", "nope"], "--base-link 'nope' is not a link of the URDF"),
+        (["-f", "sdf"], "unknown export format 'sdf'"),
+    ):
+        assert main([*args[:-2], *extra, "--robot", str(path), "--force"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and message in err and err.count("\n") == 1, err
+    assert (
+        main(["export", str(tmp_path / "r.json"), "-f", "urdf", "-o", str(path), "--robot", str(path), "--force"]) == 2
+    )  # the robot's URDF is an input: never overwritten
+    assert "is the input" in capsys.readouterr().err

@@ -47,15 +47,20 @@ def segmentation_tables(report, verbose: bool = False) -> list:
     return tables
 
 
-def _segmentation_config(rest_velocity: float, min_static: float, min_dynamic: float):
+def _segmentation_config(rest_velocity: float | None, min_static: float | None, min_dynamic: float | None):
     from skincal.data.segment import SegmentationConfig
 
-    return SegmentationConfig(rest_velocity=rest_velocity, min_static_s=min_static, min_dynamic_s=min_dynamic)
+    given = {"rest_velocity": rest_velocity, "min_static_s": min_static, "min_dynamic_s": min_dynamic}
+    return SegmentationConfig(**{k: v for k, v in given.items() if v is not None})
 
 
-_REST = typer.Option(0.01, help="a joint is at rest below this speed, rad/s")
-_MIN_STATIC = typer.Option(0.5, help="shortest static segment, s")
-_MIN_DYNAMIC = typer.Option(1.0, help="shortest dynamic segment, s")
+# None = the library's default (skincal.data.segment.SegmentationConfig: one set of defaults, which
+# accepts every preset protocol)
+_REST = typer.Option(None, help="a joint is at rest below this speed, rad/s [default: 0.01]", show_default=False)
+_MIN_STATIC = typer.Option(None, help="shortest static segment, s [default: fits every preset protocol]",
+                           show_default=False)
+_MIN_DYNAMIC = typer.Option(None, help="shortest dynamic segment, s [default: fits every preset protocol]",
+                            show_default=False)
 
 
 @app.command("import")
@@ -70,9 +75,9 @@ def import_bag(
     accel_unit: str = typer.Option("auto", help="accelerometer unit: auto, g or mps2"),
     gyro_unit: str = typer.Option("auto", help="gyroscope unit: auto, rad or deg (per second)"),
     segment: bool = typer.Option(True, help="segment the recording automatically"),
-    rest_velocity: float = _REST,
-    min_static: float = _MIN_STATIC,
-    min_dynamic: float = _MIN_DYNAMIC,
+    rest_velocity: float | None = _REST,
+    min_static: float | None = _MIN_STATIC,
+    min_dynamic: float | None = _MIN_DYNAMIC,
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Import a ROS bag (no ROS install needed), segment it and write a dataset."""
@@ -122,9 +127,9 @@ def _read_bag_with_progress(bag: Path, robot: str, tmap, accel_unit: str, gyro_u
 def segment_cmd(
     dataset: Path = typer.Argument(..., help="dataset file (.h5)"),
     out: Path = typer.Option(..., "--out", "-o", help="dataset file to write with /segments (.h5)"),
-    rest_velocity: float = _REST,
-    min_static: float = _MIN_STATIC,
-    min_dynamic: float = _MIN_DYNAMIC,
+    rest_velocity: float | None = _REST,
+    min_static: float | None = _MIN_STATIC,
+    min_dynamic: float | None = _MIN_DYNAMIC,
     verbose: bool = typer.Option(False, "--verbose", "-v", help="list every segment"),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
@@ -150,7 +155,8 @@ def export_cmd(
                             "units), yaml, json (with 6x6 covariance), tf (ROS 2 node + launch file), tf-ros1 (ROS 1 "
                             "node) or csv"),
     out: Path = typer.Option(..., "--out", "-o", help="file to write"),
-    robot: str | None = typer.Option(None, help="robot: a preset or the robot's .urdf (default: the result's preset)"),
+    robot: str | None = typer.Option(None, help="robot: a preset, the robot's .urdf or a DH chain file (default: "
+                                     "the result's preset)"),
     base_link: str | None = typer.Option(None, help="URDF link the chain starts from (with --robot arm.urdf)"),
     tip_link: str | None = typer.Option(None, help="URDF link the chain ends at (with --robot arm.urdf)"),
     robot_links: Path | None = typer.Option(None, help="YAML map of link number -> frame (+ xyz/rpy offset); "
@@ -167,17 +173,23 @@ def export_cmd(
     from skincal.data.export import export_result
     from skincal.data.names import printable
     from skincal.data.result import failed_units, read_result
+    from skincal.kinematics import PRESETS
 
-    check_output(out, force=force, inputs=(result,) + ((Path(robot),) if robot and robot.endswith(".urdf") else ()))
+    robot_file = (Path(robot),) if robot is not None and robot not in PRESETS else ()
+    check_output(out, force=force, inputs=(result, *robot_file, *((robot_links,) if robot_links else ())))
     res = read_result(result)
     frames = export_result(res, fmt, out, link_map=robot_links, prefix=prefix, robot=robot, base_link=base_link,
                            tip_link=tip_link, frame=frame)
     # names come from the result and the link map: no markup, control characters shown escaped
     console.print(printable(f"wrote {out}: {len(frames)} unit(s) as {fmt} onto " + ", ".join(
         sorted({f.parent for f in frames}))), highlight=False, markup=False)
-    if robot is not None and robot != res.robot and Path(robot).stem != res.robot:
-        console.print("[yellow]warning[/]: " + escape(printable(f"the result is for robot '{res.robot}', exported onto "
-                                                                 f"'{robot}'")), highlight=False)
+    if robot is not None:
+        from skincal.data.export import export_robot
+
+        chain = export_robot(res, robot, base_link=base_link, tip_link=tip_link)
+        if chain is not None and chain.name != res.robot:
+            shown = printable(f"the result is for robot '{res.robot}', exported onto '{chain.name}' ({robot})")
+            console.print("[yellow]warning[/]: " + escape(shown), highlight=False)
     for name, reason in failed_units(res).items():
         if name not in res.units:
             console.print("[yellow]warning[/]: " + escape(printable(f"unit {name} not exported (not calibrated: "
