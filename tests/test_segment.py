@@ -138,3 +138,44 @@ def test_cli_segment(tmp_path, capsys):
     assert "segments found" in out and "multi-joint motion" in out
     seg = read_dataset(tmp_path / "seg.h5").segments
     _check_against_truth(seg, _all_true_segments(ds))
+
+
+def test_default_thresholds_leave_room_for_every_preset_protocol():
+    """The defaults are derived from the presets: the shortest rest less both margins is above
+    min_static_s, and the shortest excitation (detected ~2 x 15 ms short) above min_dynamic_s, each with
+    at least 50 ms to spare."""
+    from skincal.protocol import PROTOCOLS
+
+    cfg = SegmentationConfig()
+    for name, protocol in PROTOCOLS.items():
+        assert protocol.rest_duration - 2 * cfg.static_margin_s - cfg.min_static_s >= 0.05, name
+        assert protocol.excite_duration - 2 * cfg.smooth_s - cfg.min_dynamic_s >= 0.05, name
+
+
+@pytest.mark.parametrize("protocol", ["fast", "paper-sim", "paper-real"])
+def test_every_preset_protocol_segments_with_defaults(protocol):
+    """A simulated recording of each preset (controller joint noise), its /segments dropped, is cut by
+    the default thresholds into exactly the simulated dynamic segments (same joints and poses, ends
+    within 30 ms; the return after a non-whole-period sine belongs to the motion) and static segments
+    covering >= 90 % of every simulated static window; only the moves between poses are rejected."""
+    from skincal.protocol import get_protocol
+    from skincal.workflows.session import simulate_dataset
+
+    ds = simulate_dataset("panda", "random", 1, "realistic", protocol, seed=0)
+    sim = ds.segments
+    _, report = segment_dataset(replace(ds, segments=None))
+    found = report.segments
+    sd, fd = np.flatnonzero(sim.kind == DYNAMIC), np.flatnonzero(found.kind == DYNAMIC)
+    assert fd.size == sd.size
+    np.testing.assert_array_equal(found.joint[fd], sim.joint[sd])
+    np.testing.assert_array_equal(found.pose[fd], sim.pose[sd])
+    np.testing.assert_allclose(found.t_start[fd], sim.t_start[sd], atol=0.03)
+    assert np.all(found.t_end[fd] >= sim.t_end[sd] - 0.03)
+    whole_periods = float(get_protocol(protocol).frequency_per_joint(7)[0] * get_protocol(protocol).excite_duration)
+    if whole_periods.is_integer():
+        np.testing.assert_allclose(found.t_end[fd], sim.t_end[sd], atol=0.03)
+    fs = found.kind == STATIC
+    for k in np.flatnonzero(sim.kind == STATIC):
+        overlap = np.minimum(sim.t_end[k], found.t_end[fs]) - np.maximum(sim.t_start[k], found.t_start[fs])
+        assert overlap.max() >= 0.9 * (sim.t_end[k] - sim.t_start[k])
+    assert {r.reason for r in report.rejected} == {"multi-joint motion"}

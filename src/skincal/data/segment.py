@@ -2,7 +2,9 @@
 
 A recording without ``/segments`` (a ROS bag, a live skin recording) is cut from its joint stream:
 
-* a joint sample is *at rest* when every joint speed is below ``rest_velocity`` (rad/s);
+* a joint sample is *at rest* when every joint speed, averaged over a centred window of
+  ``smooth_s`` (a controller's velocity noise of a few mrad/s would otherwise break every rest
+  into pieces), is below ``rest_velocity`` (rad/s);
 * runs of rest shorter than ``bridge_s`` inside a motion are zero crossings of an oscillating
   joint (``qd_j = A sin(2 pi f t)`` passes 0 twice a period) and belong to the motion;
 * a run of rest is trimmed to the samples whose configuration stays within ``static_tolerance``
@@ -37,11 +39,18 @@ from skincal.kinematics.transforms import FloatArray
 
 @dataclass(frozen=True)
 class SegmentationConfig:
-    """Thresholds of :func:`segment_dataset` (SI units: s, rad, rad/s, m/s^2)."""
+    """Thresholds of :func:`segment_dataset` (SI units: s, rad, rad/s, m/s^2).
+
+    The defaults accept every preset protocol (:data:`skincal.protocol.PROTOCOLS`): its shortest rest
+    (``fast``: 0.4 s) less the two ``static_margin_s`` leaves 0.3 s, above ``min_static_s`` = 0.25 s;
+    its shortest excitation (``fast``: 1 s) is detected a little shorter (speeds below
+    ``rest_velocity`` at both ends), above ``min_dynamic_s`` = 0.8 s. ``tests/test_segment.py`` checks
+    both margins for every preset.
+    """
 
     rest_velocity: float = 0.01
-    min_static_s: float = 0.5
-    min_dynamic_s: float = 1.0
+    min_static_s: float = 0.25
+    min_dynamic_s: float = 0.8
     bridge_s: float = 0.1
     static_margin_s: float = 0.05
     static_tolerance: float = 1e-3
@@ -50,6 +59,7 @@ class SegmentationConfig:
     gap_factor: float = 5.0
     accel_tolerance: float = 0.3
     accel_reference_s: float = 0.2
+    smooth_s: float = 0.04
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
@@ -91,6 +101,19 @@ class SegmentationReport:
     @property
     def n_dynamic(self) -> int:
         return int(np.sum(np.asarray(self.segments.kind) == DYNAMIC))
+
+
+def _moving_average(x: FloatArray, t: FloatArray, window_s: float) -> FloatArray:
+    """Centred moving average of ``x`` ``(N, n)`` over ``window_s`` seconds (in samples of the median
+    interval of ``t``; shorter at the ends)."""
+    dt = np.median(np.diff(t)) if t.shape[0] > 1 else 0.0
+    half = int(round(0.5 * window_s / dt)) if dt > 0 else 0
+    if half < 1:
+        return x
+    c = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
+    i = np.arange(x.shape[0])
+    lo, hi = np.clip(i - half, 0, x.shape[0]), np.clip(i + half + 1, 0, x.shape[0])
+    return (c[hi] - c[lo]) / (hi - lo)[:, None]
 
 
 def _runs(label: np.ndarray, connected: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -156,7 +179,7 @@ def segment_dataset(ds: Dataset, config: SegmentationConfig | None = None) -> tu
     qd = np.asarray(ds.joints.qd, dtype=float)
     if t.shape[0] < 3:
         raise DatasetError(f"segmentation: /joints/t has {t.shape[0]} samples, at least 3 needed")
-    rest = np.all(np.abs(qd) < cfg.rest_velocity, axis=1)
+    rest = np.all(np.abs(_moving_average(qd, t, cfg.smooth_s)) < cfg.rest_velocity, axis=1)
     connected, rejected, bridged = _gap_links(ds, rest, cfg)
 
     # Short rests inside a motion (zero crossings of a sine) become motion.
