@@ -4,7 +4,12 @@
   (exact float64 round trip): the stream a joint controller replays.
 * JSON: ``format = "skincal-protocol"``, ``version = 1``, the robot name, the config, the poses,
   the segments and the piecewise closed form (``knots``, ``coef``, ``sine_amplitude``,
-  ``sine_omega``), from which :func:`read_trajectory_json` rebuilds the exact trajectory.
+  ``sine_omega``), from which :func:`read_trajectory_json` rebuilds the exact trajectory; also
+  ``joint_names`` and ``rate_hz`` (the sample rate of the stream handed to the robot).
+* YAML: a ROS ``trajectory_msgs/JointTrajectory`` message (``header``, ``joint_names``, ``points``
+  with ``positions``, ``velocities``, ``accelerations``, ``effort`` and ``time_from_start`` as
+  ``{sec, nanosec}``), one point per sample, 17 significant digits, as ``ros2 topic pub`` or a
+  ``FollowJointTrajectory`` goal takes it; comment lines name the robot, protocol and segments file.
 
 Writes are atomic (:func:`skincal.data.atomic.atomic_path`: a temporary file in the target's
 directory is fsynced and moved onto the target with :func:`os.replace`): readers never see half a file.
@@ -36,10 +41,18 @@ def _write_atomic(path: Path, write: Callable[[TextIO], object]) -> None:
         write(fh)
 
 
-def export_trajectory(traj: Trajectory, path: str | Path) -> Path:
-    """Write ``traj`` to ``path``: ``.csv`` (samples) or ``.json`` (definition), chosen by suffix."""
+TRAJECTORY_SUFFIXES = (".csv", ".json", ".yaml", ".yml")
+"""File suffixes :func:`export_trajectory` writes."""
+
+
+def export_trajectory(traj: Trajectory, path: str | Path, joint_names: tuple[str, ...] | None = None) -> Path:
+    """Write ``traj`` to ``path``: ``.csv`` (samples), ``.json`` (definition) or ``.yaml``/``.yml`` (ROS
+    JointTrajectory), chosen by suffix. ``joint_names``: the robot's (default ``joint1`` .. ``jointn``)."""
     path = Path(path)
     suffix = path.suffix.lower()
+    names = tuple(joint_names) if joint_names is not None else tuple(f"joint{i + 1}" for i in range(traj.n_joints))
+    if len(names) != traj.n_joints:
+        raise ConfigError(f"{path}: {len(names)} joint names for a {traj.n_joints}-joint trajectory")
     if suffix == ".csv":
         n = traj.n_joints
         header = ",".join(["t"] + [f"q{i + 1}" for i in range(n)] + [f"qd{i + 1}" for i in range(n)])
@@ -47,10 +60,37 @@ def export_trajectory(traj: Trajectory, path: str | Path) -> Path:
         _write_atomic(path, lambda fh: np.savetxt(fh, table, fmt="%.17g", delimiter=",", header=header, comments=""))
     elif suffix == ".json":
         doc = trajectory_to_json(traj)
+        doc["joint_names"] = list(names)
+        doc["rate_hz"] = traj.config.rate_hz
         _write_atomic(path, lambda fh: json.dump(doc, fh))
+    elif suffix in (".yaml", ".yml"):
+        _write_atomic(path, lambda fh: _write_joint_trajectory_yaml(fh, traj, names))
     else:
-        raise ConfigError(f"{path}: unknown trajectory format '{path.suffix}' (use .csv or .json)")
+        raise ConfigError(f"{path}: unknown trajectory format '{path.suffix}' (use .csv, .json or .yaml)")
     return path
+
+
+def _flow(values: FloatArray) -> str:
+    return "[" + ", ".join(repr(float(v)) for v in values) + "]"
+
+
+def _write_joint_trajectory_yaml(fh: TextIO, traj: Trajectory, names: tuple[str, ...]) -> None:
+    """The ROS ``trajectory_msgs/JointTrajectory`` of ``traj`` as YAML (names as JSON strings, which
+    are YAML double-quoted scalars)."""
+    ns = np.rint(np.asarray(traj.t) * 1e9).astype(np.int64)
+    sec, nanosec = ns // 1_000_000_000, ns % 1_000_000_000
+    fh.write(
+        f"# trajectory_msgs/JointTrajectory: skincal protocol {json.dumps(traj.config.name)} for robot "
+        f"{json.dumps(traj.robot)}, {traj.t.size} points at {traj.config.rate_hz:g} Hz, {traj.duration:.3f} s\n"
+    )
+    fh.write("# positions rad or m, velocities rad/s or m/s, accelerations rad/s^2 or m/s^2\n")
+    fh.write("header:\n  stamp: {sec: 0, nanosec: 0}\n  frame_id: ''\n")
+    fh.write("joint_names: [" + ", ".join(json.dumps(n) for n in names) + "]\n")
+    fh.write("points:\n")
+    for k in range(traj.t.size):
+        fh.write(f"- positions: {_flow(traj.q[k])}\n  velocities: {_flow(traj.qd[k])}\n"
+                 f"  accelerations: {_flow(traj.qdd[k])}\n  effort: []\n"
+                 f"  time_from_start: {{sec: {int(sec[k])}, nanosec: {int(nanosec[k])}}}\n")  # fmt: skip
 
 
 def trajectory_to_json(traj: Trajectory) -> dict[str, Any]:

@@ -1,0 +1,106 @@
+"""``skincal protocol``: the calibration motion written for a robot controller (CSV, JSON, ROS YAML)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+from registry_robots import registry_urdf
+
+from skincal.cli import main
+from skincal.kinematics import get_robot
+from skincal.protocol import read_trajectory_csv, read_trajectory_json
+from skincal.protocol.collision import CollisionModel
+
+
+def _run(capsys, *args: str) -> tuple[int, str, str]:
+    code = main(["protocol", *args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_yaml_is_a_joint_trajectory_message(tmp_path, capsys):
+    """ROS JointTrajectory fields: joint names from the URDF, one point per 1/rate s with positions,
+    velocities, accelerations, time_from_start {sec, nanosec}; the motion is within the limits and
+    collision-free, and it starts and ends at rest."""
+    path = registry_urdf("panda")
+    out = tmp_path / "motion.yaml"
+    code, text, _ = _run(capsys, "--robot", str(path), "--protocol", "fast", "--rate", "20", "--out", str(out))
+    assert code == 0 and "wrote" in text
+    msg = yaml.load(out.read_text(), Loader=yaml.CSafeLoader)
+    assert set(msg) == {"header", "joint_names", "points"}
+    assert msg["joint_names"] == [f"panda_joint{i}" for i in range(1, 8)]
+    points = msg["points"]
+    assert set(points[0]) == {"positions", "velocities", "accelerations", "effort", "time_from_start"}
+    t = np.array([p["time_from_start"]["sec"] + 1e-9 * p["time_from_start"]["nanosec"] for p in points])
+    assert all(0 <= p["time_from_start"]["nanosec"] < 1_000_000_000 for p in points)
+    np.testing.assert_allclose(np.diff(t), 0.05, atol=1e-9)
+    q = np.array([p["positions"] for p in points])
+    qd = np.array([p["velocities"] for p in points])
+    qdd = np.array([p["accelerations"] for p in points])
+    assert q.shape == qd.shape == qdd.shape == (len(points), 7)
+    chain = get_robot(str(path))
+    assert np.all(q >= chain.joint_lower) and np.all(q <= chain.joint_upper)
+    assert np.all(np.abs(qd) <= chain.velocity_limit)
+    assert np.all(CollisionModel(chain).free(q))
+    assert np.all(qd[[0, -1]] == 0)
+    assert t[-1] > 60  # the whole fast protocol (~80 s), not a part
+
+
+def test_csv_and_json_agree_and_json_carries_the_segments(tmp_path, capsys):
+    csv, js = tmp_path / "m.csv", tmp_path / "m.json"
+    assert _run(capsys, "--robot", "ur5e", "--seed", "3", "--out", str(csv))[0] == 0
+    assert _run(capsys, "--robot", "ur5e", "--seed", "3", "--out", str(js))[0] == 0
+    t, q, qd = read_trajectory_csv(csv)
+    np.testing.assert_allclose(np.diff(t), 0.01, atol=1e-12)  # default --rate 100 Hz
+    traj = read_trajectory_json(js)
+    np.testing.assert_allclose(traj.q, q, atol=1e-12)  # the JSON's definition rebuilds the CSV stream
+    doc = json.loads(js.read_text())
+    assert doc["rate_hz"] == 100.0 and len(doc["joint_names"]) == 6
+    assert doc["config"]["collision_check"] is True
+    seg = doc["segments"]
+    assert len(seg["t_start"]) == 6 * 7 and sorted(set(seg["kind"])) == [0, 1]  # 6 static + 36 dynamic
+
+
+def test_seed_changes_poses_and_same_seed_repeats(tmp_path, capsys):
+    a, b, c = (tmp_path / f"{k}.csv" for k in "abc")
+    for path, seed in ((a, "1"), (b, "1"), (c, "2")):
+        assert _run(capsys, "--robot", "xarm7", "--seed", seed, "--out", str(path))[0] == 0
+    assert a.read_bytes() == b.read_bytes()
+    assert a.read_bytes() != c.read_bytes()
+
+
+def test_refuses_existing_out_without_force(tmp_path, capsys):
+    out = tmp_path / "m.csv"
+    out.write_text("keep me")
+    code, _, err = _run(capsys, "--robot", "panda", "--out", str(out))
+    assert code == 2 and err.count("\n") == 1 and "--force" in err
+    assert out.read_text() == "keep me"
+    assert _run(capsys, "--robot", "panda", "--out", str(out), "--force")[0] == 0
+    assert out.read_text().startswith("t,q1,")
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--robot", "no-such-robot"], "unknown robot 'no-such-robot'"),
+        (["--robot", "panda", "--protocol", "slow"], "unknown protocol 'slow'"),
+        (["--robot", "panda", "--rate", "0"], "--rate must be a positive"),
+        (["--robot", "panda", "--rate", "nan"], "--rate must be a positive"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(tmp_path, capsys, args, message):
+    out = tmp_path / "m.yaml"
+    code, _, err = _run(capsys, *args, "--out", str(out))
+    assert code == 2
+    assert err.startswith("error: ") and err.count("\n") == 1 and message in err
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.adversarial
+def test_unknown_suffix_is_refused_before_any_work(tmp_path, capsys):
+    code, _, err = _run(capsys, "--robot", "panda", "--out", str(tmp_path / "m.txt"))
+    assert code == 2 and "use .csv, .json or .yaml" in err and err.count("\n") == 1
