@@ -416,3 +416,28 @@ def test_cli_urdf_robot_range_frames_and_one_line_errors(tmp_path, capsys):
         main(["export", str(tmp_path / "r.json"), "-f", "urdf", "-o", str(path), "--robot", str(path), "--force"]) == 2
     )  # the robot's URDF is an input: never overwritten
     assert "is the input" in capsys.readouterr().err
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize(
+    "bad",
+    [
+        "x",
+        [[1.0] * 6] * 5,
+        [["a"] * 6] * 6,
+        {"k": 1},
+        (np.eye(6) * -1).tolist(),
+        (np.eye(6) + np.triu(np.ones((6, 6)), 1)).tolist(),
+    ],
+    ids=range(6),
+)
+def test_a_bad_full_covariance_in_the_result_is_one_line(tmp_path, capsys, bad):
+    result = _result("panda", 2, per_link=1)
+    res = result.units["su2_0"]
+    units = {**result.units, "su2_0": UnitResult(res.pose, extras={"pose_covariance": bad})}
+    write_result(CalibrationResult("mle", "panda", "", 0.1, units), tmp_path / "r.json")
+    capsys.readouterr()
+    assert main(["export", str(tmp_path / "r.json"), "-f", "yaml", "-o", str(tmp_path / "o.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: result: units.su2_0.pose_covariance must be") and err.count("\n") == 1, err
+    assert not (tmp_path / "o.yaml").exists()

@@ -266,7 +266,7 @@ def link_frames_for(chain: SerialChain | None, link_map: str | Path | None = Non
     return {i: LinkFrame(names[i], np.eye(4)) for i in range(1, chain.n_joints + 1)}
 
 
-def pose_covariance(unit: UnitResult, R_frame_link: FloatArray) -> tuple[FloatArray, str]:
+def pose_covariance(unit: UnitResult, R_frame_link: FloatArray, name: str = "unit") -> tuple[FloatArray, str]:
     """``(6, 6)`` covariance of ``(x, y, z, rx, ry, rz)`` (m^2, rad^2) of a unit in a parent frame
     whose axes are ``R_frame_link`` of the link's, and its source (``full``, ``std``, ``none``).
 
@@ -278,9 +278,18 @@ def pose_covariance(unit: UnitResult, R_frame_link: FloatArray) -> tuple[FloatAr
     full = unit.extras.get(FULL_COVARIANCE_EXTRA)
     cov = None
     if full is not None:
-        arr = np.array(full, dtype=float) if not isinstance(full, str) else None
+        try:
+            arr = None if isinstance(full, str) else np.array(full, dtype=float)
+        except (TypeError, ValueError):
+            arr = None
+        where = f"result: units.{_shown(name)}.{FULL_COVARIANCE_EXTRA}"
         if arr is None or arr.shape != (6, 6):
-            raise DatasetError(f"result: {FULL_COVARIANCE_EXTRA} must be a 6x6 matrix")
+            raise DatasetError(f"{where} must be a 6x6 matrix of numbers (null where undetermined)")
+        known = np.isfinite(arr)
+        if np.any(np.diag(arr)[np.diag(known)] < 0) or not np.allclose(
+            np.where(known & known.T, arr, 0), np.where(known & known.T, arr.T, 0), rtol=1e-9, atol=0.0
+        ):
+            raise DatasetError(f"{where} must be symmetric with a non-negative diagonal")
         cov, source = arr, "full"
     elif unit.position_std_m is not None and unit.rotation_std_deg is not None:
         std = np.concatenate([np.asarray(unit.position_std_m, float), np.radians(unit.rotation_std_deg)])
@@ -331,7 +340,7 @@ def unit_frames(
         T = parent.T_frame_link @ res.pose.T_link_su
         if frame == "range":
             T = T @ T_SU_RANGE
-        cov, source = pose_covariance(res, parent.T_frame_link[:3, :3])
+        cov, source = pose_covariance(res, parent.T_frame_link[:3, :3], unit)
         out.append(
             UnitFrame(
                 unit,
