@@ -23,6 +23,10 @@ Random streams: each unit draws its IMU errors, instants, noise (and ToF) from i
 ``rng``, then its clock from a child of that; the joint stream draws from another child of ``rng``
 spawned after the units'. So the IMU streams of a seed do not change with the joint model, and
 with the ``ideal`` clock they are those of the simulator before clock models, bit for bit.
+
+Steps 1, 3 (the sensor models), 4 and the joint stream are :func:`skincal.sim.common.simulate_units`,
+shared with the MuJoCo simulator; this module supplies the exact kinematics (:func:`unit_kinematics`)
+and the closed-form ToF cast (:func:`skincal.skin.tof.nearest_in_cone`).
 """
 
 from __future__ import annotations
@@ -31,23 +35,15 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from skincal.data.dataset import Dataset, ImuStream, TofStream
-from skincal.errors import ConfigError
+from skincal.data.dataset import Dataset
 from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
 from skincal.protocol import Trajectory
-from skincal.sim.joint_states import JointStateModel, apply_joint_state_model
-from skincal.skin.clock import ClockModel, UnitClock, draw_clock, stamp_samples
-from skincal.skin.imu import (
-    ImuErrors,
-    ImuModel,
-    angular_rate,
-    apply_imu_model,
-    draw_imu_errors,
-    sample_instants,
-    specific_force,
-    true_sample_times,
-)
+from skincal.sim.common import check_session, simulate_units, tof_model_or_default
+from skincal.sim.joint_states import JointStateModel
+from skincal.skin.clock import ClockModel
+from skincal.skin.imu import ImuModel, angular_rate, specific_force
 from skincal.skin.pose import SkinUnitPose
+from skincal.skin.tof import TofModel, nearest_in_cone
 
 
 def unit_kinematics(
@@ -71,7 +67,7 @@ def simulate(
     imu_model: ImuModel,
     rng: np.random.Generator,
     *,
-    tof_model=None,
+    tof_model: TofModel | None = None,
     scene: Sequence | None = None,
     gravity: np.ndarray = GRAVITY_BASE,
     description: str = "",
@@ -95,94 +91,21 @@ def simulate(
         clock_model: the units' clock type (default: ``ideal``).
         progress: called as ``progress(done, total)`` after each unit.
     """
-    if not placements:
-        raise ConfigError("simulate: no skin units to simulate")
-    for pose in placements.values():
-        chain.check_link(pose.link)
+    check_session("simulate", chain, placements, trajectory)
     gravity = np.asarray(gravity, dtype=float)
-    t0, t1 = float(trajectory.t[0]), float(trajectory.t[-1])
-    imu: dict[str, ImuStream] = {}
-    tof: dict[str, TofStream] = {}
-    truth_sensor: dict[str, dict[str, np.ndarray | float]] = {}
-    for (name, pose), unit_rng in zip(placements.items(), rng.spawn(len(placements)), strict=True):
-        errors = draw_imu_errors(imu_model, unit_rng)
-        t_stamp = sample_instants(imu_model, t0 + errors.latency_s, t1 + min(errors.latency_s, 0.0), unit_rng)
-        t_true = true_sample_times(t_stamp, errors)
-        inside = (t_true >= t0) & (t_true <= t1)
-        t_stamp, t_true = t_stamp[inside], t_true[inside]
-        f_su, w_su, _, _ = unit_kinematics(chain, pose, trajectory, t_true, gravity)
-        accel, gyro = apply_imu_model(imu_model, errors, f_su, w_su, unit_rng)
-        if scene is not None:
-            tof[name] = _simulate_tof(chain, pose, trajectory, tof_model, scene, unit_rng, t0, t1)
-        clock, t_stamp, keep = unit_clock_stamps(clock_model, unit_rng, t_stamp, t_true, t0)
-        imu[name] = ImuStream(t=t_stamp, accel=accel[keep], gyro=gyro[keep])
-        truth_sensor[name] = sensor_truth(errors, clock)
-        if progress is not None:
-            progress(len(imu), len(placements))
-    joints = apply_joint_state_model(
-        joint_model or JointStateModel(), trajectory.evaluate, trajectory.t, rng.spawn(1)[0]
-    )
-    return Dataset(
-        robot=chain,
-        joints=joints,
-        imu=imu,
-        tof=tof,
-        segments=trajectory.segments,
-        truth=dict(placements),
-        truth_sensor=truth_sensor,
-        gravity=gravity,
-        description=description,
-    )
+    poses = list(placements.values())
+    tof_model = tof_model_or_default(tof_model)
 
+    def imu_truth(u: int, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        f_su, w_su, _, _ = unit_kinematics(chain, poses[u], trajectory, t, gravity)
+        return f_su, w_su
 
-def unit_clock_stamps(
-    clock_model: ClockModel | None,
-    unit_rng: np.random.Generator,
-    t_nominal: np.ndarray,
-    t_true: np.ndarray,
-    t0: float,
-) -> tuple[UnitClock, np.ndarray, np.ndarray]:
-    """One unit's clock, drawn from a child of ``unit_rng`` (so the unit's other draws are untouched),
-    and its stamps of samples at physical instants ``t_true`` ``(M,)`` s with perfect-clock stamps
-    ``t_nominal``: ``(clock, t_stamp (K,), keep (M,) bool)`` (:func:`skincal.skin.clock.stamp_samples`)."""
-    model = clock_model or ClockModel()
-    clock_rng = unit_rng.spawn(1)[0]
-    clock = draw_clock(model, clock_rng)
-    t_stamp, keep = stamp_samples(model, clock, t_nominal, t_true, t0, clock_rng)
-    return clock, t_stamp, keep
+    def tof_truth(u: int, t: np.ndarray) -> np.ndarray:
+        _, _, x_base, R_base_su = unit_kinematics(chain, poses[u], trajectory, t)
+        return nearest_in_cone(x_base, R_base_su, scene, tof_model)
 
-
-def sensor_truth(errors: ImuErrors, clock: UnitClock | None = None) -> dict[str, np.ndarray | float]:
-    """The ``Dataset.truth_sensor`` entry of one unit's drawn IMU errors and clock.
-
-    ``time_offset_s`` = latency + clock offset (the stamp error right after a re-sync, or at the
-    session start of a free-running clock); ``clock_drift_ppm``; ``clock_resync_period_s`` only
-    when the clock is re-synced (a dataset attribute must be finite).
-    """
-    clock = clock or UnitClock()
-    truth: dict[str, np.ndarray | float] = {
-        "accel_bias": errors.accel_bias,
-        "accel_scale": errors.accel_scale,
-        "accel_misalignment": errors.accel_misalignment,
-        "gyro_bias": errors.gyro_bias,
-        "time_offset_s": float(errors.latency_s) + clock.offset_s,
-        "clock_drift_ppm": clock.drift_ppm,
-    }
-    if np.isfinite(clock.resync_period_s):
-        truth["clock_resync_period_s"] = clock.resync_period_s
-    return truth
-
-
-def tof_instants(t0: float, t1: float, rate_hz: float, rng: np.random.Generator) -> np.ndarray:
-    """A ToF sensor's sample instants over ``[t0, t1]``: its rate with a random phase, s."""
-    phase = rng.uniform(0.0, 1.0 / rate_hz)
-    return t0 + phase + np.arange(int(np.floor((t1 - t0 - phase) * rate_hz)) + 1) / rate_hz
-
-
-def _simulate_tof(chain, pose, trajectory, tof_model, scene, rng, t0: float, t1: float) -> TofStream:
-    from skincal.skin.tof import TofModel, tof_range
-
-    model = tof_model if tof_model is not None else TofModel()
-    t = tof_instants(t0, t1, model.rate_hz, rng)
-    _, _, x_base, R_base_su = unit_kinematics(chain, pose, trajectory, t)
-    return TofStream(t=t, range=tof_range(x_base, R_base_su, scene, model, rng))
+    return simulate_units(
+        chain, placements, trajectory, imu_model, rng, imu_truth=imu_truth, joint_motion=trajectory.evaluate,
+        tof_truth=None if scene is None else tof_truth, tof_model=tof_model, gravity=gravity,
+        description=description, joint_model=joint_model, clock_model=clock_model, progress=progress,
+    )  # fmt: skip

@@ -1,14 +1,11 @@
 """MuJoCo simulator: the same :class:`~skincal.data.dataset.Dataset` as :func:`skincal.sim.analytic.simulate`,
 with the sensor physics from an independent engine.
 
-Per unit (mirroring the analytic simulator draw for draw, so that one seed gives the same stamps,
-errors and noise in both): constant errors :func:`~skincal.skin.imu.draw_imu_errors`, own stamps
-:func:`~skincal.skin.imu.sample_instants`, physical instants ``t_true = t_stamp - latency``; the
-true specific force ``f = R_base_su^T (a - g)`` and rate ``R_base_su^T w`` come from MuJoCo's
-``accelerometer`` and ``gyro`` at the unit's site; then :func:`~skincal.skin.imu.apply_imu_model`
-and the unit's own clock (:func:`~skincal.sim.analytic.unit_clock_stamps`). The joint stream is the
-true motion as the robot reports it (:func:`~skincal.sim.joint_states.apply_joint_state_model`, from
-a child of ``rng`` spawned after the units', as in the analytic simulator).
+The sensor models, clocks, joint stream and dataset are :func:`skincal.sim.common.simulate_units`,
+shared with the analytic simulator (so one seed gives the same stamps, errors and noise in both,
+draw for draw); this module supplies the true signals: the specific force ``f = R_base_su^T (a - g)``
+and rate ``R_base_su^T w`` from MuJoCo's ``accelerometer`` and ``gyro`` at the unit's site, the
+nearest ToF target from MuJoCo's rangefinders, and the joint motion of the mode below.
 
 Modes:
 
@@ -38,18 +35,20 @@ from typing import Any
 
 import numpy as np
 
-from skincal.data.dataset import Dataset, ImuStream, TofStream
+from skincal.data.dataset import Dataset
+from skincal.data.interp import hold_rows, interp_rows
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
 from skincal.kinematics.transforms import FloatArray
 from skincal.protocol import Trajectory
-from skincal.sim.analytic import sensor_truth, tof_instants, unit_clock_stamps
-from skincal.sim.joint_states import JointStateModel, apply_joint_state_model
+from skincal.sim.common import check_session, simulate_units, tof_model_or_default
+from skincal.sim.joint_states import JointStateModel
 from skincal.sim.mujoco_model import SensorIndex, build_model, require_mujoco
 from skincal.sim.scene import Scene
 from skincal.skin.clock import ClockModel
-from skincal.skin.imu import ImuModel, apply_imu_model, draw_imu_errors, sample_instants, true_sample_times
+from skincal.skin.imu import ImuModel
 from skincal.skin.pose import SkinUnitPose
+from skincal.skin.tof import TofModel, cone_directions
 
 MODES = ("kinematic", "dynamic")
 
@@ -182,31 +181,6 @@ def servo_run(
     return ServoRun(t, q, qd, qdd, q_ref, qd_ref, _no_hit_to_nan(sensors))
 
 
-def _interp_rows(t: FloatArray, t_grid: FloatArray, values: FloatArray) -> FloatArray:
-    """Linear interpolation of ``values`` ``(S, ...)`` on ``t_grid`` at ``t`` ``(M,)`` -> ``(M, ...)``."""
-    flat = values.reshape(values.shape[0], -1)
-    out = np.stack([np.interp(t, t_grid, flat[:, j]) for j in range(flat.shape[1])], axis=-1)
-    return out.reshape((t.size,) + values.shape[1:])
-
-
-def _hold_rows(t: FloatArray, t_grid: FloatArray, values: FloatArray) -> FloatArray:
-    """Zero-order hold: the latest grid row at or before each ``t``."""
-    k = np.clip(np.searchsorted(t_grid, t + 1e-12, side="right") - 1, 0, t_grid.size - 1)
-    return values[k]
-
-
-def _apply_tof(model: Any, distance: FloatArray, rng: np.random.Generator) -> FloatArray:
-    """The post-processing steps of :func:`skincal.skin.tof.tof_range` on true distances ``(M,)`` m:
-    range window, range-dependent Gaussian noise, rounding (same draws from ``rng``)."""
-    valid = (distance >= model.min_range) & (distance <= model.max_range)
-    measured = np.where(valid, distance, np.nan)
-    if model.noise_std > 0 or model.noise_std_per_m > 0:
-        measured = measured + rng.normal(size=measured.shape) * model.noise_std_at(np.where(valid, distance, 0.0))
-    if model.resolution_m > 0:
-        measured = np.round(measured / model.resolution_m) * model.resolution_m
-    return measured
-
-
 def simulate_mujoco(
     chain: SerialChain,
     placements: Mapping[str, SkinUnitPose],
@@ -216,7 +190,7 @@ def simulate_mujoco(
     *,
     mode: str = "kinematic",
     scene: Scene | None = None,
-    tof_model: Any = None,
+    tof_model: TofModel | None = None,
     gravity: FloatArray = GRAVITY_BASE,
     description: str = "",
     position_gain: float = POSITION_GAIN,
@@ -242,18 +216,11 @@ def simulate_mujoco(
     """
     if mode not in MODES:
         raise ConfigError(f"simulate_mujoco: mode must be one of {', '.join(MODES)}, got '{mode}'")
-    if not placements:
-        raise ConfigError("simulate_mujoco: no skin units to simulate")
-    for pose in placements.values():
-        chain.check_link(pose.link)
-    if trajectory.n_joints != chain.n_joints:
-        raise ConfigError(f"trajectory has {trajectory.n_joints} joints, robot '{chain.name}' has {chain.n_joints}")
+    check_session("simulate_mujoco", chain, placements, trajectory)
     gravity = np.asarray(gravity, dtype=float)
     directions = None
     if scene is not None:
-        from skincal.skin.tof import TofModel, cone_directions
-
-        tof_model = tof_model if tof_model is not None else TofModel()
+        tof_model = tof_model_or_default(tof_model)
         directions = cone_directions(tof_model.fov_deg, tof_model.n_rays)
     options = dict(model_options or {})
     units = list(placements)
@@ -275,19 +242,6 @@ def simulate_mujoco(
     )
     idx = SensorIndex.of(model, units, None if directions is None else len(directions))
 
-    # 1. Each unit's sampling instants (same draws as the analytic simulator; stamps come in 3.).
-    unit_rngs = rng.spawn(len(units))
-    errors, stamps, true_t = [], [], []
-    for unit_rng in unit_rngs:
-        err = draw_imu_errors(imu_model, unit_rng)
-        t_stamp = sample_instants(imu_model, t0 + err.latency_s, t1 + min(err.latency_s, 0.0), unit_rng)
-        t_true = true_sample_times(t_stamp, err)
-        inside = (t_true >= t0) & (t_true <= t1)
-        errors.append(err)
-        stamps.append(t_stamp[inside])
-        true_t.append(t_true[inside])
-
-    # 2. Physics.
     run = None
     if mode == "kinematic":
         motion = trajectory.evaluate
@@ -295,43 +249,23 @@ def simulate_mujoco(
         run = servo_run(model, idx, trajectory, t1, scene, position_gain)
 
         def motion(t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-            return _interp_rows(t, run.t, run.q), _interp_rows(t, run.t, run.qd), _interp_rows(t, run.t, run.qdd)
+            return interp_rows(t, run.t, run.q), interp_rows(t, run.t, run.qd), interp_rows(t, run.t, run.qdd)
 
-    joints = apply_joint_state_model(joint_model or JointStateModel(), motion, trajectory.t, rng.spawn(1)[0])
-
-    def sense(t: FloatArray) -> SensorTrace:
+    def imu_truth(u: int, t: FloatArray) -> tuple[FloatArray, FloatArray]:
         if run is None:
-            return kinematic_playback(model, idx, trajectory, t, scene)
-        s = run.sensors
-        return SensorTrace(
-            t, _interp_rows(t, run.t, s.accel), _interp_rows(t, run.t, s.gyro), _hold_rows(t, run.t, s.range)
-        )
+            trace = kinematic_playback(model, idx, trajectory, t, scene)
+            return trace.accel[:, u], trace.gyro[:, u]
+        return interp_rows(t, run.t, run.sensors.accel[:, u]), interp_rows(t, run.t, run.sensors.gyro[:, u])
 
-    # 3. Sensor models and clocks per unit.
-    imu: dict[str, ImuStream] = {}
-    tof: dict[str, TofStream] = {}
-    truth_sensor: dict[str, dict[str, FloatArray | float]] = {}
-    for u, (name, unit_rng) in enumerate(zip(units, unit_rngs, strict=True)):
-        trace = sense(true_t[u])
-        accel, gyro = apply_imu_model(imu_model, errors[u], trace.accel[:, u], trace.gyro[:, u], unit_rng)
-        if scene is not None:
-            t_tof = tof_instants(t0, t1, tof_model.rate_hz, unit_rng)
-            rays = sense(t_tof).range[:, u]  # (M, K), NaN = ray hit nothing
-            nearest = np.where(np.isnan(rays), np.inf, rays).min(axis=1)
-            tof[name] = TofStream(t=t_tof, range=_apply_tof(tof_model, nearest, unit_rng))
-        clock, t_stamp, keep = unit_clock_stamps(clock_model, unit_rng, stamps[u], true_t[u], t0)
-        imu[name] = ImuStream(t=t_stamp, accel=accel[keep], gyro=gyro[keep])
-        truth_sensor[name] = sensor_truth(errors[u], clock)
-        if progress is not None:
-            progress(u + 1, len(units))
-    return Dataset(
-        robot=chain,
-        joints=joints,
-        imu=imu,
-        tof=tof,
-        segments=trajectory.segments,
-        truth=dict(placements),
-        truth_sensor=truth_sensor,
-        gravity=gravity,
-        description=description,
-    )
+    def tof_truth(u: int, t: FloatArray) -> FloatArray:
+        if run is None:
+            rays = kinematic_playback(model, idx, trajectory, t, scene).range[:, u]
+        else:
+            rays = hold_rows(t, run.t, run.sensors.range[:, u])
+        return np.where(np.isnan(rays), np.inf, rays).min(axis=1)  # (M, K) per ray, NaN = hit nothing
+
+    return simulate_units(
+        chain, placements, trajectory, imu_model, rng, imu_truth=imu_truth, joint_motion=motion,
+        tof_truth=None if scene is None else tof_truth, tof_model=tof_model, gravity=gravity,
+        description=description, joint_model=joint_model, clock_model=clock_model, progress=progress,
+    )  # fmt: skip

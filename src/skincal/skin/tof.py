@@ -9,9 +9,10 @@ Sensor (:func:`tof_range`): the VL53L1X reports the distance to the nearest targ
 view. We cast rays from the SU origin inside a cone of full angle ``fov_deg`` around the unit's +z
 axis (a central ray plus rings, :func:`cone_directions`), take the nearest hit over all rays and
 report that *distance along its ray* (for ``n_rays = 1`` it is the range along +z, as MuJoCo's
-rangefinder). Range limits are applied to the true distance; then range-dependent Gaussian noise
-``std = noise_std + noise_std_per_m * d`` and rounding to ``resolution_m`` are applied. NaN means
-no target within ``[min_range, max_range]``.
+rangefinder). The reading of that true distance is :meth:`TofModel.measure` (the one measurement
+model, also used by the MuJoCo simulator and the avoidance loop): range limits on the true distance,
+then range-dependent Gaussian noise ``std = noise_std + noise_std_per_m * d`` and rounding to
+``resolution_m``. NaN means no target within ``[min_range, max_range]``.
 """
 
 from __future__ import annotations
@@ -28,10 +29,25 @@ from skincal.kinematics import geometry
 from skincal.kinematics.transforms import FloatArray
 
 
-def _vec(name: str, value: ArrayLike) -> FloatArray:
-    arr = np.array(value, dtype=float)
-    if arr.ndim == 0 or arr.shape[-1] != 3 or not np.all(np.isfinite(arr)):
-        raise ConfigError(f"{name} must be finite with shape (3,) or (M, 3) in m, got shape {arr.shape}")
+def finite_array(value: ArrayLike, what: str, shape: tuple = (..., 3)) -> FloatArray:
+    """``value`` as a new read-only float array, checked finite and of ``shape``; else a
+    :class:`ConfigError` naming ``what``. The one validation of the vectors of scenes and solids.
+
+    ``shape``: exact sizes, ``None`` for any size on that axis, and a leading ``...`` for any number
+    (>= 0) of leading axes: the default ``(..., 3)`` takes ``(3,)``, ``(M, 3)``, ...
+    """
+    any_lead = shape[:1] == (...,)
+    tail = shape[1:] if any_lead else shape
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        arr = None
+    ok = arr is not None and (arr.ndim >= len(tail) if any_lead else arr.ndim == len(tail))
+    ok = ok and all(w is None or g == w for g, w in zip(arr.shape[arr.ndim - len(tail) :], tail, strict=True))
+    if not ok or not np.all(np.isfinite(arr)):
+        dims = ["..." if d is ... else "N" if d is None else str(d) for d in shape]
+        text = f"({dims[0]},)" if len(dims) == 1 else f"({', '.join(dims)})"
+        raise ConfigError(f"{what} must be finite with shape {text}, got {'?' if arr is None else arr.shape}")
     arr.setflags(write=False)
     return arr
 
@@ -66,7 +82,7 @@ class Sphere:
     radius: FloatArray
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "center", _vec("Sphere.center", self.center))
+        object.__setattr__(self, "center", finite_array(self.center, "Sphere.center (m)"))
         object.__setattr__(self, "radius", _positive("Sphere.radius", self.radius))
 
     def ray_distance(self, o: FloatArray, d: FloatArray) -> FloatArray:
@@ -88,8 +104,8 @@ class Capsule:
     radius: FloatArray
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "p0", _vec("Capsule.p0", self.p0))
-        object.__setattr__(self, "p1", _vec("Capsule.p1", self.p1))
+        object.__setattr__(self, "p0", finite_array(self.p0, "Capsule.p0 (m)"))
+        object.__setattr__(self, "p1", finite_array(self.p1, "Capsule.p1 (m)"))
         object.__setattr__(self, "radius", _positive("Capsule.radius", self.radius))
 
     def ray_distance(self, o: FloatArray, d: FloatArray) -> FloatArray:
@@ -133,8 +149,8 @@ class Plane:
     normal: FloatArray
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "point", _vec("Plane.point", self.point))
-        n = _vec("Plane.normal", self.normal)
+        object.__setattr__(self, "point", finite_array(self.point, "Plane.point (m)"))
+        n = finite_array(self.normal, "Plane.normal")
         norm = np.linalg.norm(n, axis=-1, keepdims=True)
         if np.any(norm < 1e-12):
             raise ConfigError("Plane.normal must be a non-zero vector")
@@ -164,7 +180,7 @@ class Box:
     R: FloatArray | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "center", _vec("Box.center", self.center))
+        object.__setattr__(self, "center", finite_array(self.center, "Box.center (m)"))
         h = _positive("Box.half_extents", self.half_extents)
         if h.shape[-1:] != (3,):
             raise ConfigError(f"Box.half_extents must have shape (3,) in m, got {h.shape}")
@@ -280,6 +296,42 @@ class TofModel:
         """Range noise std at the true distance, m: ``noise_std + noise_std_per_m * d``."""
         return self.noise_std + self.noise_std_per_m * np.asarray(distance, dtype=float)
 
+    @property
+    def noisy(self) -> bool:
+        """The model adds range noise (so :meth:`measure` needs an rng)."""
+        return self.noise_std > 0 or self.noise_std_per_m > 0
+
+    def measure(self, true_distance: ArrayLike, rng: np.random.Generator | None = None) -> FloatArray:
+        """The sensor's readings of true nearest-target distances: THE ToF measurement model.
+
+        Every ToF reading of skincal goes through here (:func:`tof_range`, the MuJoCo simulator, the
+        avoidance loop): window ``[min_range, max_range]`` on the true distance (outside it, ``inf``
+        or NaN: NaN), Gaussian noise of std :meth:`noise_std_at` the true distance, rounding to
+        ``resolution_m``.
+
+        Random stream (the contract the simulators' draw-for-draw equality rests on): a noisy model
+        draws exactly ``rng.normal(size=true_distance.shape)``, one standard normal per sample in C
+        order, invalid samples included (their draw is spent and discarded); a noise-free model draws
+        nothing, so ``rng`` may then be ``None``.
+
+        Args:
+            true_distance: ``(...)`` distances to the nearest target, m (``inf`` = nothing hit).
+            rng: random generator; required when :attr:`noisy`.
+
+        Returns:
+            ``(...)`` readings, m; NaN = no target in the window.
+        """
+        d = np.asarray(true_distance, dtype=float)
+        valid = (d >= self.min_range) & (d <= self.max_range)
+        measured = np.where(valid, d, np.nan)
+        if self.noisy:
+            if rng is None:
+                raise ConfigError("the ToF model has noise: measuring needs an rng")
+            measured = measured + rng.normal(size=measured.shape) * self.noise_std_at(np.where(valid, d, 0.0))
+        if self.resolution_m > 0:
+            measured = np.round(measured / self.resolution_m) * self.resolution_m
+        return measured
+
 
 TOF_PRESETS: dict[str, TofModel] = {
     # VL53L1X long mode: 4 m, 27 deg; ~5 mm + 0.5 % of range (1 sigma), 1 mm output resolution.
@@ -341,7 +393,7 @@ def tof_range(
     model: TofModel,
     rng: np.random.Generator | None = None,
 ) -> FloatArray:
-    """Simulated ToF readings: nearest target over the cone, with limits and noise.
+    """Simulated ToF readings: :meth:`TofModel.measure` of :func:`nearest_in_cone`.
 
     Args:
         origins: ``(M, 3)`` SU origins in the base frame, m.
@@ -354,6 +406,18 @@ def tof_range(
         ``(M,)`` range, m: ``min`` over cone rays of the distance along each ray, plus noise;
         NaN when the nearest target is outside ``[min_range, max_range]`` or nothing is hit.
     """
+    if model.noisy and rng is None:
+        raise ConfigError("tof_range needs an rng: the ToF model has noise")
+    return model.measure(nearest_in_cone(origins, R_base_su, scene, model), rng)
+
+
+def nearest_in_cone(
+    origins: ArrayLike, R_base_su: ArrayLike, scene: Sequence[Primitive], model: TofModel
+) -> FloatArray:
+    """True distance ``(M,)`` m to the nearest target over the model's cone rays (``inf``: none).
+
+    Arguments as :func:`tof_range`; no limits, no noise.
+    """
     o = np.asarray(origins, dtype=float)
     if o.ndim != 2 or o.shape[1] != 3:
         raise ConfigError(f"ToF origins must have shape (M, 3) in m, got {o.shape}")
@@ -362,17 +426,8 @@ def tof_range(
         R = _frames_from_axes(R)
     elif R.shape != (o.shape[0], 3, 3):
         raise ConfigError(f"R_base_su must be ({o.shape[0]}, 3, 3) rotations or ({o.shape[0]}, 3) axes, got {R.shape}")
-    noisy = model.noise_std > 0 or model.noise_std_per_m > 0
-    if noisy and rng is None:
-        raise ConfigError("tof_range needs an rng: the ToF model has noise")
     dirs = np.einsum("mij,kj->kmi", R, cone_directions(model.fov_deg, model.n_rays))  # (K, M, 3)
     nearest = np.full(o.shape[0], np.inf)
     for primitive in scene:
         nearest = np.minimum(nearest, ray_distance(o[None], dirs, primitive).min(axis=0))
-    valid = (nearest >= model.min_range) & (nearest <= model.max_range)
-    measured = np.where(valid, nearest, np.nan)
-    if noisy:
-        measured = measured + rng.normal(size=measured.shape) * model.noise_std_at(np.where(valid, nearest, 0.0))
-    if model.resolution_m > 0:
-        measured = np.round(measured / model.resolution_m) * model.resolution_m
-    return measured
+    return nearest

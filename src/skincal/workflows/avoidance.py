@@ -11,8 +11,8 @@ Per step ``k`` (``t = k dt``, ``dt = 1 ms``):
 2. units whose turn it is (each unit reads every ``1 / rate_hz`` s, phases staggered over the units)
    read their range: MuJoCo rangefinders along the ToF cone rays at the current ``q``, nearest hit
    among the obstacles (the robot's own capsule hull is hidden from the rays, see below),
-   then :class:`~skincal.skin.tof.TofModel` window, noise and rounding; perception gets the reading
-   with the joint state of its instant;
+   then :meth:`~skincal.skin.tof.TofModel.measure` (window, noise, rounding: the simulators' model
+   and random stream); perception gets the reading with the joint state of its instant;
 3. the controller solves its QP with the live filtered points and the circle reference;
 4. the robot integrates the commanded velocity kinematically, ``q <- q + qd dt`` (an ideal velocity
    interface, as a Panda under joint-velocity control at 1 kHz).
@@ -84,17 +84,6 @@ class RunLog:
         return np.linalg.norm(self.x_des - self.x, axis=1)
 
 
-def sensor_reading(model: TofModel, nearest: FloatArray, rng: np.random.Generator) -> FloatArray:
-    """ToF output for true nearest distances ``(U,)`` m: window ``[min_range, max_range]`` (else NaN),
-    Gaussian noise of std ``noise_std + noise_std_per_m d``, rounding to ``resolution_m``."""
-    valid = np.isfinite(nearest) & (nearest >= model.min_range) & (nearest <= model.max_range)
-    out = np.where(valid, nearest, np.nan)
-    out = out + rng.normal(size=out.shape) * model.noise_std_at(np.where(valid, nearest, 0.0))
-    if model.resolution_m > 0:
-        out = np.round(out / model.resolution_m) * model.resolution_m
-    return out
-
-
 def run_scenario(
     chain: SerialChain,
     scenario: Scenario,
@@ -163,7 +152,7 @@ def run_scenario(
             mujoco.mj_sensorPos(model, data)
             hits = data.sensordata[idx.range[reading]]  # (R, K), -1 = no hit
             nearest = np.where(hits < 0, np.inf, hits).min(axis=1)
-            r = sensor_reading(tof_model, nearest, rng)
+            r = tof_model.measure(nearest, rng)
             tof_t[count[reading], reading] = t[k]
             tof_range[count[reading], reading] = r
             count[reading] += 1
