@@ -25,6 +25,8 @@ from skincal.data.dataset import Dataset
 from skincal.data.result import UnitResult
 from skincal.kinematics.transforms import FloatArray
 
+CHUNK = 8192
+"""Samples whose prediction is computed at once (bounds the memory of a long recording's residuals)."""
 PLOT_POINTS = 2000
 """Samples per residual curve in the report's plots (:meth:`UnitResiduals.thinned`): a picture, not the data."""
 
@@ -125,10 +127,13 @@ def unit_residuals(
         stamps = imu.t - 1e-6 * float(drift_ppm) * (imu.t - float(t_ref))
         dataset = replace(dataset, imu={**dataset.imu, name: replace(imu, t=stamps)})
     s = unit_samples(dataset, name, time_offset_s=tau, interpolator=interpolator)
-    pose = unit.pose
-    sig = link_signals(dataset.robot, pose.link, s.q, s.qd, s.qdd, np.asarray(dataset.gravity, dtype=float))
-    v_link = sig.u + np.einsum("mij,j->mi", sig.K, pose.p_link_su)
-    predicted = (v_link @ pose.R_link_su) @ A.T + b
+    pose, gravity = unit.pose, np.asarray(dataset.gravity, dtype=float)
+    predicted = np.empty_like(s.accel)
+    for i in range(0, len(s.t), CHUNK):  # the kinematics' temporaries grow with the samples: bound them
+        j = slice(i, i + CHUNK)
+        sig = link_signals(dataset.robot, pose.link, s.q[j], s.qd[j], s.qdd[j], gravity)
+        v_link = sig.u + np.einsum("mij,j->mi", sig.K, pose.p_link_su)
+        predicted[j] = (v_link @ pose.R_link_su) @ A.T + b
     residual = s.accel - predicted
     n_seg = len(dataset.segments) if dataset.segments is not None else 0
     inside = s.segment >= 0
