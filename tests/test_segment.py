@@ -179,3 +179,68 @@ def test_every_preset_protocol_segments_with_defaults(protocol):
         overlap = np.minimum(sim.t_end[k], found.t_end[fs]) - np.maximum(sim.t_start[k], found.t_start[fs])
         assert overlap.max() >= 0.9 * (sim.t_end[k] - sim.t_start[k])
     assert {r.reason for r in report.rejected} == {"multi-joint motion"}
+
+
+def _recording_of(json_path, seed: int, shift_s: float):
+    """A simulated recording (controller joint stream, realistic IMUs) of the motion in ``json_path``,
+    its clock starting ``shift_s`` s before the motion and without /segments."""
+    from skincal.protocol import read_trajectory_json
+
+    traj = read_trajectory_json(json_path)
+    chain = get_robot(traj.robot)
+    rng = np.random.default_rng(seed)
+    ds = simulate(chain, random_placement(chain, 1, rng), traj, get_imu_model("realistic"), rng)
+    js = ds.joints
+    imu = {u: replace(s, t=np.asarray(s.t) + shift_s) for u, s in ds.imu.items()}
+    shifted = replace(ds, joints=replace(js, t=np.asarray(js.t) + shift_s), imu=imu, segments=None)
+    return shifted, ds.segments
+
+
+def test_cli_segment_takes_segments_from_the_protocol_file(tmp_path, capsys):
+    """`segment --protocol motion.json`: the protocol's segments, aligned to a recording whose clock is
+    7.3 s off by cross-correlation of joint positions, land within 2 ms of the true ones; a recording
+    of another draw of poses (seed) is refused in one line."""
+    motion = tmp_path / "motion.json"
+    assert main(["protocol", "--robot", "panda", "--rate", "1000", "--seed", "4", "--out", str(motion)]) == 0
+    rec, truth = _recording_of(motion, 0, 7.3)
+    write_dataset(rec, tmp_path / "rec.h5")
+    capsys.readouterr()
+    assert main(["segment", str(tmp_path / "rec.h5"), "--protocol", str(motion), "-o", str(tmp_path / "seg.h5")]) == 0
+    assert "protocol t=0 at 7.30" in capsys.readouterr().out
+    seg = read_dataset(tmp_path / "seg.h5").segments
+    np.testing.assert_allclose(seg.t_start, truth.t_start + 7.3, atol=2e-3)
+    np.testing.assert_allclose(seg.t_end, truth.t_end + 7.3, atol=2e-3)
+    np.testing.assert_array_equal(seg.joint, truth.joint)
+    np.testing.assert_array_equal(seg.kind, truth.kind)
+    other = tmp_path / "other.json"
+    assert main(["protocol", "--robot", "panda", "--rate", "1000", "--seed", "5", "--out", str(other)]) == 0
+    capsys.readouterr()
+    assert main(["segment", str(tmp_path / "rec.h5"), "--protocol", str(other), "-o", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "does not follow the protocol" in err and err.count("\n") == 1
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_cli_import_takes_segments_from_the_protocol_file(tmp_path, capsys):
+    """`import bag --protocol motion.json` with a recording of the `fast` motion that starts 2 s into it
+    (the import counts time from the bag's first message): the protocol's segments, aligned, those
+    before the recording dropped."""
+    from skincal.data.rosbag import write_bag
+
+    motion = tmp_path / "motion.json"
+    assert main(["protocol", "--robot", "panda", "--rate", "1000", "--out", str(motion)]) == 0
+    rec, truth = _recording_of(motion, 1, 12.5)
+    js, late = rec.joints, lambda t: np.asarray(t) >= 14.5
+    rec = replace(rec, joints=JointStates(js.t[late(js.t)], js.q[late(js.t)], js.qd[late(js.t)]),
+                  imu={u: replace(s, t=s.t[late(s.t)], accel=s.accel[late(s.t)], gyro=s.gyro[late(s.t)])
+                       for u, s in rec.imu.items()})  # fmt: skip
+    write_bag(rec, tmp_path / "rec")
+    capsys.readouterr()
+    code = main(["import", str(tmp_path / "rec"), "--protocol", str(motion), "-o", str(tmp_path / "ds.h5")])
+    assert code == 0, capsys.readouterr()
+    assert "protocol t=0 at -2.00" in capsys.readouterr().out
+    seg = read_dataset(tmp_path / "ds.h5").segments
+    kept = truth.t_start >= 2.0
+    assert 0 < kept.sum() < len(truth)
+    np.testing.assert_allclose(seg.t_start, truth.t_start[kept] - 2.0, atol=5e-3)
+    np.testing.assert_array_equal(seg.joint, truth.joint[kept])

@@ -63,6 +63,26 @@ _MIN_DYNAMIC = typer.Option(None, help="shortest dynamic segment, s [default: fi
                             show_default=False)
 
 
+_PROTOCOL = typer.Option(None, "--protocol", help="take the segments from this protocol file (.json of `skincal "
+                         "protocol`), aligned to the recording's joint positions, instead of finding them")
+
+
+def _segments_from_protocol(ds, protocol: Path):
+    """``ds`` with the segments of the protocol file, aligned by cross-correlation of joint positions."""
+    from dataclasses import replace
+
+    from skincal.data.names import printable
+    from skincal.protocol import read_trajectory_json
+    from skincal.protocol.align import align_to_protocol
+
+    al = align_to_protocol(ds.joints.t, ds.joints.q, read_trajectory_json(protocol))
+    console.print(printable(f"segments from {protocol}: protocol t=0 at {al.offset_s:.3f} s of the recording, "
+                            f"RMS joint difference {al.rms:.2g}, {len(al.segments)} segments" +
+                            (f" ({al.dropped} outside the recording dropped)" if al.dropped else "")),
+                  highlight=False, markup=False)  # fmt: skip
+    return replace(ds, segments=al.segments)
+
+
 @app.command("import")
 def import_bag(
     bag: Path = typer.Argument(..., help="ROS 1 .bag file, ROS 2 bag directory, or .db3/.mcap file"),
@@ -78,6 +98,7 @@ def import_bag(
     rest_velocity: float | None = _REST,
     min_static: float | None = _MIN_STATIC,
     min_dynamic: float | None = _MIN_DYNAMIC,
+    protocol: Path | None = _PROTOCOL,
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Import a ROS bag (no ROS install needed), segment it and write a dataset."""
@@ -88,7 +109,7 @@ def import_bag(
     from skincal.data.rosbag import topic_map
     from skincal.data.segment import segment_dataset
 
-    check_output(out, force=force, inputs=(bag,))
+    check_output(out, force=force, inputs=(bag,) + ((protocol,) if protocol else ()))
     tmap = topic_map(imu_topic, joint_topic, range_topic, path=map_file)
     ds, report = _read_bag_with_progress(bag, robot, tmap, accel_unit, gyro_unit)
     units = ", ".join(f"{u} <- {t}" for t, u in report.imu_topics.items())
@@ -98,7 +119,9 @@ def import_bag(
                   highlight=False)
     for note in report.notes:
         console.print(f"  note: {note}", highlight=False, markup=False)
-    if segment:
+    if segment and protocol is not None:
+        ds = _segments_from_protocol(ds, protocol)
+    elif segment:
         ds, seg_report = segment_dataset(ds, _segmentation_config(rest_velocity, min_static, min_dynamic))
         for table in segmentation_tables(seg_report):
             console.print(table)
@@ -130,6 +153,7 @@ def segment_cmd(
     rest_velocity: float | None = _REST,
     min_static: float | None = _MIN_STATIC,
     min_dynamic: float | None = _MIN_DYNAMIC,
+    protocol: Path | None = _PROTOCOL,
     verbose: bool = typer.Option(False, "--verbose", "-v", help="list every segment"),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
@@ -138,12 +162,15 @@ def segment_cmd(
     from skincal.data.hdf5 import read_dataset, write_dataset
     from skincal.data.segment import segment_dataset
 
-    check_output(out, force=force, inputs=(dataset,))
+    check_output(out, force=force, inputs=(dataset,) + ((protocol,) if protocol else ()))
     ds = read_dataset(dataset)
     had = ds.segments is not None and len(ds.segments) > 0
-    ds, report = segment_dataset(ds, _segmentation_config(rest_velocity, min_static, min_dynamic))
-    for table in segmentation_tables(report, verbose):
-        console.print(table)
+    if protocol is not None:
+        ds = _segments_from_protocol(ds, protocol)
+    else:
+        ds, report = segment_dataset(ds, _segmentation_config(rest_velocity, min_static, min_dynamic))
+        for table in segmentation_tables(report, verbose):
+            console.print(table)
     write_dataset(ds, out)
     console.print(f"wrote {out}" + (" (its previous /segments were replaced)" if had else ""), highlight=False)
 
