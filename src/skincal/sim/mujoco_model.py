@@ -141,10 +141,11 @@ def sensor_name(unit: str, kind: str) -> str:
 
 
 # ---------------------------------------------------------------------------------------------- MJCF
-def _fmt(values: FloatArray | Sequence[float] | float) -> str:
-    """Floats at full precision (repr round-trips), so frames survive the XML text exactly."""
+def mjcf_floats(values: FloatArray | Sequence[float] | float) -> str:
+    """Floats as MJCF attribute text at full precision (repr round-trips), so frames survive the XML
+    text exactly: the one float formatting of every MJCF skincal writes (robot and scene)."""
     arr = np.atleast_1d(np.asarray(values, dtype=float))
-    return " ".join(repr(float(x)) + "" for x in arr)
+    return " ".join(repr(float(x)) for x in arr)
 
 
 def _body_offset(chain: SerialChain, i: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -168,9 +169,13 @@ def _add_capsules(body: ET.Element, chain: SerialChain, link: int, radius: float
             "rgba": "0.85 0.85 0.88 1",
         }
         if cap.length > 0:
-            attrs |= {"type": "capsule", "fromto": _fmt(np.concatenate([cap.p0, cap.p1])), "size": _fmt(cap.radius)}
+            attrs |= {
+                "type": "capsule",
+                "fromto": mjcf_floats(np.concatenate([cap.p0, cap.p1])),
+                "size": mjcf_floats(cap.radius),
+            }
         else:
-            attrs |= {"type": "sphere", "pos": _fmt(cap.p0), "size": _fmt(cap.radius)}
+            attrs |= {"type": "sphere", "pos": mjcf_floats(cap.p0), "size": mjcf_floats(cap.radius)}
         ET.SubElement(body, "geom", attrs)
 
 
@@ -233,31 +238,33 @@ def build_mjcf(
 
     root = ET.Element("mujoco", {"model": f"skincal_{chain.name}"})
     ET.SubElement(root, "compiler", {"angle": "radian", "autolimits": "true", "inertiafromgeom": "auto"})
-    ET.SubElement(root, "option", {"timestep": repr(TIMESTEP), "gravity": _fmt(g), "integrator": "implicitfast"})
+    ET.SubElement(root, "option", {"timestep": repr(TIMESTEP), "gravity": mjcf_floats(g), "integrator": "implicitfast"})
     world = ET.SubElement(root, "worldbody")
     parent = ET.SubElement(world, "body", {"name": body_name(0)})
     _add_capsules(parent, chain, 0, link_radius, density)
     bodies = [parent]
     for i in range(1, n + 1):
         pos, quat, axis, anchor = _body_offset(chain, i)
-        battrs = {"name": body_name(i), "pos": _fmt(pos), "quat": _fmt(quat)}
+        battrs = {"name": body_name(i), "pos": mjcf_floats(pos), "quat": mjcf_floats(quat)}
         if gravity_compensation:
             battrs["gravcomp"] = "1"
         body = ET.SubElement(parent, "body", battrs)
         kind = "hinge" if chain.joint_type[i - 1] == "revolute" else "slide"
-        jattrs = {"name": joint_name(i), "type": kind, "axis": _fmt(axis), "pos": _fmt(anchor)}
+        jattrs = {"name": joint_name(i), "type": kind, "axis": mjcf_floats(axis), "pos": mjcf_floats(anchor)}
         if (
             chain.joint_lower is not None
             and chain.joint_upper is not None
             and np.isfinite(chain.joint_lower[i - 1])
             and np.isfinite(chain.joint_upper[i - 1])
         ):
-            jattrs["range"] = _fmt([chain.joint_lower[i - 1], chain.joint_upper[i - 1]])
+            jattrs["range"] = mjcf_floats([chain.joint_lower[i - 1], chain.joint_upper[i - 1]])
         ET.SubElement(body, "joint", jattrs)
         if inertials is not None:
             li = inertials[i - 1]
             ET.SubElement(
-                body, "inertial", {"pos": _fmt(li.com), "mass": _fmt(li.mass), "fullinertia": _fmt(li.inertia)}
+                body,
+                "inertial",
+                {"pos": mjcf_floats(li.com), "mass": mjcf_floats(li.mass), "fullinertia": mjcf_floats(li.inertia)},
             )
         _add_capsules(body, chain, i, link_radius, density)
         bodies.append(body)
@@ -266,13 +273,13 @@ def build_mjcf(
     sensors = ET.SubElement(root, "sensor")
     for unit, pose in placements.items():
         body = bodies[pose.link]
-        site_quat = _fmt(quat_wxyz_from_matrix(pose.R_link_su))
+        site_quat = mjcf_floats(quat_wxyz_from_matrix(pose.R_link_su))
         ET.SubElement(
             body,
             "site",
             {
                 "name": site_name(unit),
-                "pos": _fmt(pose.p_link_su),
+                "pos": mjcf_floats(pose.p_link_su),
                 "quat": site_quat,
                 "size": "0.005",
                 "rgba": "0.1 0.6 0.2 1",
@@ -287,8 +294,8 @@ def build_mjcf(
                 {
                     "name": f"{site_name(unit)}/board",
                     "type": "box",
-                    "size": _fmt(half),
-                    "pos": _fmt(centre),
+                    "size": mjcf_floats(half),
+                    "pos": mjcf_floats(centre),
                     "quat": site_quat,
                     "mass": "0",
                     "contype": "0",
@@ -309,8 +316,8 @@ def build_mjcf(
                 "site",
                 {
                     "name": ray_site,
-                    "pos": _fmt(pose.p_link_su),
-                    "quat": _fmt(quat_wxyz_from_matrix(pose.R_link_su @ R_su_ray)),
+                    "pos": mjcf_floats(pose.p_link_su),
+                    "quat": mjcf_floats(quat_wxyz_from_matrix(pose.R_link_su @ R_su_ray)),
                 },
             )
             ET.SubElement(sensors, "rangefinder", {"name": sensor_name(unit, f"range{k}"), "site": ray_site})

@@ -20,23 +20,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
+from skincal.data.interp import interp_rows
 from skincal.errors import ConfigError
 from skincal.kinematics.transforms import FloatArray, quat_wxyz_from_matrix, rot_z
+from skincal.sim.mujoco_model import mjcf_floats
+from skincal.skin.tof import finite_array
 
 KINDS = {"sphere": 1, "capsule": 2, "box": 3, "plane": 2}
 """Primitive kinds and the number of size entries each takes."""
-
-
-def _vec(value: ArrayLike, shape: tuple[int, ...], what: str) -> FloatArray:
-    arr = np.array(value, dtype=float)
-    if arr.shape != shape or not np.all(np.isfinite(arr)):
-        raise ConfigError(f"{what} must be finite with shape {shape}, got {np.shape(value)}")
-    arr.setflags(write=False)
-    return arr
-
-
-def _fmt(values: ArrayLike) -> str:
-    return " ".join(repr(float(x)) for x in np.atleast_1d(np.asarray(values, dtype=float)))
 
 
 @dataclass(frozen=True)
@@ -51,12 +42,12 @@ class Primitive:
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ConfigError(f"obstacle primitive kind must be one of {', '.join(KINDS)}, got '{self.kind}'")
-        size = _vec(self.size, (KINDS[self.kind],), f"{self.kind} size (m)")
+        size = finite_array(self.size, f"{self.kind} size (m)", (KINDS[self.kind],))
         if np.any(size < 0) or (self.kind != "plane" and np.any(size[:1] <= 0)):
             raise ConfigError(f"{self.kind} size must be positive m, got {size.tolist()}")
         object.__setattr__(self, "size", size)
-        object.__setattr__(self, "p_obs_prim", _vec(self.p_obs_prim, (3,), "primitive position (m)"))
-        R = _vec(self.R_obs_prim, (3, 3), "primitive rotation")
+        object.__setattr__(self, "p_obs_prim", finite_array(self.p_obs_prim, "primitive position (m)", (3,)))
+        R = finite_array(self.R_obs_prim, "primitive rotation", (3, 3))
         if np.abs(R.T @ R - np.eye(3)).max() > 1e-6 or np.linalg.det(R) < 0:
             raise ConfigError("primitive rotation is not a proper rotation matrix")
         object.__setattr__(self, "R_obs_prim", R)
@@ -76,13 +67,13 @@ class TimeTable:
         t = np.array(self.t, dtype=float)
         if t.ndim != 1 or t.size < 1 or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
             raise ConfigError("obstacle time table: t must be a finite, strictly increasing (K,) array in s")
-        object.__setattr__(self, "t", _vec(t, t.shape, "time table t (s)"))
-        object.__setattr__(self, "p_base", _vec(self.p_base, (t.size, 3), "time table p_base (m)"))
+        object.__setattr__(self, "t", finite_array(t, "time table t (s)", t.shape))
+        object.__setattr__(self, "p_base", finite_array(self.p_base, "time table p_base (m)", (t.size, 3)))
 
     def at(self, t: ArrayLike) -> FloatArray:
         """Positions ``(M, 3)`` at times ``t`` ``(M,)``, linear interpolation."""
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        return np.stack([np.interp(t, self.t, self.p_base[:, k]) for k in range(3)], axis=-1)
+        return interp_rows(t, self.t, self.p_base)
 
 
 @dataclass(frozen=True)
@@ -99,8 +90,12 @@ class Obstacle:
         if not self.name or not self.primitives:
             raise ConfigError("an obstacle needs a name and at least one primitive")
         object.__setattr__(self, "primitives", tuple(self.primitives))
-        object.__setattr__(self, "p_base_obs", _vec(self.p_base_obs, (3,), f"obstacle '{self.name}' position (m)"))
-        object.__setattr__(self, "R_base_obs", _vec(self.R_base_obs, (3, 3), f"obstacle '{self.name}' rotation"))
+        object.__setattr__(
+            self, "p_base_obs", finite_array(self.p_base_obs, f"obstacle '{self.name}' position (m)", (3,))
+        )
+        object.__setattr__(
+            self, "R_base_obs", finite_array(self.R_base_obs, f"obstacle '{self.name}' rotation", (3, 3))
+        )
 
     def positions(self, t: ArrayLike) -> FloatArray:
         """Origin of the obstacle frame in the base frame at times ``t`` ``(M,)``: ``(M, 3)`` m."""
@@ -134,8 +129,8 @@ class Scene:
                 {
                     "name": self.body_name(obs.name),
                     "mocap": "true",
-                    "pos": _fmt(obs.p_base_obs),
-                    "quat": _fmt(quat_wxyz_from_matrix(obs.R_base_obs)),
+                    "pos": mjcf_floats(obs.p_base_obs),
+                    "quat": mjcf_floats(quat_wxyz_from_matrix(obs.R_base_obs)),
                 },
             )
             for k, prim in enumerate(obs.primitives):
@@ -145,9 +140,9 @@ class Scene:
                     {
                         "name": f"{self.body_name(obs.name)}/{k}",
                         "type": prim.kind,
-                        "size": _fmt(prim.size if prim.kind != "plane" else [*prim.size, 1.0]),
-                        "pos": _fmt(prim.p_obs_prim),
-                        "quat": _fmt(quat_wxyz_from_matrix(prim.R_obs_prim)),
+                        "size": mjcf_floats(prim.size if prim.kind != "plane" else [*prim.size, 1.0]),
+                        "pos": mjcf_floats(prim.p_obs_prim),
+                        "quat": mjcf_floats(quat_wxyz_from_matrix(prim.R_obs_prim)),
                         "contype": "0",
                         "conaffinity": "0",
                         "mass": "0",

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from skincal.data.dataset import Dataset
+from skincal.data.interp import interp_rows
 from skincal.data.result import CalibrationResult
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
@@ -121,18 +122,11 @@ class Recording:
 
     def q_at(self, t: float) -> FloatArray:
         """Joint angles ``(n,)`` at instant ``t`` (s), linear between samples, held at the ends."""
-        i = int(np.clip(np.searchsorted(self.t, t) - 1, 0, self.t.size - 2)) if self.t.size > 1 else 0
-        if self.t.size == 1:
-            return self.q[0].copy()
-        w = float(np.clip((t - self.t[i]) / (self.t[i + 1] - self.t[i]), 0.0, 1.0))
-        return (1.0 - w) * self.q[i] + w * self.q[i + 1]
+        return interp_rows(float(t), self.t, self.q)
 
     def obstacle_positions(self, t: float) -> dict[str, FloatArray]:
         """Centre ``(3,)`` of each obstacle at instant ``t`` (s), linear between samples."""
-        return {
-            name: np.array([np.interp(t, tr.t, tr.p_base[:, k]) for k in range(3)])
-            for name, tr in self.obstacles.items()
-        }
+        return {name: interp_rows(float(t), tr.t, tr.p_base) for name, tr in self.obstacles.items()}
 
 
 def tof_points_base(
@@ -158,7 +152,7 @@ def tof_points_base(
         if not np.any(sel):
             continue
         ts, rs = t[sel], r[sel]
-        q = np.column_stack([np.interp(ts, recording.t, recording.q[:, j]) for j in range(recording.q.shape[1])])
+        q = interp_rows(ts, recording.t, recording.q)
         pose = poses[unit]
         T = chain.link_frames(q, upto=pose.link)[:, pose.link] @ pose.T_link_su
         origins.append(T[:, :3, 3])
@@ -174,8 +168,7 @@ def check_result_robot(result: CalibrationResult, chain: SerialChain) -> None:
     for name, unit in result.units.items():
         if not 1 <= unit.pose.link <= chain.n_joints:
             raise ConfigError(
-                f"unit '{name}': link {unit.pose.link} does not exist on robot '{chain.name}' "
-                f"({chain.n_joints} links)"
+                f"unit '{name}': link {unit.pose.link} does not exist on robot '{chain.name}' ({chain.n_joints} links)"
             )
 
 
