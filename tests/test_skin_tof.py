@@ -258,3 +258,57 @@ def test_robot_links_as_moving_capsules():
         [ray_distance(o[i : i + 1], [[0.0, 0.0, -1.0]], Capsule(m0.p0[i], m0.p1[i], 0.06))[0] for i in range(2)]
     )
     np.testing.assert_allclose(ray_distance(o, [[0.0, 0.0, -1.0]], m0), per_sample)
+
+
+def test_measure_is_window_noise_rounding_with_one_normal_per_sample():
+    """The stream contract: a noisy model draws rng.normal(size=shape), invalid samples included."""
+    model = dataclasses.replace(get_tof_model("roboskin-firmware"), resolution_m=0.0)
+    d = np.array([[0.005, 0.5], [np.inf, 0.9], [1.5, np.nan]])
+    z = np.random.default_rng(3).normal(size=d.shape)
+    got = model.measure(d, np.random.default_rng(3))
+    valid = np.isfinite(d) & (d >= 0.01) & (d <= 1.0)
+    np.testing.assert_array_equal(np.isnan(got), ~valid)
+    np.testing.assert_array_equal(got[valid], d[valid] + z[valid] * (0.005 + 0.005 * d[valid]))
+    rng = np.random.default_rng(3)
+    model.measure(d, rng)
+    assert rng.normal() == np.random.default_rng(3).normal(size=d.size + 1)[-1]  # exactly d.size draws
+    rounded = get_tof_model("roboskin-firmware").measure(d, np.random.default_rng(3))
+    np.testing.assert_allclose(rounded[valid], np.round(got[valid] / 0.001) * 0.001, rtol=0, atol=1e-15)
+
+
+def test_noise_free_measure_draws_nothing_and_needs_no_rng():
+    rng = np.random.default_rng(5)
+    r = get_tof_model("ideal").measure([0.3, 5.0, np.inf], rng)
+    np.testing.assert_array_equal(r, [0.3, np.nan, np.nan])
+    assert rng.normal() == np.random.default_rng(5).normal()
+    assert get_tof_model("ideal").measure(0.3) == 0.3
+    with pytest.raises(ConfigError, match="rng"):
+        get_tof_model("vl53l1x").measure([0.3])
+
+
+def test_tof_range_is_measure_of_the_nearest_in_cone():
+    from skincal.skin.tof import nearest_in_cone
+
+    rng = np.random.default_rng(11)
+    o = rng.uniform(-0.3, 0.3, (50, 3))
+    axes = rng.normal(size=(50, 3)) + [0.0, 0.0, 3.0]
+    scene = list(PRIMITIVES.values())[:2] + [BOX]
+    model = get_tof_model("vl53l1x")
+    true = nearest_in_cone(o, axes, scene, model)
+    assert np.isfinite(true).sum() > 10
+    np.testing.assert_array_equal(
+        tof_range(o, axes, scene, model, np.random.default_rng(2)), model.measure(true, np.random.default_rng(2))
+    )
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize("bad", [[1.0, 2.0], [1.0, np.nan, 0.0], 3.0, "abc", [[1, 2, 3], [4, 5]], np.ones((2, 4))])
+def test_solid_vectors_are_checked_by_the_one_validator(bad):
+    from skincal.skin.tof import finite_array
+
+    with pytest.raises(ConfigError, match=r"Sphere.center \(m\) must be finite with shape \(\.\.\., 3\)"):
+        Sphere(bad, 0.1)
+    with pytest.raises(ConfigError, match="must be finite with shape"):
+        finite_array(bad, "x", (3,))
+    ok = finite_array([[1, 2, 3]], "x")
+    assert ok.shape == (1, 3) and not ok.flags.writeable
