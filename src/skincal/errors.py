@@ -25,3 +25,9 @@ class ProtocolError(SkincalError, ValueError):
 
 class CalibrationError(SkincalError, RuntimeError):
     """Calibration cannot run on the given data (for one unit or for all)."""
+
+
+def first_line(exc: BaseException) -> str:
+    """The first line of a foreign exception's message (its type name when empty), for a one-line error."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
