@@ -50,6 +50,7 @@ from skincal.data.jsonio import regular_file
 from skincal.data.names import printable
 from skincal.data.validate import check_unit_name, shown, validate_dataset
 from skincal.errors import ConfigError, DatasetError
+from skincal.errors import first_line as _first_line
 from skincal.kinematics.chain import CONVENTIONS, SerialChain
 from skincal.skin.pose import SkinUnitPose
 
@@ -72,11 +73,6 @@ READ_BYTES_PER_FILE_BYTE = 8
 MAX_ATTR_BYTES = 1 << 20
 """Largest attribute read, bytes (the contract's attributes are a few numbers)."""
 _NO_COMPRESSION = {h5py.h5z.FILTER_FLETCHER32, h5py.h5z.FILTER_SHUFFLE}
-
-
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
 
 
 class _Reader:

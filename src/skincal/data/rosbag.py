@@ -35,12 +35,12 @@ from skincal.data.dataset import Dataset, ImuStream, JointStates, TofStream
 from skincal.data.jsonio import load_yaml
 from skincal.data.validate import validate_dataset
 from skincal.errors import ConfigError, DatasetError
+from skincal.errors import first_line as _first_line
 from skincal.kinematics.chain import SerialChain
+from skincal.skin.imu import STANDARD_GRAVITY
 
 PROGRESS_EVERY = 5000
 """Messages between two calls of :func:`read_bag`'s ``progress`` callback."""
-STANDARD_GRAVITY = 9.80665
-"""1 g in m/s^2 (the conversion for accelerometers that report in g)."""
 IMU, JOINTS, RANGE, SCAN = (f"sensor_msgs/msg/{x}" for x in ("Imu", "JointState", "Range", "LaserScan"))
 KNOWN_JOINT_NAMES: dict[str, tuple[str, ...]] = {
     "panda": tuple(f"panda_joint{i}" for i in range(1, 8)),
@@ -109,11 +109,6 @@ def topic_map(imu: list[str] | None = None, joints: str | None = None, range_: l
     names = joint_names or doc.get("joint_names")
     return TopicMap(imu=maps["imu"], joints=joints or doc.get("joints"), range=maps["range"],
                     joint_names=None if not names else tuple(str(n) for n in names))
-
-
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
 
 
 def _unit_from_topic(topic: str) -> str:
