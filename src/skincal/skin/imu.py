@@ -36,7 +36,8 @@ from skincal.kinematics.chain import GRAVITY_BASE
 from skincal.kinematics.transforms import FloatArray
 
 STANDARD_GRAVITY = 9.80665
-"""One ``g`` of datasheets (mg, µg/√Hz), m/s^2; only used to convert datasheet units."""
+"""One ``g``, m/s^2: the one definition, converting datasheet units (mg, µg/√Hz) and accelerometers
+that report in g (:mod:`skincal.data.rosbag`); the simulated gravity is ``GRAVITY_BASE``."""
 
 _MG = 1e-3 * STANDARD_GRAVITY
 _DPS = math.pi / 180.0
