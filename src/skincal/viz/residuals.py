@@ -159,6 +159,7 @@ def unit_activity(dataset: Dataset, name: str, interpolator: JointInterpolator |
     """One row of :func:`activity_matrix`: ``(n,)`` activity of each joint on unit ``name``."""
     if interpolator is None:
         interpolator = JointInterpolator(dataset.joints)
-    s = unit_samples(dataset, name, interpolator=interpolator)
+    # the activity uses the readings and their segment tags only: no need to interpolate the joints
+    s = unit_samples(dataset, name, interpolator=interpolator, exact_joint_states=False)
     return discover_link(s, dataset.robot.n_joints, use_gyro=True).activity
 
