@@ -11,14 +11,14 @@ import pytest
 from registry_robots import registry_urdf
 
 from skincal.errors import ProtocolError
-from skincal.kinematics import get_robot
+from skincal.kinematics import PRESETS, get_robot
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import homogeneous
 from skincal.protocol import PROTOCOLS, build_trajectory, get_protocol
 from skincal.protocol.collision import CollisionModel, segment_distance
 from skincal.protocol.limits import acceleration_bounds, fit_to_limits, position_bounds
 
-PRESET_ROBOTS = ("panda", "sawyer", "ur5", "ur5e", "ur10e", "xarm7")
+PRESET_ROBOTS = tuple(sorted(PRESETS))
 
 PANDA_PAPER_SIM_SHA256 = {
     0: "456e6f511d7b68dfe086a77ef82f403b825e7e43ff910c9252e6b8b64a76bea9",

@@ -110,10 +110,8 @@ class CollisionModel:
     def endpoints(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Capsule end points in the base frame, each ``(N, C, 3)``, at configurations ``q`` ``(N, n)``."""
         link, p0, p1, _ = self._arrays
-        frames = self.chain.link_frames(q)[:, link]  # (N, C, 4, 4)
-        a = np.einsum("ncij,cj->nci", frames[..., :3, :], p0)
-        b = np.einsum("ncij,cj->nci", frames[..., :3, :], p1)
-        return a, b
+        frames = self.chain.link_frames(q)[:, link, :3, :]  # (N, C, 3, 4)
+        return (frames @ p0[:, :, None])[..., 0], (frames @ p1[:, :, None])[..., 0]
 
     def clearance(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Per configuration ``(N,)``: the smallest capsule-capsule distance over the checked pairs and

@@ -196,8 +196,10 @@ def pose_box(chain: SerialChain, config: ProtocolConfig) -> tuple[FloatArray, Fl
 
 MAX_POSE_DRAWS = 200
 """Draws allowed per static pose before :func:`sample_static_poses` gives up (collision check)."""
-DIVERSE_POOL = 30
-"""Candidates drawn per static pose for ``pose_selection="diverse"``."""
+DIVERSE_POOL = 20
+"""Candidates drawn per static pose (in one batch) for ``pose_selection="diverse"``; batches are drawn
+until :data:`DIVERSE_FEASIBLE` collision-free candidates per pose are available."""
+DIVERSE_FEASIBLE = 5
 
 
 class _PoseChecker:
@@ -211,20 +213,25 @@ class _PoseChecker:
         self.model = CollisionModel(chain)
         n = chain.n_joints
         A, f = config.amplitude_per_joint(n), config.frequency_per_joint(n)
-        rows = [np.zeros((1, n))]
+        self.blocks = []  # (m_j, n) offsets of each excitation and its return
         for j in config.joints_to_excite(n):
             column = excitation_offsets(A[j], f[j], config.excite_duration, self.step, j)
             off = np.zeros((column.size, n))
             off[:, j] = column
-            rows.append(off)
-        self.offsets = np.concatenate(rows)  # (m, n): the pose first
+            self.blocks.append(off)
 
     def static_ok(self, poses: FloatArray) -> np.ndarray:
-        """``(K,)`` True where a pose and all its excitations are collision-free."""
+        """``(K,)`` True where a pose and all its excitations are collision-free (checked in stages:
+        the poses, then each excitation for the candidates still free)."""
         poses = np.atleast_2d(poses)
-        m = self.offsets.shape[0]
-        q = (poses[:, None, :] + self.offsets[None]).reshape(-1, poses.shape[1])
-        return self.model.free(q).reshape(poses.shape[0], m).all(axis=1)
+        ok = self.model.free(poses)
+        for off in self.blocks:
+            idx = np.flatnonzero(ok)
+            if idx.size == 0:
+                break
+            q = (poses[idx, None, :] + off[None]).reshape(-1, poses.shape[1])
+            ok[idx] = self.model.free(q).reshape(idx.size, off.shape[0]).all(axis=1)
+        return ok
 
     def move_ok(self, q_from: FloatArray, q_to: FloatArray) -> bool:
         from skincal.protocol.motion import quintic_move_samples
@@ -250,11 +257,12 @@ def sample_static_poses(
     * ``pose_selection="uniform"``: one uniform draw of all poses (exactly the draw of earlier
       versions); with ``collision_check`` each pose whose excitations or move from the previous pose
       collide (:mod:`skincal.protocol.collision`) is replaced by a fresh uniform draw.
-    * ``pose_selection="diverse"``: :data:`DIVERSE_POOL` candidates per pose are drawn uniformly;
-      the first collision-free one starts, and each next pose is the candidate whose gravity
-      directions in the link frames 1..n lie farthest from those of every pose chosen so far
-      (greedy farthest point: rotation, bias and scale of a unit need gravity in several directions
-      of its link frame), among those reachable by a collision-free move.
+    * ``pose_selection="diverse"``: candidates are drawn uniformly (batches of :data:`DIVERSE_POOL`
+      per pose, until :data:`DIVERSE_FEASIBLE` per pose are collision-free); the first one starts,
+      and each next pose is the candidate whose gravity directions in the link frames 1..n lie
+      farthest from those of every pose chosen so far (greedy farthest point: rotation, bias and
+      scale of a unit need gravity in several directions of its link frame), among those reachable
+      by a collision-free move.
 
     Raises :class:`ProtocolError` naming the robot and the protocol when no collision-free pose is
     found within :data:`MAX_POSE_DRAWS` draws per pose.
@@ -293,7 +301,7 @@ def _diverse_poses(
     check = _PoseChecker(chain, config) if config.collision_check else None
     pool = np.zeros((0, chain.n_joints))
     drawn = 0
-    while pool.shape[0] < DIVERSE_POOL * P // 2 and drawn < MAX_POSE_DRAWS * P:
+    while pool.shape[0] < DIVERSE_FEASIBLE * P and drawn < MAX_POSE_DRAWS * P:
         batch = rng.uniform(lo, hi, size=(DIVERSE_POOL * P, chain.n_joints))
         drawn += batch.shape[0]
         pool = np.concatenate([pool, batch if check is None else batch[check.static_ok(batch)]])
