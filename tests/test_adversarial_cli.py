@@ -533,3 +533,28 @@ def test_wrong_kinds_of_files_are_one_line_errors(command, kinds, wrong_files, t
         assert main(args) == 2, (args, capsys.readouterr())
         _one_line_error(capsys)
         assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        "view {r} --port 70000 --duration 0",
+        "view {r} --port -1 --duration 0",
+        "view {r} --duration -1",
+        "view {r} --duration nan",
+        "view {r} --duration inf",
+        "view {r} --host 10.255.255.1 --public --duration 0",  # not this machine's address
+        "view {r} --host no.such.host.invalid --public --duration 0",
+        "calibrate {d} -o {out} --seed -1 --method om",
+    ],
+)
+def test_impossible_option_values_are_errors_not_hangs(args, small, tmp_path):
+    """In a real process with a timeout: viser retries the next port on every error and used to wait
+    forever when no port could work."""
+    pytest.importorskip("viser")
+    argv = args.format(d=small[0], r=small[1], out=tmp_path / "r.json").split()
+    done = subprocess.run([sys.executable, "-m", "skincal", *argv], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done
+    assert "internal error" not in done.stderr and "Traceback" not in done.stderr
+    assert done.stderr.strip().splitlines()[-1].lower().startswith("error")
+    assert not (tmp_path / "r.json").exists()

@@ -242,3 +242,11 @@ def test_viewer_screenshot_in_headless_chromium(viewer, tmp_path: Path):
     # Sky well above the robot's highest projected point stays the background.
     top = int(px[:, 1].min()) - 80
     assert top > 60 and img[20:top, 450:850].mean() > 0.97
+
+
+def test_view_plays_an_avoidance_scenario_with_truth_poses(capsys):
+    """``skincal view --scenario``: the run is simulated and served (its URL printed)."""
+    pytest.importorskip("viser")
+    assert main(["view", "--scenario", "hand", "--placement", "paper", "--duration", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "running scenario hand" in out and "skincal viewer: http://127.0.0.1:" in out

@@ -69,7 +69,7 @@ def calibrate(
     dataset: Path = typer.Argument(..., help="dataset file (.h5)"),
     out: Path = typer.Option(..., "--out", "-o", help="result file to write (.json)"),
     method: str = typer.Option("mle", help="mle (default), om (paper), om-joint, mmm, mm"),
-    seed: int = typer.Option(0, help="seed for methods with random starts"),
+    seed: int = typer.Option(0, min=0, help="seed for methods with random starts"),
     links: Path | None = typer.Option(None, help="YAML/JSON file mapping unit -> 1-based link"),
     use_truth_links: bool = typer.Option(False, help="take each unit's link from the dataset truth"),
     use_dataset_qdd: bool = typer.Option(False, help="use the dataset's qdd instead of estimating it"),

@@ -10,16 +10,27 @@ from skincal.cli.app import app, console, console_warning, err_console, shown
 from skincal.errors import ConfigError
 
 
+def _finite(value: float | None) -> float | None:
+    """Option callback: NaN and infinity are usage errors (``--duration nan``)."""
+    import math
+
+    if value is not None and not math.isfinite(value):
+        raise typer.BadParameter(f"{value} is not a finite number")
+    return value
+
+
 @app.command()
 def view(
     result: Path | None = typer.Argument(None, help="calibration result (.json); optional with --scenario"),
     truth: Path | None = typer.Option(None, help="simulated dataset with /truth: show the true poses too"),
     play: Path | None = typer.Option(None, help="dataset to play back (joint motion, ToF rays and points)"),
     robot: str | None = typer.Option(None, help="robot preset or chain file when no dataset is given"),
-    port: int = typer.Option(0, help="TCP port (0: any free port)"),
+    port: int = typer.Option(0, min=0, max=65535, help="TCP port (0: any free port)"),
     host: str = typer.Option("127.0.0.1", help="interface to serve on; anything but loopback needs --public"),
     public: bool = typer.Option(False, "--public", help="allow a non-loopback --host (the viewer has no login)"),
-    duration: float | None = typer.Option(None, help="stop after this many seconds (default: until Ctrl-C)"),
+    duration: float | None = typer.Option(
+        None, min=0.0, callback=_finite, help="stop after this many seconds (default: until Ctrl-C)"
+    ),
     scenario: str | None = typer.Option(
         None, help="run this avoidance scenario (skincal avoid) with the result's poses (or truth) and play it"
     ),
@@ -102,8 +113,8 @@ def _view_scenario(
     sc = get_scenario(name, chain)
     console.print(f"running scenario {name} ({sc.duration:.1f} s) with poses: {label}", highlight=False)
     log = run_scenario(chain, sc, true_poses, poses, np.random.default_rng(seed))
-    shown = CalibrationResult(label, chain.name, "", 0.0, {u: UnitResult(p) for u, p in poses.items()})
-    viewer = start_viewer(shown, chain, truth=true_poses, recording=recording_from_run(log), host=host, port=port)
+    believed = CalibrationResult(label, chain.name, "", 0.0, {u: UnitResult(p) for u, p in poses.items()})
+    viewer = start_viewer(believed, chain, truth=true_poses, recording=recording_from_run(log), host=host, port=port)
     console.print(f"skincal viewer: [bold]{shown(viewer.url)}[/]  (Ctrl-C to stop)", highlight=False)
     if duration is not None:
         try:

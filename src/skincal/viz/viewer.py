@@ -23,9 +23,11 @@ that same origin; anything else gets HTTP 403 before the websocket upgrade (:fun
 from __future__ import annotations
 
 import contextlib
+import errno
 import http
 import io
 import ipaddress
+import socket
 import threading
 import time
 from dataclasses import dataclass, field
@@ -147,6 +149,28 @@ def refusal(headers: Any, bound_host: str, port: int | None) -> str | None:
         if _split_host(origins[0][len("http://") :].rstrip("/")) != parsed:
             return "cross-site Origin"
     return None
+
+
+def check_listen(host: str, port: int) -> None:
+    """Refuse, with a one-line :class:`ConfigError`, an address the viewer could never listen on: a
+    port outside 0..65535, a host that does not resolve or is not this machine's, a port it may not
+    use. (viser retries the next port on every error and would wait forever when none works; a port
+    merely in use is left to that retry, and the URL printed is the port finally bound.)"""
+    if not 0 <= int(port) <= 65535:
+        raise ConfigError(f"port {port} is not a TCP port (0..65535; 0: any free port)")
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(
+            host or None, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+        )[0]
+    except (socket.gaierror, UnicodeError) as exc:
+        raise ConfigError(f"cannot serve on host {host!r}: {getattr(exc, 'strerror', None) or exc}") from None
+    with socket.socket(family, kind, proto) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind(address)
+        except OSError as exc:
+            if exc.errno != errno.EADDRINUSE:
+                raise ConfigError(f"cannot serve on {url_host(host)}:{port} ({exc.strerror or exc})") from None
 
 
 _SERVE_LOCK = threading.Lock()
@@ -344,6 +368,7 @@ def start_viewer(
     ``chain``; returns at once (the server runs in its own threads). ``q0`` ``(n,)`` rad is the
     initial posture (default: the recording's first sample, else zeros)."""
     viser = _viser()
+    check_listen(host, port)
     bound: dict[str, int] = {}  # the port, once known: requests before that are refused
     with _guarded_serving(host, lambda: bound.get("port")) as installed:
         with contextlib.redirect_stdout(io.StringIO()):  # viser prints a banner; the CLI prints the URL
