@@ -103,4 +103,30 @@ def test_bad_input_is_one_line_exit_2(tmp_path, capsys, args, message):
 @pytest.mark.adversarial
 def test_unknown_suffix_is_refused_before_any_work(tmp_path, capsys):
     code, _, err = _run(capsys, "--robot", "panda", "--out", str(tmp_path / "m.txt"))
-    assert code == 2 and "use .csv, .json or .yaml" in err and err.count("\n") == 1
+    assert code == 2 and "use .csv, .json, .yaml, .bag" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("name", ["motion.bag", "motion_bag"])
+def test_bags_hold_one_joint_trajectory(tmp_path, capsys, name):
+    """A ROS 1 .bag file or a new ROS 2 bag folder (no suffix): one JointTrajectory on /joint_trajectory
+    that the rosbags reader deserialises to the same points as the YAML; an existing bag folder is
+    refused in one line."""
+    from rosbags.highlevel import AnyReader
+
+    out, ref = tmp_path / name, tmp_path / "ref.yaml"
+    assert _run(capsys, "--robot", "panda", "--rate", "10", "--out", str(out))[0] == 0
+    assert _run(capsys, "--robot", "panda", "--rate", "10", "--out", str(ref))[0] == 0
+    with AnyReader([out]) as reader:
+        (conn,) = reader.connections
+        assert conn.topic == "/joint_trajectory" and conn.msgtype == "trajectory_msgs/msg/JointTrajectory"
+        (msg,) = [reader.deserialize(raw, conn.msgtype) for _, _, raw in reader.messages()]
+    expect = yaml.load(ref.read_text(), Loader=yaml.CSafeLoader)
+    assert list(msg.joint_names) == expect["joint_names"]
+    assert len(msg.points) == len(expect["points"])
+    np.testing.assert_array_equal([p.positions for p in msg.points], [p["positions"] for p in expect["points"]])
+    last = msg.points[-1].time_from_start
+    assert (last.sec, last.nanosec) == tuple(expect["points"][-1]["time_from_start"].values())
+    if out.suffix == "":
+        code, _, err = _run(capsys, "--robot", "panda", "--out", str(out), "--force")
+        assert code == 2 and err.count("\n") == 1 and "folder" in err
+    assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp")] == []

@@ -29,7 +29,8 @@ def protocol_cmd(
         "--out",
         "-o",
         help="file to write: .csv (t, q, qd), .json (definition and "
-        "segment table, for `skincal segment --protocol`) or .yaml (ROS JointTrajectory)",
+        "segment table, for `skincal segment --protocol`), .yaml (ROS JointTrajectory), .bag (ROS 1 bag) or "
+        "a name without suffix (a new ROS 2 bag folder); a bag holds one JointTrajectory on /joint_trajectory",
     ),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
@@ -49,7 +50,10 @@ def protocol_cmd(
     from skincal.protocol.limits import fit_to_limits
 
     if out.suffix.lower() not in TRAJECTORY_SUFFIXES:
-        raise ConfigError(f"{out}: unknown trajectory format '{out.suffix}' (use .csv, .json or .yaml)")
+        raise ConfigError(
+            f"{out}: unknown trajectory format '{out.suffix}' (use .csv, .json, .yaml, .bag or a bag folder name "
+            "without suffix)"
+        )
     if not (math.isfinite(rate) and 0 < rate <= 10_000):
         raise ConfigError(f"--rate must be a positive sample rate up to 10000 Hz, got {rate}")
     check_output(out, force=force, inputs=() if robot in PRESETS else (Path(robot),))

@@ -41,13 +41,17 @@ def _write_atomic(path: Path, write: Callable[[TextIO], object]) -> None:
         write(fh)
 
 
-TRAJECTORY_SUFFIXES = (".csv", ".json", ".yaml", ".yml")
-"""File suffixes :func:`export_trajectory` writes."""
+TRAJECTORY_SUFFIXES = (".csv", ".json", ".yaml", ".yml", ".bag", "")
+"""File suffixes :func:`export_trajectory` writes (``""``: a ROS 2 bag directory)."""
+TRAJECTORY_TOPIC = "/joint_trajectory"
+"""Topic of the one ``trajectory_msgs/JointTrajectory`` message in a bag written by :func:`export_trajectory`."""
 
 
 def export_trajectory(traj: Trajectory, path: str | Path, joint_names: tuple[str, ...] | None = None) -> Path:
-    """Write ``traj`` to ``path``: ``.csv`` (samples), ``.json`` (definition) or ``.yaml``/``.yml`` (ROS
-    JointTrajectory), chosen by suffix. ``joint_names``: the robot's (default ``joint1`` .. ``jointn``)."""
+    """Write ``traj`` to ``path``: ``.csv`` (samples), ``.json`` (definition), ``.yaml``/``.yml`` (ROS
+    JointTrajectory), ``.bag`` (ROS 1 bag) or no suffix (ROS 2 bag directory, sqlite3; the path must not
+    exist), chosen by suffix. A bag holds one JointTrajectory message on :data:`TRAJECTORY_TOPIC`.
+    ``joint_names``: the robot's (default ``joint1`` .. ``jointn``)."""
     path = Path(path)
     suffix = path.suffix.lower()
     names = tuple(joint_names) if joint_names is not None else tuple(f"joint{i + 1}" for i in range(traj.n_joints))
@@ -65,9 +69,62 @@ def export_trajectory(traj: Trajectory, path: str | Path, joint_names: tuple[str
         _write_atomic(path, lambda fh: json.dump(doc, fh))
     elif suffix in (".yaml", ".yml"):
         _write_atomic(path, lambda fh: _write_joint_trajectory_yaml(fh, traj, names))
+    elif suffix in (".bag", ""):
+        _write_bag(traj, path, names, ros_version=1 if suffix == ".bag" else 2)
     else:
-        raise ConfigError(f"{path}: unknown trajectory format '{path.suffix}' (use .csv, .json or .yaml)")
+        raise ConfigError(f"{path}: unknown trajectory format '{path.suffix}' (use .csv, .json, .yaml, .bag or "
+                          "a bag folder name without suffix)")  # fmt: skip
     return path
+
+
+def _write_bag(traj: Trajectory, path: Path, names: tuple[str, ...], ros_version: int) -> None:
+    """One ``trajectory_msgs/JointTrajectory`` message in a ROS 1 bag file (written atomically) or a
+    new ROS 2 bag directory (written next to it under a temporary name, then renamed)."""
+    import os
+    import secrets
+    import shutil
+
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import StoragePlugin
+    from rosbags.rosbag2 import Writer as Writer2
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS1_NOETIC if ros_version == 1 else Stores.ROS2_HUMBLE)
+    T = ts.types
+    kind = "trajectory_msgs/msg/JointTrajectory"
+    ns = np.rint(np.asarray(traj.t) * 1e9).astype(np.int64)
+
+    def duration(k: int):
+        return T["builtin_interfaces/msg/Duration"](sec=int(ns[k] // 1_000_000_000), nanosec=int(ns[k] % 1_000_000_000))
+
+    points = [
+        T["trajectory_msgs/msg/JointTrajectoryPoint"](
+            positions=np.array(traj.q[k], float), velocities=np.array(traj.qd[k], float),
+            accelerations=np.array(traj.qdd[k], float), effort=np.zeros(0), time_from_start=duration(k),
+        )
+        for k in range(ns.size)
+    ]  # fmt: skip
+    stamp = T["builtin_interfaces/msg/Time"](sec=0, nanosec=0)
+    header = T["std_msgs/msg/Header"](stamp=stamp, frame_id="", **({"seq": 0} if ros_version == 1 else {}))
+    msg = T[kind](header=header, joint_names=list(names), points=points)
+    if ros_version == 1:
+        with atomic_path(path) as tmp:
+            tmp.unlink()  # the writer creates the file itself
+            with Writer1(tmp) as writer:
+                conn = writer.add_connection(TRAJECTORY_TOPIC, kind, typestore=ts)
+                writer.write(conn, 1, ts.serialize_ros1(msg, kind))
+        return
+    if path.exists():
+        raise ConfigError(f"{path} exists; a ROS 2 bag folder is never overwritten")
+    tmp = path.parent / f".{path.name}.{os.getpid()}.{secrets.token_hex(6)}.tmp"
+    try:
+        with Writer2(tmp, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+            conn = writer.add_connection(TRAJECTORY_TOPIC, kind, typestore=ts)
+            writer.write(conn, 1, ts.serialize_cdr(msg, kind))
+        os.rename(tmp, path)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
 
 
 def _flow(values: FloatArray) -> str:
