@@ -1,8 +1,9 @@
 """skincal.sim: simulated calibration sessions.
 
 :func:`simulate` runs a :class:`Session` on a simulator named in :data:`BACKENDS` (``analytic``:
-exact kinematics; ``mujoco``: independent physics, optional dependency); ``joint_states`` is how
-the robot reports its joints, ``scene`` the obstacles, ``faults`` the faults of real sessions.
+exact kinematics; ``mujoco``: independent physics, optional dependency), both through ``common``
+(the steps every simulator shares); ``joint_states`` is how the robot reports its joints, ``scene``
+the obstacles, ``faults`` the faults of real sessions.
 """
 
 from skincal.sim.joint_states import JOINT_PRESETS, JointStateModel, get_joint_model
