@@ -90,6 +90,7 @@ def test_refuses_existing_out_without_force(tmp_path, capsys):
         (["--robot", "panda", "--protocol", "slow"], "unknown protocol 'slow'"),
         (["--robot", "panda", "--rate", "0"], "--rate must be a positive"),
         (["--robot", "panda", "--rate", "nan"], "--rate must be a positive"),
+        (["--robot", "panda", "--poses", "best"], "--poses must be one of uniform, diverse"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(tmp_path, capsys, args, message):

@@ -257,7 +257,7 @@ def test_diverse_poses_spread_gravity_more_than_uniform():
     from skincal.protocol.limits import _gravity_features, sample_static_poses
 
     chain = get_robot("panda")
-    config = fit_to_limits(chain, get_protocol("fast"))
+    config = replace(fit_to_limits(chain, get_protocol("fast")), pose_selection="diverse", collision_check=True)
 
     def spread(poses):
         f = _gravity_features(chain, poses)

@@ -32,6 +32,12 @@ def protocol_cmd(
         "segment table, for `skincal segment --protocol`), .yaml (ROS JointTrajectory), .bag (ROS 1 bag) or "
         "a name without suffix (a new ROS 2 bag folder); a bag holds one JointTrajectory on /joint_trajectory",
     ),
+    poses: str = typer.Option(
+        "diverse",
+        "--poses",
+        help="static poses: diverse (gravity directions spread in "
+        "every link frame) or uniform (the protocol's plain draw)",
+    ),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Write the calibration motion for a robot: fitted into its position, velocity and acceleration
@@ -46,6 +52,7 @@ def protocol_cmd(
     from skincal.errors import ConfigError
     from skincal.kinematics import PRESETS, get_robot
     from skincal.protocol import build_trajectory, get_protocol
+    from skincal.protocol.config import POSE_SELECTIONS
     from skincal.protocol.export import TRAJECTORY_SUFFIXES, export_trajectory
     from skincal.protocol.limits import fit_to_limits
 
@@ -54,11 +61,13 @@ def protocol_cmd(
             f"{out}: unknown trajectory format '{out.suffix}' (use .csv, .json, .yaml, .bag or a bag folder name "
             "without suffix)"
         )
+    if poses not in POSE_SELECTIONS:
+        raise ConfigError(f"--poses must be one of {', '.join(POSE_SELECTIONS)}, got {poses!r}")
     if not (math.isfinite(rate) and 0 < rate <= 10_000):
         raise ConfigError(f"--rate must be a positive sample rate up to 10000 Hz, got {rate}")
     check_output(out, force=force, inputs=() if robot in PRESETS else (Path(robot),))
     chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
-    config = replace(fit_to_limits(chain, get_protocol(protocol)), collision_check=True)
+    config = replace(fit_to_limits(chain, get_protocol(protocol)), collision_check=True, pose_selection=poses)
     traj = build_trajectory(chain, config, np.random.default_rng(seed))  # checked at config.rate_hz (1 kHz)
     t = np.arange(int(np.floor(traj.duration * rate + 1e-9)) + 1) / rate
     q, qd, qdd = traj.evaluate(t)

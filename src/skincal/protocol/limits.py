@@ -299,28 +299,37 @@ def _diverse_poses(
     chain: SerialChain, P: int, rng: np.random.Generator, config: ProtocolConfig, lo: FloatArray, hi: FloatArray
 ) -> FloatArray:
     check = _PoseChecker(chain, config) if config.collision_check else None
-    pool = np.zeros((0, chain.n_joints))
+    n = chain.n_joints
+    pool = np.zeros((0, n))
     drawn = 0
-    while pool.shape[0] < DIVERSE_FEASIBLE * P and drawn < MAX_POSE_DRAWS * P:
-        batch = rng.uniform(lo, hi, size=(DIVERSE_POOL * P, chain.n_joints))
+
+    def grow() -> None:
+        nonlocal pool, drawn
+        batch = rng.uniform(lo, hi, size=(DIVERSE_POOL * P, n))
         drawn += batch.shape[0]
         pool = np.concatenate([pool, batch if check is None else batch[check.static_ok(batch)]])
-    if pool.shape[0] < P:
-        raise _no_pose(chain, config, pool.shape[0])
-    feat = _gravity_features(chain, pool)
+
+    while pool.shape[0] < DIVERSE_FEASIBLE * P and drawn < MAX_POSE_DRAWS * P:
+        grow()
+    if pool.shape[0] == 0:
+        raise _no_pose(chain, config, 0)
     chosen = [0]
-    dist = np.sum((feat - feat[0]) ** 2, axis=1)
     while len(chosen) < P:
-        order = np.argsort(-dist, kind="stable")
-        for k in order:
-            if k in chosen:
-                continue
-            if check is None or check.move_ok(pool[chosen[-1]], pool[k]):
-                break
+        feat = _gravity_features(chain, pool)
+        dist = np.min(np.sum((feat[:, None, :] - feat[chosen][None]) ** 2, axis=2), axis=1)
+        dist[chosen] = -np.inf
+        reachable = (
+            int(k)
+            for k in np.argsort(-dist, kind="stable")
+            if dist[k] > -np.inf and (check is None or check.move_ok(pool[chosen[-1]], pool[k]))
+        )
+        nxt = next(reachable, None)
+        if nxt is not None:
+            chosen.append(nxt)
+        elif drawn < MAX_POSE_DRAWS * P:
+            grow()  # no candidate reachable from the last pose by a collision-free move: draw more
         else:
             raise _no_pose(chain, config, len(chosen))
-        chosen.append(int(k))
-        dist = np.minimum(dist, np.sum((feat - feat[k]) ** 2, axis=1))
     return pool[chosen]
 
 

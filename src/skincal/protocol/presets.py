@@ -17,10 +17,15 @@
 Robots: every preset runs on any chain once fitted to it (:func:`skincal.protocol.limits.fit_to_limits`:
 amplitudes scaled into the velocity, acceleration and position limits, per-joint lists adapted to
 the number of joints, each change in ``config.notes``). ``paper-real`` and ``fast`` are meant for a
-real robot: their static poses are chosen for diverse gravity directions in every link frame and
-the whole motion is collision-free (``collision_check``, :mod:`skincal.protocol.collision`).
-``paper-sim`` keeps its plain uniform poses without collision check, exactly as the simulation
-benchmarks were made; ``skincal protocol`` (the motion handed to a real robot) always checks.
+real robot: the whole motion is collision-free (``collision_check``, :mod:`skincal.protocol.collision`);
+``paper-real`` chooses its static poses for diverse gravity directions in every link frame, ``fast``
+keeps the uniform draw (only colliding poses redrawn), so that its simulated sessions (benchmarks,
+robustness) stay as they were wherever they were collision-free. ``paper-sim`` keeps its plain
+uniform poses without collision check, exactly as the simulation benchmarks were made.
+``skincal protocol`` (the motion handed to a real robot) always checks collisions and chooses
+diverse poses unless told otherwise (``--poses uniform``): on the Panda with 4 random units,
+realistic noise and ``mle``, diverse ``fast`` poses gave 0.106 mm / 0.0064 deg mean error against
+0.116 mm / 0.0071 deg for uniform ones (seeds 0-5).
 
 The static window (not given in the paper) is 1 s of the 2 s rest in ``paper-sim`` and 2 s of the
 10 s rest in ``paper-real``.
@@ -63,7 +68,7 @@ PROTOCOLS: dict[str, ProtocolConfig] = {
         move_speed=1.5,
         min_move_duration=0.8,
         collision_check=True,
-        pose_selection="diverse",
+        pose_selection="uniform",
     ),
 }
 """Preset protocols by name (frozen configs; derive variants with ``dataclasses.replace``)."""
