@@ -23,6 +23,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from skincal.data.hdf5 import read_dataset  # noqa: E402
+
 from independent.generator import (  # noqa: E402
     G_FILE,
     Placement,
@@ -36,8 +38,6 @@ from independent.generator import (  # noqa: E402
     robot_spec,
     rotation_log,
 )
-
-from skincal.data.hdf5 import read_dataset  # noqa: E402
 
 POSITION_TARGET_MM = 1.0
 """Mean position error over the units on links >= 2, mm."""

@@ -11,7 +11,6 @@ import re
 
 import numpy as np
 import pytest
-from synthetic_streams import rest_runs_stream
 
 from skincal.calib.rest import (
     joint_rest_from_data,
@@ -21,6 +20,8 @@ from skincal.calib.rest import (
     unit_rest_runs,
 )
 from skincal.data.dataset import DYNAMIC, STATIC, JointStates, Segments
+
+from synthetic_streams import rest_runs_stream
 
 RATE_HZ = 500.0
 ENCODER_STEP = 2.0 * np.pi / 2**18

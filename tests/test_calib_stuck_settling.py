@@ -11,11 +11,12 @@ import re
 
 import numpy as np
 import pytest
-from synthetic_streams import rest_runs_stream
 
 from skincal.calib.preprocess import screen_readings
 from skincal.calib.rest import unit_rest_runs
 from skincal.errors import CalibrationError
+
+from synthetic_streams import rest_runs_stream
 
 RATE_HZ = 100.0
 

@@ -210,7 +210,10 @@ BAD_EDITS = {
     "string data": (lambda f: _replace(f, "joints/qd", np.array([b"x"] * 3)), "/joints/qd has dtype"),
     "unknown convention": (lambda f: f["robot"].attrs.__setitem__("convention", "craig"), "'convention' is 'craig'"),
     "dh shape": (lambda f: _replace(f, "robot/dh", np.zeros((7, 3))), "/robot/dh has shape (7, 3)"),
-    "wrong version": (lambda f: f.attrs.__setitem__("version", 3), "root attr 'version' is 3; this skincal reads versions 1, 2"),
+    "wrong version": (
+        lambda f: f.attrs.__setitem__("version", 3),
+        "root attr 'version' is 3; this skincal reads versions 1, 2",
+    ),
     "float version": (lambda f: f.attrs.__setitem__("version", 1.0), "root attr 'version' must be an integer, got 1.0"),
     "wrong format": (lambda f: f.attrs.__setitem__("format", "other"), "root attr 'format' is 'other'"),
     "no format": (lambda f: f.attrs.__delitem__("format"), "root attr 'format' is missing"),

@@ -16,8 +16,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from registry_robots import REGISTRY_URDFS, registry_urdf
-from test_kinematics_urdf import random_chain
 
 from skincal.cli import main
 from skincal.data.export import (
@@ -36,6 +34,9 @@ from skincal.errors import ConfigError
 from skincal.kinematics import PRESETS, get_robot
 from skincal.kinematics.urdf import chain_from_urdf
 from skincal.skin.pose import SkinUnitPose
+
+from registry_robots import REGISTRY_URDFS, registry_urdf
+from test_kinematics_urdf import random_chain
 
 yourdfpy = pytest.importorskip("yourdfpy")
 

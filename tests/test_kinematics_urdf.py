@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from registry_robots import REGISTRY_URDFS, robots_dir
 
 from skincal.errors import ConfigError
 from skincal.kinematics import panda
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import homogeneous, matrix_from_quat_wxyz
 from skincal.kinematics.urdf import chain_from_urdf
+
+from registry_robots import REGISTRY_URDFS, robots_dir
 
 
 def random_chain(rng: np.random.Generator, n: int) -> SerialChain:

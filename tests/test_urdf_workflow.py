@@ -8,9 +8,10 @@ import shutil
 
 import pytest
 
-from registry_robots import registry_urdf
 from skincal.cli import main
 from skincal.data.hdf5 import read_dataset
+
+from registry_robots import registry_urdf
 
 
 @pytest.mark.parametrize("robot", ["ur5", "xarm7"])

@@ -241,8 +241,9 @@ def calibrate(
         outcomes = serial()
     elif "fork" in multiprocessing.get_all_start_methods():
         interpolator.warm()  # computed once here, inherited by every child
-        if hasattr(shared, "warm"):
-            shared.warm()
+        warm = getattr(shared, "warm", None)
+        if warm is not None:
+            warm()
         _FORKED[id(one)] = one
         pool = ProcessPoolExecutor(
             max_workers=n_workers, mp_context=multiprocessing.get_context("fork"), initializer=_one_blas_thread

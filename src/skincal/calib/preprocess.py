@@ -508,8 +508,8 @@ def unit_samples(
     if interpolator is None:
         interpolator = JointInterpolator(dataset.joints, use_dataset_qdd=use_dataset_qdd)
     q, qd, qdd = interpolator(t) if exact_joint_states else interpolator.nearest(t)
-    no_segments = dataset.segments is None or len(dataset.segments) == 0
-    seg = np.full(t.shape, -1, dtype=np.intp) if no_segments else tag_segments(t, dataset.segments)
+    segments = dataset.segments if dataset.segments is not None and len(dataset.segments) > 0 else None
+    seg = np.full(t.shape, -1, dtype=np.intp) if segments is None else tag_segments(t, segments)
     inside = seg >= 0
     pick = lambda arr, fill: np.where(inside, np.asarray(arr)[np.clip(seg, 0, None)], fill)  # noqa: E731
     return UnitSamples(
@@ -521,9 +521,9 @@ def unit_samples(
         qd=qd,
         qdd=qdd,
         segment=seg,
-        kind=seg.astype(np.int8) if no_segments else pick(dataset.segments.kind, -1).astype(np.int8),
-        joint=seg.astype(np.int32) if no_segments else pick(dataset.segments.joint, -1).astype(np.int32),
-        pose=seg.astype(np.int32) if no_segments else pick(dataset.segments.pose, -1).astype(np.int32),
+        kind=seg.astype(np.int8) if segments is None else pick(segments.kind, -1).astype(np.int8),
+        joint=seg.astype(np.int32) if segments is None else pick(segments.joint, -1).astype(np.int32),
+        pose=seg.astype(np.int32) if segments is None else pick(segments.pose, -1).astype(np.int32),
     )
 
 

@@ -54,6 +54,7 @@ import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -420,7 +421,7 @@ def _comment_literal(text: str) -> str:
     return json.dumps(str(text), ensure_ascii=True).replace("-", "\\u002d").replace("$", "\\u0024")
 
 
-def _comment(text: str) -> ET.Element:
+def _comment(text: str) -> ET.Element[Any]:
     if "--" in text or text.endswith("-"):  # pragma: no cover - fixed text and _comment_literal only
         raise AssertionError("an XML comment cannot hold '--'")
     return ET.Comment(f" {text} ")

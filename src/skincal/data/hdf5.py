@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any, Literal, overload
 
 import h5py
 import numpy as np
@@ -119,13 +120,15 @@ class _Reader:
                     raise self.fail(here, "must be a group")
         return True
 
-    def node(self, path: str, kind: type, required: bool = True) -> h5py.Group | h5py.Dataset | None:
+    def node(
+        self, path: str, kind: type[h5py.Group] | type[h5py.Dataset], required: bool = True
+    ) -> h5py.Group | h5py.Dataset | None:
         if not self.link(path):
             if required:
                 raise self.fail(path, "is missing")
             return None
         try:
-            obj = self.f.get(path)
+            obj: Any = self.f.get(path)
         except (OSError, KeyError, ValueError) as exc:
             raise self.fail(path, f"cannot be read ({_first_line(exc)})") from None
         if not isinstance(obj, kind):
@@ -166,6 +169,10 @@ class _Reader:
                 f"declare ({self.budget}); refused before reading",
             )
 
+    @overload
+    def group(self, path: str, required: Literal[True] = True) -> h5py.Group: ...
+    @overload
+    def group(self, path: str, required: bool) -> h5py.Group | None: ...
     def group(self, path: str, required: bool = True) -> h5py.Group | None:
         return self.node(path, h5py.Group, required)  # type: ignore[return-value]
 
@@ -179,6 +186,10 @@ class _Reader:
             check_unit_name(unit, self.source, path)
         return names
 
+    @overload
+    def array(self, path: str, required: Literal[True] = True, dtype: type | None = None) -> np.ndarray: ...
+    @overload
+    def array(self, path: str, required: bool, dtype: type | None = None) -> np.ndarray | None: ...
     def array(self, path: str, required: bool = True, dtype: type | None = None) -> np.ndarray | None:
         """Dataset ``path`` as an array; numbers are converted to ``dtype`` (float64 by default)."""
         obj = self.node(path, h5py.Dataset, required)
@@ -301,6 +312,8 @@ class _Reader:
         if dh is not None and (dh.ndim != 2 or dh.shape[1] != 4 or dh.shape[0] < 1):
             raise self.fail("/robot/dh", f"has shape {dh.shape}, expected (n, 4) with n >= 1")
         if self.version == 1:
+            if dh is None:  # pragma: no cover - required above
+                raise self.fail("/robot/dh", "is missing")
             n = dh.shape[0]
             general: dict[str, object] = {}
         else:
@@ -310,9 +323,10 @@ class _Reader:
             n = axis.shape[0]
             general = {"axis": axis}
             for key in ("T_parent_joint", "T_joint_link"):
-                general[key] = self.array(f"/robot/{key}")
-                if general[key].shape != (n, 4, 4):
-                    raise self.fail(f"/robot/{key}", f"has shape {general[key].shape}, expected ({n}, 4, 4)")
+                transforms = self.array(f"/robot/{key}")
+                if transforms.shape != (n, 4, 4):
+                    raise self.fail(f"/robot/{key}", f"has shape {transforms.shape}, expected ({n}, 4, 4)")
+                general[key] = transforms
             codes = self.array("/robot/joint_type", dtype=np.int8)
             names = {v: k for k, v in JOINT_TYPE_CODES.items()}
             if codes.shape != (n,) or any(int(c) not in names for c in codes):
@@ -529,10 +543,10 @@ def _write(f: h5py.File, ds: Dataset) -> None:
 
     if ds.tof:
         tof = f.create_group("tof", track_order=True)
-        for unit, stream in ds.tof.items():
+        for unit, ranges in ds.tof.items():
             g = tof.create_group(unit)
-            _write_floats(g, "t", stream.t)
-            _write_floats(g, "range", stream.range)
+            _write_floats(g, "t", ranges.t)
+            _write_floats(g, "range", ranges.range)
 
     if ds.segments is not None:
         seg = f.create_group("segments")

@@ -358,7 +358,7 @@ def apply_imu_model(
     if rng is None and (model.accel_noise_std > 0 or (w_true is not None and model.gyro_noise_std > 0)):
         raise ConfigError("apply_imu_model needs an rng: the IMU model has noise")
     accel = f @ errors.accel_matrix.T + errors.accel_bias
-    if model.accel_noise_std > 0:
+    if model.accel_noise_std > 0 and rng is not None:
         accel = accel + rng.normal(0.0, model.accel_noise_std, accel.shape)
     accel = _digitise(accel, model.accel_lsb, model.accel_range)
     if w_true is None:
@@ -367,6 +367,6 @@ def apply_imu_model(
     if w.shape != f.shape:
         raise ConfigError(f"w_true must have the shape of f_true {f.shape}, got {w.shape}")
     gyro = w + errors.gyro_bias
-    if model.gyro_noise_std > 0:
+    if model.gyro_noise_std > 0 and rng is not None:
         gyro = gyro + rng.normal(0.0, model.gyro_noise_std, gyro.shape)
     return accel, _digitise(gyro, model.gyro_lsb, model.gyro_range)

@@ -38,16 +38,16 @@ def finite_array(value: ArrayLike, what: str, shape: tuple = (..., 3)) -> FloatA
     """
     any_lead = shape[:1] == (...,)
     tail = shape[1:] if any_lead else shape
+    dims = ["..." if d is ... else "N" if d is None else str(d) for d in shape]
+    text = f"({dims[0]},)" if len(dims) == 1 else f"({', '.join(dims)})"
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
-        arr = None
-    ok = arr is not None and (arr.ndim >= len(tail) if any_lead else arr.ndim == len(tail))
+        raise ConfigError(f"{what} must be finite with shape {text}, got ?") from None
+    ok = arr.ndim >= len(tail) if any_lead else arr.ndim == len(tail)
     ok = ok and all(w is None or g == w for g, w in zip(arr.shape[arr.ndim - len(tail) :], tail, strict=True))
     if not ok or not np.all(np.isfinite(arr)):
-        dims = ["..." if d is ... else "N" if d is None else str(d) for d in shape]
-        text = f"({dims[0]},)" if len(dims) == 1 else f"({', '.join(dims)})"
-        raise ConfigError(f"{what} must be finite with shape {text}, got {'?' if arr is None else arr.shape}")
+        raise ConfigError(f"{what} must be finite with shape {text}, got {arr.shape}")
     arr.setflags(write=False)
     return arr
 
