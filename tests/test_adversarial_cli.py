@@ -140,6 +140,49 @@ def test_a_signal_during_a_write_leaves_no_temporary(sig, code, message, tmp_pat
     assert list(tmp_path.iterdir()) == []
 
 
+FINALIZER_WRITER = """
+    import sys, time, weakref
+    from pathlib import Path
+    from skincal.cli import app, main
+    from skincal.data.atomic import atomic_path
+
+    class Handle:
+        pass
+
+    def finalizer(_ref):  # h5py's object tracking runs such callbacks all the time while writing
+        print("in finalizer", flush=True)
+        time.sleep(20)
+
+    @app.command("finalizer-write")
+    def finalizer_write(out: Path) -> None:
+        with atomic_path(out) as tmp:
+            tmp.write_bytes(b"x" * 1000)
+            handle = Handle()
+            keep = weakref.ref(handle, finalizer)
+            del handle  # the finalizer runs (and sleeps): the signal lands inside it
+            time.sleep(3)
+
+    sys.exit(main(["finalizer-write", sys.argv[1]]))
+"""
+
+
+@pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
+def test_sigterm_landing_in_a_finalizer_still_terminates(tmp_path):
+    """Python ignores an exception raised in a weakref callback ("Exception ignored ..."): the
+    signal would be lost and the command would finish as if never told to stop."""
+    out = tmp_path / "out.bin"
+    proc = _python(FINALIZER_WRITER, str(out))
+    try:
+        assert proc.stdout.readline().strip() == "in finalizer", proc.stderr.read()
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines()[-1] == "error: terminated"
+    assert list(tmp_path.iterdir()) == []
+
+
 # ------------------------------------------------------------------------------ workers
 POOL_PARENT = """
     import sys, time

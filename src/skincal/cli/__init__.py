@@ -8,6 +8,7 @@ one-line message on stderr and exit code 2; no traceback reaches the user.
 from __future__ import annotations
 
 import contextlib
+import functools
 import importlib
 import os
 import signal
@@ -59,18 +60,42 @@ def _raise_terminated(_signum: int, _frame: object) -> None:
     raise Terminated()
 
 
+_REDELIVER_S = 0.01
+"""Delay before a swallowed signal is sent again, s."""
+
+
+def _redeliver(unraisable: object, *, fallback: object) -> None:
+    """``sys.unraisablehook`` while a command runs: a signal's exception raised where Python can only
+    ignore it (a weakref callback, a ``__del__``: it would print "Exception ignored" and carry on, the
+    signal lost) is sent again a moment later, so it surfaces in the command's own code instead."""
+    exc = getattr(unraisable, "exc_value", None)
+    if isinstance(exc, Terminated):
+        sig = signal.SIGTERM
+    elif isinstance(exc, KeyboardInterrupt):
+        sig = signal.SIGINT
+    else:
+        fallback(unraisable)  # type: ignore[operator]
+        return
+    # from another thread, a moment later: delivered now, it would be raised inside this hook again
+    threading.Timer(_REDELIVER_S, os.kill, (os.getpid(), sig)).start()
+
+
 @contextlib.contextmanager
 def _sigterm_unwinds() -> Iterator[None]:
     """SIGTERM raises :class:`Terminated` while the command runs (main thread only; the previous
-    handler is restored afterwards). Commands that handle SIGTERM themselves (``record``) install
-    their own handler inside."""
+    handler is restored afterwards), and a signal's exception swallowed by a finalizer is delivered
+    again (:func:`_redeliver`). Commands that handle SIGTERM themselves (``record``) install their
+    own handler inside."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = functools.partial(_redeliver, fallback=previous_hook)
     try:
         yield
     finally:
+        sys.unraisablehook = previous_hook
         signal.signal(signal.SIGTERM, previous)
 
 
