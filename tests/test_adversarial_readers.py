@@ -437,7 +437,7 @@ def result_from_doc_unchecked(doc: dict) -> CalibrationResult:
 # ---------------------------------------------------------------------- the other JSON/YAML readers
 def test_chain_links_and_topic_map_files_share_the_guards(tmp_path: Path) -> None:
     from skincal.cli.calibrate import read_links_file
-    from skincal.data.rosbag import topic_map
+    from skincal.data.ros import topic_map
 
     bomb = tmp_path / "bomb.yaml"
     bomb.write_text(
@@ -693,3 +693,17 @@ def test_fuzz_read_dataset(small_h5_bytes: bytes, edits) -> None:
             assert "\n" not in str(exc)
         else:
             assert isinstance(out, Dataset)
+
+
+@pytest.mark.adversarial
+def test_a_true_position_of_1e308_is_refused(tmp_path):
+    """A /truth position must be within 1000 m, as result positions are (evaluate printed inf)."""
+    from skincal.data.hdf5 import read_dataset, write_dataset
+    from skincal.workflows.session import simulate_dataset
+
+    path = tmp_path / "d.h5"
+    write_dataset(simulate_dataset("panda", "random", 1, "none", "fast", seed=1), path)
+    with h5py.File(path, "r+") as f:
+        f["truth/su1"].attrs["position"] = [1e308, 0.0, 0.0]
+    with pytest.raises(DatasetError, match="/truth/su1 attr 'position' has a component beyond 1000 m"):
+        read_dataset(path)

@@ -17,13 +17,13 @@ from skincal.calib import calibrate, evaluate
 from skincal.cli import main
 from skincal.data.dataset import TofStream
 from skincal.data.hdf5 import read_dataset, write_dataset
-from skincal.data.rosbag import PROGRESS_EVERY, STANDARD_GRAVITY, read_bag, topic_map, write_bag
+from skincal.data.ros import PROGRESS_EVERY, read_bag, topic_map, write_bag
 from skincal.data.segment import segment_dataset
 from skincal.errors import DatasetError
 from skincal.kinematics import get_robot
 from skincal.protocol import ProtocolConfig, build_trajectory
 from skincal.sim.analytic import simulate
-from skincal.skin.imu import get_imu_model
+from skincal.skin.imu import STANDARD_GRAVITY, get_imu_model
 from skincal.skin.placement import paper_placement
 
 T0_NS = 1_700_000_000_000_000_000

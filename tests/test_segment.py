@@ -225,7 +225,7 @@ def test_cli_import_takes_segments_from_the_protocol_file(tmp_path, capsys):
     """`import bag --protocol motion.json` with a recording of the `fast` motion that starts 2 s into it
     (the import counts time from the bag's first message): the protocol's segments, aligned, those
     before the recording dropped."""
-    from skincal.data.rosbag import write_bag
+    from skincal.data.ros import write_bag
 
     motion = tmp_path / "motion.json"
     assert main(["protocol", "--robot", "panda", "--rate", "1000", "--out", str(motion)]) == 0

@@ -38,7 +38,7 @@ def run_seed(
     """Both paths for one seed: errors, segments found, messages and timings."""
     from skincal.calib import calibrate, evaluate
     from skincal.data.hdf5 import read_dataset, write_dataset
-    from skincal.data.rosbag import read_bag, write_bag
+    from skincal.data.ros import read_bag, write_bag
     from skincal.data.segment import segment_dataset
     from skincal.protocol import get_protocol
     from skincal.sim import simulate

@@ -1,20 +1,34 @@
-"""ROS bag import (and export of a dataset as a bag) with the ``rosbags`` library: no ROS install.
+"""ROS bag import with the ``rosbags`` library: no ROS install.
 
 Reads ROS 1 (``.bag``) and ROS 2 bags (a directory with ``metadata.yaml``, or a bare ``.db3`` /
 ``.mcap`` file) through ``rosbags.highlevel.AnyReader``:
 
-* ``sensor_msgs/Imu``, one topic per unit: ``linear_acceleration`` -> ``/imu/<unit>/accel`` and
-  ``angular_velocity`` -> ``gyro``. Units: REP 103 says m/s^2 and rad/s, but some firmware sends
-  g and deg/s (the paper's skin did). ``accel_unit="auto"``: the median ``|a|`` of a recording
-  (mostly at rest) is ~1 in g (times 9.80665) and ~9.81 in m/s^2. ``gyro_unit="auto"``: a link's
-  angular speed never exceeds ``sum_j |qd_j|``; a gyro whose 99th percentile speed is several times
-  that of the joints is in deg/s. Unit name: the map, else ``header.frame_id``, else the topic.
-* ``sensor_msgs/JointState``: ``name`` order mapped to the robot's joints (explicit names, the
-  preset's known names, or the message order when it has exactly ``n`` joints); ``velocity``
-  missing -> central differences of ``position``. Messages without the robot's joints (e.g. a
-  gripper's) are skipped and counted.
+* The robot: ``--robot`` (a preset, a ``.urdf`` with ``base_link``/``tip_link``, a DH chain file),
+  else the URDF on the bag's ``/robot_description`` topic (``std_msgs/String``, latched, as
+  ``robot_state_publisher`` publishes it; the last message), else the ``panda`` preset (noted).
+* ``sensor_msgs/Imu``: ``linear_acceleration`` -> ``/imu/<unit>/accel`` and ``angular_velocity``
+  -> ``gyro``. One unit per topic and ``header.frame_id``: a topic whose messages carry several
+  frame_ids (IMUs sharing a topic) gives one unit per frame_id, named by it. Unit name: the map,
+  else ``header.frame_id``, else the topic; names follow :func:`skincal.data.names.name_problem`.
+  Samples of several sources interleaved under one frame_id are refused, never merged: stamps that
+  go back or repeat (more than :data:`INTERLEAVED_FRACTION` of the steps in bag order), or samples
+  that jump away from both neighbours while the neighbours agree (more than
+  :data:`INTERLEAVED_FRACTION` of them).
+  Units: REP 103 says m/s^2 and rad/s, but some firmware sends g and deg/s (the paper's skin did).
+  ``accel_unit="auto"``: the median ``|a|`` of a recording (mostly at rest) is ~1 in g (times
+  9.80665) and ~9.81 in m/s^2. ``gyro_unit="auto"``: a link's angular speed never exceeds
+  ``sum_j |qd_j|``; a gyro whose 99th percentile speed is several times that of the joints is in deg/s.
+* ``sensor_msgs/JointState``: each of the robot's joints is found by name, in any order, among
+  extra joints (a gripper's): the topic map's ``joint_names``, else the chain's joint names (the
+  URDF's, or a preset's driver names: :mod:`skincal.kinematics.presets`); a message name matches
+  exactly or ends with ``_<name>`` / ``/<name>`` (a prefix such as ``lbr_A1``). A joint the messages
+  lack is a one-line error naming it. A chain without joint names (a DH chain file) takes the
+  message order when a message has exactly ``n`` joints (noted). ``velocity`` missing -> central
+  differences of ``position``. Messages without any of the robot's joints (e.g. a gripper's) are
+  skipped and counted.
 * ``sensor_msgs/Range`` (REP 117: +inf or out of ``[min_range, max_range]`` = no target -> NaN;
-  NaN = invalid reading -> dropped) and ``sensor_msgs/LaserScan`` (the minimum valid beam) -> ToF.
+  NaN = invalid reading -> dropped) and ``sensor_msgs/LaserScan`` (the minimum valid beam) -> ToF,
+  one source per topic and frame_id like the IMUs.
 
 Time: ``header.stamp`` (a topic with zero stamps falls back to the bag's receive time, noted),
 shifted so that the first joint state is at 0 s (the origin is kept in the description). Samples
@@ -23,16 +37,27 @@ are sorted; repeated stamps and NaN samples are dropped with a count in the repo
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from skincal.data.dataset import Dataset, ImuStream, JointStates, TofStream
-from skincal.data.jsonio import load_yaml
+from skincal.data.names import printable
+from skincal.data.ros.topics import (
+    IMU,
+    JOINTS,
+    RANGE,
+    ROBOT_DESCRIPTION,
+    SCAN,
+    STRING,
+    TopicMap,
+    range_unit,
+    unit_from_topic,
+    unit_name,
+)
 from skincal.data.validate import validate_dataset
 from skincal.errors import ConfigError, DatasetError
 from skincal.errors import first_line as _first_line
@@ -41,31 +66,18 @@ from skincal.skin.imu import STANDARD_GRAVITY
 
 PROGRESS_EVERY = 5000
 """Messages between two calls of :func:`read_bag`'s ``progress`` callback."""
-IMU, JOINTS, RANGE, SCAN = (f"sensor_msgs/msg/{x}" for x in ("Imu", "JointState", "Range", "LaserScan"))
-KNOWN_JOINT_NAMES: dict[str, tuple[str, ...]] = {
-    "panda": tuple(f"panda_joint{i}" for i in range(1, 8)),
-    "sawyer": tuple(f"right_j{i}" for i in range(7)),
-    "ur5e": ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint",
-             "wrist_3_joint"),
-}
-"""Joint names robots publish, in kinematic order (matched as suffixes, so ``ur_elbow_joint`` works)."""
-
-
-@dataclass(frozen=True)
-class TopicMap:
-    """Which topics to read. ``imu`` / ``range``: topic -> unit name (``""``: from frame_id or topic);
-    ``joints``: the JointState topic; ``joint_names``: the robot's joints in kinematic order. Empty
-    fields are filled automatically from the bag's message types."""
-
-    imu: dict[str, str] = field(default_factory=dict)
-    joints: str | None = None
-    range: dict[str, str] = field(default_factory=dict)
-    joint_names: tuple[str, ...] | None = None
+INTERLEAVED_FRACTION = 0.01
+"""Above this fraction of stamps going back or repeating (in bag order), or of samples jumping away
+from both neighbours, one frame_id's samples come from several sources: refused."""
+JUMP_RELATIVE = 0.05
+"""A sample "jumps" when it is farther than this times the median ``|a|`` (and 3 times the gap
+between its neighbours) from both neighbours."""
 
 
 @dataclass(frozen=True)
 class ImportReport:
-    """What :func:`read_bag` read: format, topics and the unit each feeds, and notes (unit
+    """What :func:`read_bag` read: format, topics and the unit each feeds (``"topic"`` or, for a topic
+    carrying several units, ``"topic frame_id"``), the robot and where it came from, and notes (unit
     conversions, fallbacks, dropped samples with counts)."""
 
     source: str
@@ -76,44 +88,8 @@ class ImportReport:
     counts: dict[str, int]
     notes: tuple[str, ...]
     time_origin_ns: int
-
-
-def _parse_topic_spec(specs: list[str] | tuple[str, ...] | None) -> dict[str, str]:
-    out = {}
-    for spec in specs or ():
-        topic, _, name = spec.partition("=")
-        out[topic.strip()] = name.strip()
-    return out
-
-
-def topic_map(imu: list[str] | None = None, joints: str | None = None, range_: list[str] | None = None,
-              joint_names: list[str] | None = None, path: str | Path | None = None) -> TopicMap:
-    """A :class:`TopicMap` from a YAML file (``imu``, ``joints``, ``range``, ``joint_names`` keys;
-    ``imu``/``range`` a topic -> unit mapping or a list of topics) overridden by options
-    (``TOPIC`` or ``TOPIC=UNIT`` strings)."""
-    doc: dict[str, Any] = {}
-    if path is not None:
-        doc = load_yaml(path, "topic map", ConfigError) or {}
-        if not isinstance(doc, dict) or set(doc) - {"imu", "joints", "range", "joint_names"}:
-            raise ConfigError(f"{path}: a topic map has keys imu, joints, range, joint_names; got {doc!r:.80}")
-    maps = {}
-    for key in ("imu", "range"):
-        value = doc.get(key) or {}
-        if isinstance(value, list):
-            value = {str(t): "" for t in value}
-        if not isinstance(value, dict):
-            raise ConfigError(f"{path}: '{key}' must map topics to unit names or list topics")
-        maps[key] = {str(k): "" if v is None else str(v) for k, v in value.items()}
-    maps["imu"].update(_parse_topic_spec(imu))
-    maps["range"].update(_parse_topic_spec(range_))
-    names = joint_names or doc.get("joint_names")
-    return TopicMap(imu=maps["imu"], joints=joints or doc.get("joints"), range=maps["range"],
-                    joint_names=None if not names else tuple(str(n) for n in names))
-
-
-def _unit_from_topic(topic: str) -> str:
-    parts = [p for p in topic.split("/") if p and p not in ("imu", "data", "data_raw", "range", "tof", "scan")]
-    return "_".join(parts) or topic.strip("/").replace("/", "_")
+    robot: str = ""
+    robot_source: str = ""
 
 
 def _stamps(rows: list[tuple[int, int]], topic: str, notes: list[str]) -> np.ndarray:
@@ -125,8 +101,9 @@ def _stamps(rows: list[tuple[int, int]], topic: str, notes: list[str]) -> np.nda
     return arr[:, 0]
 
 
-def _clean(topic: str, t_ns: np.ndarray, values: np.ndarray, notes: list[str], source: str,
-           nan_ok: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def _clean(
+    topic: str, t_ns: np.ndarray, values: np.ndarray, notes: list[str], source: str, nan_ok: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """Sort by time, drop repeated stamps and (unless ``nan_ok``) samples with NaN; error if none left."""
     order = np.argsort(t_ns, kind="stable")
     t_ns, values = t_ns[order], values[order]
@@ -143,21 +120,60 @@ def _clean(topic: str, t_ns: np.ndarray, values: np.ndarray, notes: list[str], s
     return t_ns[keep], values[keep]
 
 
-def _joint_columns(names: tuple[str, ...], chain: SerialChain, tmap: TopicMap) -> np.ndarray | None:
-    """Index into the message's arrays of each robot joint, or None if the message lacks them."""
-    n = chain.n_joints
-    wanted = tmap.joint_names or KNOWN_JOINT_NAMES.get(chain.name)
-    if wanted is not None:
-        if len(wanted) != n:
-            raise ConfigError(f"joint_names has {len(wanted)} names but robot '{chain.name}' has {n} joints")
-        cols = []
-        for w in wanted:
-            hits = [i for i, name in enumerate(names) if name == w or name.endswith("_" + w) or name.endswith("/" + w)]
-            if len(hits) != 1:
-                return None
+def _refuse_interleaved(label: str, t_ns: np.ndarray, accel: np.ndarray | None, source: str) -> None:
+    """One-line :class:`DatasetError` when one source's samples (``t_ns`` in bag order; ``accel`` in
+    time order, raw units) look like several sources interleaved (module docstring)."""
+    hint = "give each sensor its own frame_id or topic"
+    steps = np.diff(t_ns)
+    back = int(np.sum(steps <= 0))
+    if back > max(1, INTERLEAVED_FRACTION * len(steps)):
+        raise DatasetError(
+            printable(
+                f"{source}: {label}: {back} of {len(steps)} time stamps go back or repeat: "
+                f"samples of several sources interleaved (not merged); {hint}"
+            )
+        )
+    if accel is None or len(accel) < 3:
+        return
+    a = accel[np.all(np.isfinite(accel), axis=1)]
+    if len(a) < 3:
+        return
+    d_prev = np.linalg.norm(a[1:-1] - a[:-2], axis=1)
+    d_next = np.linalg.norm(a[1:-1] - a[2:], axis=1)
+    d_skip = np.linalg.norm(a[2:] - a[:-2], axis=1)
+    eps = JUMP_RELATIVE * float(np.median(np.linalg.norm(a, axis=1)))
+    jumps = int(np.sum(np.minimum(d_prev, d_next) > 3.0 * d_skip + eps))
+    if jumps > max(1, INTERLEAVED_FRACTION * len(d_skip)):
+        raise DatasetError(
+            printable(
+                f"{source}: {label}: {jumps} of {len(d_skip)} samples jump away from both "
+                f"neighbours: samples of several sources interleaved (not merged); {hint}"
+            )
+        )
+
+
+def _match_joints(
+    names: tuple[str, ...], wanted: tuple[str, ...], source: str, topic: str
+) -> tuple[np.ndarray | None, list[str]]:
+    """Index into the message's arrays of each wanted joint (None if some are missing) and the
+    missing ones. A name matches exactly, else as a ``_``/``/`` suffix; two matches are an error."""
+    cols, missing = [], []
+    for w in wanted:
+        hits = [i for i, name in enumerate(names) if name == w]
+        if not hits:
+            hits = [i for i, name in enumerate(names) if name.endswith("_" + w) or name.endswith("/" + w)]
+        if len(hits) > 1:
+            raise DatasetError(
+                printable(
+                    f"{source}: topic {topic}: joint '{w}' matches several names of a message "
+                    f"({', '.join(names[i] for i in hits)}); give joint_names in the topic map"
+                )
+            )
+        if hits:
             cols.append(hits[0])
-        return np.array(cols)
-    return np.arange(n) if len(names) == n else None
+        else:
+            missing.append(w)
+    return (None if missing else np.array(cols, dtype=int)), missing
 
 
 def _accel_scale(topic: str, accel: np.ndarray, unit: str, source: str, notes: list[str]) -> float:
@@ -171,8 +187,10 @@ def _accel_scale(topic: str, accel: np.ndarray, unit: str, source: str, notes: l
         return STANDARD_GRAVITY
     if 5.0 < med < 20.0:
         return 1.0
-    raise DatasetError(f"{source}: topic {topic}: median |linear_acceleration| is {med:.3g}, neither ~1 (g) nor "
-                       "~9.81 (m/s^2); give the unit (--accel-unit)")
+    raise DatasetError(
+        f"{source}: topic {topic}: median |linear_acceleration| is {med:.3g}, neither ~1 (g) nor "
+        "~9.81 (m/s^2); give the unit (--accel-unit)"
+    )
 
 
 def _gyro_scale(topic: str, gyro: np.ndarray, qd_sum_p99: float, unit: str, notes: list[str]) -> float:
@@ -197,11 +215,23 @@ def _open_reader(path: Path):
     return reader
 
 
+@dataclass
+class _Pass:
+    """What one pass over the bag gave: ROS version, the topics chosen, rows per topic, all topic types."""
+
+    ros: int
+    used: TopicMap
+    rows: dict[str, list]
+    topics: dict[str, str]
+    notes: list[str]
+
+
 def _read_messages(
-    path: Path, source: str, tmap: TopicMap, progress: Callable[[int, int], None] | None = None
-) -> tuple[int, TopicMap, dict[str, list], list[str]]:
-    """One pass over the bag: per selected topic, a list of (stamp ns, bag ns, payload) rows;
-    ``progress(read, total)`` every :data:`PROGRESS_EVERY` messages of the selected topics and at the end."""
+    path: Path, source: str, tmap: TopicMap, description: bool, progress: Callable[[int, int], None] | None = None
+) -> _Pass:
+    """One pass over the bag: per selected topic, a list of (stamp ns, bag ns, payload) rows (and the
+    ``/robot_description`` text when ``description``); ``progress(read, total)`` every
+    :data:`PROGRESS_EVERY` messages of the selected topics and at the end."""
     notes: list[str] = []
     try:
         reader = _open_reader(path)
@@ -231,15 +261,20 @@ def _read_messages(
         else:
             found = [t for t, ty in topics.items() if ty == JOINTS]
             if not found:
-                raise DatasetError(f"{source}: no sensor_msgs/JointState topic; calibration needs the robot's joint "
-                                   f"states (topics: {listing})")
+                raise DatasetError(
+                    f"{source}: no sensor_msgs/JointState topic; calibration needs the robot's joint "
+                    f"states (topics: {listing})"
+                )
             if len(found) > 1:
-                raise DatasetError(f"{source}: several JointState topics ({', '.join(sorted(found))}); choose one "
-                                   "with --joint-topic")
+                raise DatasetError(
+                    f"{source}: several JointState topics ({', '.join(sorted(found))}); choose one with --joint-topic"
+                )
             joint_topic = found[0]
         if not imu:
             raise DatasetError(f"{source}: no sensor_msgs/Imu topic (topics: {listing})")
         selected = {joint_topic, *imu, *ranges}
+        if description and topics.get(ROBOT_DESCRIPTION) == STRING:
+            selected.add(ROBOT_DESCRIPTION)
         rows: dict[str, list] = {t: [] for t in selected}
         conns = [c for c in reader.connections if c.topic in selected]
         total, done = sum(int(c.msgcount) for c in conns), 0
@@ -250,6 +285,9 @@ def _read_messages(
             if progress is not None and done % PROGRESS_EVERY == 0:
                 progress(done, total)
             msg = reader.deserialize(raw, conn.msgtype)
+            if conn.msgtype == STRING:
+                rows[conn.topic].append((0, bag_ns, str(msg.data)))
+                continue
             stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
             if conn.msgtype == IMU:
                 a, w = msg.linear_acceleration, msg.angular_velocity
@@ -275,203 +313,287 @@ def _read_messages(
         except Exception:  # noqa: BLE001 - closing a broken bag must not hide the first error
             pass
     used = TopicMap(imu=imu, joints=joint_topic, range=ranges, joint_names=tmap.joint_names)
-    return (2 if reader.is2 else 1), used, rows, notes
+    return _Pass(2 if reader.is2 else 1, used, rows, topics, notes)
 
 
-def read_bag(path: str | Path, robot: SerialChain | str = "panda", tmap: TopicMap | None = None, *,
-             accel_unit: str = "auto", gyro_unit: str = "auto",
-             progress: Callable[[int, int], None] | None = None) -> tuple[Dataset, ImportReport]:
-    """Read a ROS 1/ROS 2 bag into a :class:`Dataset` without segments (see the module docstring).
-
-    Args:
-        path: ``.bag`` file, ROS 2 bag directory, or ``.db3``/``.mcap`` file.
-        robot: preset name, chain file, or chain.
-        tmap: topics to read (default: every Imu, JointState, Range and LaserScan topic).
-        accel_unit: ``auto``, ``g`` or ``mps2``; gyro_unit: ``auto``, ``rad`` or ``deg`` (per second).
-        progress: called as ``progress(read, total)`` with the messages of the selected topics read so
-            far and their total (from the bag's index): at the start, every :data:`PROGRESS_EVERY`
-            messages and at the end.
-
-    Raises:
-        DatasetError: missing, empty, truncated or corrupt bag; no joint states; an unknown topic;
-            a topic whose samples are all NaN; one line naming the bag and the topic.
-    """
+def _robot(robot: SerialChain | str | None, base_link: str | None, tip_link: str | None) -> SerialChain | None:
+    """The chain the caller names (None: take it from the bag)."""
     from skincal.kinematics import get_robot
 
-    chain = get_robot(robot) if isinstance(robot, str) else robot
-    path = Path(path)
-    source = str(path)
-    ros, used, rows, notes = _read_messages(path, source, tmap or TopicMap(), progress)
-    counts = {t: len(r) for t, r in rows.items()}
+    if isinstance(robot, SerialChain):
+        if base_link is not None or tip_link is not None:
+            raise ConfigError("--base-link and --tip-link apply to a URDF robot only")
+        return robot
+    if robot is None:
+        return None
+    return get_robot(robot, base_link=base_link, tip_link=tip_link)
 
-    # Joint states.
-    jrows = rows[used.joints]
+
+def _robot_from_bag(scan: _Pass, source: str, base_link: str | None, tip_link: str | None) -> tuple[SerialChain, str]:
+    """The chain of the bag's ``/robot_description`` (the last message), else the panda preset."""
+    from skincal.kinematics import get_robot
+    from skincal.kinematics.urdf import chain_from_urdf
+
+    texts = scan.rows.get(ROBOT_DESCRIPTION) or []
+    if not texts:
+        if base_link is not None or tip_link is not None:
+            raise ConfigError(
+                f"--base-link/--tip-link need a URDF: give --robot arm.urdf ({source} has no {ROBOT_DESCRIPTION} topic)"
+            )
+        scan.notes.append(f"no --robot given and no {ROBOT_DESCRIPTION} in the bag: robot 'panda' (the default)")
+        return get_robot("panda"), "default"
+    text = texts[-1][2]
+    if len({t[2] for t in texts}) > 1:
+        scan.notes.append(f"{ROBOT_DESCRIPTION}: {len(texts)} different descriptions; using the last")
+    try:
+        chain = chain_from_urdf(text=text, base_link=base_link, tip_link=tip_link)
+    except ConfigError as exc:
+        raise DatasetError(f"{source}: {ROBOT_DESCRIPTION}: {exc}") from None
+    scan.notes.append(
+        printable(
+            f"robot '{chain.name}' from {ROBOT_DESCRIPTION}: {chain.n_joints} joints "
+            f"{chain.link_name(0)} -> {chain.link_name(chain.n_joints)}"
+        )
+    )
+    return chain, ROBOT_DESCRIPTION
+
+
+def _joint_states(scan: _Pass, chain: SerialChain, source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(t_ns, q, qd)`` of the robot's joints, found by name (module docstring)."""
+    topic, notes = scan.used.joints, scan.notes
+    jrows = scan.rows[topic]
     if not jrows:
-        raise DatasetError(f"{source}: joint state topic {used.joints} has no messages")
-    cols_by_names: dict[tuple[str, ...], np.ndarray | None] = {}
+        raise DatasetError(f"{source}: joint state topic {topic} has no messages")
+    n = chain.n_joints
+    wanted = scan.used.joint_names or chain.joint_names
+    if wanted is not None and len(wanted) != n:
+        raise ConfigError(f"joint_names has {len(wanted)} names but robot '{chain.name}' has {n} joints")
+    matched: dict[tuple[str, ...], tuple[np.ndarray | None, list[str]]] = {}
     keep, q_rows, qd_rows = [], [], []
     for i, (_, _, (names, pos, vel)) in enumerate(jrows):  # per message: name order may differ between messages
-        if names not in cols_by_names:
-            cols_by_names[names] = _joint_columns(names, chain, used)
-        cols = cols_by_names[names]
+        if names not in matched:
+            if wanted is not None:
+                matched[names] = _match_joints(names, wanted, source, topic)
+            elif len(names) == n:
+                matched[names] = (np.arange(n), [])
+                notes.append(
+                    printable(
+                        f"{topic}: robot '{chain.name}' has no joint names; taking the message's "
+                        f"order {', '.join(names)} as joints 1..{n}"
+                    )
+                )
+            else:
+                matched[names] = (None, [f"joint{j}" for j in range(1, n + 1)])
+        cols = matched[names][0]
         if cols is None or pos.shape[0] != len(names):
             continue
         keep.append(i)
         q_rows.append(pos[cols])
         qd_rows.append(vel[cols] if vel.shape[0] == len(names) else np.full(len(cols), np.nan))
     if not keep:
-        seen = "; ".join(", ".join(n) for n in list(cols_by_names)[:2])
-        raise DatasetError(f"{source}: topic {used.joints}: no message names the {chain.n_joints} joints of "
-                           f"'{chain.name}' (names seen: {seen}); give joint_names in the topic map")
+        seen = "; ".join(", ".join(k) for k in list(matched)[:2])
+        if wanted is None:
+            raise DatasetError(
+                printable(
+                    f"{source}: topic {topic}: robot '{chain.name}' has no joint names and no "
+                    f"message has exactly its {n} joints (names seen: {seen}); give "
+                    "joint_names in the topic map"
+                )
+            )
+        missing = min((m for _, m in matched.values()), key=len)
+        raise DatasetError(
+            printable(
+                f"{source}: topic {topic}: joint{'s' if len(missing) > 1 else ''} {', '.join(missing)} of robot "
+                f"'{chain.name}' missing from the messages (names seen: {seen}); give joint_names in the topic map"
+            )
+        )
     if len(keep) < len(jrows):
-        notes.append(f"{used.joints}: skipped {len(jrows) - len(keep)} message(s) without the robot's joints")
-    t_j = _stamps([jrows[i][:2] for i in keep], used.joints, notes)
+        partial = sorted({m for c, ms in matched.values() if c is None and len(ms) < n for m in ms})
+        notes.append(
+            f"{topic}: skipped {len(jrows) - len(keep)} message(s) without the robot's joints"
+            + (f" (some lack {', '.join(partial)})" if partial else "")
+        )
+    t_j = _stamps([jrows[i][:2] for i in keep], topic, notes)
     q, qd = np.array(q_rows), np.array(qd_rows)
     no_velocity = np.all(np.isnan(qd), axis=1)
-    t_j, qq = _clean(used.joints, t_j, np.stack([q, np.where(no_velocity[:, None], 0.0, qd)], axis=1), notes, source)
+    t_j, qq = _clean(topic, t_j, np.stack([q, np.where(no_velocity[:, None], 0.0, qd)], axis=1), notes, source)
     q, qd = qq[:, 0], qq[:, 1]
     if np.any(no_velocity):
         if len(t_j) < 3:
-            raise DatasetError(f"{source}: topic {used.joints}: {len(t_j)} samples, too few to differentiate")
+            raise DatasetError(f"{source}: topic {topic}: {len(t_j)} samples, too few to differentiate")
         qd = np.gradient(q, (t_j - t_j[0]) * 1e-9, axis=0)  # relative: epoch seconds lose precision
-        notes.append(f"{used.joints}: no velocities in {int(np.sum(no_velocity))} message(s); joint velocities "
-                     "from central differences of the positions")
+        notes.append(
+            f"{topic}: no velocities in {int(np.sum(no_velocity))} message(s); joint velocities "
+            "from central differences of the positions"
+        )
+    return t_j, q, qd
+
+
+def _sources(
+    topic: str, rows: list, frame_at: int, name: str, source: str, what: str, notes: list[str]
+) -> dict[str, list]:
+    """The rows of ``topic`` per source: one per ``header.frame_id`` (payload item ``frame_at``). A
+    unit name given for a topic that carries several frame_ids is an error."""
+    by_frame: dict[str, list] = {}
+    for r in rows:
+        by_frame.setdefault(r[2][frame_at], []).append(r)
+    if len(by_frame) > 1:
+        frames = ", ".join(repr(f) for f in by_frame)
+        if name:
+            raise DatasetError(
+                printable(
+                    f"{source}: {what} topic {topic} carries {len(by_frame)} frame_ids "
+                    f"({frames}), one unit each; a single unit name '{name}' cannot hold "
+                    "them (leave it out to name the units by frame_id)"
+                )
+            )
+        if "" in by_frame:
+            raise DatasetError(
+                printable(
+                    f"{source}: {what} topic {topic} carries frame_ids {frames}, some "
+                    "empty: cannot tell which unit those messages come from"
+                )
+            )
+        notes.append(printable(f"{topic}: {len(by_frame)} frame_ids ({frames}): one unit each"))
+    return by_frame
+
+
+def read_bag(
+    path: str | Path,
+    robot: SerialChain | str | None = None,
+    tmap: TopicMap | None = None,
+    *,
+    base_link: str | None = None,
+    tip_link: str | None = None,
+    accel_unit: str = "auto",
+    gyro_unit: str = "auto",
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[Dataset, ImportReport]:
+    """Read a ROS 1/ROS 2 bag into a :class:`Dataset` without segments (see the module docstring).
+
+    Args:
+        path: ``.bag`` file, ROS 2 bag directory, or ``.db3``/``.mcap`` file.
+        robot: preset name, ``.urdf`` or DH chain file, or chain; None: the bag's
+            ``/robot_description``, else the ``panda`` preset (noted).
+        tmap: topics to read (default: every Imu, JointState, Range and LaserScan topic).
+        base_link, tip_link: the serial chain of a URDF (``robot`` a ``.urdf``, or the bag's).
+        accel_unit: ``auto``, ``g`` or ``mps2``; gyro_unit: ``auto``, ``rad`` or ``deg`` (per second).
+        progress: called as ``progress(read, total)`` with the messages of the selected topics read so
+            far and their total (from the bag's index): at the start, every :data:`PROGRESS_EVERY`
+            messages and at the end.
+
+    Raises:
+        DatasetError: missing, empty, truncated or corrupt bag; no joint states; a joint of the robot
+            missing from them; an unknown topic; a topic whose samples are all NaN; interleaved
+            sources under one frame_id; one line naming the bag and the topic.
+        ConfigError: a bad robot, link or unit option.
+    """
+    chain = _robot(robot, base_link, tip_link)
+    path = Path(path)
+    source = str(path)
+    tmap = tmap or TopicMap()
+    scan = _read_messages(path, source, tmap, chain is None, progress)
+    notes, rows, used = scan.notes, scan.rows, scan.used
+    counts = {t: len(r) for t, r in rows.items()}
+    if chain is None:
+        chain, robot_source = _robot_from_bag(scan, source, base_link, tip_link)
+    else:
+        robot_source = str(robot) if isinstance(robot, str) else "chain"
+        if scan.topics.get(ROBOT_DESCRIPTION) == STRING:
+            notes.append(f"{ROBOT_DESCRIPTION} in the bag not used (robot given: {chain.name})")
+
+    t_j, q, qd = _joint_states(scan, chain, source)
     origin = int(t_j[0])
     to_s = lambda ns: (ns - origin) * 1e-9  # noqa: E731
     qd_sum_p99 = float(np.percentile(np.sum(np.abs(qd), axis=1), 99))
 
-    # IMUs.
+    # IMUs: one unit per topic and frame_id.
     imu: dict[str, ImuStream] = {}
     imu_units: dict[str, str] = {}
     for topic, name in used.imu.items():
         if not rows[topic]:
             raise DatasetError(f"{source}: IMU topic {topic} has no messages")
-        frame = rows[topic][0][2][6]
-        unit = name or (frame if frame and frame not in imu_units.values() else _unit_from_topic(topic))
-        if unit in imu:
-            raise DatasetError(f"{source}: topics {topic} and another both map to unit '{unit}'; name them in the map")
-        t_ns = _stamps([r[:2] for r in rows[topic]], topic, notes)
-        vals = np.array([r[2][:6] for r in rows[topic]], dtype=float)
-        t_ns, vals = _clean(topic, t_ns, vals, notes, source)
-        accel = vals[:, :3] * _accel_scale(topic, vals[:, :3], accel_unit, source, notes)
-        gyro = vals[:, 3:] * _gyro_scale(topic, vals[:, 3:], qd_sum_p99, gyro_unit, notes)
-        imu[unit] = ImuStream(t=to_s(t_ns), accel=accel, gyro=gyro)
-        imu_units[topic] = unit
+        by_frame = _sources(topic, rows[topic], 6, name, source, "IMU", notes)
+        split = len(by_frame) > 1
+        for frame, frows in by_frame.items():
+            if split:
+                unit, label = unit_name(frame, source, topic, "frame_id"), f"{topic} {frame}"
+            elif name:
+                unit, label = name, topic
+            elif frame and frame not in imu:
+                unit, label = unit_name(frame, source, topic, "frame_id"), topic
+            else:
+                unit, label = unit_name(unit_from_topic(topic), source, topic, "topic"), topic
+            if unit in imu:
+                raise DatasetError(
+                    printable(
+                        f"{source}: {label} and another IMU source both map to unit '{unit}'; "
+                        "name them in the topic map"
+                    )
+                )
+            t_ns = _stamps([r[:2] for r in frows], label, notes)
+            vals = np.array([r[2][:6] for r in frows], dtype=float)
+            _refuse_interleaved(label, t_ns, vals[np.argsort(t_ns, kind="stable"), :3], source)
+            t_ns, vals = _clean(label, t_ns, vals, notes, source)
+            accel = vals[:, :3] * _accel_scale(label, vals[:, :3], accel_unit, source, notes)
+            gyro = vals[:, 3:] * _gyro_scale(label, vals[:, 3:], qd_sum_p99, gyro_unit, notes)
+            imu[unit] = ImuStream(t=to_s(t_ns), accel=accel, gyro=gyro)
+            imu_units[label] = unit
 
-    # Time-of-flight.
+    # Time-of-flight: one source per topic and frame_id.
     tof: dict[str, TofStream] = {}
     range_units: dict[str, str] = {}
+    one_unit = {t: u for t, u in imu_units.items() if " " not in t}
     for topic, name in used.range.items():
-        unit = name or _range_unit(topic, rows[topic], imu_units)
-        if unit is None:
-            if topic in (tmap.range if tmap else {}):
-                raise DatasetError(f"{source}: range topic {topic}: cannot tell its unit; write {topic}=UNIT")
-            notes.append(f"{topic}: skipped (cannot tell which unit it belongs to; give {topic}=UNIT)")
-            continue
-        if unit not in imu:
-            raise DatasetError(f"{source}: range topic {topic} maps to unit '{unit}', which has no IMU topic")
         if not rows[topic]:
             continue
-        t_ns = _stamps([r[:2] for r in rows[topic]], topic, notes)
-        vals = np.array([r[2][:3] for r in rows[topic]], dtype=float)
-        t_ns, vals = _clean(topic, t_ns, vals, notes, source)
-        r, lo, hi = vals.T
-        no_target = ~((r >= lo) & (r <= hi))
-        if np.any(no_target):
-            notes.append(f"{topic}: {int(np.sum(no_target))} reading(s) out of range (no target) -> NaN")
-        tof[unit] = TofStream(t=to_s(t_ns), range=np.where(no_target, np.nan, r))
-        range_units[topic] = unit
+        by_frame = _sources(topic, rows[topic], 3, name, source, "range", notes)
+        split = len(by_frame) > 1
+        for frame, frows in by_frame.items():
+            label = f"{topic} {frame}" if split else topic
+            unit = name or range_unit(topic, frame, {} if split else one_unit, set(imu))
+            if unit is None:
+                if topic in tmap.range:
+                    raise DatasetError(
+                        printable(f"{source}: range topic {label}: cannot tell its unit; write {topic}=UNIT")
+                    )
+                notes.append(printable(f"{label}: skipped (cannot tell which unit it belongs to; give {topic}=UNIT)"))
+                continue
+            if unit not in imu:
+                raise DatasetError(
+                    printable(f"{source}: range topic {label} maps to unit '{unit}', which has no IMU topic")
+                )
+            if unit in tof:
+                raise DatasetError(printable(f"{source}: range topic {label} and another both map to unit '{unit}'"))
+            t_ns = _stamps([r[:2] for r in frows], label, notes)
+            _refuse_interleaved(label, t_ns, None, source)
+            vals = np.array([r[2][:3] for r in frows], dtype=float)
+            t_ns, vals = _clean(label, t_ns, vals, notes, source)
+            r, lo, hi = vals.T
+            no_target = ~((r >= lo) & (r <= hi))
+            if np.any(no_target):
+                notes.append(f"{label}: {int(np.sum(no_target))} reading(s) out of range (no target) -> NaN")
+            tof[unit] = TofStream(t=to_s(t_ns), range=np.where(no_target, np.nan, r))
+            range_units[label] = unit
 
-    ds = Dataset(robot=chain, joints=JointStates(t=to_s(t_j), q=q, qd=qd), imu=imu, tof=tof,
-                 description=f"imported from {path.name} (ROS {ros}); time origin {origin} ns since the epoch")
+    ds = Dataset(
+        robot=chain,
+        joints=JointStates(t=to_s(t_j), q=q, qd=qd),
+        imu=imu,
+        tof=tof,
+        description=f"imported from {path.name} (ROS {scan.ros}); time origin {origin} ns since the epoch",
+    )
     validate_dataset(ds, source)
-    report = ImportReport(source=source, ros_version=ros, joint_topic=used.joints, imu_topics=imu_units,
-                          range_topics=range_units, counts=counts, notes=tuple(notes), time_origin_ns=origin)
+    report = ImportReport(
+        source=source,
+        ros_version=scan.ros,
+        joint_topic=used.joints,
+        imu_topics=imu_units,
+        range_topics=range_units,
+        counts=counts,
+        notes=tuple(notes),
+        time_origin_ns=origin,
+        robot=chain.name,
+        robot_source=robot_source,
+    )
     return ds, report
-
-
-def _range_unit(topic: str, rows: list, imu_units: dict[str, str]) -> str | None:
-    """The unit of a range topic: its frame_id if that is a unit, else the IMU topic in the same namespace."""
-    frame = rows[0][2][3] if rows else ""
-    if frame in imu_units.values():
-        return frame
-    ns = topic.rsplit("/", 1)[0]
-    hits = [u for t, u in imu_units.items() if t.rsplit("/", 1)[0] == ns and ns]
-    if len(hits) == 1:
-        return hits[0]
-    m = re.sub(r"_(tof|range)$", "", frame)
-    return m if m in imu_units.values() else None
-
-
-def write_bag(ds: Dataset, path: str | Path, *, ros_version: int = 2, storage: str = "sqlite3",
-              accel_unit: str = "mps2", gyro_unit: str = "rad", joint_names: tuple[str, ...] | None = None,
-              joint_velocity: bool = True, origin_ns: int = 1_700_000_000_000_000_000) -> None:
-    """Write ``ds`` as a ROS bag (``sensor_msgs`` Imu per unit on ``/skin/<unit>/imu``, JointState on
-    ``/joint_states``, Range on ``/skin/<unit>/range``), messages in time order, header stamps
-    ``origin_ns + t``; the bag time is the stamp. ``ros_version`` 1 writes a ``.bag`` file
-    (noetic types), 2 a bag directory (humble types) with ``storage`` ``sqlite3`` or ``mcap``.
-    ``accel_unit`` ``g`` and ``gyro_unit`` ``deg`` write what some firmware sends; NaN ranges
-    (no target) become +inf (REP 117). The target must not exist."""
-    from rosbags.rosbag1 import Writer as Writer1
-    from rosbags.rosbag2 import StoragePlugin
-    from rosbags.rosbag2 import Writer as Writer2
-    from rosbags.typesys import Stores, get_typestore
-
-    if ros_version not in (1, 2) or storage not in ("sqlite3", "mcap"):
-        raise ConfigError(f"write_bag: ros_version must be 1 or 2 and storage sqlite3 or mcap, got {ros_version}, "
-                          f"{storage}")
-    ts = get_typestore(Stores.ROS1_NOETIC if ros_version == 1 else Stores.ROS2_HUMBLE)
-    T = ts.types
-    n = ds.robot.n_joints
-    names = list(joint_names or KNOWN_JOINT_NAMES.get(ds.robot.name) or [f"joint{i + 1}" for i in range(n)])
-    a_scale = 1.0 / STANDARD_GRAVITY if accel_unit == "g" else 1.0
-    w_scale = 180.0 / np.pi if gyro_unit == "deg" else 1.0
-    zeros9 = np.zeros(9)
-
-    def header(ns: int, frame: str) -> Any:
-        stamp = T["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
-        extra = {"seq": 0} if ros_version == 1 else {}
-        return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame, **extra)
-
-    def vec(v: np.ndarray) -> Any:
-        return T["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
-
-    streams: list[tuple[str, str, np.ndarray, Any]] = [("/joint_states", JOINTS, ds.joints.t, None)]
-    streams += [(f"/skin/{u}/imu", IMU, s.t, (u, s)) for u, s in ds.imu.items()]
-    streams += [(f"/skin/{u}/range", RANGE, s.t, (u, s)) for u, s in ds.tof.items()]
-    t_all = np.concatenate([s[2] for s in streams])
-    which = np.concatenate([np.full(len(s[2]), k) for k, s in enumerate(streams)])
-    index = np.concatenate([np.arange(len(s[2])) for s in streams])
-    order = np.argsort(t_all, kind="stable")
-    ns_all = origin_ns + np.round(t_all * 1e9).astype(np.int64)
-    identity = T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
-    path = Path(path)
-    if ros_version == 1:
-        writer: Any = Writer1(path)
-        serialize = ts.serialize_ros1
-    else:
-        plugin = StoragePlugin.SQLITE3 if storage == "sqlite3" else StoragePlugin.MCAP
-        writer = Writer2(path, version=9, storage_plugin=plugin)
-        serialize = ts.serialize_cdr
-    with writer:
-        conns = [writer.add_connection(topic, kind, typestore=ts) for topic, kind, _, _ in streams]
-        for k in order:  # one message per sample: serialisation is per message
-            s, i, ns = int(which[k]), int(index[k]), int(ns_all[k])
-            topic, kind, _, data = streams[s]
-            if kind == JOINTS:
-                js = ds.joints
-                msg = T[JOINTS](header=header(ns, ""), name=names, position=np.array(js.q[i], float),
-                                velocity=np.array(js.qd[i], float) if joint_velocity else np.zeros(0),
-                                effort=np.zeros(0))
-            elif kind == IMU:
-                unit, st = data
-                gyro = st.gyro[i] if st.gyro is not None else np.zeros(3)
-                msg = T[IMU](header=header(ns, unit), orientation=identity, orientation_covariance=zeros9,
-                             angular_velocity=vec(gyro * w_scale), angular_velocity_covariance=zeros9,
-                             linear_acceleration=vec(st.accel[i] * a_scale), linear_acceleration_covariance=zeros9)
-            else:
-                unit, st = data
-                r = float(st.range[i])
-                msg = T[RANGE](header=header(ns, unit), radiation_type=1, field_of_view=float(np.radians(27.0)),
-                               min_range=0.01, max_range=4.0, range=np.inf if np.isnan(r) else r)
-            writer.write(conns[s], ns, serialize(msg, kind))
