@@ -57,6 +57,10 @@ def test_calibrate_refuses_its_input_an_existing_file_and_bad_folders(files, cap
         ["export", "{result}", "-f", "csv", "-o", "{data}"],
         ["report", "{result}", "--dataset", "{data}", "--out", "{data}"],
         ["report", "{result}", "--dataset", "{data}", "--out", "{result}"],
+        ["benchmark", "core", "--json", "{data}"],  # refused before minutes of work
+        ["benchmark", "mle", "--quick", "--json", "{result}"],
+        ["benchmark", "table1", "--quick", "--json", "{result}"],
+        ["benchmark", "robustness", "--quick", "--out", "{result}"],
     ],
 )
 def test_other_writers_keep_existing_files(files, command, capsys):

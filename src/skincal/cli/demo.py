@@ -6,7 +6,7 @@ import time
 
 import typer
 
-from skincal.cli.app import app, console
+from skincal.cli.app import app, console, shown
 
 
 @app.command()
@@ -64,5 +64,5 @@ def demo(
         f"{result.runtime_s:.2f} s with '{noise}' sensors"
     )
     for name, reason in failed_units(result).items():
-        console.print(f"[yellow]warning[/]: unit {name} not calibrated: {reason}", highlight=False)
+        console.print(f"[yellow]warning[/]: unit {shown(name)} not calibrated: {shown(reason)}", highlight=False)
     console.print(f"total {time.perf_counter() - start:.1f} s")

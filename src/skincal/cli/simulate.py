@@ -46,7 +46,7 @@ def simulate(
     check_output(out, force=force)
     chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
     start = time.perf_counter()
-    with Progress(console=err_console, transient=True) as bar:
+    with Progress(console=err_console, transient=True, disable=not err_console.is_terminal) as bar:
         task = bar.add_task(f"simulating ({backend})", total=None)
         ds = simulate_dataset(
             chain, placement, units, noise, protocol, seed, backend, mujoco_mode=mujoco_mode, joints=joints,

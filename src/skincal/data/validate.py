@@ -13,6 +13,7 @@ import numpy as np
 
 from skincal.data.dataset import DYNAMIC, STATIC, Dataset, Segments
 from skincal.data.names import name_problem, printable
+from skincal.data.result import MAX_POSITION_M
 from skincal.errors import DatasetError
 from skincal.kinematics.chain import CONVENTIONS, SerialChain
 from skincal.skin.pose import SkinUnitPose
@@ -174,6 +175,8 @@ def validate_truth(ds: Dataset, n: int, source: str) -> None:
             raise _fail(source, field, f"must be a SkinUnitPose, got {type(pose).__name__}")
         if not 1 <= pose.link <= n:
             raise _fail(source, f"{field} attr 'link'", f"is {pose.link}, expected 1..{n}")
+        if np.any(np.abs(pose.p_link_su) > MAX_POSITION_M):  # as in results: distances from 1e308 overflow
+            raise _fail(source, f"{field} attr 'position'", f"has a component beyond {MAX_POSITION_M:g} m")
     for unit, errors in ds.truth_sensor.items():
         field = f"/truth/{unit}"
         if unit not in ds.truth:
