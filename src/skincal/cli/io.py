@@ -87,7 +87,12 @@ def _segments_from_protocol(ds, protocol: Path):
 def import_bag(
     bag: Path = typer.Argument(..., help="ROS 1 .bag file, ROS 2 bag directory, or .db3/.mcap file"),
     out: Path = typer.Option(..., "--out", "-o", help="dataset file to write (.h5)"),
-    robot: str = typer.Option("panda", help="robot preset (panda, sawyer, ur5e) or a chain .yaml/.json"),
+    robot: str | None = typer.Option(None, help="robot: a preset, the robot's .urdf or a DH chain file [default: the "
+                                     "URDF on the bag's /robot_description, else panda]", show_default=False),
+    base_link: str | None = typer.Option(None, help="URDF link the chain starts from (--robot arm.urdf or the bag's "
+                                         "/robot_description)"),
+    tip_link: str | None = typer.Option(None, help="URDF link the chain ends at (--robot arm.urdf or the bag's "
+                                        "/robot_description)"),
     map_file: Path | None = typer.Option(None, "--map", help="YAML topic map (imu, joints, range, joint_names)"),
     imu_topic: list[str] | None = typer.Option(None, help="sensor_msgs/Imu topic, TOPIC or TOPIC=UNIT (repeatable)"),
     joint_topic: str | None = typer.Option(None, help="sensor_msgs/JointState topic"),
@@ -106,19 +111,23 @@ def import_bag(
 
     from skincal.data.atomic import check_output
     from skincal.data.hdf5 import write_dataset
-    from skincal.data.rosbag import topic_map
+    from skincal.data.names import printable
+    from skincal.data.ros import topic_map
     from skincal.data.segment import segment_dataset
+    from skincal.kinematics import PRESETS
 
-    check_output(out, force=force, inputs=(bag,) + ((protocol,) if protocol else ()))
+    robot_file = (Path(robot),) if robot is not None and robot not in PRESETS else ()
+    check_output(out, force=force, inputs=(bag, *robot_file, *((protocol,) if protocol else ())))
     tmap = topic_map(imu_topic, joint_topic, range_topic, path=map_file)
-    ds, report = _read_bag_with_progress(bag, robot, tmap, accel_unit, gyro_unit)
+    ds, report = _read_bag_with_progress(bag, robot, tmap, accel_unit, gyro_unit, base_link, tip_link)
     units = ", ".join(f"{u} <- {t}" for t, u in report.imu_topics.items())
     ranges = ", ".join(f"{u} <- {t}" for t, u in report.range_topics.items())
-    console.print(f"read {bag} (ROS {report.ros_version}): joints from {report.joint_topic} "
-                  f"({len(ds.joints.t)} samples), units {units}" + (f"; ranges {ranges}" if ranges else ""),
-                  highlight=False)
+    # names come from the bag (topics, frame_ids): no markup, control characters shown escaped
+    console.print(printable(f"read {bag} (ROS {report.ros_version}): robot {report.robot} ({report.robot_source}), "
+                            f"joints from {report.joint_topic} ({len(ds.joints.t)} samples), units {units}"
+                            + (f"; ranges {ranges}" if ranges else "")), highlight=False, markup=False)  # fmt: skip
     for note in report.notes:
-        console.print(f"  note: {note}", highlight=False, markup=False)
+        console.print(printable(f"  note: {note}"), highlight=False, markup=False)
     if segment and protocol is not None:
         ds = _segments_from_protocol(ds, protocol)
     elif segment:
@@ -131,19 +140,20 @@ def import_bag(
     console.print(f"wrote {out}: {len(ds.units)} units, {ds.duration:.1f} s", highlight=False)
 
 
-def _read_bag_with_progress(bag: Path, robot: str, tmap, accel_unit: str, gyro_unit: str):
-    """:func:`~skincal.data.rosbag.read_bag` with a transient progress bar on stderr (messages read / total)."""
+def _read_bag_with_progress(bag: Path, robot: str | None, tmap, accel_unit: str, gyro_unit: str,
+                            base_link: str | None = None, tip_link: str | None = None):
+    """:func:`~skincal.data.ros.read_bag` with a transient progress bar on stderr (messages read / total)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     from skincal.cli.app import err_console
-    from skincal.data.rosbag import read_bag
+    from skincal.data.ros import read_bag
 
     columns = (TextColumn("reading the bag"), BarColumn(), MofNCompleteColumn(), TextColumn("messages"),
                TimeRemainingColumn())
     with Progress(*columns, console=err_console, transient=True, disable=not err_console.is_terminal) as bar:
         task = bar.add_task("read", total=None)
-        return read_bag(bag, robot, tmap, accel_unit=accel_unit, gyro_unit=gyro_unit,
-                        progress=lambda done, total: bar.update(task, completed=done, total=total))
+        return read_bag(bag, robot, tmap, base_link=base_link, tip_link=tip_link, accel_unit=accel_unit,
+                        gyro_unit=gyro_unit, progress=lambda done, total: bar.update(task, completed=done, total=total))
 
 
 @app.command("segment")

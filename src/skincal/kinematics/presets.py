@@ -10,6 +10,20 @@ Presets:
 * ``iiwa14``: KUKA LBR iiwa 14 R820, standard DH, KUKA's axis ranges and speeds.
 
 ``--robot`` also takes a URDF (``.urdf``, :mod:`skincal.kinematics.urdf`) or a DH chain file.
+
+Joint names: each preset carries the names its maker's ROS driver publishes in
+``sensor_msgs/JointState`` (and its ``*_description`` URDF uses), so a bag imports without a topic
+map (:mod:`skincal.data.ros`; a prefixed name such as ``ur_elbow_joint`` or ``lbr_A1`` matches too):
+
+* panda: ``panda_joint1`` .. ``panda_joint7`` (``franka_ros``/``franka_description``);
+* sawyer: ``right_j0`` .. ``right_j6`` (Rethink's ``intera_sdk``);
+* ur5, ur5e, ur10e: ``shoulder_pan_joint``, ``shoulder_lift_joint``, ``elbow_joint``,
+  ``wrist_1_joint``, ``wrist_2_joint``, ``wrist_3_joint`` (``Universal_Robots_ROS_Driver``,
+  ``ur_description``);
+* xarm7: ``joint1`` .. ``joint7`` (UFactory's ``xarm_ros``/``xarm_description``);
+* iiwa14: ``A1`` .. ``A7``, KUKA's axis names as the ``lbr_fri_ros2_stack`` publishes them
+  (``lbr_A1`` ..); bags of ROS-Industrial's ``kuka_experimental`` (``joint_a1`` ..) or of
+  ``iiwa_stack`` (``iiwa_joint_1`` ..) need ``joint_names`` in a topic map.
 """
 
 from __future__ import annotations
@@ -22,6 +36,9 @@ from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
 
 _PI = np.pi
+UR_JOINT_NAMES = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint",
+                  "wrist_3_joint")  # fmt: skip
+"""The joint names of Universal Robots' driver and URDF, base first."""
 
 
 def panda() -> SerialChain:
@@ -45,6 +62,7 @@ def panda() -> SerialChain:
         joint_upper=np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973]),
         velocity_limit=np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61]),
         T_link_flange=flange,
+        joint_names=tuple(f"panda_joint{i}" for i in range(1, 8)),
     )
 
 
@@ -61,6 +79,7 @@ def sawyer() -> SerialChain:
         joint_lower=np.array([-3.0503, -3.8095, -3.0426, -3.0439, -2.9761, -2.9761, -4.7124]),
         joint_upper=np.array([3.0503, 2.2736, 3.0426, 3.0439, 2.9761, 2.9761, 4.7124]),
         velocity_limit=np.array([1.74, 1.328, 1.957, 1.957, 3.485, 3.485, 4.545]),
+        joint_names=tuple(f"right_j{i}" for i in range(7)),
     )
 
 
@@ -78,6 +97,7 @@ def ur5e() -> SerialChain:
         joint_lower=-lim,
         joint_upper=lim,
         velocity_limit=np.full(6, _PI),
+        joint_names=UR_JOINT_NAMES,
     )
 
 
@@ -86,7 +106,9 @@ def _ur(name: str, d: list[float], a: list[float], velocity: list[float]) -> Ser
     alpha = [_PI / 2, 0.0, 0.0, _PI / 2, -_PI / 2, 0.0]
     lim = np.array([2 * _PI, 2 * _PI, _PI, 2 * _PI, 2 * _PI, 2 * _PI])
     dh = np.column_stack([np.zeros(6), d, a, alpha])
-    return SerialChain.from_dh(name, "standard", dh, joint_lower=-lim, joint_upper=lim, velocity_limit=velocity)
+    return SerialChain.from_dh(
+        name, "standard", dh, joint_lower=-lim, joint_upper=lim, velocity_limit=velocity, joint_names=UR_JOINT_NAMES
+    )
 
 
 def ur5() -> SerialChain:
@@ -122,6 +144,7 @@ def xarm7() -> SerialChain:
         joint_lower=np.array([-2 * _PI, -2.059, -2 * _PI, -0.19198, -2 * _PI, -1.69297, -2 * _PI]),
         joint_upper=np.array([2 * _PI, 2.0944, 2 * _PI, 3.927, 2 * _PI, _PI, 2 * _PI]),
         velocity_limit=np.full(7, 3.14),
+        joint_names=tuple(f"joint{i}" for i in range(1, 8)),
     )
 
 
@@ -138,6 +161,7 @@ def iiwa14() -> SerialChain:
         joint_lower=-lim,
         joint_upper=lim,
         velocity_limit=np.radians([85.0, 85.0, 100.0, 75.0, 130.0, 135.0, 135.0]),
+        joint_names=tuple(f"A{i}" for i in range(1, 8)),
     )
 
 
