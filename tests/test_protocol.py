@@ -276,7 +276,7 @@ def test_export_round_trips(real_like, tmp_path):
     tt = np.linspace(-1, traj.duration + 1, 777)
     np.testing.assert_allclose(back.evaluate(tt)[1], traj.evaluate(tt)[1], atol=1e-12)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["traj.csv", "traj.json"]  # no temporaries left
-    with pytest.raises(ConfigError, match="use .csv or .json"):
+    with pytest.raises(ConfigError, match=r"use \.csv, \.json, \.yaml, \.bag"):
         export_trajectory(traj, tmp_path / "traj.txt")
     (tmp_path / "bad.json").write_text('{"format": "other"}')
     with pytest.raises(DatasetError, match="bad.json: field 'format'"):
