@@ -7,12 +7,13 @@ import json
 import numpy as np
 import pytest
 import yaml
-from registry_robots import registry_urdf
 
 from skincal.cli import main
 from skincal.kinematics import get_robot
 from skincal.protocol import read_trajectory_csv, read_trajectory_json
 from skincal.protocol.collision import CollisionModel
+
+from registry_robots import registry_urdf
 
 
 def _run(capsys, *args: str) -> tuple[int, str, str]:

@@ -8,7 +8,6 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from registry_robots import registry_urdf
 
 from skincal.errors import ProtocolError
 from skincal.kinematics import PRESETS, get_robot
@@ -17,6 +16,8 @@ from skincal.kinematics.transforms import homogeneous
 from skincal.protocol import PROTOCOLS, build_trajectory, get_protocol
 from skincal.protocol.collision import CollisionModel, segment_distance
 from skincal.protocol.limits import acceleration_bounds, fit_to_limits, position_bounds
+
+from registry_robots import registry_urdf
 
 PRESET_ROBOTS = tuple(sorted(PRESETS))
 
