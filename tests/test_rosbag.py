@@ -15,16 +15,20 @@ from rosbags.typesys import Stores, get_typestore
 
 from skincal.calib import calibrate, evaluate
 from skincal.cli import main
-from skincal.data.dataset import TofStream
+from skincal.data.dataset import JointStates, TofStream
 from skincal.data.hdf5 import read_dataset, write_dataset
-from skincal.data.ros import PROGRESS_EVERY, read_bag, topic_map, write_bag
+from skincal.data.ros import PROGRESS_EVERY, ROBOT_DESCRIPTION, read_bag, topic_map, write_bag
 from skincal.data.segment import segment_dataset
-from skincal.errors import DatasetError
+from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics import get_robot
+from skincal.kinematics.presets import UR_JOINT_NAMES
 from skincal.protocol import ProtocolConfig, build_trajectory
 from skincal.sim.analytic import simulate
 from skincal.skin.imu import STANDARD_GRAVITY, get_imu_model
 from skincal.skin.placement import paper_placement
+from skincal.workflows.session import simulate_dataset
+
+from registry_robots import registry_urdf
 
 T0_NS = 1_700_000_000_000_000_000
 PANDA_JOINTS = [f"panda_joint{i}" for i in range(1, 8)]
@@ -314,3 +318,220 @@ def test_progress_counts_the_messages_read(small, tmp_path, ros, storage):
         small.imu[unit].t)
     selected = sum(one.counts.values())  # joints, one IMU and the (automatically selected) range topics
     assert calls[0] == (0, selected) and calls[-1] == (selected, selected) and selected < total
+
+
+# ---------------------------------------------------------------- robot, joint names, shared IMU topics
+def _thin(ds, k: int = 10):
+    """``ds`` with every ``k``-th joint state (bags of 1 kHz joints are slow to write in a test)."""
+    js = ds.joints
+    return replace(ds, joints=JointStates(js.t[::k], js.q[::k], js.qd[::k]))
+
+
+@pytest.fixture(scope="module")
+def ur5_urdf_session():
+    """Two units on the registry UR5 (a URDF chain: joint names and source text from the file)."""
+    chain = get_robot(str(registry_urdf("ur5")))
+    return _thin(simulate_dataset(chain, "random", 2, "none", "fast", seed=1))
+
+
+@pytest.mark.parametrize("ros", [1, 2])
+def test_robot_from_the_bags_robot_description(ur5_urdf_session, tmp_path, ros):
+    """No robot given: the URDF on /robot_description (latched std_msgs/String) is the robot, its
+    joint names find the joints; with a robot given, the description is left alone (noted)."""
+    sim = ur5_urdf_session
+    bag = tmp_path / ("b.bag" if ros == 1 else "b")
+    write_bag(sim, bag, ros_version=ros, robot_description=sim.robot.source)
+    ds, report = read_bag(bag)
+    assert report.robot == "ur5" and report.robot_source == ROBOT_DESCRIPTION
+    assert ds.robot.convention == "urdf" and ds.robot.source == sim.robot.source
+    assert ds.robot.joint_names == sim.robot.joint_names == UR_JOINT_NAMES
+    np.testing.assert_array_equal(ds.joints.q, sim.joints.q)
+    np.testing.assert_allclose(ds.robot.link_frames(sim.joints.q[:50]), sim.robot.link_frames(sim.joints.q[:50]))
+    assert any("robot 'ur5' from /robot_description: 6 joints world -> wrist_3_link" in n for n in report.notes)
+    # a tip link picks a shorter chain out of the description
+    short, rep = read_bag(bag, tip_link="forearm_link")
+    assert short.robot.n_joints == 3 and rep.robot_source == ROBOT_DESCRIPTION
+    np.testing.assert_array_equal(short.joints.q, sim.joints.q[:, :3])
+    # a robot given wins over the bag's description
+    ds2, report2 = read_bag(bag, "ur5")
+    assert ds2.robot.convention == "standard" and report2.robot_source == "ur5"
+    assert "/robot_description in the bag not used (robot given: ur5)" in report2.notes
+
+
+def test_robot_description_that_is_not_urdf_is_one_line_error(small, tmp_path):
+    write_bag(small, tmp_path / "b", robot_description="<robot name='x'><link name='a'/>")
+    with pytest.raises(DatasetError, match=r"/robot_description: .*") as info:
+        read_bag(tmp_path / "b")
+    assert "\n" not in str(info.value)
+
+
+def test_no_robot_and_no_description_is_panda_noted(small, tmp_path):
+    write_bag(small, tmp_path / "b")
+    ds, report = read_bag(tmp_path / "b")
+    assert ds.robot.name == "panda" and report.robot_source == "default"
+    assert "no --robot given and no /robot_description in the bag: robot 'panda' (the default)" in report.notes
+    with pytest.raises(ConfigError, match="--base-link/--tip-link need a URDF"):
+        read_bag(tmp_path / "b", tip_link="panda_link5")
+
+
+PRESET_JOINTS = {
+    "panda": PANDA_JOINTS,
+    "ur5e": list(UR_JOINT_NAMES),
+    "ur10e": [f"ur_{n}" for n in UR_JOINT_NAMES],  # a tf_prefix: matched as a suffix
+    "xarm7": [f"joint{i}" for i in range(1, 8)],
+    "iiwa14": [f"lbr_A{i}" for i in range(1, 8)],  # lbr_fri_ros2_stack's default robot_name
+    "sawyer": [f"right_j{i}" for i in range(7)],
+}
+
+
+def _named_joint_msgs(ts, t: np.ndarray, names: list[str], ros: int):
+    """JointState with joint ``k`` of ``names`` at ``q = 0.1 k + 0.01 t`` (in the message order given)."""
+    out = []
+    for tk in t:
+        ns = T0_NS + round(tk * 1e9)
+        q = np.array([0.1 * k + 0.01 * tk for k in range(len(names))])
+        out.append((ns, ts.types["sensor_msgs/msg/JointState"](
+            header=_header(ts, ns, "", ros), name=list(names), position=q, velocity=np.full(len(names), 0.01),
+            effort=np.zeros(0))))  # fmt: skip
+    return "sensor_msgs/msg/JointState", out
+
+
+@pytest.mark.parametrize("robot", sorted(PRESET_JOINTS))
+@pytest.mark.parametrize("ros", [1, 2])
+def test_preset_joint_names_found_in_any_order_among_extra_joints(tmp_path, robot, ros):
+    """The drivers' own names, shuffled, with two gripper fingers in between: each joint by name."""
+    ts = _store(ros)
+    own = PRESET_JOINTS[robot]
+    rng = np.random.default_rng(3)
+    names = [*own, "gripper_finger_joint1", "gripper_finger_joint2"]
+    names = [names[i] for i in rng.permutation(len(names))]
+    topics = {"/joint_states": _named_joint_msgs(ts, T, names, ros), "/su1/imu": _imu_msgs(ts, T, UP_G, ros=ros)}
+    bag = _write(tmp_path / ("b.bag" if ros == 1 else "b"), ros, topics)
+    ds, _ = read_bag(bag, robot)
+    column = [names.index(n) for n in own]  # where each robot joint sits in the message
+    np.testing.assert_allclose(ds.joints.q, 0.1 * np.array(column) + 0.01 * ds.joints.t[:, None], atol=1e-12)
+
+
+@pytest.mark.parametrize("ros", [1, 2])
+def test_missing_joint_is_one_line_error_naming_it(tmp_path, ros, capsys):
+    ts = _store(ros)
+    bag = _write(tmp_path / ("b.bag" if ros == 1 else "b"), ros, {
+        "/joint_states": _named_joint_msgs(ts, T, [*PANDA_JOINTS[:6], "panda_finger_joint1"], ros),
+        "/su1/imu": _imu_msgs(ts, T, UP_G, ros=ros)})  # fmt: skip
+    with pytest.raises(DatasetError, match=r"topic /joint_states: joint panda_joint7 of robot 'panda' missing") as e:
+        read_bag(bag, "panda")
+    assert "\n" not in str(e.value)
+    out = tmp_path / "d.h5"
+    assert main(["import", str(bag), "--robot", "panda", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "joint panda_joint7" in err and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_joint_matching_several_names_is_refused(tmp_path):
+    ts = _store(2)
+    names = ["left_joint1", "right_joint1", *[f"joint{i}" for i in range(2, 8)]]
+    bag = _write(tmp_path / "b", 2, {"/joint_states": _named_joint_msgs(ts, T, names, 2),
+                                     "/su1/imu": _imu_msgs(ts, T, UP_G)})  # fmt: skip
+    with pytest.raises(DatasetError, match=r"joint 'joint1' matches several names .*left_joint1, right_joint1"):
+        read_bag(bag, "xarm7")
+
+
+@pytest.mark.parametrize("ros,storage", [(1, "sqlite3"), (2, "sqlite3"), (2, "mcap")])
+def test_shared_imu_topic_becomes_one_unit_per_frame_id(small, tmp_path, ros, storage):
+    """Every unit's Imu on /skin/imu, told apart by header.frame_id: the same units and samples as
+    one topic per unit."""
+    shared, own = tmp_path / ("s.bag" if ros == 1 else "s"), tmp_path / ("o.bag" if ros == 1 else "o")
+    write_bag(small, shared, ros_version=ros, storage=storage, imu_topic="/skin/imu")
+    write_bag(small, own, ros_version=ros, storage=storage)
+    ds, report = read_bag(shared, "panda")
+    ref, _ = read_bag(own, "panda")
+    assert ds.units == ref.units == small.units
+    assert report.imu_topics == {f"/skin/imu {u}": u for u in small.units}
+    assert any(n.startswith("/skin/imu: 3 frame_ids (") for n in report.notes)
+    for u in small.units:
+        np.testing.assert_array_equal(ds.imu[u].t, ref.imu[u].t)
+        np.testing.assert_array_equal(ds.imu[u].accel, ref.imu[u].accel)
+        np.testing.assert_array_equal(ds.imu[u].gyro, ref.imu[u].gyro)
+    assert set(ds.tof) == set(small.tof)  # the Range topics find their units by frame_id
+    with pytest.raises(DatasetError, match=r"/skin/imu carries 3 frame_ids .* a single unit name 'u' cannot"):
+        read_bag(shared, "panda", topic_map(imu=["/skin/imu=u"]))
+
+
+@pytest.mark.adversarial
+def test_frame_id_that_is_not_a_valid_unit_name_is_refused(tmp_path):
+    ts = _store(2)
+    _, a = _imu_msgs(ts, T, UP_G, frame="good")
+    _, b = _imu_msgs(ts, T + 0.005, UP_G, frame="bad\x1b[31m")
+    bag = _write(tmp_path / "b", 2, {"/joint_states": _joint_msgs(ts, T), "/imu": ("sensor_msgs/msg/Imu", a + b)})
+    with pytest.raises(DatasetError, match=r"unit name 'bad\\x1b\[31m' \(from the frame_id\) contains") as info:
+        read_bag(bag, "panda")
+    assert "\x1b" not in str(info.value)
+
+
+def _tilted(t: np.ndarray, angle: float) -> np.ndarray:
+    """Gravity in g seen by a unit tilted by ``angle`` about x."""
+    return np.tile([0.0, np.sin(angle), np.cos(angle)], (len(t), 1))
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize("ros", [1, 2])
+def test_two_imus_interleaved_under_one_frame_id_are_refused(tmp_path, ros):
+    """Two IMUs publishing on one topic with the same frame_id: never merged into one unit."""
+    ts = _store(ros)
+    _, a = _imu_msgs(ts, T, _tilted(T, 0.0), frame="imu_link", ros=ros)
+    # the same instants (synchronised sampling): every stamp comes twice
+    _, b = _imu_msgs(ts, T, _tilted(T, 1.2), frame="imu_link", ros=ros)
+    joints = _joint_msgs(ts, T, ros=ros)
+    same = _write(tmp_path / ("s.bag" if ros == 1 else "s"), ros,
+                  {"/joint_states": joints, "/imu": ("sensor_msgs/msg/Imu", a + b)})  # fmt: skip
+    with pytest.raises(DatasetError, match=r"/imu: \d+ of \d+ time stamps go back or repeat: samples of several "
+                       "sources interleaved") as info:  # fmt: skip
+        read_bag(same, "panda")
+    assert "\n" not in str(info.value)
+    # offset instants: stamps increase, the samples alternate between the two orientations
+    _, c = _imu_msgs(ts, T + 0.005, _tilted(T, 1.2), frame="imu_link", ros=ros)
+    offset = _write(tmp_path / ("o.bag" if ros == 1 else "o"), ros,
+                    {"/joint_states": joints, "/imu": ("sensor_msgs/msg/Imu", sorted(a + c, key=lambda m: m[0]))})
+    with pytest.raises(DatasetError, match=r"/imu: \d+ of \d+ samples jump away from both neighbours"):
+        read_bag(offset, "panda")
+
+
+def test_one_imu_with_a_few_repeated_stamps_and_noise_is_not_refused(tmp_path):
+    """One source: a repeated stamp now and then (a driver re-publishing) is dropped with a count, and
+    white noise or a single outlier is no sign of a second source."""
+    ts = _store(2)
+    rng = np.random.default_rng(5)
+    accel = UP_G + 0.02 * rng.standard_normal(UP_G.shape)
+    accel[100] = [0.0, 0.8, 0.6]  # one knock
+    _, msgs = _imu_msgs(ts, T, accel)
+    msgs = msgs[:50] + [msgs[49]] + msgs[50:]
+    bag = _write(tmp_path / "b", 2, {"/joint_states": _joint_msgs(ts, T), "/su1/imu": ("sensor_msgs/msg/Imu", msgs)})
+    ds, report = read_bag(bag, "panda")
+    assert "/su1/imu: dropped 1 message(s) with a repeated time stamp" in report.notes
+    assert len(ds.imu["su1"].t) == len(T)
+
+
+def test_cli_import_robot_urdf_and_robot_description(ur5_urdf_session, tmp_path, capsys):
+    """`skincal import --robot ur5.urdf` (a registry URDF): the dataset holds the URDF chain; without
+    --robot the bag's /robot_description is used."""
+    sim = ur5_urdf_session
+    urdf = registry_urdf("ur5")
+    write_bag(replace(sim, robot=get_robot("ur5")), tmp_path / "plain.bag", ros_version=1)  # the preset's names
+    out = tmp_path / "a.h5"
+    assert main(["import", str(tmp_path / "plain.bag"), "--robot", str(urdf), "--tip-link", "wrist_3_link",
+                 "--no-segment", "--out", str(out)]) == 0  # fmt: skip
+    text = capsys.readouterr().out.replace("\n", "")  # rich wraps long lines
+    assert f"robot ur5 ({urdf})" in text
+    ds = read_dataset(out)
+    assert ds.robot.convention == "urdf" and ds.robot.joint_names == UR_JOINT_NAMES
+    assert ds.robot.source == urdf.read_text()
+    np.testing.assert_array_equal(ds.joints.q, sim.joints.q)
+    write_bag(sim, tmp_path / "desc", robot_description=sim.robot.source)
+    assert main(["import", str(tmp_path / "desc"), "--no-segment", "--out", str(tmp_path / "b.h5")]) == 0
+    assert "robot ur5 (/robot_description)" in capsys.readouterr().out.replace("\n", "")
+    assert read_dataset(tmp_path / "b.h5").robot.source == sim.robot.source
+    assert main(["import", str(tmp_path / "desc"), "--robot", "panda", "--base-link", "x", "--out",
+                 str(tmp_path / "c.h5")]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "--base-link and --tip-link apply to a URDF robot only" in err

@@ -437,6 +437,7 @@ def _sources(
     by_frame: dict[str, list] = {}
     for r in rows:
         by_frame.setdefault(r[2][frame_at], []).append(r)
+    by_frame = dict(sorted(by_frame.items()))  # units in name order, as with one topic per unit
     if len(by_frame) > 1:
         frames = ", ".join(repr(f) for f in by_frame)
         if name:
