@@ -255,3 +255,14 @@ def test_iiwa14_axes_at_zero_are_the_published_joint_twists():
     np.testing.assert_allclose(z[0], directions, atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(np.cross(c[0] - np.array(points), z[0]), axis=-1), 0.0, atol=1e-12)
     np.testing.assert_allclose(chain.flange_pose(np.zeros(7))[0, :3, 3], [0.0, 0.0, 1.306], atol=1e-12)
+
+
+def test_same_motion_and_description_do_not_depend_on_the_chains_origin():
+    from skincal.kinematics import get_robot
+
+    urdf = chain_from_urdf(robots_dir() / REGISTRY_URDFS["panda"])
+    assert urdf.same_motion(panda()) and panda().same_motion(urdf)
+    assert not urdf.same_motion(get_robot("xarm7"))  # 7 revolute joints too, other kinematics
+    assert (urdf.described_by, panda().described_by, get_robot("ur5").described_by) == (
+        "URDF", "modified DH", "standard DH",
+    )  # fmt: skip

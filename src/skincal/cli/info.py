@@ -60,7 +60,7 @@ def info(path: Path = typer.Argument(..., help="dataset file (.h5)")) -> None:
     head.add_row("file", shown(path))  # names and free text as stored, escaped (shown)
     if ds.description:
         head.add_row("description", shown(ds.description))
-    head.add_row("robot", f"{shown(robot.name)} ({robot.convention} DH, {robot.n_joints} joints)")
+    head.add_row("robot", f"{shown(robot.name)} ({robot.described_by}, {robot.n_joints} joints)")
     head.add_row("duration", f"{ds.duration:.3f} s (t = {js.t[0]:.3f} .. {js.t[-1]:.3f} s)")
     qdd = "with qdd" if js.qdd is not None else "no qdd"
     head.add_row("joint stream", f"{len(js.t)} samples, {_fmt_rate(_rate_hz(js.t))} Hz, {qdd}")

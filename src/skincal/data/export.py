@@ -105,20 +105,17 @@ _MAKER_NAMES = {
 def _is_preset(chain: SerialChain) -> bool:
     from skincal.kinematics.presets import PRESETS
 
-    if chain.name not in PRESETS or chain.dh is None:
-        return False
-    preset = PRESETS[chain.name]()
-    return chain.convention == preset.convention and np.array_equal(chain.dh, preset.dh)
+    return chain.name in PRESETS and chain.same_motion(PRESETS[chain.name]())
 
 
 def robot_names(chain: SerialChain) -> RobotNames:
     """Link, joint and flange frame names of ``chain`` (see the module docstring)."""
     n = chain.n_joints
     has_flange = not np.array_equal(chain.T_link_flange, np.eye(4))
-    if chain.convention == "urdf" or (chain.link_names is not None and chain.joint_names is not None):
+    if chain.source is not None or (chain.link_names is not None and chain.joint_names is not None):
         links = tuple(chain.link_name(i) for i in range(n + 1))
         joints = tuple(chain.joint_name(i) for i in range(1, n + 1))
-        return RobotNames(links, joints, f"{links[-1]}_flange" if has_flange else None, chain.convention == "urdf")
+        return RobotNames(links, joints, f"{links[-1]}_flange" if has_flange else None, chain.source is not None)
     if _is_preset(chain) and chain.name in _MAKER_NAMES:
         link, joint, base, flange = _MAKER_NAMES[chain.name]
         links = (base, *(link.format(i=i) for i in range(1, n + 1)))
@@ -591,7 +588,7 @@ def to_urdf(
                 "a complete URDF names its own links: --robot-links does not apply to -f urdf (use "
                 "-f xacro to add the units to your own robot description)"
             )
-    if chain.convention == "urdf" and chain.source is not None:
+    if chain.source is not None:
         return _user_urdf(result, frames, chain, frame)
     robot = ET.Element("robot", name=f"{result.robot}_skin")
     robot.append(_head_comment(result, frame))

@@ -249,6 +249,19 @@ class SerialChain:
         """``(n,)`` True where the joint is revolute."""
         return np.array([t == REVOLUTE for t in self.joint_type])
 
+    @property
+    def described_by(self) -> str:
+        """Where the chain came from, for people: ``"URDF"``, ``"modified DH"`` or ``"standard DH"``."""
+        return "URDF" if self.dh is None else f"{self.convention} DH"
+
+    def same_motion(self, other: SerialChain, atol: float = 1e-9) -> bool:
+        """True when ``other`` moves every link frame as this chain does (same joint count and types,
+        link frames equal to ``atol`` at a spread of configurations), whatever its name or origin."""
+        if other.n_joints != self.n_joints or other.joint_type != self.joint_type:
+            return False
+        q = np.linspace(-1.0, 1.0, 3 * self.n_joints).reshape(3, self.n_joints)
+        return bool(np.allclose(self.link_frames(q), other.link_frames(q), atol=atol))
+
     def link_name(self, link: int) -> str:
         """Name of link frame ``link`` (0 = base): the URDF link name, else ``link<i>``."""
         return self.link_names[link] if self.link_names is not None else f"link{link}"
