@@ -37,7 +37,7 @@ from skincal.kinematics.transforms import FloatArray
 
 STANDARD_GRAVITY = 9.80665
 """One ``g``, m/s^2: the one definition, converting datasheet units (mg, µg/√Hz) and accelerometers
-that report in g (:mod:`skincal.data.rosbag`); the simulated gravity is ``GRAVITY_BASE``."""
+that report in g (:mod:`skincal.data.ros`); the simulated gravity is ``GRAVITY_BASE``."""
 
 _MG = 1e-3 * STANDARD_GRAVITY
 _DPS = math.pi / 180.0
