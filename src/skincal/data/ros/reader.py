@@ -552,20 +552,20 @@ def read_bag(
         split = len(by_frame) > 1
         for frame, frows in by_frame.items():
             label = f"{topic} {frame}" if split else topic
-            unit = name or range_unit(topic, frame, {} if split else one_unit, set(imu))
-            if unit is None:
+            tof_unit = name or range_unit(topic, frame, {} if split else one_unit, set(imu))
+            if tof_unit is None:
                 if topic in tmap.range:
                     raise DatasetError(
                         printable(f"{source}: range topic {label}: cannot tell its unit; write {topic}=UNIT")
                     )
                 notes.append(printable(f"{label}: skipped (cannot tell which unit it belongs to; give {topic}=UNIT)"))
                 continue
-            if unit not in imu:
+            if tof_unit not in imu:
                 raise DatasetError(
-                    printable(f"{source}: range topic {label} maps to unit '{unit}', which has no IMU topic")
+                    printable(f"{source}: range topic {label} maps to unit '{tof_unit}', which has no IMU topic")
                 )
-            if unit in tof:
-                raise DatasetError(printable(f"{source}: range topic {label} and another both map to unit '{unit}'"))
+            if tof_unit in tof:
+                raise DatasetError(printable(f"{source}: range topic {label} and another map to unit '{tof_unit}'"))
             t_ns = _stamps([r[:2] for r in frows], label, notes)
             _refuse_interleaved(label, t_ns, None, source)
             vals = np.array([r[2][:3] for r in frows], dtype=float)
@@ -574,8 +574,8 @@ def read_bag(
             no_target = ~((r >= lo) & (r <= hi))
             if np.any(no_target):
                 notes.append(f"{label}: {int(np.sum(no_target))} reading(s) out of range (no target) -> NaN")
-            tof[unit] = TofStream(t=to_s(t_ns), range=np.where(no_target, np.nan, r))
-            range_units[label] = unit
+            tof[tof_unit] = TofStream(t=to_s(t_ns), range=np.where(no_target, np.nan, r))
+            range_units[label] = tof_unit
 
     ds = Dataset(
         robot=chain,
