@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from skincal.errors import ConfigError
+from skincal.kinematics.inertia import LinkInertial
 from skincal.kinematics.transforms import FloatArray, modified_dh, skew, standard_dh
 
 GRAVITY_BASE = np.array([0.0, 0.0, -9.81])
@@ -101,6 +102,13 @@ class SerialChain:
         convention: where the chain came from: ``"modified"``/``"standard"`` DH, ``"urdf"``.
         dh: ``(n, 4)`` rows ``[theta_offset, d, a, alpha]`` (rad, m) of a DH chain, else ``None``.
         source: the URDF text of a URDF chain (kept so exports can extend the user's own file).
+        inertials: ``n + 1`` link inertials (:class:`~skincal.kinematics.inertia.LinkInertial`, the
+            base first) in the link frames, ``None`` for a link without one, or ``None`` when the
+            chain has none (a DH chain; a URDF without ``<inertial>``). A URDF chain's come from its
+            ``<inertial>`` elements (:mod:`skincal.kinematics.urdf`). Used to build the simulator's
+            model in memory (:mod:`skincal.sim.mujoco_model`). The dataset file does not store them
+            (a chain read from a dataset has none; a URDF chain's can be rebuilt from its ``source``
+            with ``chain_from_urdf(text=...)``), and calibration does not use them.
     """
 
     name: str
@@ -119,6 +127,7 @@ class SerialChain:
     convention: str = "urdf"
     dh: FloatArray | None = None
     source: str | None = field(default=None, repr=False)
+    inertials: tuple[LinkInertial | None, ...] | None = field(default=None, repr=False, compare=False)
     _terms: FloatArray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -165,6 +174,11 @@ class SerialChain:
             dh = np.array(self.dh, dtype=float)
             dh.setflags(write=False)
             object.__setattr__(self, "dh", dh)
+        if self.inertials is not None:
+            inertials = tuple(self.inertials)
+            if len(inertials) != n + 1 or not all(li is None or isinstance(li, LinkInertial) for li in inertials):
+                raise ConfigError(f"robot '{self.name}': inertials must be {n + 1} LinkInertial or None (base first)")
+            object.__setattr__(self, "inertials", inertials)
         object.__setattr__(self, "_terms", self._joint_terms())
 
     @classmethod

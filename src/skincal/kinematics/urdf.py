@@ -15,6 +15,16 @@ single leaf of a serial arm). Along it:
 * ``<limit>`` gives position (rad or m), velocity and effort limits; a chain whose joints do not all
   state a velocity (or effort) has none of that kind. ``mimic``, ``floating`` and ``planar`` joints
   in the chain are refused: they are not independent serial joints.
+* ``<inertial>``: link frame ``i`` (and the base, frame {0}) is one rigid body made of its own URDF
+  link and every link hanging below it by ``fixed`` joints only (the folded links up to the next
+  moving joint or the tip, and fixed side branches such as sensor frames or rigid fingers; links
+  below a joint that is not in the chain are not covered). Their ``<inertial>`` elements (mass,
+  CoM ``origin``, inertia about the CoM in the origin's axes) are combined in the link frame
+  (:func:`skincal.kinematics.inertia.combine`: parallel-axis theorem, tensors rotated into the link
+  frame) into ``SerialChain.inertials``. A body with no mass (no ``<inertial>``, or mass 0) has
+  ``None``; so has one with an inertial that is not physical (negative or non-finite mass, an
+  inertia that is not positive semi-definite or breaks the triangle inequality): such URDFs exist
+  and their kinematics are still good, the simulator gives those bodies capsule masses instead.
 
 Every failure is one :class:`~skincal.errors.ConfigError` line naming the file.
 """
@@ -28,6 +38,7 @@ import numpy as np
 
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import PRISMATIC, REVOLUTE, SerialChain
+from skincal.kinematics.inertia import LinkInertial, combine
 
 _MOVING = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
 MAX_URDF_BYTES = 32 * 1024 * 1024
@@ -68,6 +79,48 @@ def read_urdf_text(path: str | Path) -> str:
         raise ConfigError(f"{path}: cannot read the URDF ({exc.strerror or exc})") from None
     except UnicodeDecodeError:
         raise ConfigError(f"{path}: not UTF-8 text") from None
+
+
+def _link_inertial(link) -> LinkInertial | None:  # link: yourdfpy.Link
+    """A URDF link's ``<inertial>`` in the link's frame; ``None`` without one or with mass 0.
+    Raises :class:`ConfigError` for an inertial that is not physical."""
+    inertial = link.inertial
+    if inertial is None or inertial.mass is None or float(inertial.mass) == 0.0:
+        return None
+    origin = np.eye(4) if inertial.origin is None else np.asarray(inertial.origin, dtype=float)
+    tensor = np.zeros((3, 3)) if inertial.inertia is None else np.asarray(inertial.inertia, dtype=float)
+    R = origin[:3, :3]
+    return LinkInertial.from_tensor(float(inertial.mass), origin[:3, 3], R @ tensor @ R.T)
+
+
+def _rigid_body(urdf_links: dict, joints: dict, children: dict[str, list[str]], root: str) -> LinkInertial | None:
+    """The inertial, in ``root``'s frame, of ``root`` and every link below it by fixed joints only."""
+    parts: list[LinkInertial] = []
+    poses: list[np.ndarray] = []
+    stack, seen = [(root, np.eye(4))], {root}
+    while stack:
+        name, T = stack.pop()
+        own = _link_inertial(urdf_links[name])
+        if own is not None:
+            parts.append(own)
+            poses.append(T)
+        for child in children[name]:
+            j = joints[child]
+            if j.type == "fixed" and child not in seen:  # (a malformed URDF may loop)
+                seen.add(child)
+                stack.append((child, T @ (np.eye(4) if j.origin is None else np.asarray(j.origin, dtype=float))))
+    return combine(parts, poses)
+
+
+def _inertials(urdf_links: dict, joints: dict, children: dict[str, list[str]], frames: list[str]):
+    """``SerialChain.inertials`` of the link frames ``frames`` (URDF link names, the base first)."""
+    bodies: list[LinkInertial | None] = []
+    for frame in frames:
+        try:
+            bodies.append(_rigid_body(urdf_links, joints, children, frame))
+        except ConfigError:  # not physical: the body gets capsule masses (module docstring)
+            bodies.append(None)
+    return None if all(b is None for b in bodies) else tuple(bodies)
 
 
 def chain_from_urdf(
@@ -176,6 +229,7 @@ def chain_from_urdf(
             link_names=(base_link, *link_names),
             convention="urdf",
             source=text,
+            inertials=_inertials({link.name: link for link in robot.links}, joints, children, [base_link, *link_names]),
         )
     except ConfigError as exc:
         raise ConfigError(f"{source}: {exc}") from None

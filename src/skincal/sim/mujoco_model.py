@@ -21,9 +21,11 @@ accelerometer: ``f = R_base_su^T (a - g)``, +9.81 m/s^2 along "up" at rest), ``s
 unit's own body, m; -1 when nothing is hit). All geoms have ``contype = conaffinity = 0``: no
 contacts are simulated (the obstacles of :mod:`skincal.sim.scene` are seen by the range sensors only).
 
-Masses: for the Panda the link inertials of Franka's ``franka_description`` (see
-:data:`PANDA_INERTIALS`), otherwise MuJoCo computes them from the link capsules at
-:data:`DEFAULT_LINK_DENSITY`. ``mujoco`` is optional: it is imported only when a model is compiled.
+Masses: a chain's own link inertials when it has them (``SerialChain.inertials``: a URDF's
+``<inertial>`` elements, the links folded by fixed joints combined into their link frame), else for
+the Panda the link inertials of Franka's ``franka_description`` (see :data:`PANDA_INERTIALS`);
+a body with none gets MuJoCo's inertia of its link capsules at :data:`DEFAULT_LINK_DENSITY`.
+``mujoco`` is optional: it is imported only when a model is compiled.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ import numpy as np
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
 from skincal.kinematics.geometry import DEFAULT_LINK_RADIUS, link_capsules
+from skincal.kinematics.inertia import LinkInertial
 from skincal.kinematics.presets import panda
 from skincal.kinematics.transforms import FloatArray, quat_wxyz_from_matrix
 from skincal.skin.pose import SkinUnitPose
@@ -58,21 +61,6 @@ TIMESTEP = 0.001
 """Physics time step, s (1 kHz, the Panda's control rate)."""
 
 _MISSING_MUJOCO = "MuJoCo is not installed: pip install 'skincal[mujoco]'"
-
-
-@dataclass(frozen=True)
-class LinkInertial:
-    """Rigid-body inertia of one link, in its link frame (DH frame {i}).
-
-    Attributes:
-        mass: kg.
-        com: ``(3,)`` centre of mass in the link frame, m.
-        inertia: ``(6,)`` ``[Ixx, Iyy, Izz, Ixy, Ixz, Iyz]`` about the CoM, link-frame axes, kg m^2.
-    """
-
-    mass: float
-    com: FloatArray
-    inertia: FloatArray
 
 
 def _li(mass: float, com: Sequence[float], inertia: Sequence[float]) -> LinkInertial:
@@ -114,8 +102,12 @@ def is_panda(chain: SerialChain) -> bool:
     return bool(np.allclose(chain.link_frames(q), ref.link_frames(q), atol=1e-9))
 
 
-def default_inertials(chain: SerialChain) -> list[LinkInertial] | None:
-    """Franka's published inertials for the Panda, else ``None`` (MuJoCo derives them from the capsules)."""
+def default_inertials(chain: SerialChain) -> list[LinkInertial | None] | None:
+    """Inertials of links ``1..n``: the chain's own (``SerialChain.inertials``, e.g. a URDF's; an
+    entry is ``None`` for a link without one), else Franka's published ones for the Panda, else
+    ``None`` (MuJoCo derives every link's from its capsules)."""
+    if chain.inertials is not None:
+        return list(chain.inertials[1:])
     return list(PANDA_INERTIALS) if is_panda(chain) else None
 
 
@@ -159,6 +151,12 @@ def _body_offset(chain: SerialChain, i: int) -> tuple[FloatArray, FloatArray, Fl
     return AB[:3, 3], quat_wxyz_from_matrix(AB[:3, :3]), R_B.T @ u, -R_B.T @ p_B
 
 
+def _add_inertial(body: ET.Element, inertial: LinkInertial | None) -> None:
+    if inertial is not None:
+        attrs = {"pos": mjcf_floats(inertial.com), "mass": mjcf_floats(inertial.mass)}
+        ET.SubElement(body, "inertial", attrs | {"fullinertia": mjcf_floats(inertial.inertia)})
+
+
 def _add_capsules(body: ET.Element, chain: SerialChain, link: int, radius: float | FloatArray, density: float) -> None:
     for k, cap in enumerate(c for c in link_capsules(chain, radius) if c.link == link):
         attrs = {
@@ -197,7 +195,7 @@ def build_mjcf(
     *,
     scene: Scene | None = None,
     board_geoms: bool = True,
-    inertials: Sequence[LinkInertial] | None = None,
+    inertials: Sequence[LinkInertial | None] | None = None,
     link_radius: float | FloatArray = DEFAULT_LINK_RADIUS,
     density: float = DEFAULT_LINK_DENSITY,
     velocity_gain: float | Sequence[float] | None = None,
@@ -212,8 +210,11 @@ def build_mjcf(
         placements: unit name -> :class:`SkinUnitPose` (pose in link frame ``pose.link``).
         scene: obstacles (:class:`skincal.sim.scene.Scene`), added as mocap bodies.
         board_geoms: add a 33 x 36 x 5 mm massless, non-colliding box per unit (visual only).
-        inertials: ``n`` link inertials in the link frames; default :func:`default_inertials`
-            (Panda: Franka's values; others: MuJoCo's inertia of the solid capsules at ``density``).
+        inertials: ``n`` inertials of links ``1..n`` in the link frames, ``None`` entries for links
+            whose capsules give theirs; default :func:`default_inertials` (the chain's own, e.g. a
+            URDF's; Panda: Franka's values; others: MuJoCo's inertia of the solid capsules at
+            ``density``). The static base body ``link0`` takes the chain's base inertial
+            (``chain.inertials[0]``) when it has one, else its capsules'.
         link_radius: capsule radius (m), one or ``(n + 1,)``.
         density: capsule density for links without explicit inertials, kg/m^3.
         velocity_gain: when given, one MuJoCo ``velocity`` actuator per joint with this gain
@@ -241,6 +242,7 @@ def build_mjcf(
     ET.SubElement(root, "option", {"timestep": repr(TIMESTEP), "gravity": mjcf_floats(g), "integrator": "implicitfast"})
     world = ET.SubElement(root, "worldbody")
     parent = ET.SubElement(world, "body", {"name": body_name(0)})
+    _add_inertial(parent, None if chain.inertials is None else chain.inertials[0])
     _add_capsules(parent, chain, 0, link_radius, density)
     bodies = [parent]
     for i in range(1, n + 1):
@@ -260,12 +262,7 @@ def build_mjcf(
             jattrs["range"] = mjcf_floats([chain.joint_lower[i - 1], chain.joint_upper[i - 1]])
         ET.SubElement(body, "joint", jattrs)
         if inertials is not None:
-            li = inertials[i - 1]
-            ET.SubElement(
-                body,
-                "inertial",
-                {"pos": mjcf_floats(li.com), "mass": mjcf_floats(li.mass), "fullinertia": mjcf_floats(li.inertia)},
-            )
+            _add_inertial(body, inertials[i - 1])
         _add_capsules(body, chain, i, link_radius, density)
         bodies.append(body)
         parent = body
