@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 
 from skincal.cli import main
 from skincal.data.hdf5 import write_dataset
+from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.names import name_problem
 from skincal.data.result import CalibrationResult, UnitResult, write_result
 from skincal.kinematics import get_robot
@@ -53,7 +54,7 @@ def hostile_dataset():
 
 def _truth_result(ds) -> CalibrationResult:
     units = {
-        name: UnitResult(pose, extras={"accel_bias_mps2": np.asarray(ds.truth_sensor[name]["accel_bias"])})
+        name: UnitResult(pose, imu=ImuCalibration(accel_bias_mps2=np.asarray(ds.truth_sensor[name]["accel_bias"])))
         for name, pose in ds.truth.items()
     }
     return CalibrationResult("truth", "panda", "", 0.0, units)

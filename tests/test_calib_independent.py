@@ -336,7 +336,8 @@ def test_c_time_offset_0p4s(cases):
     for name, ut in case.truth.units.items():
         if name not in result.units:
             continue
-        found = result.units[name].extras.get("time_offset_s")
+        imu = result.units[name].imu
+        found = None if imu is None else imu.time_offset_s
         want = ut.mean_time_offset(case.truth.duration_s)
         if found is None or not abs(float(found) - want) <= 1e-3:
             wrong.append(f"{name}: time_offset_s {found} vs true {want:.4f}")

@@ -67,8 +67,8 @@ def test_noise_free_recovery_without_given_links(robot):
     assert ev["mean_position_error_mm"] < 0.01
     assert ev["mean_rotation_error_deg"] < 0.001
     for u in result.units.values():
-        assert abs(u.extras["time_offset_s"]) < 1e-5
-        np.testing.assert_allclose(u.extras["accel_bias_mps2"], 0.0, atol=1e-4)
+        assert abs(u.imu.time_offset_s) < 1e-5
+        np.testing.assert_allclose(u.imu.accel_bias_mps2, 0.0, atol=1e-4)
 
 
 def test_realistic_sensor_errors_are_estimated(realistic_panda):
@@ -83,16 +83,16 @@ def test_realistic_sensor_errors_are_estimated(realistic_panda):
     assert ev["mean_rotation_error_deg"] < 0.01
     for name, unit in result.units.items():
         truth = ds.truth_sensor[name]
-        assert unit.extras["time_offset_s"] == pytest.approx(truth["time_offset_s"], abs=1e-4)
-        bias_err = unit.extras["accel_bias_mps2"] - truth["accel_bias"]
-        assert np.all(np.abs(bias_err) < 4 * unit.extras["accel_bias_std_mps2"] + 1e-3), bias_err
+        assert unit.imu.time_offset_s == pytest.approx(truth["time_offset_s"], abs=1e-4)
+        bias_err = unit.imu.accel_bias_mps2 - truth["accel_bias"]
+        assert np.all(np.abs(bias_err) < 4 * unit.imu.accel_bias_std_mps2 + 1e-3), bias_err
         assert np.all(np.abs(bias_err) < 0.005)  # the bias itself is up to ~0.8 m/s^2
         # The estimated symmetric matrix is the polar factor of diag(scale) @ (I + S).
         K = np.diag(truth["accel_scale"]) @ truth["accel_misalignment"]
         U, s, Vt = np.linalg.svd(K)
         P = U @ np.diag(s) @ U.T
-        err = unit.extras["accel_scale_misalignment"] - P
-        assert np.all(np.abs(err) < 4 * unit.extras["accel_scale_misalignment_std"] + 5e-4), err
+        err = unit.imu.accel_scale_misalignment - P
+        assert np.all(np.abs(err) < 4 * unit.imu.accel_scale_misalignment_std + 5e-4), err
         assert np.all(np.abs(err) < 0.01)
 
 
@@ -201,8 +201,8 @@ def test_covariance_calibration_monte_carlo():
         result = calibrate(ds, "mle")
         for name, unit in result.units.items():
             z_pos.extend((unit.pose.p_link_su - ds.truth[name].p_link_su) / unit.position_std_m)
-            tau_err = unit.extras["time_offset_s"] - ds.truth_sensor[name]["time_offset_s"]
-            z_tau.append(tau_err / unit.extras["time_offset_std_s"])
+            tau_err = unit.imu.time_offset_s - ds.truth_sensor[name]["time_offset_s"]
+            z_tau.append(tau_err / unit.imu.time_offset_std_s)
     for z in (z_pos, z_tau):
         rms = float(np.sqrt(np.mean(np.square(z))))
         assert 1 / 1.5 < rms < 1.5, rms

@@ -62,7 +62,7 @@ def test_a_fixed_time_offset_is_found(realistic, shift):
     assert ev["mean_position_error_mm"] <= TARGET_MM
     for name, unit in result.units.items():
         expected = shift + ds.truth_sensor[name]["time_offset_s"]  # + the 15 ms latency
-        assert unit.extras["time_offset_s"] == pytest.approx(expected, abs=1e-3), name
+        assert unit.imu.time_offset_s == pytest.approx(expected, abs=1e-3), name
         assert unit.extras["time_offset_coarse_s"] == pytest.approx(expected, abs=0.01), name
         assert unit.pose.link == ds.truth[name].link
 
@@ -76,7 +76,7 @@ def test_wifi_like_clock_offsets_drawn_per_unit_are_found():
     assert max(abs(o) for o in offsets) > 0.1  # the draw really is far from zero
     result = calibrate(ds, "mle")
     for name, unit in result.units.items():
-        assert unit.extras["time_offset_s"] == pytest.approx(ds.truth_sensor[name]["time_offset_s"], abs=1e-3), name
+        assert unit.imu.time_offset_s == pytest.approx(ds.truth_sensor[name]["time_offset_s"], abs=1e-3), name
     assert evaluate(result, ds)["mean_position_error_mm"] <= TARGET_MM
 
 
@@ -93,22 +93,22 @@ def test_a_clock_drift_is_estimated_and_reported(realistic):
     result = calibrate(_with_stamps(ds, fast), "mle")
     assert evaluate(result, ds)["mean_position_error_mm"] <= TARGET_MM
     for name, unit in result.units.items():
-        assert unit.extras["clock_drift_ppm"] == pytest.approx(100.0, abs=20.0), name
-        assert unit.extras["clock_drift_std_ppm"] < 5.0
+        assert unit.imu.clock_drift_ppm == pytest.approx(100.0, abs=20.0), name
+        assert unit.imu.clock_drift_std_ppm < 5.0
         # found and corrected: a note, not a warning
         assert any(w.startswith("clock drifts") for w in unit.extras["notes"]), unit.extras.get("notes")
         assert not any("clock drifts" in w for w in unit.warnings)
         # the offset is given at time_reference_s: away from the stamps' middle the drift adds to it
         t = ds.imu[name].t
         mid = 0.5 * (t[0] + t[-1])
-        expected = ds.truth_sensor[name]["time_offset_s"] + 100e-6 * (unit.extras["time_reference_s"] - mid)
-        assert unit.extras["time_offset_s"] == pytest.approx(expected, abs=1e-3)
+        expected = ds.truth_sensor[name]["time_offset_s"] + 100e-6 * (unit.imu.time_reference_s - mid)
+        assert unit.imu.time_offset_s == pytest.approx(expected, abs=1e-3)
 
 
 def test_no_drift_no_drift_warning(realistic):
     ds, result = realistic
     for unit in result.units.values():
-        assert abs(unit.extras["clock_drift_ppm"]) < 4 * unit.extras["clock_drift_std_ppm"] + 1.0
+        assert abs(unit.imu.clock_drift_ppm) < 4 * unit.imu.clock_drift_std_ppm + 1.0
         assert not any("clock drifts" in w for w in unit.warnings)
 
 
@@ -117,12 +117,12 @@ def test_gyroscope_bias_is_recovered_within_its_std(realistic):
     ds, result = realistic
     for name, unit in result.units.items():
         truth = np.asarray(ds.truth_sensor[name]["gyro_bias"])
-        est, std = unit.extras["gyro_bias_rps"], unit.extras["gyro_bias_std_rps"]
+        est, std = unit.imu.gyro_bias_rps, unit.imu.gyro_bias_std_rps
         assert np.all(np.abs(est - truth) <= 3 * std), (name, est - truth, std)
         assert np.all(std < 0.05 * np.abs(truth).max())  # the bias (10 deg/s std) is well determined
     # and the time offset too (15 ms latency of the realistic preset)
     for name, unit in result.units.items():
-        assert unit.extras["time_offset_s"] == pytest.approx(ds.truth_sensor[name]["time_offset_s"], abs=1e-3)
+        assert unit.imu.time_offset_s == pytest.approx(ds.truth_sensor[name]["time_offset_s"], abs=1e-3)
 
 
 # ---------------------------------------------------------------------------- (d) a bumped rest
@@ -270,4 +270,4 @@ def test_velocities_a_driver_differentiates_from_encoder_counts():
     assert evaluate(result, ds)["mean_position_error_mm"] <= 0.3
     for unit in result.units.values():
         assert unit.observable
-        assert unit.extras["time_offset_s"] == pytest.approx(0.015 - 0.004, abs=1.5e-3)
+        assert unit.imu.time_offset_s == pytest.approx(0.015 - 0.004, abs=1.5e-3)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from skincal.data import CalibrationResult, UnitResult, read_result, result_to_dict, sha256_file, write_result
+from skincal.data.imu_calibration import IMU_KEYS, IMU_SHAPES, ImuCalibration
 from skincal.errors import DatasetError
 from skincal.kinematics import rotation_angle
 from skincal.skin.pose import SkinUnitPose
@@ -41,13 +42,12 @@ def make_result() -> CalibrationResult:
                 warnings=(),
                 extras={
                     "link_confidence": 0.987654321,
-                    "accel_bias_mps2": np.array([0.01, -0.02, np.nan]),
                     "accel_scale": np.array([1.001, 0.999, 1.0]),
-                    "time_offset_s": np.float64(0.0042),
                     "dh6": su1.dh6(),
                     "iterations": np.int64(17),
                     "note": "converged",
                 },
+                imu=ImuCalibration(accel_bias_mps2=np.array([0.01, -0.02, np.nan]), time_offset_s=np.float64(0.0042)),
             ),
             "base_unit": UnitResult(
                 pose=su0,
@@ -93,6 +93,11 @@ def test_round_trip(tmp_path: Path) -> None:
         for key in ("position_std_m", "rotation_std_deg"):
             a, b = getattr(unit, key), getattr(got, key)
             assert (a is None and b is None) or np.array_equal(a, b)
+        assert (got.imu is None) == (unit.imu is None)
+        if unit.imu is not None:
+            for key in IMU_KEYS:
+                a, b = getattr(unit.imu, key), getattr(got.imu, key)
+                assert (a is None and b is None) or np.array_equal(a, b, equal_nan=True), key
         assert set(got.extras) == set(unit.extras)
         for key, value in unit.extras.items():
             if isinstance(value, np.ndarray):
@@ -118,6 +123,149 @@ def test_json_layout(tmp_path: Path) -> None:
     q = np.array(su1["quaternion_wxyz"])
     assert abs(np.linalg.norm(q) - 1) < 1e-15 and q[0] >= 0
     assert "NaN" not in path.read_text()
+
+
+# A result written by mle before the IMU calibration had a type (su1: the writer's own output for a
+# simulated Panda unit, ``skincal calibrate`` of the realistic IMU model; su2: the same layout with the
+# fields mle writes as null when it does not estimate them, time offset and clock drift).
+OLD_MLE_RESULT = """
+{"format": "skincal-result", "version": 1, "method": "mle", "robot": "panda", "dataset_sha256": "",
+ "runtime_s": 0.6772303540001303, "seed": 0,
+ "units": {
+  "su1": {
+    "link": 2,
+    "position_m": [0.03574409215337423, -0.009045915070273748, -0.048428459244416945],
+    "quaternion_wxyz": [0.12428259566577707, -0.871745067774284, 0.3765341329989869, -0.28781316841396815],
+    "observable": true,
+    "position_std_m": [0.00016433496345790366, 0.00012566182289675996, 0.00020808519536212624],
+    "rotation_std_deg": [0.005817467408037891, 0.005183746150113648, 0.006258376627342006],
+    "warnings": [],
+    "link_confidence": 0.9756406632117663,
+    "link_residual_mps2": {},
+    "accel_bias_mps2": [-0.040822642844165966, -0.25821553598015123, 0.12018947294937052],
+    "accel_scale_misalignment": [
+        [0.9778518157132822, 0.008302305405266596, 0.0032600073962667907],
+        [0.009663885436694391, 1.0008967884635795, -0.004939743502833981],
+        [-0.005137201590618791, 0.005651135673563817, 0.9982850061405634]
+    ],
+    "accel_bias_std_mps2": [0.0011489921074755896, 0.0011487362364387447, 0.0011486316634818899],
+    "time_offset_s": 0.014985033764840661,
+    "time_offset_std_s": 2.8794695104459353e-05,
+    "time_offset_coarse_s": 0.014971247729732455,
+    "time_reference_s": 0.0,
+    "clock_drift_ppm": 0.10999763787414828,
+    "clock_drift_std_ppm": 0.23424495063410414,
+    "residual_std_mps2": 0.030974887830805004,
+    "residual_correlation": 1.0,
+    "n_static_runs": 48,
+    "n_static_dropped": 0,
+    "n_moving_samples": 12239,
+    "iterations": 1,
+    "scale_estimated": true,
+    "rest_source": "segments",
+    "gyro_bias_rps": [-0.35313925257692313, 0.06183311748045054, -0.18024025271416344],
+    "gyro_bias_std_rps": [3.055934675878544e-05, 3.057183634032596e-05, 3.056961869165549e-05],
+    "gyro_residual_std_rps": 0.00431295058398401,
+    "gravity_mps2": 9.809650530547678,
+    "gravity_std_mps2": 0.01957381371176707,
+    "accel_bias_drift_mps3": [3.1224160263599105e-06, 2.1177919227972295e-06, -5.419828382194456e-06],
+    "accel_bias_drift_std_mps3": [3.498745204806452e-06, 3.4989172641159012e-06, 3.499254627133855e-06],
+    "accel_scale_misalignment_std": [
+        [0.003560706583002541, 0.0031666761764162954, 0.005867446998556289],
+        [0.0030385221552240386, 0.0037925293122422236, 0.005978549902661455],
+        [0.0031164807233617768, 0.0033082672519981456, 0.006440247006027855]
+    ],
+    "accel_scale": [0.9778518157132822, 1.0008967884635795, 0.9982850061405634],
+    "accel_misalignment_sym": [
+        [0.0, 0.008983095420980493, -0.0009385970971760001],
+        [0.008983095420980493, 0.0, 0.0003556960853649182],
+        [-0.0009385970971760001, 0.0003556960853649182, 0.0]
+    ],
+    "link_name": "link2"
+  },
+  "su2": {
+    "link": 3,
+    "position_m": [0.03574409215337423, -0.009045915070273748, -0.048428459244416945],
+    "quaternion_wxyz": [1.0, 0.0, 0.0, 0.0],
+    "observable": true,
+    "position_std_m": [0.00016433496345790366, 0.00012566182289675996, 0.00020808519536212624],
+    "rotation_std_deg": [0.005817467408037891, 0.005183746150113648, 0.006258376627342006],
+    "warnings": ["only 2 distinct static orientation(s)"],
+    "accel_bias_mps2": [0.01, -0.02, 0.03],
+    "accel_scale_misalignment": [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+    "accel_bias_std_mps2": [0.001, 0.001, 0.002],
+    "time_offset_s": 0.0,
+    "time_offset_std_s": null,
+    "time_offset_coarse_s": null,
+    "time_reference_s": 0.0,
+    "clock_drift_ppm": null,
+    "clock_drift_std_ppm": null,
+    "residual_std_mps2": 0.03,
+    "scale_estimated": false,
+    "link_name": "link3"
+  }}}
+"""
+
+
+def test_a_result_written_before_the_typed_imu_calibration_reads_identically(tmp_path: Path) -> None:
+    """Old code: ``UnitResult`` has no ``imu``; the IMU fields sat in ``extras`` under the same keys."""
+    path = tmp_path / "old.json"
+    path.write_text(OLD_MLE_RESULT)
+    doc = json.loads(OLD_MLE_RESULT)
+    result = read_result(path)
+    for name, entry in doc["units"].items():
+        unit = result.units[name]
+        assert isinstance(unit.imu, ImuCalibration)
+        assert not set(unit.extras) & set(IMU_KEYS)  # read into the typed field, not left in extras
+        for key in IMU_KEYS:
+            value = getattr(unit.imu, key)
+            if entry.get(key) is None:
+                assert value is None, (name, key)
+            elif isinstance(value, float):
+                assert type(value) is float and value == entry[key], (name, key)
+            else:
+                assert value.dtype == float and np.array_equal(value, np.array(entry[key])), (name, key)
+        if "accel_scale" in entry:  # derived summaries of A stay extras
+            assert unit.extras["accel_scale"].tolist() == entry["accel_scale"]
+        assert unit.extras["time_offset_coarse_s"] == entry["time_offset_coarse_s"]
+    su1, su2 = result.units["su1"].imu, result.units["su2"].imu
+    assert su1.clock_drift_ppm == 0.10999763787414828 and su1.gravity_mps2 == 9.809650530547678
+    assert su1.accel_scale_misalignment.shape == (3, 3) and su1.accel_scale_misalignment[1, 0] == 0.009663885436694391
+    assert su2.clock_drift_ppm is None and su2.gyro_bias_rps is None and su2.accel_scale_misalignment_std is None
+    # Written again: the same document (the same keys, the same numbers; the quaternion's last bit may
+    # move through the rotation matrix, as it always did).
+    write_result(result, tmp_path / "again.json")
+    again = json.loads((tmp_path / "again.json").read_text())
+    assert set(again) == set(doc) and {k: again[k] for k in doc if k != "units"} == {
+        k: doc[k] for k in doc if k != "units"
+    }
+    for name, entry in doc["units"].items():
+        got = again["units"][name]
+        assert set(got) == set(entry), name
+        assert {k: v for k, v in got.items() if k != "quaternion_wxyz"} == {
+            k: v for k, v in entry.items() if k != "quaternion_wxyz"
+        }
+        np.testing.assert_allclose(got["quaternion_wxyz"], entry["quaternion_wxyz"], rtol=0, atol=1e-15)
+
+
+def test_imu_calibration_round_trip_keeps_every_field(tmp_path: Path) -> None:
+    rng = np.random.default_rng(5)
+    values = {}
+    for key in IMU_KEYS:
+        shape = IMU_SHAPES[key]
+        values[key] = float(rng.normal()) if shape == () else rng.normal(size=shape)
+    values["accel_bias_mps2"][1] = np.nan  # undetermined: null in the file, NaN again on read
+    imu = ImuCalibration(**values)
+    result = make_result()
+    units = {**result.units, "su1": UnitResult(result.units["su1"].pose, imu=imu)}
+    write_result(CalibrationResult("mle", "panda", "", 0.0, units), tmp_path / "r.json")
+    back = read_result(tmp_path / "r.json").units["su1"]
+    assert back.extras == {}
+    for key in IMU_KEYS:
+        np.testing.assert_array_equal(getattr(back.imu, key), getattr(imu, key), err_msg=key)
+    # A unit without one: no IMU field written, None read.
+    assert read_result(tmp_path / "r.json").units["base_unit"].imu is None
+    assert not set(json.loads((tmp_path / "r.json").read_text())["units"]["base_unit"]) & set(IMU_KEYS)
 
 
 def test_sha256_file(tmp_path: Path) -> None:

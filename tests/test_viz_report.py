@@ -16,6 +16,7 @@ from skincal.calib.metrics import evaluate
 from skincal.calib.preprocess import JointInterpolator
 from skincal.cli import main
 from skincal.data.hdf5 import write_dataset
+from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.result import CalibrationResult, UnitResult, write_result
 from skincal.kinematics import get_robot
 from skincal.protocol import build_trajectory, get_protocol
@@ -61,16 +62,16 @@ def page(calibrated) -> str:
 def _truth_result(ds, *, sensor: bool, shift_m: float = 0.0) -> CalibrationResult:
     units = {}
     for name, pose in ds.truth.items():
-        extras = {}
+        imu = None
         if sensor:
             s = ds.truth_sensor[name]
-            extras = {
-                "accel_bias_mps2": np.asarray(s["accel_bias"]),
-                "accel_scale_misalignment": np.asarray(s["accel_scale"])[:, None] * np.asarray(s["accel_misalignment"]),
-                "time_offset_s": float(s["time_offset_s"]),
-            }
+            imu = ImuCalibration(
+                accel_bias_mps2=np.asarray(s["accel_bias"]),
+                accel_scale_misalignment=np.asarray(s["accel_scale"])[:, None] * np.asarray(s["accel_misalignment"]),
+                time_offset_s=float(s["time_offset_s"]),
+            )
         moved = SkinUnitPose(pose.link, pose.R_link_su, pose.p_link_su + np.array([shift_m, 0.0, 0.0]))
-        units[name] = UnitResult(moved, extras=extras)
+        units[name] = UnitResult(moved, imu=imu)
     return CalibrationResult("truth", "panda", "", 0.0, units)
 
 
@@ -121,7 +122,7 @@ def test_html_report_is_self_contained_and_shows_the_numbers(calibrated, page: s
     for n, u in result.units.items():
         assert f">{n}<" in page
         assert " ".join(f"{x:+.4f}" for x in u.pose.quaternion_wxyz) in page
-        assert f"{1e3 * u.extras['time_offset_s']:+.2f}" in page
+        assert f"{1e3 * u.imu.time_offset_s:+.2f}" in page
 
 
 def test_html_escapes_text_and_flags_a_different_dataset(calibrated):

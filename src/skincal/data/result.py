@@ -9,8 +9,12 @@ Example::
                        "rotation_std_deg": [0.01, 0.01, 0.02], "warnings": []}}}
 
 Poses are in link frame ``link`` (a URDF robot's link frame, or DH frame {link}; ``docs/interfaces.md``),
-named by ``link_name`` too; quaternions are (w, x, y, z). Fields beyond the
-contract (per unit, e.g. ``link_confidence``, ``accel_bias_mps2``, ``dh6``; at the top level, e.g.
+named by ``link_name`` too; quaternions are (w, x, y, z). The IMU calibration of a unit
+(``accel_bias_mps2``, ``accel_scale_misalignment``, ``time_offset_s``, ``clock_drift_ppm``,
+``gyro_bias_rps``, their std, ...: :data:`~skincal.data.imu_calibration.IMU_KEYS`) is written next to
+the contract fields from ``UnitResult.imu`` and read back into it (a unit with none of those fields
+gets ``imu = None``; a malformed one is refused). Other fields beyond the
+contract (per unit, e.g. ``link_confidence``, ``dh6``; at the top level, e.g.
 ``options``) are written next to the contract fields and read back into ``extras``. In extras,
 NumPy arrays become JSON lists (non-finite numbers become ``null``) and numeric lists come back as
 float64 arrays (``null`` -> NaN). Floats are written with full (round-trip) precision.
@@ -40,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from skincal.data.atomic import write_bytes_atomic
+from skincal.data.imu_calibration import IMU_KEYS, IMU_SHAPES, ImuCalibration, imu_to_fields
 from skincal.data.jsonio import load_json, regular_file
 from skincal.data.names import MAX_NAME_CHARS, name_problem
 from skincal.errors import ConfigError, DatasetError
@@ -71,7 +76,10 @@ class UnitResult:
             None; NaN in an undetermined component.
         warnings: human-readable notes (which part is unobservable and why, poor fit, ...).
         extras: further per-unit fields written next to the contract fields (numbers, strings,
-            lists, arrays, nested dicts), e.g. ``link_confidence``, ``accel_bias_mps2``, ``dh6``.
+            lists, arrays, nested dicts), e.g. ``link_confidence``, ``dh6``; not the fields of
+            ``imu`` (:data:`~skincal.data.imu_calibration.IMU_KEYS`).
+        imu: the unit's IMU calibration (bias, scale/misalignment, time offset, clock drift, ...),
+            or None where the method estimates none.
     """
 
     pose: SkinUnitPose
@@ -80,6 +88,7 @@ class UnitResult:
     rotation_std_deg: FloatArray | None = None
     warnings: tuple[str, ...] = ()
     extras: dict[str, Any] = field(default_factory=dict)
+    imu: ImuCalibration | None = None
 
     def __post_init__(self) -> None:
         for name in ("position_std_m", "rotation_std_deg"):
@@ -319,6 +328,32 @@ class _Checker:
         warnings = self.get(unit, "warnings", where)
         if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
             raise self.fail(f"{where}.warnings", f"must be a list of strings, got {_short(warnings)}")
+        self.imu(unit, where)
+
+    def imu(self, unit: dict, where: str) -> ImuCalibration | None:
+        """The :class:`ImuCalibration` of a unit entry, None when it has none of its fields: arrays are
+        lists of numbers (``null``: undetermined, NaN), numbers a finite number or ``null`` (not
+        estimated, None)."""
+        if not any(k in unit for k in IMU_KEYS):
+            return None
+        values: dict[str, Any] = {}
+        for key in IMU_KEYS:
+            value, shape = unit.get(key), IMU_SHAPES[key]
+            if value is None:
+                continue
+            if shape == ():
+                if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+                    raise self.fail(f"{where}.{key}", f"must be a finite number or null, got {_short(value)}")
+                values[key] = float(value)
+            elif len(shape) == 1:
+                values[key] = self.vector(value, shape[0], f"{where}.{key}", nulls=True)
+            else:
+                if not isinstance(value, list) or len(value) != shape[0]:
+                    problem = f"must be {shape[0]} rows of {shape[1]} numbers, got {_short(value)}"
+                    raise self.fail(f"{where}.{key}", problem)
+                rows = [self.vector(row, shape[1], f"{where}.{key}[{i}]", nulls=True) for i, row in enumerate(value)]
+                values[key] = np.array(rows)
+        return ImuCalibration(**values)
 
 
 # ---------------------------------------------------------------------- conversions
@@ -344,6 +379,11 @@ def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[
         clash = sorted(set(unit.extras) & set(_UNIT_KEYS))
         if clash:
             raise DatasetError(f"{source}: {where} extras may not redefine contract field(s) {', '.join(clash)}")
+        clash = sorted(set(unit.extras) & set(IMU_KEYS))
+        if clash:
+            raise DatasetError(
+                f"{source}: {where} extras may not hold {', '.join(clash)}: the IMU calibration goes in UnitResult.imu"
+            )
         entry = {
             "link": unit.pose.link,
             "position_m": _to_json(unit.pose.p_link_su, source, f"{where}.position_m"),
@@ -353,6 +393,8 @@ def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[
             "rotation_std_deg": _to_json(unit.rotation_std_deg, source, f"{where}.rotation_std_deg"),
             "warnings": list(unit.warnings),
         }
+        if unit.imu is not None:
+            entry.update(_to_json(imu_to_fields(unit.imu), source, where))
         entry.update(_to_json(unit.extras, source, f"{where}"))
         units[name] = entry
     failed = result.extras.get(FAILED_UNITS)
@@ -391,7 +433,8 @@ def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
             pose=pose,
             observable=entry["observable"],
             warnings=tuple(entry["warnings"]),
-            extras={k: _from_json(v) for k, v in entry.items() if k not in _UNIT_KEYS},
+            extras={k: _from_json(v) for k, v in entry.items() if k not in _UNIT_KEYS and k not in IMU_KEYS},
+            imu=_Checker(source).imu(entry, f"units.{name}"),
             **stds,
         )
     extras = {k: _from_json(v) for k, v in doc.items() if k not in _TOP_KEYS}

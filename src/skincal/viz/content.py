@@ -14,7 +14,7 @@ from skincal.data.dataset import Dataset
 from skincal.data.result import CalibrationResult, failed_units
 from skincal.errors import DatasetError
 from skincal.kinematics.transforms import FloatArray
-from skincal.viz.residuals import PLOT_POINTS, UnitResiduals, sensor_model, unit_activity, unit_residuals
+from skincal.viz.residuals import PLOT_POINTS, UnitResiduals, unit_activity, unit_residuals
 
 WORST_SHOWN = 10
 """Units whose residuals the HTML report plots: the worst by the report's key figure (:class:`Ranking`)."""
@@ -137,8 +137,8 @@ def collect(
     residuals = {u: traces[u] for u in ranking.worst(shown)}
     rows = []
     for name, unit in result.units.items():
-        ex = unit.extras
-        A, b, tau = sensor_model(unit)
+        imu = unit.imu
+        scale = imu is not None and unit.extras.get("scale_estimated", imu.accel_scale_misalignment is not None)
         rows.append(
             UnitRow(
                 name=name,
@@ -148,9 +148,9 @@ def collect(
                 observable=unit.observable,
                 position_std_m=unit.position_std_m,
                 rotation_std_deg=unit.rotation_std_deg,
-                bias_mps2=b if "accel_bias_mps2" in ex else None,
-                scale=np.diag(A).copy() if ex.get("scale_estimated", "accel_scale_misalignment" in ex) else None,
-                time_offset_s=tau if ex.get("time_offset_s") is not None else None,
+                bias_mps2=imu.bias if imu is not None and imu.accel_bias_mps2 is not None else None,
+                scale=np.diag(imu.scale_matrix).copy() if imu is not None and scale else None,
+                time_offset_s=imu.time_offset_s if imu is not None else None,
                 residual_rms_mps2=rms[name],
                 warnings=unit.warnings,
             )

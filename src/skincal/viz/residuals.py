@@ -1,15 +1,16 @@
 """Accelerometer residuals of a calibration result and the data coverage, for plots and reports.
 
-The model (the ``mle`` calibrator's, :mod:`skincal.calib.mle.solver`): the sample stamped ``t``
-measured the motion at ``t - tau`` (``tau`` = ``time_offset_s``), and
+The model is the one ``mle`` fits, evaluated by the same code (:mod:`skincal.calib.mle.model`): the
+sample stamped ``t`` measured the motion at ``s = t - tau - d (t - t_ref)``, and
 
-    f_pred = A R_link_su^T (u + K p_link_su) + b,
+    f_pred = A R_link_su^T (u(s) + K(s) p_link_su + k u_g(s)) + b + c (s - t_b),
 
-with ``u``, ``K`` the link signals of :func:`skincal.calib.mle.signals.link_signals` (``u`` =
-specific force of the link origin, ``K`` = angular-velocity terms, both in link frame),
-``A`` = ``accel_scale_misalignment`` ``(3, 3)`` (identity when absent) and ``b`` =
-``accel_bias_mps2`` ``(3,)`` m/s^2 (zero when absent). Residual ``e = f_meas - f_pred`` in the
-unit frame, m/s^2.
+with ``u``, ``K``, ``u_g`` the link signals of :func:`skincal.calib.mle.signals.link_signals` and the
+unit's :class:`~skincal.data.imu_calibration.ImuCalibration` (``UnitResult.imu``; what it does not
+give takes the neutral value: ``A`` identity, ``b``, ``c``, ``k``, ``tau``, ``d`` zero). Residual
+``e = f_meas - f_pred`` in the unit frame, m/s^2. (``mle`` measures the bias drift's time from its
+coarsely aligned stamps, here from ``s``: the two differ by the refined offset, a few ms, which moves
+the prediction by ``c`` times that, below 1e-6 m/s^2 for any drift it reports as plausible.)
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from skincal.calib.links import discover_link
+from skincal.calib.mle.model import calibrated_instants, predict_calibrated
 from skincal.calib.mle.signals import link_signals
 from skincal.calib.preprocess import JointInterpolator, unit_samples
 from skincal.data.dataset import Dataset
@@ -101,39 +103,23 @@ def envelope_indices(values: FloatArray, max_points: int = PLOT_POINTS) -> np.nd
     return idx[idx < m]
 
 
-def sensor_model(unit: UnitResult) -> tuple[FloatArray, FloatArray, float]:
-    """``(A (3, 3), b (3,) m/s^2, tau s)`` from a unit's extras, defaults where a method gave none."""
-    ex = unit.extras
-    A = np.asarray(ex.get("accel_scale_misalignment", np.eye(3)), dtype=float).reshape(3, 3)
-    b = np.asarray(ex.get("accel_bias_mps2", np.zeros(3)), dtype=float).reshape(3)
-    tau = ex.get("time_offset_s")
-    tau = float(tau) if tau is not None and np.isfinite(tau) else 0.0
-    if not np.all(np.isfinite(A)):
-        A = np.eye(3)
-    return A, np.nan_to_num(b), tau
-
-
 def unit_residuals(
     dataset: Dataset, name: str, unit: UnitResult, interpolator: JointInterpolator | None = None
 ) -> UnitResiduals:
     """Residuals of one unit (module docstring). Pass one ``interpolator`` for several units."""
-    A, b, tau = sensor_model(unit)
     if interpolator is None:
         interpolator = JointInterpolator(dataset.joints)
-    drift_ppm, t_ref = unit.extras.get("clock_drift_ppm"), unit.extras.get("time_reference_s")
-    if drift_ppm is not None and t_ref is not None and np.isfinite(drift_ppm):
-        # a drifting unit clock: the offset grows by drift (t - t_ref) from time_reference_s
+    if unit.imu is not None:  # the stamps put on the motion's clock (offset and drift)
         imu = dataset.imu[name]
-        stamps = imu.t - 1e-6 * float(drift_ppm) * (imu.t - float(t_ref))
-        dataset = replace(dataset, imu={**dataset.imu, name: replace(imu, t=stamps)})
-    s = unit_samples(dataset, name, time_offset_s=tau, interpolator=interpolator)
+        dataset = replace(dataset, imu={**dataset.imu, name: replace(imu, t=calibrated_instants(unit.imu, imu.t))})
+    s = unit_samples(dataset, name, interpolator=interpolator)
     pose, gravity = unit.pose, np.asarray(dataset.gravity, dtype=float)
+    g0 = float(np.linalg.norm(gravity))
     predicted = np.empty_like(s.accel)
     for i in range(0, len(s.t), CHUNK):  # the kinematics' temporaries grow with the samples: bound them
         j = slice(i, i + CHUNK)
         sig = link_signals(dataset.robot, pose.link, s.q[j], s.qd[j], s.qdd[j], gravity)
-        v_link = sig.u + np.einsum("mij,j->mi", sig.K, pose.p_link_su)
-        predicted[j] = (v_link @ pose.R_link_su) @ A.T + b
+        predicted[j] = predict_calibrated(unit.imu, pose, sig.u, sig.K, sig.u_g, s.t[j], g0)
     residual = s.accel - predicted
     n_seg = len(dataset.segments) if dataset.segments is not None else 0
     inside = s.segment >= 0

@@ -49,10 +49,11 @@ def _summary(ds, result) -> dict[str, Any]:
             z.extend((unit.pose.p_link_su - ds.truth[name].p_link_su) / unit.position_std_m)
             std.append(float(np.linalg.norm(unit.position_std_m)))
         truth = ds.truth_sensor.get(name, {})
-        if unit.extras.get("time_offset_s") is not None and "time_offset_s" in truth:
-            dtau.append(abs(unit.extras["time_offset_s"] - truth["time_offset_s"]))
-        if unit.extras.get("clock_drift_ppm") is not None and "clock_drift_ppm" in truth:
-            ddrift.append(abs(unit.extras["clock_drift_ppm"] - truth["clock_drift_ppm"]))
+        imu = unit.imu
+        if imu is not None and imu.time_offset_s is not None and "time_offset_s" in truth:
+            dtau.append(abs(imu.time_offset_s - truth["time_offset_s"]))
+        if imu is not None and imu.clock_drift_ppm is not None and "clock_drift_ppm" in truth:
+            ddrift.append(abs(imu.clock_drift_ppm - truth["clock_drift_ppm"]))
     z = [v for v in z if np.isfinite(v)]
     return {
         "mean_position_error_mm": ev["mean_position_error_mm"],

@@ -33,6 +33,7 @@ import numpy as np
 from skincal.calib.api import MethodSpec, UnitProblem, register
 from skincal.calib.closed_form import position_and_bias, static_rotation_and_bias, wahba
 from skincal.calib.links import discover_link
+from skincal.calib.mle.model import predict_specific_force
 from skincal.calib.mle.signals import SignalTable, UnitData, arrange_unit_data
 from skincal.calib.mle.solver import (
     SCALE_FULL,
@@ -57,6 +58,7 @@ from skincal.calib.timing import (
     motion_profile,
 )
 from skincal.data.dataset import STATIC, Dataset, ImuStream
+from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.result import UnitResult
 from skincal.errors import CalibrationError
 from skincal.kinematics.chain import SerialChain
@@ -325,8 +327,7 @@ def _residual_level(problem: UnitProblem, link: int, state: State) -> float:
     t = s.t - state.tau
     keep = (t >= table.t[0]) & (t <= table.t[-1])
     u, K, *_, ug = table.at(link, t[keep])
-    v = u + state.k * ug + np.einsum("mij,j->mi", K, state.p)
-    pred = (v @ state.R) @ state.A.T + state.b
+    pred = predict_specific_force(state.R, state.p, state.A, state.b, u, K, ug=ug, gravity_scale=state.k)
     return float(np.median(np.linalg.norm(pred - s.accel[keep], axis=1)))
 
 
@@ -618,18 +619,21 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         if "d" in sl:
             j[sl["d"].start] = lever
         offset_ref_std = float(np.sqrt(max(j @ cov @ j, 0.0)))
+    imu: dict = {
+        "accel_bias_mps2": st.b,
+        "accel_scale_misalignment": st.A,
+        "accel_bias_std_mps2": std[6:9],
+        "time_offset_s": offset_ref,
+        "time_offset_std_s": offset_ref_std,
+        "time_reference_s": t_ref,
+        "clock_drift_ppm": (st.d * 1e6 if "d" in sl else 0.0) + (steps.drift_ppm if steps is not None else 0.0)
+        if "d" in sl or steps is not None
+        else None,
+        "clock_drift_std_ppm": float(get_std("d")[0]) * 1e6 if "d" in sl else None,
+    }
     extras.update(
         {
-            "accel_bias_mps2": st.b,
-            "accel_scale_misalignment": st.A,
-            "accel_bias_std_mps2": std[6:9],
-            "time_offset_s": offset_ref,
-            "time_offset_std_s": offset_ref_std,
             "time_offset_coarse_s": None if alignment is None else alignment.offset_s,
-            "time_reference_s": t_ref,
-            "clock_drift_ppm": (st.d * 1e6 if "d" in sl else 0.0) + (steps.drift_ppm if steps is not None else 0.0)
-            if "d" in sl or steps is not None else None,
-            "clock_drift_std_ppm": float(get_std("d")[0]) * 1e6 if "d" in sl else None,
             "residual_std_mps2": fit.sigma,
             "residual_correlation": fit.residual_correlation,
             "n_static_runs": int(p.data.n_static),
@@ -650,19 +654,20 @@ def run_unit(problem: UnitProblem) -> UnitResult:
             "re-syncs); stamps corrected"
         )
     if "bg" in sl:
-        extras["gyro_bias_rps"] = st.bg
-        extras["gyro_bias_std_rps"] = get_std("bg")
+        imu["gyro_bias_rps"] = st.bg
+        imu["gyro_bias_std_rps"] = get_std("bg")
         extras["gyro_residual_std_rps"] = fit.sigma_gyro
     if "k" in sl:
         g0 = float(np.linalg.norm(problem.gravity))
-        extras["gravity_mps2"] = g0 * (1.0 + st.k)
-        extras["gravity_std_mps2"] = g0 * float(get_std("k")[0])
+        imu["gravity_mps2"] = g0 * (1.0 + st.k)
+        imu["gravity_std_mps2"] = g0 * float(get_std("k")[0])
     if "c" in sl:
-        extras["accel_bias_drift_mps3"] = st.c
-        extras["accel_bias_drift_std_mps3"] = get_std("c")
+        imu["accel_bias_drift_mps3"] = st.c
+        imu["accel_bias_drift_std_mps3"] = get_std("c")
+        imu["accel_bias_reference_s"] = p.data.t_c
     if "e" in sl:
         std_e = get_std("e")
-        extras["accel_scale_misalignment_std"] = (
+        imu["accel_scale_misalignment_std"] = (
             std_e.reshape(3, 3) if fit.blocks.scale == SCALE_FULL else sym_from_e(std_e)
         )
         extras["accel_scale"] = np.diag(st.A).copy()
@@ -677,6 +682,7 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         rotation_std_deg=rot_std,
         warnings=tuple(warnings),
         extras=extras,
+        imu=ImuCalibration(**imu),
     )
 
 

@@ -30,11 +30,13 @@ from skincal.kinematics.transforms import FloatArray, skew
 @dataclass(frozen=True)
 class LinkSignals:
     """``u`` ``(M, 3)`` and ``K`` ``(M, 3, 3)`` (see module docstring), with the link's angular
-    velocity ``w_link`` ``(M, 3)`` in link frame, rad/s."""
+    velocity ``w_link`` ``(M, 3)`` in link frame, rad/s, and ``u_g = -R^T g`` ``(M, 3)``, the part of
+    ``u`` due to gravity, m/s^2."""
 
     u: FloatArray
     K: FloatArray
     w_link: FloatArray
+    u_g: FloatArray
 
 
 def link_signals(
@@ -48,7 +50,8 @@ def link_signals(
     w_l = np.einsum("nij,nj->ni", Rt, motion.omega[:, link])
     dw_l = np.einsum("nij,nj->ni", Rt, motion.omega_dot[:, link])
     W = skew(w_l)
-    return LinkSignals(u=u, K=skew(dw_l) + W @ W, w_link=w_l)
+    u_g = -np.einsum("nji,j->ni", R, np.asarray(gravity, dtype=float))
+    return LinkSignals(u=u, K=skew(dw_l) + W @ W, w_link=w_l, u_g=u_g)
 
 
 class SignalTable:

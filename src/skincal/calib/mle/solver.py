@@ -42,6 +42,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from skincal.calib.mle.model import accelerometer, link_specific_force
 from skincal.kinematics.transforms import FloatArray, skew
 
 PRIOR_STD = {"e": 0.05, "d": 1e-3, "c": 1e-3, "k": 0.002}
@@ -208,20 +209,21 @@ def _accel_rows(
     sl = blocks.slices()
     R, A = state.R, state.A
     S = len(rows.static_u)
-    # static rows are pure gravity: u_s = u_g; moving rows' u already holds (1 + k_lin) u_g
+    # static rows are pure gravity: u_s = u_g, K = 0 (the model: skincal.calib.mle.model)
+    v = link_specific_force(rows.static_u, None, state.p, gravity_scale=state.k)
     if lin is not None:
         dtau = (state.tau - lin.tau_k) + (state.d - lin.d_k) * rows.moving_t  # s_k - s per sample
         Kd = lin.K - dtau[:, None, None] * lin.dK
-        v_m = lin.u - dtau[:, None] * lin.du + np.einsum("mij,j->mi", Kd, state.p)
+        v_m = link_specific_force(lin.u - dtau[:, None] * lin.du, Kd, state.p, lin.ug, state.k)
         ug = np.concatenate([rows.static_u, lin.ug]) if lin.ug is not None else None
-        v = np.concatenate([(1.0 + state.k) * rows.static_u, v_m + (state.k * lin.ug if lin.ug is not None else 0.0)])
+        v = np.concatenate([v, v_m])
         t_rel = np.concatenate([rows.static_t, rows.moving_t])
         meas = np.concatenate([rows.static_f, rows.moving_f])
     else:
         ug = rows.static_u
-        v, t_rel, meas = (1.0 + state.k) * rows.static_u, rows.static_t, rows.static_f
+        t_rel, meas = rows.static_t, rows.static_f
     f = v @ R  # rows: (R^T v)^T
-    pred = f @ A.T + state.b + np.outer(t_rel, state.c)
+    pred = accelerometer(f, A, state.b, state.c, t_rel)
     r = pred - meas
     J = np.zeros((len(v), 3, blocks.size))
     J[:, :, sl["theta"]] = A @ skew(f)  # d/d dtheta of A R^T v with R <- R Exp(dtheta): A [f]x
