@@ -40,19 +40,31 @@ def view(
         False, "--allow-other-dataset",
         help="show even if --truth is not the result's dataset (other file or robot), or --play another robot",
     ),
+    package_path: list[Path] = typer.Option(
+        [], "--package-path", "--mesh-dir",
+        help="folder holding ROS packages (or a package itself) for a URDF robot's package:// meshes; "
+        "repeatable; searched before the URDF's folder and its parents, then ROS_PACKAGE_PATH",
+    ),
 ) -> None:
-    """Show a calibration result on the robot in the browser (viser); with --scenario, play an avoidance run."""
+    """Show a calibration result on the robot in the browser (viser); with --scenario, play an avoidance run.
+
+    A URDF robot is drawn with its visual meshes when they are found (else as capsules, with a note)."""
+    import dataclasses
+    import os
     import time
 
     from skincal.data.hdf5 import read_dataset
+    from skincal.data.names import printable
     from skincal.data.provenance import check_result_dataset
     from skincal.data.result import read_result
     from skincal.hw.net import check_bind
+    from skincal.viz.meshes import MeshResolver
     from skincal.viz.model import Recording
     from skincal.viz.viewer import serve_forever, start_viewer
 
     host = host[1:-1] if host.startswith("[") and host.endswith("]") else host  # [::1] as in a URL
     check_bind(host, public)  # one rule with skincal record: loopback unless --public
+    meshes = MeshResolver.from_options(None, package_path)  # (a --package-path that is no folder: refused now)
     if scenario is not None:
         if play is not None or truth is not None:
             raise ConfigError("--scenario plays its own run: give no --play or --truth with it")
@@ -71,17 +83,23 @@ def view(
     for warning in warnings:
         console_warning(warning)
     source = play_ds or truth_ds
+    urdf_dir = None  # a dataset's URDF has no folder: its meshes are looked up in the package paths only
     if source is not None:
         chain = source.robot
     else:
         from skincal.kinematics import get_robot
 
         chain = get_robot(robot or res.robot)
+        if Path(robot or res.robot).suffix.lower() == ".urdf":
+            urdf_dir = Path(os.path.abspath(Path(robot or res.robot).parent))
+    meshes = dataclasses.replace(meshes, urdf_dir=urdf_dir)
     recording = Recording.from_dataset(play_ds) if play_ds is not None else None
     viewer = start_viewer(
         res, chain, truth=None if truth_ds is None else truth_ds.truth, recording=recording, host=host, port=port,
-        q0=None if truth_ds is None or recording is not None else truth_ds.joints.q[0],
+        q0=None if truth_ds is None or recording is not None else truth_ds.joints.q[0], meshes=meshes,
     )
+    for note in viewer.notes:
+        err_console.print(f"note: {printable(note)}", markup=False, highlight=False, soft_wrap=True)
     console.print(f"skincal viewer: [bold]{shown(viewer.url)}[/]  (Ctrl-C to stop)", highlight=False)
     if duration is not None:
         try:

@@ -3,10 +3,15 @@
 Scene graph (names are viser paths; a child moves with its parent):
 
 * ``/robot/link{i}`` (i = 0..n): link frame ``T_base_link_i`` at the current joint angles; under it
-  the link's capsules (a cylinder and two spheres each), the units on that link (estimated box
-  and axes, the true box beside it when truth is given, coloured green..red by position error) and
-  the units' uncertainty ellipsoids (``ELLIPSOID_SIGMA`` x ``position_std_m`` along the link axes,
-  with a visible floor).
+  the link's capsules (a cylinder and two spheres each; none when the URDF's meshes are drawn), the
+  units on that link (estimated box and axes, the true box beside it when truth is given, coloured
+  green..red by position error) and the units' uncertainty ellipsoids (``ELLIPSOID_SIGMA`` x
+  ``position_std_m`` along the link axes, with a visible floor).
+* ``/robot/urdf``: when the robot came from a URDF whose visual meshes resolve
+  (:mod:`skincal.viz.meshes`), the URDF's visual geometry drawn by ``viser.extras.ViserUrdf`` (its
+  root link placed so that the chain's base link is at the base frame), moved with the same joint
+  angles (URDF joints outside the chain, such as fingers, stay at 0). Otherwise the capsules, and
+  :attr:`Viewer.notes` says why.
 * ``/play/rays``, ``/play/points``, ``/play/obstacles/*``: playback of a recording in the base
   frame: ToF rays and the obstacle points they see, computed with the *calibrated* poses.
 
@@ -30,6 +35,7 @@ import ipaddress
 import socket
 import threading
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,6 +48,7 @@ from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.geometry import link_capsules
 from skincal.kinematics.transforms import FloatArray, quat_wxyz_from_matrix
 from skincal.skin.pose import SkinUnitPose
+from skincal.viz.meshes import MeshRefused, MeshResolver, UrdfVisuals, urdf_visuals
 from skincal.viz.model import (
     UNIT_BOX_M,
     Recording,
@@ -53,6 +60,8 @@ from skincal.viz.model import (
 )
 
 ROBOT_COLOR = (175, 180, 190)
+ROBOT_OPACITY = 0.55
+"""Robot capsules and meshes are see-through: units on (or just under) the surface stay visible."""
 ESTIMATE_COLOR = (40, 110, 230)
 ELLIPSOID_COLOR = (120, 60, 220)
 RAY_COLOR = (250, 150, 30)
@@ -229,16 +238,24 @@ class Viewer:
     poses: dict[str, SkinUnitPose] = field(default_factory=dict)
     time_slider: Any = None
     play_checkbox: Any = None
+    urdf: Any = None
+    """The ``viser.extras.ViserUrdf`` drawing the URDF's meshes, or ``None`` (capsules)."""
+    visuals: UrdfVisuals | None = None
+    notes: list[str] = field(default_factory=list)
+    """One-line notes for the user (why the robot is drawn as capsules)."""
     _stop: threading.Event = field(default_factory=threading.Event)
     _quiet: bool = False
 
     def set_joints(self, q: FloatArray) -> None:
         """Move the robot (and its units) to joint angles ``q`` ``(n,)``, rad."""
-        T = self.chain.link_frames(np.asarray(q, dtype=float)[None, :])[0]
+        q = np.asarray(q, dtype=float)
+        T = self.chain.link_frames(q[None, :])[0]
         with self.server.atomic():
             for handle, T_i in zip(self.link_frames, T, strict=True):
                 handle.position = T_i[:3, 3]
                 handle.wxyz = _wxyz(T_i[:3, :3])
+            if self.urdf is not None and self.visuals is not None:
+                self.urdf.update_cfg(self.visuals.configuration(q))
 
     def close(self) -> None:
         """Stop playback and the server."""
@@ -247,23 +264,52 @@ class Viewer:
             self.server.stop()
 
 
-def _add_robot(server: Any, chain: SerialChain) -> list[Any]:
+def _add_urdf(server: Any, visuals: UrdfVisuals) -> Any:
+    """Draw the URDF's visual geometry under ``/robot/urdf`` (see the module docstring); the ``ViserUrdf``."""
+    from viser.extras import ViserUrdf
+
+    T = visuals.T_base_root
+    root = server.scene.add_frame("/robot/urdf", show_axes=False, wxyz=_wxyz(T[:3, :3]), position=T[:3, 3])
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return ViserUrdf(
+                server, visuals.urdf, root_node_name="/robot/urdf", mesh_color_override=(*ROBOT_COLOR, ROBOT_OPACITY)
+            )
+    except BaseException:
+        root.remove()  # and whatever was drawn under it
+        raise
+
+
+def _add_robot(
+    server: Any, chain: SerialChain, visuals: UrdfVisuals | None = None, notes: list[str] | None = None
+) -> tuple[list[Any], Any]:
+    """The link frames, and the ``ViserUrdf`` when ``visuals`` are drawn (else the capsules are; a
+    failure to draw ``visuals`` is a line in ``notes``)."""
     frames = []
     for i in range(chain.n_joints + 1):
         frames.append(server.scene.add_frame(f"/robot/link{i}", show_axes=False))
+    if visuals is not None:
+        try:
+            return frames, _add_urdf(server, visuals)
+        except Exception as exc:  # noqa: BLE001 - any geometry viser cannot show: capsules instead
+            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+            if notes is not None:
+                notes.append(f"robot drawn as capsules: the URDF's meshes cannot be shown ({first[:200]})")
     for k, cap in enumerate(link_capsules(chain)):
         base = f"/robot/link{cap.link}/capsule{k}"
         T, length = cylinder_pose(cap)
         if length > 0:
             server.scene.add_cylinder(
-                f"{base}/cyl", radius=cap.radius, height=length, color=ROBOT_COLOR, opacity=0.55,
+                f"{base}/cyl", radius=cap.radius, height=length, color=ROBOT_COLOR, opacity=ROBOT_OPACITY,
                 wxyz=_wxyz(T[:3, :3]), position=T[:3, 3], cast_shadow=False,
             )
         for j, p in enumerate((cap.p0, cap.p1) if length > 0 else (cap.p0,)):
             server.scene.add_icosphere(
-                f"{base}/end{j}", radius=cap.radius, color=ROBOT_COLOR, opacity=0.55, position=p, cast_shadow=False,
+                f"{base}/end{j}", radius=cap.radius, color=ROBOT_COLOR, opacity=ROBOT_OPACITY, position=p,
+                cast_shadow=False,
             )
-    return frames
+    return frames, None
 
 
 def _add_unit(
@@ -283,13 +329,16 @@ def build_scene(
     chain: SerialChain,
     truth: dict[str, SkinUnitPose] | None = None,
     q0: FloatArray | None = None,
-) -> tuple[list[Any], dict[str, float]]:
-    """Draw the robot, the units and their uncertainty on ``server``; return the link-frame handles
-    and the position error (mm) of each unit with truth."""
+    visuals: UrdfVisuals | None = None,
+    notes: list[str] | None = None,
+) -> tuple[list[Any], dict[str, float], Any]:
+    """Draw the robot (capsules, or ``visuals``: the URDF's meshes), the units and their uncertainty
+    on ``server``; return the link-frame handles, the position error (mm) of each unit with truth
+    and the ``ViserUrdf`` (``None`` with capsules)."""
     check_result_robot(result, chain)
     server.scene.set_up_direction("+z")
     server.scene.add_grid("/ground", width=2.0, height=2.0, cell_size=0.1, section_size=0.5)
-    frames = _add_robot(server, chain)
+    frames, urdf = _add_robot(server, chain, visuals, notes)
     q_ref = np.zeros(chain.n_joints) if q0 is None else np.asarray(q0, dtype=float)
     errors: dict[str, float] = {}
     for name, unit in result.units.items():
@@ -304,7 +353,7 @@ def build_scene(
             err_mm, _, _ = pose_errors(chain, q_ref, unit.pose, truth[name])
             errors[name] = err_mm
             _add_unit(server, name, truth[name], error_color(err_mm), "true", 0.025, wireframe=True)
-    return frames, errors
+    return frames, errors, urdf
 
 
 def _add_playback(viewer: Viewer) -> None:
@@ -363,12 +412,23 @@ def start_viewer(
     host: str = "127.0.0.1",
     port: int = 0,
     q0: FloatArray | None = None,
+    meshes: MeshResolver | None = None,
 ) -> Viewer:
     """Start a viser server on ``host:port`` (``port=0``: any free port) showing ``result`` on
     ``chain``; returns at once (the server runs in its own threads). ``q0`` ``(n,)`` rad is the
-    initial posture (default: the recording's first sample, else zeros)."""
+    initial posture (default: the recording's first sample, else zeros). A URDF robot
+    (``chain.source``) is drawn with its visual meshes as ``meshes`` resolves them (default: a
+    resolver without folders, which finds none); when they do not resolve, as capsules with a note
+    in :attr:`Viewer.notes`."""
     viser = _viser()
     check_listen(host, port)
+    notes: list[str] = []
+    visuals = None
+    if chain.source is not None:
+        try:
+            visuals = urdf_visuals(chain, meshes if meshes is not None else MeshResolver())
+        except MeshRefused as exc:
+            notes.append(f"robot drawn as capsules: {exc}")
     bound: dict[str, int] = {}  # the port, once known: requests before that are refused
     with _guarded_serving(host, lambda: bound.get("port")) as installed:
         with contextlib.redirect_stdout(io.StringIO()):  # viser prints a banner; the CLI prints the URL
@@ -385,12 +445,13 @@ def start_viewer(
                                           intensity=1.6)
         if q0 is None:
             q0 = recording.q[0] if recording is not None else np.zeros(chain.n_joints)
-        frames, errors = build_scene(server, result, chain, truth, q0)
+        frames, errors, urdf = build_scene(server, result, chain, truth, q0, visuals, notes)
         server.initial_camera.position = CAMERA_POSITION
         server.initial_camera.look_at = CAMERA_LOOK_AT
         server.initial_camera.fov = np.radians(CAMERA_FOV_DEG)
         url = viewer_url(host, bound["port"])
-        viewer = Viewer(server, chain, url, frames, [], recording, {n: u.pose for n, u in result.units.items()})
+        viewer = Viewer(server, chain, url, frames, [], recording, {n: u.pose for n, u in result.units.items()},
+                        urdf=urdf, visuals=visuals if urdf is not None else None, notes=notes)
         _add_gui(viewer, result, errors, np.asarray(q0, dtype=float))
         if recording is not None:
             _add_playback(viewer)
