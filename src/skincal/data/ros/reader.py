@@ -11,7 +11,8 @@ Reads ROS 1 (``.bag``) and ROS 2 bags (a directory with ``metadata.yaml``, or a 
   frame_ids (IMUs sharing a topic) gives one unit per frame_id, named by it. Unit name: the map,
   else ``header.frame_id``, else the topic; names follow :func:`skincal.data.names.name_problem`.
   Samples of several sources interleaved under one frame_id are refused, never merged: stamps that
-  go back or repeat (more than :data:`INTERLEAVED_FRACTION` of the steps in bag order), or samples
+  go back (more than :data:`INTERLEAVED_FRACTION` of the steps in bag order; repeated stamps alone
+  are a coarse clock, dropped later with a note), or samples
   that jump away from both neighbours while the neighbours agree (more than
   :data:`INTERLEAVED_FRACTION` of them).
   Units: REP 103 says m/s^2 and rad/s, but some firmware sends g and deg/s (the paper's skin did).
@@ -125,11 +126,11 @@ def _refuse_interleaved(label: str, t_ns: np.ndarray, accel: np.ndarray | None, 
     time order, raw units) look like several sources interleaved (module docstring)."""
     hint = "give each sensor its own frame_id or topic"
     steps = np.diff(t_ns)
-    back = int(np.sum(steps <= 0))
+    back = int(np.sum(steps < 0))  # repeated stamps alone are coarse clocks (dropped later, with a note)
     if back > max(1, INTERLEAVED_FRACTION * len(steps)):
         raise DatasetError(
             printable(
-                f"{source}: {label}: {back} of {len(steps)} time stamps go back or repeat: "
+                f"{source}: {label}: {back} of {len(steps)} time stamps go back: "
                 f"samples of several sources interleaved (not merged); {hint}"
             )
         )
