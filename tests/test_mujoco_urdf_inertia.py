@@ -304,3 +304,20 @@ def test_urdf_without_inertials_keeps_capsule_masses():
     assert chain.inertials is not None and chain.inertials[1].mass == pytest.approx(2.0)  # the folded box
     text = TWO_LINK.format(l1="").replace('<mass value="2"/>', '<mass value="0"/>')
     assert chain_from_urdf(text=text, tip_link="l2").inertials is None
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize("moments", ['ixx="0" iyy="0" izz="0"', 'ixx="0" iyy="0.01" izz="0.01"'])
+def test_point_mass_and_thin_rod_links_compile(moments):
+    """A point mass or a thin rod (valid, but with zero principal moments, which MuJoCo's
+    fullinertia refuses) compiles with those moments raised to 1e-12 kg m^2, the axes kept."""
+    inertial = f'<inertial><origin rpy="0.3 0.2 0.1"/><mass value="1"/><inertia {moments} ixy="0" ixz="0" iyz="0"/>'
+    text = TWO_LINK.format(l1="").replace('<link name="l2"/>', f'<link name="l2">{inertial}</inertial></link>')
+    chain = chain_from_urdf(text=text, tip_link="l2")
+    model = build_model(chain, board_geoms=False)
+    body = link_body_ids(model, 2)[2]
+    R = np.zeros(9)
+    mujoco.mju_quat2Mat(R, model.body_iquat[body])
+    R = R.reshape(3, 3)
+    assert model.body_mass[body] == 1.0
+    np.testing.assert_allclose(R @ np.diag(model.body_inertia[body]) @ R.T, chain.inertials[2].tensor, atol=2e-12)

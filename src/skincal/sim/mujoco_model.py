@@ -151,10 +151,23 @@ def _body_offset(chain: SerialChain, i: int) -> tuple[FloatArray, FloatArray, Fl
     return AB[:3, 3], quat_wxyz_from_matrix(AB[:3, :3]), R_B.T @ u, -R_B.T @ p_B
 
 
+MIN_PRINCIPAL_INERTIA = 1e-12
+"""Smallest principal moment written to MuJoCo, kg m^2: MuJoCo needs positive ones, and a valid
+:class:`LinkInertial` may have zero ones (a point mass, a thin rod); those are raised to this."""
+
+
 def _add_inertial(body: ET.Element, inertial: LinkInertial | None) -> None:
-    if inertial is not None:
-        attrs = {"pos": mjcf_floats(inertial.com), "mass": mjcf_floats(inertial.mass)}
-        ET.SubElement(body, "inertial", attrs | {"fullinertia": mjcf_floats(inertial.inertia)})
+    if inertial is None:
+        return
+    attrs = {"pos": mjcf_floats(inertial.com), "mass": mjcf_floats(inertial.mass)}
+    moments, axes = np.linalg.eigh(inertial.tensor)
+    if moments[0] >= MIN_PRINCIPAL_INERTIA:
+        attrs["fullinertia"] = mjcf_floats(inertial.inertia)
+    else:  # principal axes and raised moments (raising all alike keeps A + B >= C)
+        axes[:, 2] *= np.sign(np.linalg.det(axes))  # a proper rotation
+        attrs["quat"] = mjcf_floats(quat_wxyz_from_matrix(axes))
+        attrs["diaginertia"] = mjcf_floats(np.maximum(moments, MIN_PRINCIPAL_INERTIA))
+    ET.SubElement(body, "inertial", attrs)
 
 
 def _add_capsules(body: ET.Element, chain: SerialChain, link: int, radius: float | FloatArray, density: float) -> None:
