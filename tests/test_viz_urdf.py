@@ -149,6 +149,19 @@ def test_package_urls_resolve_from_the_urdf_folder_upwards_and_from_package_path
     assert MeshResolver.from_options(None, environ={"ROS_PACKAGE_PATH": ros}).resolve(name).samefile(expected)
 
 
+def test_packages_next_to_the_urdf_need_a_manifest(tmp_path: Path):
+    _write_stl(tmp_path / "robots" / "arm_meshes" / "arm.stl")
+    (tmp_path / "robots" / "arm_description" / "urdf").mkdir(parents=True)
+    resolver = MeshResolver.from_options(tmp_path / "robots" / "arm_description" / "urdf", environ={})
+    with pytest.raises(MeshRefused, match="package 'arm_meshes' not found"):
+        resolver.resolve("package://arm_meshes/arm.stl")
+    (tmp_path / "robots" / "arm_meshes" / "package.xml").write_text("<package/>")
+    assert resolver.resolve("package://arm_meshes/arm.stl") == tmp_path / "robots" / "arm_meshes" / "arm.stl"
+    # A folder the user names is trusted as it is.
+    bare = MeshResolver.from_options(None, [tmp_path / "robots"], environ={})
+    assert bare.resolve("package://arm_meshes/arm.stl") == tmp_path / "robots" / "arm_meshes" / "arm.stl"
+
+
 def test_relative_mesh_names_resolve_inside_the_urdf_package(tmp_path: Path):
     pkg = tmp_path / "my_robot"
     _write_stl(pkg / "meshes" / "arm.stl")
@@ -181,6 +194,7 @@ def test_package_path_that_is_no_folder_is_refused(tmp_path: Path):
         "{tmp}/outside/secret.stl",
         "file://{tmp}/outside/secret.stl",
         "../outside/secret.stl",
+        "package://{top}/outside/secret.stl",  # an ancestor's folder without package.xml is no package
         "/etc/passwd",
         "http://127.0.0.1:9/secret.stl",
     ],
@@ -191,9 +205,10 @@ def test_crafted_mesh_names_outside_the_roots_are_refused_unread(tmp_path: Path,
     root = tmp_path / "root"
     _write_stl(root / "pkg" / "meshes" / "ok.stl")
     _write_stl(tmp_path / "outside" / "secret.stl")  # a valid mesh: refused for where it is, not what
+    (root / "pkg" / "urdf").mkdir()
     resolver = MeshResolver.from_options(root / "pkg" / "urdf", [root], environ={})
     with _Watch() as watch, pytest.raises(MeshRefused):
-        path = resolver.resolve(name.format(tmp=tmp_path))
+        path = resolver.resolve(name.format(tmp=tmp_path, top="/".join(tmp_path.parts[1:])))
         load_mesh(path)
     assert not [p for p in watch.opened if "outside" in p or p.startswith("/etc")], watch.opened
 

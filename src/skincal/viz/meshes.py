@@ -4,7 +4,9 @@ A URDF names its mesh files in three ways, resolved here without any network acc
 
 * ``package://pkg/path``: ``path`` inside the folder of package ``pkg``, looked up, in this order,
   in the ``--package-path`` folders, in the URDF's own folder and its parents, and in the
-  ``ROS_PACKAGE_PATH`` folders (a folder named ``pkg`` itself or a ``pkg`` folder inside it);
+  ``ROS_PACKAGE_PATH`` folders (a folder named ``pkg`` itself or a ``pkg`` folder inside it; one
+  found from the URDF's folder must hold a ``package.xml``, so ``package://home/...`` does not make
+  ``/home`` a package);
 * a relative path: against the URDF file's folder (its root is the enclosing ROS package, the
   nearest ancestor with a ``package.xml``, else that folder); a URDF from a dataset has no folder,
   so the package paths are tried as roots;
@@ -105,15 +107,16 @@ class MeshResolver:
         problem = name_problem(package)
         if problem is not None:
             raise MeshRefused(f"package name {printable(repr(package))} {problem}")
-        folders = list(self.package_paths)
-        if self.urdf_dir is not None:
-            folders += [self.urdf_dir, *self.urdf_dir.parents]
-        folders += self.ros_package_paths
-        for folder in folders:
-            if folder.name == package and folder.is_dir():
-                return folder
-            if (folder / package).is_dir():
-                return folder / package
+        vouched = list(self.package_paths)  # folders the user named: any folder of that name is the package
+        nearby = [] if self.urdf_dir is None else [self.urdf_dir, *self.urdf_dir.parents]
+        for folder, needs_manifest in (
+            [(f, False) for f in vouched] + [(f, True) for f in nearby] + [(f, False) for f in self.ros_package_paths]
+        ):
+            for candidate in (folder, folder / package):
+                if candidate.name != package or not candidate.is_dir():
+                    continue
+                if not needs_manifest or (candidate / "package.xml").is_file():
+                    return candidate
         raise MeshRefused(f"package '{printable(package)}' not found (give its folder or a parent with --package-path)")
 
     def _roots(self) -> list[Path]:

@@ -245,12 +245,15 @@ class Viewer:
     """One-line notes for the user (why the robot is drawn as capsules)."""
     _stop: threading.Event = field(default_factory=threading.Event)
     _quiet: bool = False
+    _moving: threading.Lock = field(default_factory=threading.Lock)
+    """Held while the robot moves: the playback thread and slider callbacks both move it, and the
+    URDF's scene graph is not safe to update from two threads at once."""
 
     def set_joints(self, q: FloatArray) -> None:
         """Move the robot (and its units) to joint angles ``q`` ``(n,)``, rad."""
         q = np.asarray(q, dtype=float)
         T = self.chain.link_frames(q[None, :])[0]
-        with self.server.atomic():
+        with self._moving, self.server.atomic():
             for handle, T_i in zip(self.link_frames, T, strict=True):
                 handle.position = T_i[:3, 3]
                 handle.wxyz = _wxyz(T_i[:3, :3])
