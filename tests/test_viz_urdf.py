@@ -387,3 +387,74 @@ def test_cli_view_draws_urdf_meshes_or_notes_the_fallback_once(tmp_path: Path, c
     assert main(["view", str(res), "--robot", str(copy), "--package-path", str(tmp_path / "nope")]) == 2
     err = capsys.readouterr().err
     assert "error: --package-path" in err and "not a folder" in err and "Traceback" not in err
+
+
+def test_cli_view_plays_a_urdf_dataset_with_meshes_from_a_package_path(tmp_path: Path, capsys):
+    """A dataset stores the URDF text only: its meshes come from --package-path (else capsules, one note)."""
+    pytest.importorskip("viser")
+    from skincal.data.hdf5 import read_dataset
+
+    urdf, ds, res = tmp_path / "xarm7.urdf", tmp_path / "ds.h5", tmp_path / "r.json"
+    shutil.copy(registry_urdf("xarm7"), urdf)
+    args = ["--placement", "random", "--units", "2", "--protocol", "fast", "--seed", "2", "-o", str(ds)]
+    assert main(["simulate", "--robot", str(urdf), *args]) == 0
+    data = read_dataset(ds)
+    write_result(
+        CalibrationResult("truth", data.robot.name, "", 0.0, {n: UnitResult(p) for n, p in data.truth.items()}), res
+    )
+    capsys.readouterr()
+    assert main(["view", str(res), "--play", str(ds), "--duration", "0"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("note:") == 1 and "package 'example-robot-data' not found" in err
+    assert main(["view", str(res), "--play", str(ds), "--package-path", str(SHARE), "--duration", "0"]) == 0
+    out, err = capsys.readouterr()
+    assert "note:" not in err and "skincal viewer: http://127.0.0.1:" in out
+
+
+def test_viewer_screenshot_shows_the_meshes(viser_server, tmp_path: Path):
+    """Headless Chromium renders the xarm7's meshes: around the centre of every link's mesh the
+    pixels differ from the white background; the sky above stays white."""
+    from skincal.viz.browser import capture_page, find_chromium
+    from skincal.viz.model import project_to_image
+    from skincal.viz.viewer import CAMERA_FOV_DEG, CAMERA_LOOK_AT, CAMERA_POSITION
+
+    exe = find_chromium()
+    if exe is None:
+        pytest.skip("no Chromium: apt-get install chromium (Debian package) to run the screenshot test")
+    import matplotlib.image as mpimg
+
+    path = registry_urdf("xarm7")
+    chain = get_robot(str(path))
+    q = np.array([0.0, -0.3, 0.0, 0.8, 0.0, 1.0, 0.0])
+    v = viser_server(_empty_result(chain), chain, q0=q, meshes=MeshResolver.from_options(path.parent, environ={}))
+    centres = []
+    for name in _mesh_nodes(v.server).values():
+        T = _world_pose(v.server, name)
+        centres.append(T[:3, :3] @ np.asarray(v.server.scene._handle_from_node_name[name].vertices).mean(0) + T[:3, 3])
+    assert len(centres) == 8  # link_base and link1..link7
+    width, height = 1280, 800
+    cam = (CAMERA_POSITION, CAMERA_LOOK_AT, np.radians(CAMERA_FOV_DEG), width, height)
+    px, _ = project_to_image(np.array(centres), *cam)
+    for settle_s in (2.5, 8.0):  # software WebGL on a loaded machine: one retry with a longer settle
+        shot = capture_page(
+            v.url,
+            width=width,
+            height=height,
+            chromium=exe,
+            settle_s=settle_s,
+            ready_js="!!document.querySelector('canvas') && document.body.innerText.includes('Joints')",
+        )
+        png = tmp_path / "viewer_meshes.png"
+        png.write_bytes(shot.png)
+        img = mpimg.imread(png)[..., :3]
+        drawn = [img[y - 4 : y + 5, x - 4 : x + 5].mean() < 0.9 for x, y in np.round(px).astype(int)]
+        if img.shape[:2] == (height, width) and all(drawn):
+            break
+    assert shot.errors == [], shot.errors
+    save = os.environ.get("SKINCAL_SAVE_SCREENSHOTS")
+    if save:
+        Path(save).mkdir(parents=True, exist_ok=True)
+        (Path(save) / "viewer_meshes.png").write_bytes(shot.png)
+    assert all(drawn), f"no mesh drawn around {np.round(px[~np.array(drawn)])}"
+    top = int(px[:, 1].min()) - 80
+    assert top > 60 and img[20:top, 450:850].mean() > 0.97
