@@ -66,25 +66,41 @@ def _unit_table(result, title: str):
 
 @app.command()
 def calibrate(
-    dataset: Path = typer.Argument(..., help="dataset file (.h5)"),
-    out: Path = typer.Option(..., "--out", "-o", help="result file to write (.json)"),
+    datasets: list[Path] = typer.Argument(..., help="dataset file (.h5); several: a fleet, --out is then a folder"),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="result file to write (.json); with several datasets a folder (<stem>.json each)"
+    ),
     method: str = typer.Option("mle", help="mle (default), om (paper), om-joint, mmm, mm"),
     seed: int = typer.Option(0, min=0, help="seed for methods with random starts"),
     links: Path | None = typer.Option(None, help="YAML/JSON file mapping unit -> 1-based link"),
     use_truth_links: bool = typer.Option(False, help="take each unit's link from the dataset truth"),
     use_dataset_qdd: bool = typer.Option(False, help="use the dataset's qdd instead of estimating it"),
     unit: list[str] | None = typer.Option(None, help="calibrate only this unit (repeatable)"),
-    workers: int = typer.Option(2, min=1, help="units calibrated at once (forked processes on Linux, else threads)"),
+    workers: int = typer.Option(
+        2, min=1, help="units calibrated at once (forked processes on Linux, else threads); with several datasets: "
+        "datasets at once"
+    ),
+    dask: str | None = typer.Option(None, "--dask", help="several datasets: address of a dask.distributed scheduler"),
+    option: list[str] | None = typer.Option(
+        None, "--option", help="method option name=value (repeatable), e.g. scale=false, maxeval_static=500"
+    ),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
-    """Calibrate the skin units of a dataset and write the result JSON."""
+    """Calibrate the skin units of a dataset (or of many: a fleet) and write the result JSON."""
     from rich.progress import Progress
 
     from skincal.calib import calibrate as run
+    from skincal.calib.options import parse_option_strings
     from skincal.data.atomic import check_output
     from skincal.data.hdf5 import read_dataset
     from skincal.data.result import sha256_file, write_result
 
+    options = parse_option_strings(option or [])
+    if len(datasets) > 1 or dask is not None:
+        _calibrate_fleet(datasets, out, method, seed, links, use_truth_links, use_dataset_qdd, unit, workers, dask,
+                         options, force)  # fmt: skip
+        return
+    dataset = datasets[0]
     check_output(out, force=force, inputs=(dataset,))
     ds = read_dataset(dataset)
     link_map = read_links_file(links) if links is not None else None
@@ -94,7 +110,7 @@ def calibrate(
         result = run(
             ds, method, seed=seed, links=link_map, use_truth_links=use_truth_links,
             use_dataset_qdd=use_dataset_qdd, units=list(names), dataset_sha256=sha256_file(dataset),
-            progress=lambda _name: progress.advance(task), workers=workers,
+            progress=lambda _name: progress.advance(task), workers=workers, **options,
         )
     write_result(result, out)
     console.print(_unit_table(result, f"{method}: {len(result.units)} units in {result.runtime_s:.2f} s"))
@@ -103,6 +119,49 @@ def calibrate(
     for name, reason in result.extras.get("failed_units", {}).items():
         console.print(f"[yellow]warning[/]: unit {shown(name)} not calibrated: {shown(reason)}", highlight=False)
     console.print(f"wrote {shown(out)}", highlight=False)
+
+
+def _calibrate_fleet(
+    datasets: list[Path], out: Path, method: str, seed: int, links: Path | None, use_truth_links: bool,
+    use_dataset_qdd: bool, unit: list[str] | None, workers: int, dask: str | None, options: dict[str, str],
+    force: bool,
+) -> None:
+    """Several datasets: one result each in the folder ``out``, on the sweep runner; a dataset that
+    fails is named and the others are written; exit 2 when any failed."""
+    from rich.progress import Progress
+    from rich.table import Table
+
+    from skincal.calib import METHODS
+    from skincal.calib.options import parse_options
+    from skincal.data.atomic import check_output
+    from skincal.workflows.fleet import calibrate_fleet, fleet_jobs
+
+    if unit:
+        raise ConfigError("--unit selects units of one dataset; give one dataset with it")
+    if method not in METHODS:
+        raise ConfigError(f"unknown method '{method}' (available: {', '.join(sorted(METHODS))})")
+    parse_options(METHODS[method].options, options, method)  # refused before any dataset is read
+    jobs = fleet_jobs(
+        datasets, out, method=method, seed=seed, links=read_links_file(links) if links is not None else None,
+        use_truth_links=use_truth_links, use_dataset_qdd=use_dataset_qdd, options=options,
+    )  # fmt: skip
+    for job in jobs:
+        check_output(job.out, force=force, inputs=tuple(datasets))
+    with Progress(console=console, transient=True) as progress:
+        task = progress.add_task(f"calibrating {len(jobs)} datasets ({method})", total=len(jobs))
+        records = calibrate_fleet(jobs, workers=workers, dask=dask, progress=lambda _r: progress.advance(task))
+    table = Table(title=f"{method}: {len(jobs)} datasets")
+    for col in ("dataset", "units", "not calibrated", "runtime (s)", "result"):
+        table.add_column(col)
+    for r in records:
+        table.add_row(
+            shown(r.dataset), str(r.units), str(r.failed), f"{r.runtime_s:.2f}",
+            shown(r.out) if r.error is None else f"[red]error[/]: {shown(r.error)}",
+        )  # fmt: skip
+    console.print(table)
+    failed = [r for r in records if r.error is not None]
+    if failed:
+        raise ConfigError(f"{len(failed)} of {len(records)} datasets could not be calibrated (see the table)")
 
 
 @app.command()
