@@ -254,6 +254,7 @@ def test_imu_calibration_round_trip_keeps_every_field(tmp_path: Path) -> None:
     for key in IMU_KEYS:
         shape = IMU_SHAPES[key]
         values[key] = float(rng.normal()) if shape == () else rng.normal(size=shape)
+    values["clock_resync_steps"] = 87  # a count: a whole number in the file
     values["accel_bias_mps2"][1] = np.nan  # undetermined: null in the file, NaN again on read
     imu = ImuCalibration(**values)
     result = make_result()
@@ -266,6 +267,45 @@ def test_imu_calibration_round_trip_keeps_every_field(tmp_path: Path) -> None:
     # A unit without one: no IMU field written, None read.
     assert read_result(tmp_path / "r.json").units["base_unit"].imu is None
     assert not set(json.loads((tmp_path / "r.json").read_text())["units"]["base_unit"]) & set(IMU_KEYS)
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize(
+    ("key", "value", "problem"),
+    [
+        ("accel_bias_mps2", [0.1, 0.2], "must be a list of 3 finite numbers or null"),
+        ("accel_bias_mps2", "0.1 0.2 0.3", "must be a list of 3 finite numbers or null"),
+        ("accel_scale_misalignment", [1.0, 0.0, 0.0], "must be a list of 3 finite numbers or null"),
+        ("accel_scale_misalignment", [[1.0, 0.0, 0.0]], "must be 3 rows of 3 numbers"),
+        ("time_offset_s", "0.01", "must be a finite number or null"),
+        ("time_offset_s", True, "must be a finite number or null"),
+        ("time_offset_s", 1e309, None),  # JSON overflow: refused by the reader before
+        ("clock_resync_steps", 2.5, "must be a whole number >= 0 or null"),
+        ("clock_resync_steps", -3, "must be a whole number >= 0 or null"),
+    ],
+)
+def test_malformed_imu_fields_are_refused_on_one_line(tmp_path: Path, key, value, problem) -> None:
+    doc = json.loads(OLD_MLE_RESULT)
+    doc["units"]["su1"][key] = value
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(DatasetError) as info:
+        read_result(path)
+    message = str(info.value)
+    assert "\n" not in message and str(path) in message
+    if problem is not None:
+        assert f"units.su1.{key}" in message and problem in message, message
+
+
+def test_imu_fields_in_extras_are_refused_on_write(tmp_path: Path) -> None:
+    """The IMU calibration has one place, ``UnitResult.imu``: a writer that still puts it in extras is
+    told so (old code wrote it, and a report reading ``imu`` would silently not see it)."""
+    result = make_result()
+    unit = result.units["su1"]
+    bad = CalibrationResult("mle", "panda", "", 0.0, {"su1": UnitResult(unit.pose, extras={"time_offset_s": 0.01})})
+    with pytest.raises(DatasetError, match=r"units\.su1 extras may not hold time_offset_s: .*UnitResult\.imu"):
+        write_result(bad, tmp_path / "r.json")
+    assert not (tmp_path / "r.json").exists()
 
 
 def test_sha256_file(tmp_path: Path) -> None:

@@ -41,7 +41,12 @@ _SHAPES: dict[str, tuple[int, ...]] = {
     "accel_bias_reference_s": (),
     "gravity_mps2": (),
     "gravity_std_mps2": (),
+    "clock_resync_steps": (),
+    "clock_resync_period_s": (),
+    "clock_resync_step_s": (),
 }
+INTEGER_KEYS = frozenset({"clock_resync_steps"})
+"""Fields of :class:`ImuCalibration` that are whole numbers (the others of shape ``()`` are floats)."""
 
 
 @dataclass(frozen=True)
@@ -70,6 +75,12 @@ class ImuCalibration:
             bias drifts (``t_b`` of the model; ``None`` reads as ``time_reference_s``).
         gravity_mps2: the gravity magnitude the unit's data support, m/s^2.
         gravity_std_mps2: its std, m/s^2.
+        clock_resync_steps: periodic re-sync steps found in the unit's stamps (count; ``None``: none
+            found). The stamps were then corrected before the fit (the sawtooth between re-syncs
+            removed, :meth:`skincal.calib.timing.ClockSteps.correct`), and ``clock_drift_ppm`` is the
+            drift between re-syncs (what the correction removed plus what the fit found).
+        clock_resync_period_s: their mean period, s.
+        clock_resync_step_s: their mean step, s (positive: the stamps jump forward).
     """
 
     accel_bias_mps2: FloatArray | None = None
@@ -88,11 +99,17 @@ class ImuCalibration:
     accel_bias_reference_s: float | None = None
     gravity_mps2: float | None = None
     gravity_std_mps2: float | None = None
+    clock_resync_steps: int | None = None
+    clock_resync_period_s: float | None = None
+    clock_resync_step_s: float | None = None
 
     def __post_init__(self) -> None:
         for name, shape in _SHAPES.items():
             value = getattr(self, name)
             if value is None:
+                continue
+            if name in INTEGER_KEYS:
+                object.__setattr__(self, name, int(value))
                 continue
             if shape == ():
                 number = float(value)

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from skincal.data.atomic import write_bytes_atomic
-from skincal.data.imu_calibration import IMU_KEYS, IMU_SHAPES, ImuCalibration, imu_to_fields
+from skincal.data.imu_calibration import IMU_KEYS, IMU_SHAPES, INTEGER_KEYS, ImuCalibration, imu_to_fields
 from skincal.data.jsonio import load_json, regular_file
 from skincal.data.names import MAX_NAME_CHARS, name_problem
 from skincal.errors import ConfigError, DatasetError
@@ -341,7 +341,11 @@ class _Checker:
             value, shape = unit.get(key), IMU_SHAPES[key]
             if value is None:
                 continue
-            if shape == ():
+            if key in INTEGER_KEYS:
+                if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                    raise self.fail(f"{where}.{key}", f"must be a whole number >= 0 or null, got {_short(value)}")
+                values[key] = value
+            elif shape == ():
                 if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
                     raise self.fail(f"{where}.{key}", f"must be a finite number or null, got {_short(value)}")
                 values[key] = float(value)

@@ -645,9 +645,9 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         }
     )
     if steps is not None:
-        extras["clock_resync_steps"] = steps.n_steps
-        extras["clock_resync_period_s"] = steps.period_s
-        extras["clock_resync_step_s"] = steps.mean_step_s
+        imu["clock_resync_steps"] = steps.n_steps
+        imu["clock_resync_period_s"] = steps.period_s
+        imu["clock_resync_step_s"] = steps.mean_step_s
         notes.append(
             f"clock re-synced {steps.n_steps} times (every {steps.period_s:.2f} s, steps of "
             f"{steps.mean_step_s * 1e3:.2f} ms: the sensor clock drifts {steps.drift_ppm:+.0f} ppm between "

@@ -6,7 +6,8 @@ model that was fitted.
 
 Unit frame ``su``, link frame ``n`` (``R = R_link_su``, ``p = p_link_su`` in m)::
 
-    instant:        s = t - tau - d (t - t_ref)              (the sample stamped t measured the motion at s)
+    instant:        s = t - tau - d (t - t_ref)              (the sample stamped t measured the motion at s;
+                                                              t with periodic re-sync steps removed)
     link frame:     v(s) = u(s) + K(s) p + k u_g(s)           (specific force at the unit, m/s^2)
     accelerometer:  a = A R^T v(s) + b + c (s - t_b)          (m/s^2, unit frame)
 
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from skincal.calib.timing import find_clock_steps
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.kinematics.transforms import FloatArray
 from skincal.skin.pose import SkinUnitPose
@@ -80,13 +82,21 @@ def predict_specific_force(
 
 
 def calibrated_instants(imu: ImuCalibration | None, t: FloatArray) -> FloatArray:
-    """:func:`motion_instants` of stamps ``t`` under a result's calibration (no offset where ``imu`` is
-    None or gives none; no drift where it gives no drift or no ``time_reference_s``)."""
+    """:func:`motion_instants` of a unit's stamps ``t`` ``(M,)`` under a result's calibration (no
+    offset where ``imu`` is None or gives none; no drift where it gives no drift or no
+    ``time_reference_s``). A unit whose clock re-synced periodically (``clock_resync_steps``) has its
+    stamps corrected first as ``mle`` corrected them (:func:`~skincal.calib.timing.find_clock_steps`
+    on the same stamps); the drift left to apply is then ``clock_drift_ppm`` less the correction's."""
+    t = np.asarray(t, dtype=float)
     if imu is None:
-        return np.asarray(t, dtype=float)
-    tau = imu.time_offset_s or 0.0
+        return t
     drift = imu.clock_drift_ppm if imu.clock_drift_ppm is not None and imu.time_reference_s is not None else 0.0
-    return motion_instants(t, tau, 1e-6 * drift, imu.time_reference_s or 0.0)
+    if imu.clock_resync_steps is not None:
+        steps = find_clock_steps(t)
+        if steps is not None:
+            t = steps.correct(t)
+            drift = drift - steps.drift_ppm if drift else 0.0
+    return motion_instants(t, imu.time_offset_s or 0.0, 1e-6 * drift, imu.time_reference_s or 0.0)
 
 
 def predict_calibrated(
