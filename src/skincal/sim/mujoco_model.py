@@ -92,23 +92,13 @@ def require_mujoco() -> Any:
     return mujoco
 
 
-def is_panda(chain: SerialChain) -> bool:
-    """True when ``chain`` moves its link frames as the Panda's (from the DH preset or Franka's
-    URDF), whatever its name."""
-    ref = panda()
-    if chain.n_joints != ref.n_joints or chain.joint_type != ref.joint_type:
-        return False
-    q = np.linspace(-1.0, 1.0, 3 * ref.n_joints).reshape(3, ref.n_joints)
-    return bool(np.allclose(chain.link_frames(q), ref.link_frames(q), atol=1e-9))
-
-
 def default_inertials(chain: SerialChain) -> list[LinkInertial | None] | None:
     """Inertials of links ``1..n``: the chain's own (``SerialChain.inertials``, e.g. a URDF's; an
     entry is ``None`` for a link without one), else Franka's published ones for the Panda, else
     ``None`` (MuJoCo derives every link's from its capsules)."""
     if chain.inertials is not None:
         return list(chain.inertials[1:])
-    return list(PANDA_INERTIALS) if is_panda(chain) else None
+    return list(PANDA_INERTIALS) if chain.same_motion(panda()) else None
 
 
 # ---------------------------------------------------------------------------------------------- names
