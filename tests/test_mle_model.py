@@ -184,7 +184,7 @@ def test_report_follows_a_clock_that_re_syncs_periodically(tmp_path: Path):
         ds = simulate(chain, placement, trajectory, get_imu_model("none"), rng, clock_model=get_clock_model(clock))
         path = tmp_path / f"{clock}.json"
         write_result(calibrate(ds, "mle"), path)
-        (name, unit), = read_result(path).units.items()
+        ((name, unit),) = read_result(path).units.items()
         assert (unit.imu.clock_resync_steps or 0) > (50 if clock == "driver" else -1)
         shown = unit_residuals(ds, name, unit, JointInterpolator(ds.joints))
         assert np.max(np.linalg.norm(shown.residual[shown.kind == 0], axis=1)) < 1e-6
