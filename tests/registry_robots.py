@@ -1,9 +1,15 @@
-"""Real robot descriptions shipped by a registry package (``example-robot-data``, a test dependency)."""
+"""Robots for tests: real robot descriptions shipped by a registry package (``example-robot-data``, a
+test dependency), and random general chains."""
 
 from __future__ import annotations
 
 import importlib.metadata
 from pathlib import Path
+
+import numpy as np
+
+from skincal.kinematics.chain import SerialChain
+from skincal.kinematics.transforms import homogeneous, matrix_from_quat_wxyz
 
 
 def robots_dir() -> Path:
@@ -25,3 +31,20 @@ REGISTRY_URDFS = {
 def registry_urdf(name: str) -> Path:
     """Path of the registry URDF ``name`` (a key of :data:`REGISTRY_URDFS`)."""
     return robots_dir() / REGISTRY_URDFS[name]
+
+
+def random_chain(rng: np.random.Generator, n: int) -> SerialChain:
+    """A chain with random joint origins, random axes, and prismatic joints among revolute ones."""
+    T = []
+    for _ in range(n):
+        q = rng.normal(size=4)
+        T.append(homogeneous(matrix_from_quat_wxyz(q / np.linalg.norm(q)), rng.uniform(-0.3, 0.3, 3)))
+    after = [homogeneous(np.eye(3), rng.uniform(-0.1, 0.1, 3)) for _ in range(n)]
+    types = tuple("prismatic" if k % 3 == 1 else "revolute" for k in range(n))
+    return SerialChain(
+        name="random",
+        T_parent_joint=np.array(T),
+        axis=rng.normal(size=(n, 3)),
+        T_joint_link=np.array(after),
+        joint_type=types,
+    )

@@ -35,8 +35,7 @@ from skincal.kinematics import PRESETS, get_robot
 from skincal.kinematics.urdf import chain_from_urdf
 from skincal.skin.pose import SkinUnitPose
 
-from registry_robots import REGISTRY_URDFS, registry_urdf
-from test_kinematics_urdf import random_chain
+from registry_robots import REGISTRY_URDFS, random_chain, registry_urdf
 
 yourdfpy = pytest.importorskip("yourdfpy")
 

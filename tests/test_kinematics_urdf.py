@@ -8,28 +8,9 @@ import pytest
 
 from skincal.errors import ConfigError
 from skincal.kinematics import panda
-from skincal.kinematics.chain import SerialChain
-from skincal.kinematics.transforms import homogeneous, matrix_from_quat_wxyz
 from skincal.kinematics.urdf import chain_from_urdf
 
-from registry_robots import REGISTRY_URDFS, robots_dir
-
-
-def random_chain(rng: np.random.Generator, n: int) -> SerialChain:
-    """A chain with random joint origins, random axes, and prismatic joints among revolute ones."""
-    T = []
-    for _ in range(n):
-        q = rng.normal(size=4)
-        T.append(homogeneous(matrix_from_quat_wxyz(q / np.linalg.norm(q)), rng.uniform(-0.3, 0.3, 3)))
-    after = [homogeneous(np.eye(3), rng.uniform(-0.1, 0.1, 3)) for _ in range(n)]
-    types = tuple("prismatic" if k % 3 == 1 else "revolute" for k in range(n))
-    return SerialChain(
-        name="random",
-        T_parent_joint=np.array(T),
-        axis=rng.normal(size=(n, 3)),
-        T_joint_link=np.array(after),
-        joint_type=types,
-    )
+from registry_robots import REGISTRY_URDFS, random_chain, robots_dir
 
 
 def test_panda_urdf_frames_are_the_dh_presets_frames():

@@ -78,7 +78,7 @@ def get_chain(name: str) -> SerialChain:
 
         return chain_from_urdf(registry_urdf(name[5:]))
     if name == "general":
-        from test_kinematics_urdf import random_chain as random_general_chain
+        from registry_robots import random_chain as random_general_chain
 
         return random_general_chain(np.random.default_rng(8), 7)
     if name.startswith("random"):
