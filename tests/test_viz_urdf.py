@@ -214,6 +214,38 @@ def test_crafted_mesh_names_outside_the_roots_are_refused_unread(tmp_path: Path,
 
 
 @pytest.mark.adversarial
+def test_any_resolved_mesh_name_stays_inside_a_root(tmp_path: Path):
+    """Names built from ``..``, ``/``, ``.``, schemes and real folder names: whatever resolves is a
+    file inside the package or the URDF's package, never the file beside them."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    root = tmp_path / "ws"
+    _write_stl(root / "pkg" / "meshes" / "ok.stl")
+    (root / "pkg" / "package.xml").write_text("<package/>")
+    (root / "pkg" / "urdf").mkdir()
+    _write_stl(root / "secret.stl")  # beside the package, inside no root
+    resolver = MeshResolver.from_options(root / "pkg" / "urdf", environ={})
+    allowed = {root / "pkg" / "meshes" / "ok.stl"}
+    tmp = str(tmp_path)
+    prefixes = st.sampled_from(
+        ["", "../", "package://pkg/", "package://ws/", "package://", f"{tmp}/ws/", f"file://{tmp}/ws/pkg/", "/"]
+    )
+    middle = st.lists(st.sampled_from(["..", ".", "", "pkg", "meshes", "ws", "urdf"]), max_size=4)
+
+    @settings(max_examples=500, deadline=None, derandomize=True)
+    @given(prefixes, middle, st.sampled_from(["ok.stl", "secret.stl"]))
+    def check(prefix: str, segments: list[str], target: str) -> None:
+        try:
+            path = resolver.resolve(prefix + "/".join([*segments, target]))
+        except MeshRefused:
+            return
+        assert path in allowed, path
+
+    check()
+
+
+@pytest.mark.adversarial
 def test_special_and_oversized_files_inside_a_root_are_refused_unread(tmp_path: Path):
     meshes = tmp_path / "pkg" / "meshes"
     meshes.mkdir(parents=True)
