@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from skincal.data.hdf5 import read_dataset  # noqa: E402
 
@@ -204,7 +204,7 @@ def test_generator_does_not_use_skincal():
         "bad = sorted(m for m in sys.modules if m == 'skincal' or m.startswith('skincal.')); "
         "assert not bad, bad"
     )
-    proc = subprocess.run([sys.executable, "-c", code, str(Path(__file__).resolve().parent)],
+    proc = subprocess.run([sys.executable, "-c", code, str(Path(__file__).resolve().parents[1])],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
 
