@@ -252,7 +252,7 @@ def _turn_fit(f: FloatArray, r: FloatArray, w: FloatArray) -> tuple[float, Float
     y = (r[:, :, None] * sw).reshape(-1)
     coef, *_ = np.linalg.lstsq(A, y, rcond=None)
     left = A @ coef - y
-    return float(left @ left), coef[:3]
+    return float(left @ left), np.asarray(coef[:3], dtype=np.float64)
 
 
 def find_move(rows: Rows, residuals: FloatArray, t_c: float) -> Move | None:
@@ -606,7 +606,11 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         affected_r = np.linalg.norm(st.R @ basis[0:3], axis=1) > NULL_SHARE
         pos_std = np.where(affected_p, np.nan, pos_std)
         rot_std = np.where(affected_r, np.nan, rot_std)
-    get_std = lambda name: std[sl[name]] if name in sl else None  # noqa: E731
+
+    def get_std(name: str) -> FloatArray:
+        """The std of a fitted block (callers check ``name in sl``)."""
+        return std[sl[name]]
+
     # The offset at the start of the joint stream (where a simulation's truth and a user's sync
     # refer to), carried from the fit's reference t_c along the drift: tau + d (t_ref - t_c).
     t_ref = problem.shared.interpolator.t_start
