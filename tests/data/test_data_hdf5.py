@@ -217,7 +217,7 @@ BAD_EDITS = {
     "float version": (lambda f: f.attrs.__setitem__("version", 1.0), "root attr 'version' must be an integer, got 1.0"),
     "wrong format": (lambda f: f.attrs.__setitem__("format", "other"), "root attr 'format' is 'other'"),
     "no format": (lambda f: f.attrs.__delitem__("format"), "root attr 'format' is missing"),
-    "missing joints": (lambda f: f.__delitem__("joints"), "/joints is missing"),
+    "missing robot": (lambda f: f.__delitem__("robot"), "/robot is missing (a dataset with /joints needs its robot)"),
     "missing qd": (lambda f: f.__delitem__("joints/qd"), "/joints/qd is missing"),
     "missing gravity": (lambda f: f["robot"].attrs.__delitem__("gravity"), "/robot attr 'gravity' is missing"),
     "truth unit not in imu": (

@@ -29,9 +29,9 @@ from skincal.calib.preprocess import (
     screen_readings,
     unit_samples,
 )
-from skincal.data.dataset import Dataset
+from skincal.data.dataset import NO_JOINTS_MESSAGE, Dataset
 from skincal.data.result import CalibrationResult, UnitResult
-from skincal.errors import CalibrationError, ConfigError, SkincalError
+from skincal.errors import CalibrationError, ConfigError, DatasetError, SkincalError
 from skincal.kinematics.chain import SerialChain
 
 
@@ -123,7 +123,7 @@ def _resolve_links(
     if unknown:
         raise ConfigError(f"links given for unknown unit(s) {', '.join(unknown)}")
     for link in links.values():
-        dataset.robot.check_link(link)
+        dataset.chain.check_link(link)
     return dict(links)
 
 
@@ -190,6 +190,8 @@ def calibrate(
             Results do not depend on it.
         options: method-specific options.
     """
+    if dataset.joints is None:
+        raise DatasetError(f"{NO_JOINTS_MESSAGE}: calibrate it unit-to-unit with --reference UNIT")
     if method not in METHODS:
         raise ConfigError(f"unknown method '{method}' (available: {', '.join(sorted(METHODS))})")
     spec = METHODS[method]
@@ -273,7 +275,7 @@ def calibrate(
         extras["notes"] = notes
     return CalibrationResult(
         method=method,
-        robot=dataset.robot.name,
+        robot=dataset.chain.name,
         dataset_sha256=dataset_sha256,
         runtime_s=time.perf_counter() - start,
         units=results,
@@ -295,8 +297,8 @@ def check_joint_range(dataset: Dataset, margin_rad: float = JOINT_LIMIT_MARGIN_R
     differentiated into huge velocities and accelerations and silently skew every unit."""
     from skincal.errors import DatasetError
 
-    chain = dataset.robot
-    q = np.asarray(dataset.joints.q, dtype=float)
+    chain = dataset.chain
+    q = np.asarray(dataset.joint_states.q, dtype=float)
     n = q.shape[1]
     lower = np.full(n, -JOINT_ABS_MAX_RAD) if chain.joint_lower is None else chain.joint_lower - margin_rad
     upper = np.full(n, JOINT_ABS_MAX_RAD) if chain.joint_upper is None else chain.joint_upper + margin_rad
@@ -310,7 +312,7 @@ def check_joint_range(dataset: Dataset, margin_rad: float = JOINT_LIMIT_MARGIN_R
         limits = f"{chain.joint_lower[j]:.4g}..{chain.joint_upper[j]:.4g}"
         beyond = f"the robot's limits {limits} rad by more than {margin_rad:g} rad"
     raise DatasetError(
-        f"/joints/q: joint {j + 1} at sample {i} (t = {dataset.joints.t[i]:.3f} s) is {q[i, j]:.6g} rad, beyond "
+        f"/joints/q: joint {j + 1} at sample {i} (t = {dataset.joint_states.t[i]:.3f} s) is {q[i, j]:.6g} rad, beyond "
         f"{beyond} ({int(bad.sum())} such value(s)): a glitch in the joint stream, or limits of another robot"
     )
 
@@ -324,7 +326,7 @@ def _check_overlap(dataset: Dataset, unit: str, min_overlap_s: float = MIN_OVERL
     """A unit's stamps must overlap the joint stream for at least ``min_overlap_s`` (and 10 samples):
     stamps on another clock (Unix time, a device's boot time) would otherwise fail deep inside a method."""
     t = np.asarray(dataset.imu[unit].t, dtype=float)
-    tj = np.asarray(dataset.joints.t, dtype=float)
+    tj = np.asarray(dataset.joint_states.t, dtype=float)
     if t.size == 0:
         raise CalibrationError(f"unit '{unit}': no IMU samples")
     inside = t[(t >= tj[0]) & (t <= tj[-1])]
@@ -343,7 +345,7 @@ def _segment_automatically(dataset: Dataset, spec: MethodSpec) -> tuple[Dataset,
     from skincal.data.segment import SegmentationConfig, segment_dataset
     from skincal.errors import DatasetError
 
-    sigma = float(np.max(joint_noise(dataset.joints.q, dataset.joints.qd)[1]))
+    sigma = float(np.max(joint_noise(dataset.joint_states.q, dataset.joint_states.qd)[1]))
     config = SegmentationConfig(rest_velocity=max(SegmentationConfig.rest_velocity, 6.0 * sigma))
     try:
         tagged, report = segment_dataset(dataset, config)
@@ -389,7 +391,7 @@ def calibrate_unit(
         raise CalibrationError(f"unit '{unit}': no samples in static segments")
     assignment = None
     if link is None and not spec.discovers_links:
-        assignment = discover_link(samples, dataset.robot.n_joints, use_gyro=spec.use_gyro_for_links)
+        assignment = discover_link(samples, dataset.chain.n_joints, use_gyro=spec.use_gyro_for_links)
         if assignment.link == 0:
             raise CalibrationError(f"unit '{unit}': {'; '.join(assignment.warnings)}")
         link = assignment.link
@@ -411,4 +413,4 @@ def calibrate_unit(
     if screening:
         result = replace(result, warnings=tuple(screening) + tuple(result.warnings))
     # the link by name as well as index (a URDF robot's own link name; link<i> for a DH robot)
-    return replace(result, extras={**result.extras, "link_name": dataset.robot.link_name(result.pose.link)})
+    return replace(result, extras={**result.extras, "link_name": dataset.chain.link_name(result.pose.link)})

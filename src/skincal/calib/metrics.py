@@ -46,7 +46,7 @@ def evaluate(result: CalibrationResult, truth: Dataset) -> dict[str, Any]:
     if missing:
         raise DatasetError(f"the truth dataset has no truth for unit(s) {', '.join(missing)}")
     check_links(result, truth.robot, "result")
-    q0 = np.asarray(truth.joints.q[0], dtype=float)
+    q0 = np.asarray(truth.joint_states.q[0], dtype=float)
     units: dict[str, Any] = {}
     for name, unit in result.units.items():
         true = truth.truth[name]

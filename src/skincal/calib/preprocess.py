@@ -498,7 +498,7 @@ def unit_samples(
     t = np.asarray(imu.t, dtype=float) - time_offset_s
     accel = np.asarray(imu.accel, dtype=float)
     finite = np.all(np.isfinite(accel), axis=1)
-    tj = dataset.joints.t
+    tj = dataset.joint_states.t
     keep = finite & (t >= tj[0]) & (t <= tj[-1])
     t, accel = t[keep], accel[keep]
     gyro = None if imu.gyro is None else np.asarray(imu.gyro, dtype=float)[keep]

@@ -3,8 +3,8 @@ version 1 files (a DH robot only) read as well.
 
 Layout (optional parts in brackets)::
 
-    /            attrs format, version, [description]
-    /robot       attrs name, convention ("modified", "standard": DH; "urdf"), gravity (3,) m/s^2,
+    /            attrs format, version, [description], [gravity (3,) m/s^2: a dataset without /robot]
+    [/robot]     attrs name, convention ("modified", "standard": DH; "urdf"), gravity (3,) m/s^2,
                        joint_names (n,) str, link_names (n + 1,) str                  (version 2)
     /robot/T_parent_joint (n, 4, 4), /robot/axis (n, 3), /robot/T_joint_link (n, 4, 4),
     /robot/joint_type (n,) int8 0 = revolute, 1 = prismatic                          (version 2)
@@ -13,11 +13,11 @@ Layout (optional parts in brackets)::
     [/robot/joint_lower, /robot/joint_upper]   (n,) rad or m (+-inf: a continuous joint)
     [/robot/velocity_limit, acceleration_limit, effort_limit]  (n,)
     [/robot/T_link_flange]                     (4, 4)
-    /joints/t (N,) s, /joints/q, /joints/qd (N, n), [/joints/qdd]
+    [/joints/t (N,) s, /joints/q, /joints/qd (N, n), [/joints/qdd]]   (absent: IMU-only; then /robot optional)
     /imu/<unit>/t (M,) s, accel (M, 3) m/s^2, [gyro (M, 3) rad/s]
     [/tof/<unit>/t (K,) s, range (K,) m, NaN = no target]
     [/segments/t_start, t_end (S,) s, kind int8, pose int32, joint int32]
-    [/truth/<unit> attrs link, position (3,), quaternion_wxyz (4,),
+    [/truth/<unit> attrs link, position (3,), quaternion_wxyz (4,) and/or body (str), T_body_su (4, 4),
                    [accel_bias, accel_scale, accel_misalignment, time_offset_s, ...]]
 
 Reading opens the file read-only, checks the structure, builds a :class:`Dataset` and runs
@@ -46,13 +46,13 @@ import h5py
 import numpy as np
 
 from skincal.data.atomic import atomic_path
-from skincal.data.dataset import Dataset, ImuStream, JointStates, Segments, TofStream
+from skincal.data.dataset import BodyPose, Dataset, ImuStream, JointStates, Segments, TofStream
 from skincal.data.jsonio import regular_file
 from skincal.data.names import printable
-from skincal.data.validate import check_unit_name, shown, validate_dataset
+from skincal.data.validate import TRUTH_BODY_ATTRS, check_unit_name, shown, validate_dataset
 from skincal.errors import ConfigError, DatasetError
 from skincal.errors import first_line as _first_line
-from skincal.kinematics.chain import CONVENTIONS, SerialChain
+from skincal.kinematics.chain import CONVENTIONS, GRAVITY_BASE, SerialChain
 from skincal.skin.pose import SkinUnitPose
 
 FORMAT = "skincal-dataset"
@@ -370,8 +370,20 @@ class _Reader:
             raise self.fail("/robot", f"is not a valid chain: {exc}") from None
         return chain, gravity
 
-    def joints(self) -> JointStates:
-        self.group("/joints")
+    def robot_if_any(self, has_joints: bool) -> tuple[SerialChain | None, np.ndarray]:
+        """The robot and gravity; an IMU-only file (no ``/joints``) may have no ``/robot``, its gravity
+        then in the optional root attr ``gravity`` (default ``[0, 0, -9.81]``)."""
+        if self.link("/robot"):
+            return self.robot()
+        if has_joints:
+            raise self.fail("/robot", "is missing (a dataset with /joints needs its robot)")
+        if self.attr("/", "gravity", required=False) is None:
+            return None, GRAVITY_BASE.copy()
+        return None, self.num_attr("/", "gravity", (3,))
+
+    def joints(self) -> JointStates | None:
+        if self.group("/joints", required=False) is None:
+            return None  # an IMU-only dataset
         return JointStates(
             t=self.array("/joints/t"),
             q=self.array("/joints/q"),
@@ -412,26 +424,27 @@ class _Reader:
             joint=self.array("/segments/joint", dtype=np.int32),
         )
 
-    def truth(self) -> tuple[dict[str, SkinUnitPose], dict[str, dict[str, np.ndarray | float]]]:
+    def truth(
+        self,
+    ) -> tuple[dict[str, SkinUnitPose], dict[str, dict[str, np.ndarray | float]], dict[str, BodyPose]]:
+        """True poses on the robot's links (attrs ``link``, ``position``, ``quaternion_wxyz``), true
+        poses on named rigid bodies (IMU-only: attrs ``body``, ``T_body_su``; a unit may have both)
+        and the numeric extras (true sensor errors)."""
         grp = self.group("/truth", required=False)
         poses: dict[str, SkinUnitPose] = {}
         sensor: dict[str, dict[str, np.ndarray | float]] = {}
+        bodies: dict[str, BodyPose] = {}
         for unit in self.unit_names(grp, "/truth") if grp is not None else ():
             base = f"/truth/{unit}"
             node = self.group(base)
-            link = int(self.num_attr(base, "link", (), integer=True))
-            position = self.num_attr(base, "position", (3,))
-            quat = self.num_attr(base, "quaternion_wxyz", (4,))
-            norm = float(np.linalg.norm(quat)) if np.all(np.isfinite(quat)) else float("nan")
-            if not abs(norm - 1.0) <= _QUAT_NORM_TOL:
-                raise self.fail(f"{base} attr 'quaternion_wxyz'", f"is not a unit quaternion (norm {norm:.6g})")
-            try:
-                poses[unit] = SkinUnitPose.from_quaternion(link, position, quat)
-            except ConfigError as exc:
-                raise self.fail(base, f"is not a valid pose: {exc}") from None
+            body = self.str_attr(base, "body", required=False)
+            if body is not None:
+                bodies[unit] = BodyPose(body=body, T_body_su=self.num_attr(base, "T_body_su", (4, 4)))
+            if body is None or self.attr(base, "link", required=False) is not None:
+                poses[unit] = self.link_pose(base)
             extra: dict[str, np.ndarray | float] = {}
             for key in node.attrs:
-                if key in ("link", "position", "quaternion_wxyz"):
+                if key in ("link", "position", "quaternion_wxyz", *TRUTH_BODY_ATTRS):
                     continue
                 value = np.asarray(self.attr(base, key))
                 if value.dtype.kind not in "fiu":  # non-numeric extras (notes, labels) are not sensor errors
@@ -439,7 +452,20 @@ class _Reader:
                 extra[key] = float(value) if value.shape == () else value.astype(np.float64)
             if extra:
                 sensor[unit] = extra
-        return poses, sensor
+        return poses, sensor, bodies
+
+    def link_pose(self, base: str) -> SkinUnitPose:
+        """A unit's true pose on a link of the robot (attrs ``link``, ``position``, ``quaternion_wxyz``)."""
+        link = int(self.num_attr(base, "link", (), integer=True))
+        position = self.num_attr(base, "position", (3,))
+        quat = self.num_attr(base, "quaternion_wxyz", (4,))
+        norm = float(np.linalg.norm(quat)) if np.all(np.isfinite(quat)) else float("nan")
+        if not abs(norm - 1.0) <= _QUAT_NORM_TOL:
+            raise self.fail(f"{base} attr 'quaternion_wxyz'", f"is not a unit quaternion (norm {norm:.6g})")
+        try:
+            return SkinUnitPose.from_quaternion(link, position, quat)
+        except ConfigError as exc:
+            raise self.fail(base, f"is not a valid pose: {exc}") from None
 
 
 def read_dataset(path: str | Path) -> Dataset:
@@ -462,12 +488,12 @@ def read_dataset(path: str | Path) -> Dataset:
         r = _Reader(f, source, size)
         try:
             description = r.header()
-            robot, gravity = r.robot()
             joints = r.joints()
+            robot, gravity = r.robot_if_any(has_joints=joints is not None)
             imu = r.imu()
             tof = r.tof()
             segments = r.segments()
-            truth, truth_sensor = r.truth()
+            truth, truth_sensor, truth_body = r.truth()
         except DatasetError:
             raise
         except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:  # h5py on damaged files
@@ -482,6 +508,7 @@ def read_dataset(path: str | Path) -> Dataset:
         gravity=gravity,
         description=description,
         truth_sensor=truth_sensor,
+        truth_body=truth_body,
     )
     validate_dataset(ds, source=source)
     return ds
@@ -525,13 +552,17 @@ def _write(f: h5py.File, ds: Dataset) -> None:
     if ds.description:
         f.attrs["description"] = ds.description
 
-    write_robot(f, ds.robot, ds.gravity)
+    if ds.robot is not None:
+        write_robot(f, ds.robot, ds.gravity)
+    else:  # IMU-only without a robot: gravity at the root
+        f.attrs["gravity"] = np.asarray(ds.gravity, dtype=np.float64)
 
-    joints = f.create_group("joints")
-    for key in ("t", "q", "qd", "qdd"):
-        value = getattr(ds.joints, key)
-        if value is not None:
-            _write_floats(joints, key, value)
+    if ds.joints is not None:
+        joints = f.create_group("joints")
+        for key in ("t", "q", "qd", "qdd"):
+            value = getattr(ds.joints, key)
+            if value is not None:
+                _write_floats(joints, key, value)
 
     imu = f.create_group("imu", track_order=True)  # keep the unit order
     for unit, stream in ds.imu.items():
@@ -556,13 +587,19 @@ def _write(f: h5py.File, ds: Dataset) -> None:
         seg.create_dataset("pose", data=np.asarray(ds.segments.pose, dtype=np.int32), fletcher32=True)
         seg.create_dataset("joint", data=np.asarray(ds.segments.joint, dtype=np.int32), fletcher32=True)
 
-    if ds.truth:
+    if ds.truth or ds.truth_body:
         truth = f.create_group("truth", track_order=True)
-        for unit, pose in ds.truth.items():
+        for unit in [*ds.truth, *(u for u in ds.truth_body if u not in ds.truth)]:
             g = truth.create_group(unit)
-            g.attrs["link"] = np.int64(pose.link)
-            g.attrs["position"] = np.asarray(pose.p_link_su, dtype=np.float64)
-            g.attrs["quaternion_wxyz"] = np.asarray(pose.quaternion_wxyz, dtype=np.float64)
+            pose = ds.truth.get(unit)
+            if pose is not None:
+                g.attrs["link"] = np.int64(pose.link)
+                g.attrs["position"] = np.asarray(pose.p_link_su, dtype=np.float64)
+                g.attrs["quaternion_wxyz"] = np.asarray(pose.quaternion_wxyz, dtype=np.float64)
+            body = ds.truth_body.get(unit)
+            if body is not None:
+                g.attrs["body"] = body.body
+                g.attrs["T_body_su"] = np.asarray(body.T_body_su, dtype=np.float64)
             for key, value in ds.truth_sensor.get(unit, {}).items():
                 g.attrs[key] = np.asarray(value, dtype=np.float64)
 

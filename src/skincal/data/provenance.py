@@ -42,10 +42,10 @@ def check_result_dataset(
         warnings.append(f"{problem} (used anyway: {option})")
 
     res_name, ds_name = str(result_source), str(dataset_path)
-    if result.robot != dataset.robot.name:
+    if result.robot != dataset.chain.name:
         mismatch(
             f"{res_name} is a result for robot '{printable(result.robot)}' but {ds_name} holds robot "
-            f"'{printable(dataset.robot.name)}'"
+            f"'{printable(dataset.chain.name)}'"
         )
     if not same_file:
         return "", warnings

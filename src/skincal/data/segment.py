@@ -146,7 +146,7 @@ def _imu_still(ds: Dataset, t_a: float, t_b: float, cfg: SegmentationConfig) -> 
 
 def _gap_links(ds: Dataset, rest: np.ndarray, cfg: SegmentationConfig) -> tuple[np.ndarray, list[Rejected], int]:
     """``connected`` ``(N-1,)``: False across joint-stream gaps the IMUs do not show as rest."""
-    t, q = ds.joints.t, ds.joints.q
+    t, q = ds.joint_states.t, ds.joint_states.q
     dt = np.diff(t)
     connected = np.ones(dt.shape[0], dtype=bool)
     rejected: list[Rejected] = []
@@ -174,9 +174,9 @@ def segment_dataset(ds: Dataset, config: SegmentationConfig | None = None) -> tu
     is found.
     """
     cfg = config or SegmentationConfig()
-    t = np.asarray(ds.joints.t, dtype=float)
-    q = np.asarray(ds.joints.q, dtype=float)
-    qd = np.asarray(ds.joints.qd, dtype=float)
+    t = np.asarray(ds.joint_states.t, dtype=float)
+    q = np.asarray(ds.joint_states.q, dtype=float)
+    qd = np.asarray(ds.joint_states.qd, dtype=float)
     if t.shape[0] < 3:
         raise DatasetError(f"segmentation: /joints/t has {t.shape[0]} samples, at least 3 needed")
     rest = np.all(np.abs(_moving_average(qd, t, cfg.smooth_s)) < cfg.rest_velocity, axis=1)

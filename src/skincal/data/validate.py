@@ -11,7 +11,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from skincal.data.dataset import DYNAMIC, STATIC, Dataset, Segments
+from skincal.data.dataset import DYNAMIC, STATIC, BodyPose, Dataset, Segments
 from skincal.data.names import name_problem, printable
 from skincal.data.result import MAX_POSITION_M
 from skincal.errors import DatasetError
@@ -31,6 +31,9 @@ TRUTH_SENSOR_SHAPES: dict[str, tuple[int, ...]] = {
 be added (any finite numbers)."""
 
 _TRUTH_POSE_ATTRS = ("link", "position", "quaternion_wxyz")
+TRUTH_BODY_ATTRS = ("body", "T_body_su")
+"""``/truth/<unit>`` attrs of an IMU-only true pose (:class:`~skincal.data.dataset.BodyPose`)."""
+_BODY_ROTATION_TOL = 1e-6
 GRAVITY_NORM_MPS2 = (1.0, 100.0)
 """Accepted magnitude of the dataset's gravity, m/s^2: the accelerometers' only reference (zero
 leaves a unit's orientation undetermined), about 9.81 on Earth."""
@@ -130,20 +133,26 @@ def validate_robot(robot: object, gravity: object, source: str) -> int:
             problem = name_problem(item)
             if problem is not None:
                 raise _fail(source, f"/robot attr '{what}'", f"{shown(item)} is not a valid name: it {problem}")
-    g = _float_field(gravity, (3,), source, "/robot attr 'gravity'")
+    validate_gravity(gravity, source, "/robot attr 'gravity'")
+    return n
+
+
+def validate_gravity(gravity: object, source: str, field: str) -> None:
+    """Check gravity: ``(3,)``, finite, magnitude within :data:`GRAVITY_NORM_MPS2`."""
+    g = _float_field(gravity, (3,), source, field)
     g_norm = float(np.linalg.norm(g))
     if not GRAVITY_NORM_MPS2[0] <= g_norm <= GRAVITY_NORM_MPS2[1]:
         raise _fail(
             source,
-            "/robot attr 'gravity'",
+            field,
             f"has magnitude {g_norm:.6g} m/s^2, expected "
             f"{GRAVITY_NORM_MPS2[0]:g}..{GRAVITY_NORM_MPS2[1]:g} (about 9.81, e.g. [0, 0, -9.81])",
         )
-    return n
 
 
-def validate_segments(segments: Segments, n: int, source: str) -> None:
-    """Check segment arrays: equal lengths, ``t_start < t_end``, kinds, ``joint == -1`` iff static."""
+def validate_segments(segments: Segments, n: int | None, source: str) -> None:
+    """Check segment arrays: equal lengths, ``t_start < t_end``, kinds, ``joint == -1`` iff static;
+    a dynamic segment's joint in ``0..n-1`` (``n = None``: a dataset without a robot, any joint >= 0)."""
     t0 = _float_field(segments.t_start, (None,), source, "/segments/t_start")
     S = t0.shape[0]
     t1 = _float_field(segments.t_end, (S,), source, "/segments/t_end")
@@ -157,15 +166,43 @@ def validate_segments(segments: Segments, n: int, source: str) -> None:
         ((kind != STATIC) & (kind != DYNAMIC), "/segments/kind", f"must be {STATIC} (static) or {DYNAMIC} (dynamic)"),
         (pose < 0, "/segments/pose", "must be a non-negative pose index"),
         ((kind == STATIC) & (joint != -1), "/segments/joint", "must be -1 for a static segment"),
-        ((kind == DYNAMIC) & ((joint < 0) | (joint >= n)), "/segments/joint", f"must be in 0..{n - 1} when dynamic"),
+        (
+            (kind == DYNAMIC) & ((joint < 0) | (joint >= (np.iinfo(np.int64).max if n is None else n))),
+            "/segments/joint",
+            "must be >= 0 when dynamic" if n is None else f"must be in 0..{n - 1} when dynamic",
+        ),
     )
     for bad, field, problem in checks:
         if np.any(bad):
             raise _fail(source, field, f"{problem} (segment {int(np.argmax(bad))})")
 
 
-def validate_truth(ds: Dataset, n: int, source: str) -> None:
-    """Check true poses (units exist in ``imu``, link in ``1..n``) and true sensor errors."""
+def validate_body_pose(pose: object, source: str, field: str) -> None:
+    """Check an IMU-only true pose: ``body`` a valid name, ``T_body_su`` a finite rigid transform."""
+    if not isinstance(pose, BodyPose):
+        raise _fail(source, field, f"must be a BodyPose, got {type(pose).__name__}")
+    problem = name_problem(pose.body)
+    if problem is not None:
+        raise _fail(source, f"{field} attr 'body'", f"{shown(pose.body)} is not a valid body name: it {problem}")
+    T = _float_field(pose.T_body_su, (4, 4), source, f"{field} attr 'T_body_su'")
+    R = T[:3, :3]
+    if not np.allclose(T[3], [0.0, 0.0, 0.0, 1.0]) or not np.allclose(R.T @ R, np.eye(3), atol=_BODY_ROTATION_TOL):
+        raise _fail(source, f"{field} attr 'T_body_su'", "is not a rigid transform (rotation, translation, 0 0 0 1)")
+    if np.linalg.det(R) < 0:
+        raise _fail(source, f"{field} attr 'T_body_su'", "is a reflection, not a rotation")
+    if np.any(np.abs(T[:3, 3]) > MAX_POSITION_M):
+        raise _fail(source, f"{field} attr 'T_body_su'", f"has a translation beyond {MAX_POSITION_M:g} m")
+
+
+def validate_truth(ds: Dataset, n: int | None, source: str) -> None:
+    """Check true poses (units exist in ``imu``, link in ``1..n``; ``n = None``: no robot, so no link
+    poses), IMU-only body poses and true sensor errors."""
+    for unit, body_pose in ds.truth_body.items():
+        check_unit_name(unit, source, "/truth")
+        field = f"/truth/{unit}"
+        if unit not in ds.imu:
+            raise _fail(source, field, f"names unit '{unit}' which has no /imu/{unit} stream")
+        validate_body_pose(body_pose, source, field)
     for unit, pose in ds.truth.items():
         check_unit_name(unit, source, "/truth")
         field = f"/truth/{unit}"
@@ -173,18 +210,21 @@ def validate_truth(ds: Dataset, n: int, source: str) -> None:
             raise _fail(source, field, f"names unit '{unit}' which has no /imu/{unit} stream")
         if not isinstance(pose, SkinUnitPose):
             raise _fail(source, field, f"must be a SkinUnitPose, got {type(pose).__name__}")
+        if n is None:
+            raise _fail(source, f"{field} attr 'link'", "needs a /robot (a dataset without one gives 'body' poses)")
         if not 1 <= pose.link <= n:
             raise _fail(source, f"{field} attr 'link'", f"is {pose.link}, expected 1..{n}")
         if np.any(np.abs(pose.p_link_su) > MAX_POSITION_M):  # as in results: distances from 1e308 overflow
             raise _fail(source, f"{field} attr 'position'", f"has a component beyond {MAX_POSITION_M:g} m")
     for unit, errors in ds.truth_sensor.items():
         field = f"/truth/{unit}"
-        if unit not in ds.truth:
-            raise _fail(source, field, "has sensor errors but no true pose (link, position, quaternion_wxyz)")
+        if unit not in ds.truth and unit not in ds.truth_body:
+            pose_attrs = "link, position, quaternion_wxyz; or body, T_body_su"
+            raise _fail(source, field, f"has sensor errors but no true pose ({pose_attrs})")
         if not isinstance(errors, Mapping):
             raise _fail(source, field, f"sensor errors must be a mapping, got {type(errors).__name__}")
         for key, value in errors.items():
-            if not isinstance(key, str) or key in _TRUTH_POSE_ATTRS:
+            if not isinstance(key, str) or key in _TRUTH_POSE_ATTRS or key in TRUTH_BODY_ATTRS:
                 raise _fail(source, field, f"has an invalid sensor error name {key!r}")
             attr = f"{field} attr '{key}'"
             arr = _real_array(value, source, attr)
@@ -204,17 +244,26 @@ def validate_dataset(ds: Dataset, source: str = "<dataset>") -> None:
     """
     if not isinstance(ds, Dataset):
         raise DatasetError(f"{source}: expected a Dataset, got {type(ds).__name__}")
-    n = validate_robot(ds.robot, ds.gravity, source)
+    n: int | None = None
+    if ds.robot is not None:
+        n = validate_robot(ds.robot, ds.gravity, source)
+    else:
+        validate_gravity(ds.gravity, source, "root attr 'gravity'")
     if not isinstance(ds.description, str):
         raise _fail(source, "root attr 'description'", "must be a string")
 
     js = ds.joints
-    t = _time_field(js.t, source, "/joints/t", min_samples=1)
-    N = t.shape[0]
-    _float_field(js.q, (N, n), source, "/joints/q")
-    _float_field(js.qd, (N, n), source, "/joints/qd")
-    if js.qdd is not None:
-        _float_field(js.qdd, (N, n), source, "/joints/qdd")
+    if js is not None:
+        if n is None:
+            raise _fail(source, "/robot", "is missing (a dataset with /joints needs its robot)")
+        t = _time_field(js.t, source, "/joints/t", min_samples=1)
+        N = t.shape[0]
+        _float_field(js.q, (N, n), source, "/joints/q")
+        _float_field(js.qd, (N, n), source, "/joints/qd")
+        if js.qdd is not None:
+            _float_field(js.qdd, (N, n), source, "/joints/qdd")
+    if not ds.imu and js is None:
+        raise _fail(source, "/imu", "is empty and there are no /joints: the dataset holds no stream")
 
     for unit, imu in ds.imu.items():
         check_unit_name(unit, source, "/imu")

@@ -64,7 +64,8 @@ def run_seed(
     t = time.perf_counter()
     res = calibrate(imported, "mle", seed=seed)
     t_cal = time.perf_counter() - t
-    shifted = replace(ds, joints=replace(ds.joints, t=ds.joints.t - ds.joints.t[0]))  # the bag's time origin
+    js = ds.joint_states
+    shifted = replace(ds, joints=replace(js, t=js.t - js.t[0]))  # the bag's time origin
     ev_ref, ev_bag = evaluate(ref, ds), evaluate(res, shifted)
     keys = (*ERROR_KEYS, "links_correct")
     return {

@@ -68,8 +68,9 @@ def write_bag(
         )
     ts = get_typestore(Stores.ROS1_NOETIC if ros_version == 1 else Stores.ROS2_HUMBLE)
     T = ts.types
-    n = ds.robot.n_joints
-    names = list(joint_names or (ds.robot.joint_name(i) for i in range(1, n + 1)))
+    chain = ds.robot
+    n = 0 if chain is None else chain.n_joints
+    names = list(joint_names or (() if chain is None else (chain.joint_name(i) for i in range(1, n + 1))))
     a_scale = 1.0 / STANDARD_GRAVITY if accel_unit == "g" else 1.0
     w_scale = 180.0 / np.pi if gyro_unit == "deg" else 1.0
     zeros9 = np.zeros(9)
@@ -82,7 +83,9 @@ def write_bag(
     def vec(v: np.ndarray) -> Any:
         return T["geometry_msgs/msg/Vector3"](x=float(v[0]), y=float(v[1]), z=float(v[2]))
 
-    streams: list[tuple[str, str, np.ndarray, Any]] = [("/joint_states", JOINTS, ds.joints.t, None)]
+    streams: list[tuple[str, str, np.ndarray, Any]] = []  # an IMU-only dataset: no joint stream
+    if ds.joints is not None:
+        streams.append(("/joint_states", JOINTS, ds.joints.t, ds.joints))
     streams += [(imu_topic or f"/skin/{u}/imu", IMU, s.t, (u, s)) for u, s in ds.imu.items()]
     streams += [(f"/skin/{u}/range", RANGE, s.t, (u, s)) for u, s in ds.tof.items()]
     t_all = np.concatenate([s[2] for s in streams])
@@ -114,7 +117,7 @@ def write_bag(
             s, i, ns = int(which[k]), int(index[k]), int(ns_all[k])
             topic, kind, _, data = streams[s]
             if kind == JOINTS:
-                js = ds.joints
+                js = data
                 msg = T[JOINTS](
                     header=header(ns, ""),
                     name=names,
