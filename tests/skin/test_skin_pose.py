@@ -72,7 +72,7 @@ def test_quaternion_order_is_wxyz():
 
 def test_bad_poses_are_rejected():
     with pytest.raises(ConfigError, match="link"):
-        SkinUnitPose(0, np.eye(3), np.zeros(3))
+        SkinUnitPose(-1, np.eye(3), np.zeros(3))
     with pytest.raises(ConfigError, match="rotation"):
         SkinUnitPose(1, np.diag([1.0, 1.0, -1.0]), np.zeros(3))
     with pytest.raises(ConfigError, match="NaN"):

@@ -85,6 +85,14 @@ def calibrate(
         None, "--option", help="method option name=value (repeatable), e.g. scale=false, maxeval_static=500"
     ),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
+    reference: str | None = typer.Option(
+        None,
+        "--reference",
+        help="IMU-only: pose every unit in this unit's frame from the IMUs alone (joints not needed)",
+    ),
+    compare_with: Path | None = typer.Option(
+        None, "--compare-with", help="with --reference: a joint-based result (e.g. mle) of the dataset to compare with"
+    ),
 ) -> None:
     """Calibrate the skin units of a dataset (or of many: a fleet) and write the result JSON."""
     from rich.progress import Progress
@@ -95,6 +103,13 @@ def calibrate(
     from skincal.data.hdf5 import read_dataset
     from skincal.data.result import sha256_file, write_result
 
+    if compare_with is not None and reference is None:
+        raise ConfigError("--compare-with needs --reference (it compares an IMU-only result with a joint-based one)")
+    if reference is not None:
+        if len(datasets) > 1 or dask is not None:
+            raise ConfigError("--reference calibrates one dataset; give one dataset with it")
+        _calibrate_relative(datasets[0], out, reference, unit, compare_with, force)
+        return
     options = parse_option_strings(option or [])
     if len(datasets) > 1 or dask is not None:
         _calibrate_fleet(datasets, out, method, seed, links, use_truth_links, use_dataset_qdd, unit, workers, dask,
@@ -118,6 +133,39 @@ def calibrate(
         console.print(f"note: {shown(note)}", highlight=False)
     for name, reason in result.extras.get("failed_units", {}).items():
         console.print(f"[yellow]warning[/]: unit {shown(name)} not calibrated: {shown(reason)}", highlight=False)
+    console.print(f"wrote {shown(out)}", highlight=False)
+
+
+def _calibrate_relative(
+    dataset: Path, out: Path, reference: str, unit: list[str] | None, compare_with: Path | None, force: bool
+) -> None:
+    """``--reference``: the IMU-only unit-to-unit calibration (joints or not), and with ``--compare-with``
+    the disagreement with a joint-based result per unit on the reference's link."""
+    from skincal.calib.imu_only import calibrate_relative, compare_with_joint_result
+    from skincal.data.atomic import check_output
+    from skincal.data.hdf5 import read_dataset
+    from skincal.data.result import read_result, sha256_file, write_result
+
+    inputs = (dataset,) if compare_with is None else (dataset, compare_with)
+    check_output(out, force=force, inputs=inputs)
+    joint = read_result(compare_with) if compare_with is not None else None
+    ds = read_dataset(dataset)
+    result = calibrate_relative(ds, reference, units=list(unit) if unit else None, dataset_sha256=sha256_file(dataset))
+    write_result(result, out)
+    title = f"imu-only (frame of {reference}): {len(result.units)} units in {result.runtime_s:.2f} s"
+    console.print(_unit_table(result, title))
+    for name, reason in result.extras.get("failed_units", {}).items():
+        console.print(f"[yellow]warning[/]: unit {shown(name)} not calibrated: {shown(reason)}", highlight=False)
+    if joint is not None:
+        differences = compare_with_joint_result(result, joint)
+        if not differences:
+            console.print(f"note: {shown(str(compare_with))} puts no other unit on {shown(reference)}'s link",
+                          highlight=False)  # fmt: skip
+        for name, (mm, deg) in differences.items():
+            console.print(
+                f"{shown(name)}: IMU-only vs {shown(joint.method)} differ by {mm:.2f} mm, {deg:.3f} deg",
+                highlight=False,
+            )
     console.print(f"wrote {shown(out)}", highlight=False)
 
 
@@ -182,6 +230,7 @@ def evaluate(
     from skincal.data.result import read_result
 
     res, ds = read_result(result), read_dataset(truth)
+    ds.require_joints("evaluate (a wrong link is measured at the first joint sample)", source=str(truth))
     for warning in check_result_dataset(res, result, ds, truth, allow_other=allow_other)[1]:
         console_warning(warning)
     doc = run(res, ds)

@@ -29,6 +29,10 @@ null, "warnings": [reason]}``; the top-level ``failed_units`` is written as befo
 entry with a ``null`` ``position_m`` or ``quaternion_wxyz`` must have ``observable: false``; it is
 returned in ``extras["failed_units"]`` (name -> its warnings joined with ``"; "``), not in
 ``CalibrationResult.units``, so every unit in ``units`` has a pose.
+
+Relative results (``skincal.calib.imu_only``): a top-level ``reference`` names a unit of ``units``; every
+pose is then ``T_ref_su`` in that unit's frame and ``link`` may be 0 (:data:`REFERENCE_LINK`), which
+means exactly that; without ``reference``, link 0 is refused as before.
 """
 
 from __future__ import annotations
@@ -54,6 +58,10 @@ from skincal.skin.pose import SkinUnitPose
 FORMAT = "skincal-result"
 VERSION = 1
 FAILED_UNITS = "failed_units"
+REFERENCE = "reference"
+"""Top-level field of a relative (IMU-only) result: the unit whose frame every pose is given in."""
+REFERENCE_LINK = 0
+"""``link`` of a pose in the reference unit's frame (allowed only in a result with ``reference``)."""
 _NO_REASON = "no pose (the result file gives no reason)"
 _TOP_KEYS = ("format", "version", "method", "robot", "dataset_sha256", "runtime_s", "units")
 _UNIT_KEYS = ("link", "position_m", "quaternion_wxyz", "observable", "position_std_m", "rotation_std_deg", "warnings")
@@ -276,9 +284,14 @@ class _Checker:
             raise self.fail("units", f"must be an object of unit name -> result, got {_short(units)}")
         if not units:
             raise self.fail("units", "is empty (a result lists every unit of its dataset, calibrated or not)")
+        reference = doc.get(REFERENCE)
+        if reference is not None:
+            self.name(self.string(reference, REFERENCE), REFERENCE)
+            if reference not in units:
+                raise self.fail(REFERENCE, f"names unit {_short(reference)}, which is not in units")
         for name, unit in units.items():
             self.name(name, f"units key {_short(name)}")
-            self.unit(unit, f"units.{name}")
+            self.unit(unit, f"units.{name}", relative=reference is not None)
         links = self.robot_links(doc["robot"])
         if links is not None:
             for name, unit in units.items():
@@ -294,14 +307,16 @@ class _Checker:
 
         return PRESETS[robot]().n_joints if robot in PRESETS else None
 
-    def unit(self, unit: Any, where: str) -> None:
+    def unit(self, unit: Any, where: str, relative: bool = False) -> None:
         if not isinstance(unit, dict):
             raise self.fail(where, f"must be an object, got {_short(unit)}")
         link = self.get(unit, "link", where)
         position = self.get(unit, "position_m", where)
         quaternion = self.get(unit, "quaternion_wxyz", where)
         posed = position is not None and quaternion is not None
-        if not (link is None and not posed) and (isinstance(link, bool) or not isinstance(link, int) or link < 1):
+        if relative and link == REFERENCE_LINK and not isinstance(link, bool):
+            pass  # a relative result: the pose is in the reference unit's frame
+        elif not (link is None and not posed) and (isinstance(link, bool) or not isinstance(link, int) or link < 1):
             also = "" if posed else " or null"
             raise self.fail(f"{where}.link", f"must be a positive integer (1-based link){also}, got {_short(link)}")
         if position is not None:

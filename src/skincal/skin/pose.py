@@ -35,7 +35,8 @@ class SkinUnitPose:
     """Pose of one skin unit in its link frame.
 
     Attributes:
-        link: 1-based link the unit is fixed to (it moves with joint ``link``).
+        link: 1-based link the unit is fixed to (it moves with joint ``link``); 0 is the base frame, or
+            the reference unit's frame of an IMU-only relative result (``calib.imu_only``).
         R_link_su: ``(3, 3)`` rotation: columns are the SU axes in link frame ``link``.
         p_link_su: ``(3,)`` SU origin in link frame ``link``, m.
     """
@@ -45,8 +46,8 @@ class SkinUnitPose:
     p_link_su: FloatArray
 
     def __post_init__(self) -> None:
-        if not isinstance(self.link, (int, np.integer)) or int(self.link) < 1:
-            raise ConfigError(f"skin unit link must be a positive integer, got {self.link!r}")
+        if not isinstance(self.link, (int, np.integer)) or int(self.link) < 0:
+            raise ConfigError(f"skin unit link must be a non-negative integer, got {self.link!r}")
         object.__setattr__(self, "link", int(self.link))
         R = np.array(self.R_link_su, dtype=float)
         p = np.array(self.p_link_su, dtype=float)
