@@ -291,10 +291,13 @@ def test_cli_import(small, tmp_path, capsys):
     assert ds.segments is not None and len(ds.segments) > 0 and ds.units == sim.units
     ts = _store(1)
     _write(tmp_path / "nj.bag", 1, {"/su1/imu": _imu_msgs(ts, T, UP_G, ros=1)})
-    assert main(["import", str(tmp_path / "nj.bag"), "--out", str(tmp_path / "x.h5")]) == 2
+    assert main(["import", str(tmp_path / "nj.bag"), "--out", str(tmp_path / "x.h5")]) == 0  # IMU-only (issue 18)
+    assert "no sensor_msgs/JointState topic: an IMU-only dataset" in " ".join(capsys.readouterr().out.split())
+    assert read_dataset(tmp_path / "x.h5").joints is None
+    assert main(["import", str(tmp_path / "nj.bag"), "--joint-topic", "/js", "--out", str(tmp_path / "y.h5")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith("error: ") and "no sensor_msgs/JointState" in err and "\n" not in err
-    assert not (tmp_path / "x.h5").exists()
+    assert err.startswith("error: ") and "joint state topic '/js' is not in the bag" in err and "\n" not in err
+    assert not (tmp_path / "y.h5").exists()
 
 
 @pytest.mark.parametrize("ros,storage", [(1, "sqlite3"), (2, "mcap")])

@@ -82,8 +82,11 @@ def record(
     console.print(f"wrote {summary.path}: {sum(summary.samples.values())} samples in {len(summary.samples)} "
                   f"streams; lost {lost} packets, malformed {stats.malformed_total}, stale {stale}, refused "
                   f"{stats.refused}, ignored {summary.ignored_samples} samples", highlight=False)
-    if chain is None or "joints" not in summary.samples:
-        console.print("note: no --robot or no joint-state stream: a dataset needs both, so read_dataset, "
+    if "joints" not in summary.samples:
+        console.print("note: no joint-state stream: an IMU-only dataset (calibrate it with --reference UNIT)",
+                      highlight=False)
+    elif chain is None:
+        console.print("note: joint states but no --robot: a dataset with joints needs its robot, so read_dataset, "
                       "skincal info and calibrate will refuse this recording", highlight=False)
 
 

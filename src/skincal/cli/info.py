@@ -60,11 +60,23 @@ def info(path: Path = typer.Argument(..., help="dataset file (.h5)")) -> None:
     head.add_row("file", shown(path))  # names and free text as stored, escaped (shown)
     if ds.description:
         head.add_row("description", shown(ds.description))
-    head.add_row("robot", f"{shown(robot.name)} ({robot.described_by}, {robot.n_joints} joints)")
-    head.add_row("duration", f"{ds.duration:.3f} s (t = {js.t[0]:.3f} .. {js.t[-1]:.3f} s)")
-    qdd = "with qdd" if js.qdd is not None else "no qdd"
-    head.add_row("joint stream", f"{len(js.t)} samples, {_fmt_rate(_rate_hz(js.t))} Hz, {qdd}")
-    if ds.segments is None:
+    if robot is not None:
+        head.add_row("robot", f"{shown(robot.name)} ({robot.described_by}, {robot.n_joints} joints)")
+    else:
+        head.add_row("robot", "none")
+    if js is not None:
+        head.add_row("duration", f"{ds.duration:.3f} s (t = {js.t[0]:.3f} .. {js.t[-1]:.3f} s)")
+        qdd = "with qdd" if js.qdd is not None else "no qdd"
+        head.add_row("joint stream", f"{len(js.t)} samples, {_fmt_rate(_rate_hz(js.t))} Hz, {qdd}")
+    else:
+        spans = [(float(s.t[0]), float(s.t[-1])) for s in ds.imu.values() if len(s.t)]
+        span = f" (IMU t = {min(a for a, _ in spans):.3f} .. {max(b for _, b in spans):.3f} s)" if spans else ""
+        head.add_row("duration", f"{ds.duration:.3f} s{span}")
+        head.add_row("joint stream", "none: IMU-only (calibrate with --reference UNIT)")
+        head.add_row("gravity", f"{np.linalg.norm(ds.gravity):.4g} m/s^2")
+    if ds.segments is None and js is None:
+        head.add_row("segments", "none")
+    elif ds.segments is None:
         head.add_row("segments", "none (segmented automatically)")
     else:
         kind = np.asarray(ds.segments.kind)
@@ -84,6 +96,7 @@ def info(path: Path = typer.Argument(..., help="dataset file (.h5)")) -> None:
         ("gyro", "center"),
         ("ToF", "center"),
         ("truth link", "right"),
+        *((("truth body", "left"),) if ds.truth_body else ()),
     ):
         units.add_column(column, justify=justify)  # type: ignore[arg-type]
     for name, imu in ds.imu.items():
@@ -95,5 +108,6 @@ def info(path: Path = typer.Argument(..., help="dataset file (.h5)")) -> None:
             "yes" if imu.gyro is not None else "no",
             "yes" if name in ds.tof else "no",
             str(truth.link) if truth is not None else "-",
+            *((shown(ds.truth_body[name].body) if name in ds.truth_body else "-",) if ds.truth_body else ()),
         )
     console.print(units)

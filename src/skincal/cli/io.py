@@ -75,7 +75,8 @@ def _segments_from_protocol(ds, protocol: Path):
     from skincal.protocol import read_trajectory_json
     from skincal.protocol.align import align_to_protocol
 
-    al = align_to_protocol(ds.joints.t, ds.joints.q, read_trajectory_json(protocol))
+    _, joints = ds.require_joints("--protocol (aligned to the joint positions)")
+    al = align_to_protocol(joints.t, joints.q, read_trajectory_json(protocol))
     console.print(printable(f"segments from {protocol}: protocol t=0 at {al.offset_s:.3f} s of the recording, "
                             f"RMS joint difference {al.rms:.2g}, {len(al.segments)} segments" +
                             (f" ({al.dropped} outside the recording dropped)" if al.dropped else "")),
@@ -104,6 +105,10 @@ def import_bag(
     min_static: float | None = _MIN_STATIC,
     min_dynamic: float | None = _MIN_DYNAMIC,
     protocol: Path | None = _PROTOCOL,
+    imu_only: bool = typer.Option(
+        False, "--imu-only", help="no joint states: an IMU-only dataset (automatic, noted, when the bag has no "
+        "JointState topic); its robot only from --robot or the bag's /robot_description"
+    ),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Import a ROS bag (no ROS install needed), segment it and write a dataset."""
@@ -114,21 +119,34 @@ def import_bag(
     from skincal.data.names import printable
     from skincal.data.ros import topic_map
     from skincal.data.segment import segment_dataset
+    from skincal.errors import ConfigError
     from skincal.kinematics import PRESETS
 
     robot_file = (Path(robot),) if robot is not None and robot not in PRESETS else ()
     check_output(out, force=force, inputs=(bag, *robot_file, *((protocol,) if protocol else ())))
     tmap = topic_map(imu_topic, joint_topic, range_topic, path=map_file)
-    ds, report = _read_bag_with_progress(bag, robot, tmap, accel_unit, gyro_unit, base_link, tip_link)
+    if imu_only and protocol is not None:
+        raise ConfigError("--protocol aligns the recording's joint positions: an --imu-only import has none")
+    ds, report = _read_bag_with_progress(bag, robot, tmap, accel_unit, gyro_unit, base_link, tip_link,
+                                         True if imu_only else None)  # fmt: skip
     units = ", ".join(f"{u} <- {t}" for t, u in report.imu_topics.items())
     ranges = ", ".join(f"{u} <- {t}" for t, u in report.range_topics.items())
+    if ds.joints is None:
+        robot_text = f"robot {report.robot} ({report.robot_source})" if ds.robot is not None else "no robot"
+        joints_text = "IMU-only (no joint states)"
+    else:
+        robot_text = f"robot {report.robot} ({report.robot_source})"
+        joints_text = f"joints from {report.joint_topic} ({len(ds.joints.t)} samples)"
     # names come from the bag (topics, frame_ids): no markup, control characters shown escaped
-    console.print(printable(f"read {bag} (ROS {report.ros_version}): robot {report.robot} ({report.robot_source}), "
-                            f"joints from {report.joint_topic} ({len(ds.joints.t)} samples), units {units}"
+    console.print(printable(f"read {bag} (ROS {report.ros_version}): {robot_text}, {joints_text}, units {units}"
                             + (f"; ranges {ranges}" if ranges else "")), highlight=False, markup=False)  # fmt: skip
     for note in report.notes:
         console.print(printable(f"  note: {note}"), highlight=False, markup=False)
-    if segment and protocol is not None:
+    if ds.joints is None:
+        if protocol is not None:
+            raise ConfigError(f"{bag}: no joint states in the bag: --protocol cannot be aligned to them")
+        ds = replace(ds, segments=None)  # segments come from joint states
+    elif segment and protocol is not None:
         ds = _segments_from_protocol(ds, protocol)
     elif segment:
         ds, seg_report = segment_dataset(ds, _segmentation_config(rest_velocity, min_static, min_dynamic))
@@ -141,7 +159,8 @@ def import_bag(
 
 
 def _read_bag_with_progress(bag: Path, robot: str | None, tmap, accel_unit: str, gyro_unit: str,
-                            base_link: str | None = None, tip_link: str | None = None):
+                            base_link: str | None = None, tip_link: str | None = None,
+                            imu_only: bool | None = False):
     """:func:`~skincal.data.ros.read_bag` with a transient progress bar on stderr (messages read / total)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -153,7 +172,8 @@ def _read_bag_with_progress(bag: Path, robot: str | None, tmap, accel_unit: str,
     with Progress(*columns, console=err_console, transient=True, disable=not err_console.is_terminal) as bar:
         task = bar.add_task("read", total=None)
         return read_bag(bag, robot, tmap, base_link=base_link, tip_link=tip_link, accel_unit=accel_unit,
-                        gyro_unit=gyro_unit, progress=lambda done, total: bar.update(task, completed=done, total=total))
+                        gyro_unit=gyro_unit, progress=lambda done, total: bar.update(task, completed=done, total=total),
+                        imu_only=imu_only)
 
 
 @app.command("segment")
@@ -174,6 +194,7 @@ def segment_cmd(
 
     check_output(out, force=force, inputs=(dataset,) + ((protocol,) if protocol else ()))
     ds = read_dataset(dataset)
+    ds.require_joints("segment (segments are found in the joint stream)", source=str(dataset))
     had = ds.segments is not None and len(ds.segments) > 0
     if protocol is not None:
         ds = _segments_from_protocol(ds, protocol)

@@ -75,6 +75,9 @@ def view(
     res = read_result(result)
     truth_ds = read_dataset(truth) if truth is not None else None
     play_ds = read_dataset(play) if play is not None else None
+    for given, path, what in ((truth_ds, truth, "view --truth"), (play_ds, play, "view --play")):
+        if given is not None:  # the robot is drawn at the dataset's joint positions
+            given.require_joints(what, source=str(path))
     warnings: list[str] = []
     if truth_ds is not None:
         warnings += check_result_dataset(res, result, truth_ds, truth, allow_other=allow_other)[1]
@@ -189,6 +192,7 @@ def report(
         progress = lambda message: status.update(escape(printable(f"report: {message}")))  # noqa: E731
         res = read_result(result)
         ds = read_dataset(dataset)
+        ds.require_joints("report (its residuals are predicted from the joint stream)", source=str(dataset))
         digest, warnings = check_result_dataset(res, result, ds, dataset, allow_other=allow_other)
         for warning in warnings:
             console_warning(warning)

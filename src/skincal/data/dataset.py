@@ -118,11 +118,12 @@ class Dataset:
         """Whether the dataset has a joint stream (``False``: IMU-only)."""
         return self.joints is not None
 
-    def require_joints(self, command: str = "this step") -> tuple[SerialChain, JointStates]:
+    def require_joints(self, command: str = "this step", source: str | None = None) -> tuple[SerialChain, JointStates]:
         """The robot and the joint stream, or a one-line :class:`~skincal.errors.DatasetError` when the
-        dataset is IMU-only (``command`` names what needs them)."""
+        dataset is IMU-only (``command`` names what needs them; ``source``, the file, starts the message)."""
         if self.joints is None or self.robot is None:
-            raise DatasetError(f"{NO_JOINTS_MESSAGE}: {command} needs the robot's joint states")
+            where = f"{source}: " if source else ""
+            raise DatasetError(f"{where}{NO_JOINTS_MESSAGE}: {command} needs the robot's joint states")
         return self.robot, self.joints
 
     @property

@@ -488,8 +488,8 @@ def read_dataset(path: str | Path) -> Dataset:
         r = _Reader(f, source, size)
         try:
             description = r.header()
+            robot, gravity = r.robot_if_any(has_joints=r.link("/joints"))
             joints = r.joints()
-            robot, gravity = r.robot_if_any(has_joints=joints is not None)
             imu = r.imu()
             tof = r.tof()
             segments = r.segments()

@@ -178,7 +178,7 @@ class SkinEmulator:
         self.clocks = clocks or {}
         self.robot_clock = robot_clock or DeviceClock()
         self.duration_s, self.max_datagrams = duration_s, max_datagrams
-        self.joints, self.seq_start = joints, int(seq_start)
+        self.joints, self.seq_start = joints and dataset.joints is not None, int(seq_start)  # IMU-only: none
         self.max_burst, self.burst_pause_s = int(max_burst), float(burst_pause_s)
         self._stop = threading.Event()
         self._plan()

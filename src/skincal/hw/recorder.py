@@ -17,8 +17,10 @@ by the change of that fit between flushes, normally well under a sample period);
 :meth:`Recorder.finish` recomputes ``t`` with the final fits (since the device clock's last restart,
 if it restarted), writes ``/clock/<stream>`` attrs and replaces the file atomically.
 
-What reaches the file always passes :func:`skincal.data.hdf5.read_dataset` (given ``robot`` and a
-joint-state stream, which the contract requires): per group, a sample whose device time is not after
+What reaches the file always passes :func:`skincal.data.hdf5.read_dataset` (given at least one IMU
+sample, and ``robot`` when there is a joint-state stream: the contract wants a robot with joints; a
+recording without a joint-state stream is an IMU-only dataset, with or without ``/robot``): per
+group, a sample whose device time is not after
 the previous one of the same device epoch is ignored (replays that got through, crafted times), so
 ``t`` is strictly increasing; across a flush, a restart or the final remap ``t`` is shifted forward
 when a new clock fit would step it back. ToF samples of a unit wait until its IMU group exists (a

@@ -91,6 +91,8 @@ class ImportReport:
     time_origin_ns: int
     robot: str = ""
     robot_source: str = ""
+    imu_only: bool = False
+    """No joint states read (``joint_topic`` is ``""``; ``robot`` ``""`` when the dataset has none)."""
 
 
 def _stamps(rows: list[tuple[int, int]], topic: str, notes: list[str]) -> np.ndarray:
@@ -228,11 +230,18 @@ class _Pass:
 
 
 def _read_messages(
-    path: Path, source: str, tmap: TopicMap, description: bool, progress: Callable[[int, int], None] | None = None
+    path: Path,
+    source: str,
+    tmap: TopicMap,
+    description: bool,
+    progress: Callable[[int, int], None] | None = None,
+    imu_only: bool | None = False,
 ) -> _Pass:
     """One pass over the bag: per selected topic, a list of (stamp ns, bag ns, payload) rows (and the
     ``/robot_description`` text when ``description``); ``progress(read, total)`` every
-    :data:`PROGRESS_EVERY` messages of the selected topics and at the end."""
+    :data:`PROGRESS_EVERY` messages of the selected topics and at the end. ``imu_only``: True reads
+    no joint states; None reads none when the bag has no JointState topic (noted); False needs them.
+    ``used.joints`` is None when no joint states are read."""
     notes: list[str] = []
     try:
         reader = _open_reader(path)
@@ -256,15 +265,23 @@ def _read_messages(
 
         imu = pick((IMU,), tmap.imu, "IMU")
         ranges = pick((RANGE, SCAN), tmap.range, "range")
-        if tmap.joints:
+        joint_topic: str | None = None
+        found = [t for t, ty in topics.items() if ty == JOINTS]
+        if imu_only:
+            if tmap.joints:
+                raise ConfigError("an IMU-only import reads no joint states: give no joint topic with it")
+            if found:
+                notes.append(f"IMU-only: joint states on {', '.join(sorted(found))} not read")
+        elif tmap.joints:
             pick((JOINTS,), {tmap.joints: ""}, "joint state")
             joint_topic = tmap.joints
+        elif not found and imu_only is None and imu:
+            notes.append("no sensor_msgs/JointState topic: an IMU-only dataset (calibrate it with --reference UNIT)")
         else:
-            found = [t for t, ty in topics.items() if ty == JOINTS]
             if not found:
                 raise DatasetError(
                     f"{source}: no sensor_msgs/JointState topic; calibration needs the robot's joint "
-                    f"states (topics: {listing})"
+                    f"states, or import it IMU-only (--imu-only) (topics: {listing})"
                 )
             if len(found) > 1:
                 raise DatasetError(
@@ -273,7 +290,7 @@ def _read_messages(
             joint_topic = found[0]
         if not imu:
             raise DatasetError(f"{source}: no sensor_msgs/Imu topic (topics: {listing})")
-        selected = {joint_topic, *imu, *ranges}
+        selected = {*((joint_topic,) if joint_topic else ()), *imu, *ranges}
         if description and topics.get(ROBOT_DESCRIPTION) == STRING:
             selected.add(ROBOT_DESCRIPTION)
         rows: dict[str, list] = {t: [] for t in selected}
@@ -430,6 +447,19 @@ def _joint_states(scan: _Pass, chain: SerialChain, source: str) -> tuple[np.ndar
     return t_j, q, qd
 
 
+def _first_stamp(scan: _Pass, source: str) -> int:
+    """The earliest header stamp (the bag time where a topic's stamps are zero) of the IMU and range
+    topics read: time 0 of an IMU-only dataset."""
+    firsts = []
+    for topic in (*scan.used.imu, *scan.used.range):
+        rows = scan.rows.get(topic) or []
+        if rows:
+            firsts.append(int(_stamps([r[:2] for r in rows], topic, []).min()))
+    if not firsts:
+        raise DatasetError(f"{source}: the IMU topics have no messages")
+    return min(firsts)
+
+
 def _sources(
     topic: str, rows: list, frame_at: int, name: str, source: str, what: str, notes: list[str]
 ) -> dict[str, list]:
@@ -470,6 +500,7 @@ def read_bag(
     accel_unit: str = "auto",
     gyro_unit: str = "auto",
     progress: Callable[[int, int], None] | None = None,
+    imu_only: bool | None = False,
 ) -> tuple[Dataset, ImportReport]:
     """Read a ROS 1/ROS 2 bag into a :class:`Dataset` without segments (see the module docstring).
 
@@ -483,6 +514,11 @@ def read_bag(
         progress: called as ``progress(read, total)`` with the messages of the selected topics read so
             far and their total (from the bag's index): at the start, every :data:`PROGRESS_EVERY`
             messages and at the end.
+        imu_only: True: an IMU-only dataset (no ``/joints``; JointState topics are not read; the
+            robot only when ``robot`` is given or the bag has ``/robot_description``, never the
+            default); None: IMU-only when the bag has IMU topics and no JointState topic (noted);
+            False (default): joint states required. IMU-only time starts at the first IMU or range
+            stamp, and ``gyro_unit="auto"`` takes rad/s (noted: no joint speeds to compare with).
 
     Raises:
         DatasetError: missing, empty, truncated or corrupt bag; no joint states; a joint of the robot
@@ -494,20 +530,38 @@ def read_bag(
     path = Path(path)
     source = str(path)
     tmap = tmap or TopicMap()
-    scan = _read_messages(path, source, tmap, chain is None, progress)
+    scan = _read_messages(path, source, tmap, chain is None, progress, imu_only)
     notes, rows, used = scan.notes, scan.rows, scan.used
     counts = {t: len(r) for t, r in rows.items()}
-    if chain is None:
+    with_joints = used.joints is not None
+    if chain is None and (with_joints or scan.rows.get(ROBOT_DESCRIPTION)):
         chain, robot_source = _robot_from_bag(scan, source, base_link, tip_link)
+    elif chain is None:  # IMU-only, no robot named anywhere: none (not the default panda)
+        if base_link is not None or tip_link is not None:
+            raise ConfigError(
+                f"--base-link/--tip-link need a URDF: give --robot arm.urdf ({source} has no {ROBOT_DESCRIPTION} topic)"
+            )
+        robot_source = "none"
     else:
         robot_source = str(robot) if isinstance(robot, str) else "chain"
         if scan.topics.get(ROBOT_DESCRIPTION) == STRING:
             notes.append(f"{ROBOT_DESCRIPTION} in the bag not used (robot given: {chain.name})")
 
-    t_j, q, qd = _joint_states(scan, chain, source)
-    origin = int(t_j[0])
+    joints: JointStates | None = None
+    if with_joints:
+        if chain is None:  # pragma: no cover - a robot is always found with joint states
+            raise DatasetError(f"{source}: no robot for the joint states")
+        t_j, q, qd = _joint_states(scan, chain, source)
+        origin = int(t_j[0])
+        qd_sum_p99 = float(np.percentile(np.sum(np.abs(qd), axis=1), 99))
+    else:  # IMU-only: time from the first IMU or range stamp
+        origin = _first_stamp(scan, source)
+        qd_sum_p99 = 0.0
+        if gyro_unit == "auto":
+            notes.append("IMU-only: gyroscopes taken in rad/s (no joint speeds to check; --gyro-unit deg converts)")
     to_s = lambda ns: (ns - origin) * 1e-9  # noqa: E731
-    qd_sum_p99 = float(np.percentile(np.sum(np.abs(qd), axis=1), 99))
+    if with_joints:
+        joints = JointStates(t=to_s(t_j), q=q, qd=qd)
 
     # IMUs: one unit per topic and frame_id.
     imu: dict[str, ImuStream] = {}
@@ -580,7 +634,7 @@ def read_bag(
 
     ds = Dataset(
         robot=chain,
-        joints=JointStates(t=to_s(t_j), q=q, qd=qd),
+        joints=joints,
         imu=imu,
         tof=tof,
         description=f"imported from {path.name} (ROS {scan.ros}); time origin {origin} ns since the epoch",
@@ -589,13 +643,14 @@ def read_bag(
     report = ImportReport(
         source=source,
         ros_version=scan.ros,
-        joint_topic=used.joints,
+        joint_topic=used.joints or "",
         imu_topics=imu_units,
         range_topics=range_units,
         counts=counts,
         notes=tuple(notes),
         time_origin_ns=origin,
-        robot=chain.name,
+        robot="" if chain is None else chain.name,
         robot_source=robot_source,
+        imu_only=not with_joints,
     )
     return ds, report
