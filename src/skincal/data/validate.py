@@ -240,7 +240,9 @@ def validate_dataset(ds: Dataset, source: str = "<dataset>") -> None:
     ``(N,)`` finite and strictly increasing; ``q``, ``qd``, ``qdd`` ``(N, n)``; IMU ``accel``/``gyro``
     ``(M, 3)``; ToF ``range`` ``(K,)`` (NaN allowed: no target; not infinite, not negative); values
     finite everywhere else; ToF units have IMU streams; segments consistent; truth units exist
-    in ``imu`` with link in ``1..n``. ``source`` (the file name) starts every message.
+    in ``imu`` with link in ``1..n``. An IMU-only dataset (``joints`` None) may have no robot (its
+    gravity then checked alone; no link truth; body truth a rigid ``T_body_su``); joints need a robot.
+    ``source`` (the file name) starts every message.
     """
     if not isinstance(ds, Dataset):
         raise DatasetError(f"{source}: expected a Dataset, got {type(ds).__name__}")

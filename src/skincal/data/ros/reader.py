@@ -32,7 +32,8 @@ Reads ROS 1 (``.bag``) and ROS 2 bags (a directory with ``metadata.yaml``, or a 
   one source per topic and frame_id like the IMUs.
 
 Time: ``header.stamp`` (a topic with zero stamps falls back to the bag's receive time, noted),
-shifted so that the first joint state is at 0 s (the origin is kept in the description). Samples
+shifted so that the first joint state (IMU-only, ``imu_only``: the first IMU or range stamp) is at
+0 s (the origin is kept in the description). Samples
 are sorted; repeated stamps and NaN samples are dropped with a count in the report.
 """
 
