@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -254,9 +254,16 @@ def calibrate_relative(
     units: list[str] | None = None,
     max_offset_s: float = 1.0,
     other_body_ratio: float = OTHER_BODY_RATIO,
+    reference_scale_std: float = 0.0,
+    reference_misalignment_std: float = 0.0,
     dataset_sha256: str = "",
 ) -> CalibrationResult:
     """Poses of ``units`` (default: every unit) in the frame of unit ``reference`` from the IMUs alone.
+
+    The reference accelerometer is the gauge of every position (its scale error ``s`` makes
+    ``r_est = (1 + s) r``): ``reference_scale_std`` and ``reference_misalignment_std`` (the size of its
+    uncalibrated per-axis scale error and symmetric cross-axis error, e.g. 0.03 and 0.01 for the
+    ``real`` IMU preset) add that to the position std; 0 (default) takes the reference as exact.
 
     Returns a :class:`~skincal.data.result.CalibrationResult` with ``method = "imu-only"``,
     ``extras["reference"] = reference`` and per unit ``T_ref_su`` at ``link = 0``; units on another
@@ -270,6 +277,8 @@ def calibrate_relative(
         known = ", ".join(printable(u) for u in dataset.units)
         raise DatasetError(f"reference unit '{printable(reference)}' is not in the dataset (units: {known})")
     names = list(units) if units else dataset.units
+    if not (0.0 <= reference_scale_std < 1.0 and 0.0 <= reference_misalignment_std < 1.0):
+        raise ConfigError("reference_scale_std and reference_misalignment_std must be in [0, 1)")
     for name in names:
         if name not in dataset.imu:
             raise DatasetError(f"unit '{printable(name)}' is not in the dataset")
@@ -291,6 +300,9 @@ def calibrate_relative(
         if isinstance(fit, str):
             failed[name] = fit
             continue
+        r2 = fit.r**2
+        gauge = reference_scale_std**2 * r2 + reference_misalignment_std**2 * (r2.sum() - r2)
+        fit = replace(fit, position_cov=fit.position_cov + np.diag(gauge))
         out[name] = _unit_result(fit, reference)
     robot = dataset.robot.name if dataset.robot is not None else "none"
     extras: dict = {REFERENCE: reference}
@@ -303,6 +315,7 @@ def _unit_result(fit: RelativeFit, reference: str) -> UnitResult:
     pos_std = np.sqrt(np.maximum(np.diag(fit.position_cov), 0.0))
     rot_std = np.degrees(np.sqrt(np.maximum(np.diag(fit.rotation_cov), 0.0)))
     warnings: list[str] = []
+    notes = [f"position in the scale of {reference}'s accelerometer (its scale error carries over to the position)"]
     observable = True
     if fit.null_axis is not None:
         observable = False
@@ -325,6 +338,7 @@ def _unit_result(fit: RelativeFit, reference: str) -> UnitResult:
         "residual_std_mps2": fit.accel_sigma,
         "gyro_residual_std_rps": fit.gyro_sigma,
         "residual_correlation": fit.correlation,
+        "notes": notes,
     }
     return UnitResult(
         SkinUnitPose(REFERENCE_LINK, _closest_rotation(fit.R), fit.r),
