@@ -178,3 +178,38 @@ def test_benchmark_targets_over_20_runs():
     assert doc["rotation_error_deg_max"] <= 0.1
     assert 0.5 <= doc["position_error_over_std_rms"] <= 2.0 and 0.5 <= doc["rotation_error_over_std_rms"] <= 2.0
     assert doc["position_error_mm_max"] < 0.06 * 200  # 3 % scale std of the reference, 2 sigma
+
+
+def test_cli_simulate_handheld_then_calibrate_with_options(tmp_path, capsys):
+    data = tmp_path / "hand.h5"
+    args = ["simulate", "--handheld", "--units", "2", "--spacing", "0.15", "--duration", "12", "--noise", "real"]
+    assert main([*args, "--other-body", "1", "-o", str(data)]) == 0
+    assert "no joints" in capsys.readouterr().out
+    out = tmp_path / "rel.json"
+    opts = ["--option", "reference_scale_std=0.03", "--option", "reference_misalignment_std=0.01"]
+    assert main(["calibrate", str(data), "--reference", "su2", "-o", str(out), *opts]) == 0
+    result = read_result(out)
+    assert set(result.units) == {"su1", "su2"}
+    p, std = result.units["su1"].pose.p_link_su, result.units["su1"].position_std_m
+    assert np.linalg.norm(p) == pytest.approx(0.15, abs=8e-3)  # su1 seen from su2: 0.15 m away, any direction
+    assert np.linalg.norm(std) > 0.15 * 0.01  # the reference's scale and misalignment std are in it
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--option", "scale=false"], "--option scale: not an option of --reference"),
+        (["--option", "reference_scale_std=big"], "expected a number"),
+        (["--option", "reference_scale_std=nan"], "non-negative number"),
+        (["--compare-with", "{tmp}/missing.json"], "missing.json"),
+    ],
+)
+def test_cli_reference_refuses_bad_options(tmp_path, capsys, extra, message):
+    data = tmp_path / "hand.h5"
+    write_dataset(_dataset(0, duration=5.0), data)
+    extra = [x.replace("{tmp}", str(tmp_path)) for x in extra]
+    assert main(["calibrate", str(data), "--reference", "su1", "-o", str(tmp_path / "r.json"), *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "r.json").exists()

@@ -34,8 +34,17 @@ def simulate(
         "auto", help="unit clocks: ideal, driver, wifi, wifi-resync or auto (driver for --noise real)"
     ),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
+    handheld: bool = typer.Option(
+        False, "--handheld", help="no robot: --units units (default 2) on one body moved by hand, --spacing apart"
+    ),
+    spacing: float = typer.Option(0.2, help="--handheld: distance between neighbouring units, m"),
+    duration: float = typer.Option(60.0, help="--handheld: length of the session, s"),
+    other_body: int = typer.Option(0, min=0, help="--handheld: units on a second, independently moved body"),
 ) -> None:
     """Simulate a calibration session and write it as a dataset file."""
+    if handheld:
+        _simulate_handheld(out, units or 2, spacing, duration, noise, clock, seed, other_body, force)
+        return
     from rich.progress import Progress
 
     from skincal.data.atomic import check_output
@@ -58,3 +67,23 @@ def simulate(
         f"wrote {out}: {ds.robot.name}, {len(ds.units)} units, {ds.duration:.1f} s of motion, "
         f"{n} IMU samples ({time.perf_counter() - start:.2f} s)"
     )
+
+
+def _simulate_handheld(
+    out: Path, units: int, spacing: float, duration: float, noise: str, clock: str, seed: int, other_body: int,
+    force: bool,
+) -> None:  # fmt: skip
+    """``--handheld``: an IMU-only session (:func:`skincal.workflows.handheld.handheld_dataset`)."""
+    from skincal.data.atomic import check_output
+    from skincal.data.hdf5 import write_dataset
+    from skincal.errors import ConfigError
+    from skincal.workflows.handheld import handheld_dataset
+
+    check_output(out, force=force)
+    if not (0.0 < duration <= 3600.0):
+        raise ConfigError(f"--duration must be in (0, 3600] s, got {duration}")
+    clock_name = ("driver" if noise == "real" else "ideal") if clock == "auto" else clock
+    ds = handheld_dataset(units, spacing, duration, noise, clock_name, seed, other_body)
+    write_dataset(ds, out)
+    n = sum(len(s.t) for s in ds.imu.values())
+    console.print(f"wrote {out}: hand-held, {len(ds.units)} units, {duration:.1f} s, {n} IMU samples, no joints")
