@@ -213,3 +213,28 @@ def test_cli_reference_refuses_bad_options(tmp_path, capsys, extra, message):
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "r.json").exists()
+
+
+def test_cross_check_with_mle_on_a_robot(tmp_path, capsys):
+    """Units of one Panda link: the IMU-only poses (joints ignored) agree with mle's and with the truth."""
+    from skincal.kinematics import get_robot
+    from skincal.workflows.session import simulate_dataset
+
+    ds = simulate_dataset(get_robot("panda"), "random", 14, "realistic", "fast", 1, "analytic")
+    units = [u for u, pose in ds.truth.items() if pose.link == 3]
+    assert len(units) == 3
+    data, mle, rel = tmp_path / "panda.h5", tmp_path / "mle.json", tmp_path / "rel.json"
+    write_dataset(ds, data)
+    unit_args = [x for u in units for x in ("--unit", u)]
+    assert main(["calibrate", str(data), "-o", str(mle), "--use-truth-links", *unit_args]) == 0
+    capsys.readouterr()
+    args = ["calibrate", str(data), "--reference", units[0], "-o", str(rel), "--compare-with", str(mle), *unit_args]
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    assert printed.count("IMU-only vs mle differ by") == 2
+    diff = compare_with_joint_result(read_result(rel), read_result(mle))
+    assert set(diff) == set(units[1:]) and all(mm < 2.0 and deg < 0.1 for mm, deg in diff.values())
+    ref = ds.truth[units[0]]
+    for u in units[1:]:
+        p_true = ref.R_link_su.T @ (ds.truth[u].p_link_su - ref.p_link_su)
+        assert np.linalg.norm(read_result(rel).units[u].pose.p_link_su - p_true) < 2e-3
