@@ -238,3 +238,16 @@ def test_cross_check_with_mle_on_a_robot(tmp_path, capsys):
     for u in units[1:]:
         p_true = ref.R_link_su.T @ (ds.truth[u].p_link_su - ref.p_link_su)
         assert np.linalg.norm(read_result(rel).units[u].pose.p_link_su - p_true) < 2e-3
+
+
+def test_cli_evaluate_a_relative_result(tmp_path, capsys):
+    data, out = tmp_path / "hand.h5", tmp_path / "rel.json"
+    write_dataset(_dataset(1, duration=15.0), data)
+    assert main(["calibrate", str(data), "--reference", "su1", "-o", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(out), "--truth", str(data), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["reference"] == "su1" and doc["units"]["su1"]["position_error_mm"] == 0.0
+    assert doc["units"]["su2"]["same_body"] and doc["units"]["su2"]["position_error_mm"] < 1.0
+    assert doc["mean_position_error_mm"] == doc["units"]["su2"]["position_error_mm"]
+    assert "su3" not in doc["units"]  # not calibrated: on the other body

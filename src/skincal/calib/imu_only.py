@@ -369,3 +369,45 @@ def compare_with_joint_result(relative: CalibrationResult, joint: CalibrationRes
         chord = min(float(np.linalg.norm(R_joint - unit.pose.R_link_su)) / math.sqrt(8.0), 1.0)
         out[name] = (1e3 * float(np.linalg.norm(unit.pose.p_link_su - p_joint)), math.degrees(2 * math.asin(chord)))
     return out
+
+
+def evaluate_relative(result: CalibrationResult, dataset: Dataset) -> dict:
+    """Errors of a relative result against a simulated dataset's truth: per unit on the reference's body
+    (``truth_body``) or link (``truth``), ``position_error_mm`` and ``rotation_error_deg`` of ``T_ref_su``;
+    means over observable units. Units whose truth is on another body or link are listed as such."""
+    reference = result.extras.get(REFERENCE)
+    if not isinstance(reference, str):
+        raise ConfigError("evaluate_relative: the result has no reference unit (not an IMU-only result)")
+    truth: dict[str, tuple[str, FloatArray]] = {}
+    for name, body in dataset.truth_body.items():
+        truth[name] = (f"body {body.body}", np.asarray(body.T_body_su, dtype=float))
+    for name, pose in dataset.truth.items():
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = pose.R_link_su, pose.p_link_su
+        truth.setdefault(name, (f"link {pose.link}", T))
+    if reference not in truth:
+        raise DatasetError(f"the dataset has no true pose of the reference unit '{printable(reference)}'")
+    where, T_ref = truth[reference]
+    units: dict[str, dict] = {}
+    for name, unit in result.units.items():
+        if name not in truth:
+            continue
+        on, T = truth[name]
+        if on != where:
+            units[name] = {"same_body": False, "observable": unit.observable}
+            continue
+        T_rel = np.linalg.inv(T_ref) @ T
+        chord = min(float(np.linalg.norm(T_rel[:3, :3] - unit.pose.R_link_su)) / math.sqrt(8.0), 1.0)
+        units[name] = {
+            "same_body": True,
+            "observable": unit.observable,
+            "position_error_mm": 1e3 * float(np.linalg.norm(unit.pose.p_link_su - T_rel[:3, 3])),
+            "rotation_error_deg": math.degrees(2 * math.asin(chord)),
+        }
+    scored = [u for name, u in units.items() if u.get("same_body") and u["observable"] and name != reference]
+    return {
+        "reference": reference,
+        "units": units,
+        "mean_position_error_mm": float(np.mean([u["position_error_mm"] for u in scored])) if scored else None,
+        "mean_rotation_error_deg": float(np.mean([u["rotation_error_deg"] for u in scored])) if scored else None,
+    }

@@ -250,6 +250,9 @@ def evaluate(
     from skincal.data.result import read_result
 
     res, ds = read_result(result), read_dataset(truth)
+    if res.extras.get("reference") is not None:
+        _evaluate_relative(res, result, ds, truth, as_json, allow_other)
+        return
     ds.require_joints("evaluate (a wrong link is measured at the first joint sample)", source=str(truth))
     for warning in check_result_dataset(res, result, ds, truth, allow_other=allow_other)[1]:
         console_warning(warning)
@@ -278,4 +281,33 @@ def evaluate(
             f"{doc['mean_quaternion_distance']:.5f}",
             style="bold",
         )
+    console.print(table)
+
+
+def _evaluate_relative(res, result: Path, ds, truth: Path, as_json: bool, allow_other: bool) -> None:
+    """``evaluate`` of an IMU-only result: ``T_ref_su`` against the truth (bodies or links)."""
+    from rich.table import Table
+
+    from skincal.calib.imu_only import evaluate_relative
+    from skincal.data.provenance import check_result_dataset
+    from skincal.data.result import sha256_file
+
+    if ds.robot is not None:
+        for warning in check_result_dataset(res, result, ds, truth, allow_other=allow_other)[1]:
+            console_warning(warning)
+    elif res.dataset_sha256 and res.dataset_sha256 != sha256_file(truth) and not allow_other:
+        raise ConfigError(f"{result} was computed from another file than {truth} (--allow-other-dataset to compare)")
+    doc = evaluate_relative(res, ds)
+    if as_json:
+        typer.echo(json.dumps(doc, indent=2))
+        return
+    table = Table(title=f"{shown(result.name)} vs truth (frame of {shown(doc['reference'])})")
+    for col in ("unit", "position error (mm)", "rotation error (deg)"):
+        table.add_column(col, justify="right")
+    for name, u in doc["units"].items():
+        if not u["same_body"]:
+            table.add_row(shown(name), "other body", "-")
+            continue
+        mark = "" if u["observable"] else " (unobservable)"
+        table.add_row(shown(name) + mark, f"{u['position_error_mm']:.3f}", f"{u['rotation_error_deg']:.4f}")
     console.print(table)
