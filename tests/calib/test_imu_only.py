@@ -178,6 +178,9 @@ def test_benchmark_targets_over_20_runs():
     assert doc["rotation_error_deg_max"] <= 0.1
     assert 0.5 <= doc["position_error_over_std_rms"] <= 2.0 and 0.5 <= doc["rotation_error_over_std_rms"] <= 2.0
     assert doc["position_error_mm_max"] < 0.06 * 200  # 3 % scale std of the reference, 2 sigma
+    calibrated = bench_relative(runs=20, scale_free=True)  # the reference accelerometer's scale known
+    assert calibrated["position_error_mm_max"] <= 1.0 and calibrated["rotation_error_deg_max"] <= 0.1
+    assert 0.5 <= calibrated["position_error_over_std_rms"] <= 2.0
 
 
 def test_cli_simulate_handheld_then_calibrate_with_options(tmp_path, capsys):

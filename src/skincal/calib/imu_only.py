@@ -113,13 +113,13 @@ def _skew(v: FloatArray) -> FloatArray:
     return S
 
 
-def rate_derivative(t: FloatArray, w: FloatArray, window_s: float = 0.08) -> FloatArray:
-    """Angular acceleration ``(M, 3)`` at stamps ``t``: a cubic Savitzky-Golay derivative on a uniform
+def rate_derivative(t: FloatArray, w: FloatArray, window_s: float = 0.12) -> FloatArray:
+    """Angular acceleration ``(M, 3)`` at stamps ``t``: a quintic Savitzky-Golay derivative on a uniform
     grid (the rates resampled by a cubic spline), read back at ``t``."""
     grid, dt = _uniform_grid(t)
-    window = max(5, int(round(window_s / dt)) | 1)
+    window = max(7, int(round(window_s / dt)) | 1)
     wg = CubicSpline(t, w, axis=0)(grid)
-    dwg = savgol_filter(wg, window, 3, deriv=1, delta=dt, axis=0, mode="interp")
+    dwg = savgol_filter(wg, window, 5, deriv=1, delta=dt, axis=0, mode="interp")
     return CubicSpline(grid, dwg, axis=0)(t)
 
 

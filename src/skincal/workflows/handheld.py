@@ -11,6 +11,7 @@ calibration of the reported std (RMS of error / std per axis).
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -37,8 +38,11 @@ def handheld_dataset(
     clock: str = "driver",
     seed: int = 0,
     other_body: int = 0,
+    scale_free: bool = False,
 ) -> Dataset:
-    """A simulated hand-held session (see the module docstring); units are ``su1``, ``su2``, ..."""
+    """A simulated hand-held session (see the module docstring); units are ``su1``, ``su2``, ...
+    ``scale_free``: the IMU preset without accelerometer scale and misalignment errors (as after a
+    calibration of the accelerometers), to measure what the reference's gauge costs."""
     if units < 1 or other_body < 0 or units + other_body < 2:
         raise ConfigError(f"hand-held session: need at least 2 units in all, got {units} + {other_body}")
     if not (0 < spacing < 10):
@@ -54,8 +58,11 @@ def handheld_dataset(
         T[:3, 3] = [spacing * (k if k < units else k - units), 0.0, 0.0]
         placement[f"su{k + 1}"] = (BODY if k < units else OTHER_BODY, T)
     description = f"simulated hand-held session: {units} units {spacing} m apart, {imu} IMUs, {clock} clocks"
+    model = get_imu_model(imu)
+    if scale_free:
+        model = replace(model, accel_scale_std=0.0, misalignment_std=0.0)
     return simulate_rigid_bodies(
-        placement, motions, duration_s, get_imu_model(imu), rng, clock_model=get_clock_model(clock),
+        placement, motions, duration_s, model, rng, clock_model=get_clock_model(clock),
         description=description,
     )  # fmt: skip
 
@@ -88,15 +95,18 @@ def bench_relative(
     imu: str = "real",
     clock: str = "driver",
     seed: int = 0,
+    scale_free: bool = False,
 ) -> dict[str, Any]:
     """The IMU-only calibration of two units ``spacing`` apart over ``runs`` simulated hand-held sessions:
     position and rotation errors (max, median), RMS of error / std per axis, run time. The reported
     std includes the reference accelerometer's scale and misalignment std of the IMU preset."""
     p_err, r_err, z_p, z_r, times = [], [], [], [], []
     for k in range(runs):
-        ds = handheld_dataset(2, spacing, duration_s, imu, clock, seed + k)
+        ds = handheld_dataset(2, spacing, duration_s, imu, clock, seed + k, scale_free=scale_free)
         start = time.perf_counter()
-        model = get_imu_model(imu)
+        model = (
+            replace(get_imu_model(imu), accel_scale_std=0.0, misalignment_std=0.0) if scale_free else get_imu_model(imu)
+        )
         result = calibrate_relative(
             ds, "su1", reference_scale_std=model.accel_scale_std, reference_misalignment_std=model.misalignment_std
         )
@@ -111,6 +121,7 @@ def bench_relative(
         "duration_s": duration_s,
         "imu": imu,
         "clock": clock,
+        "scale_free": scale_free,
         "position_error_mm_max": 1e3 * max(p_err),
         "position_error_mm_median": 1e3 * float(np.median(p_err)),
         "rotation_error_deg_max": max(r_err),
