@@ -254,3 +254,14 @@ def test_cli_evaluate_a_relative_result(tmp_path, capsys):
     assert doc["units"]["su2"]["same_body"] and doc["units"]["su2"]["position_error_mm"] < 1.0
     assert doc["mean_position_error_mm"] == doc["units"]["su2"]["position_error_mm"]
     assert "su3" not in doc["units"]  # not calibrated: on the other body
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_real_imus_with_a_calibrated_reference_meet_the_targets(seed):
+    """``real`` IMUs and clocks, 25 s, the accelerometers' scale known: <= 1 mm and <= 0.1 deg."""
+    from skincal.workflows.handheld import handheld_dataset, relative_errors
+
+    ds = handheld_dataset(units=2, duration_s=25.0, imu="real", clock="driver", seed=seed, scale_free=True)
+    errors = relative_errors(calibrate_relative(ds, "su1"), ds)["su2"]
+    assert np.linalg.norm(errors["position_error_m"]) <= 1e-3
+    assert np.degrees(np.linalg.norm(errors["rotation_error_rad"])) <= 0.1
