@@ -54,9 +54,14 @@ def _parse(text: str, source: str):  # -> yourdfpy.URDF
 
     data = text.encode("utf-8")
     try:  # strictly well-formed, no entities, no network (yourdfpy alone would "recover" broken XML)
-        etree.fromstring(data, parser=etree.XMLParser(resolve_entities=False, no_network=True, recover=False))
+        root = etree.fromstring(data, parser=etree.XMLParser(resolve_entities=False, no_network=True, recover=False))
     except etree.XMLSyntaxError as exc:
         raise ConfigError(f"{source}: not a valid URDF (XML: {exc})") from None
+    docinfo = root.getroottree().docinfo
+    dtd = docinfo.internalDTD
+    if docinfo.public_id or docinfo.system_url or (dtd is not None and any(True for _ in dtd.iterentities())):
+        # yourdfpy's own parser would expand them (and a URDF written back would keep bare references)
+        raise ConfigError(f"{source}: not a valid URDF (XML: a DOCTYPE declaring entities or an external DTD)")
     try:
         return yourdfpy.URDF.load(
             io.BytesIO(data), build_scene_graph=False, load_meshes=False, load_collision_meshes=False
@@ -147,7 +152,18 @@ def chain_from_urdf(
     for j in robot.joints:
         if j.parent not in known or j.child not in known:
             raise ConfigError(f"{source}: joint '{j.name}' connects unknown link(s) '{j.parent}' -> '{j.child}'")
+        if joints[j.child] is not j:  # a URDF is a tree: one parent joint per link (else the walks below never end)
+            raise ConfigError(f"{source}: link '{j.child}' is the child of several joints; a URDF is a tree")
         children[j.parent].append(j.child)
+    rooted = {link for link in links if link not in joints}
+    for link in links:  # with one parent each, a loop is a cycle of links that no root reaches
+        walked: set[str] = set()
+        while link not in rooted:
+            if link in walked:
+                raise ConfigError(f"{source}: the joints form a loop through link '{link}'; a URDF is a tree")
+            walked.add(link)
+            link = joints[link].parent
+        rooted.update(walked)
     roots = [link for link in links if link not in joints]
     for link, what in ((base_link, "--base-link"), (tip_link, "--tip-link")):
         if link is not None and link not in known:
@@ -184,11 +200,15 @@ def chain_from_urdf(
             pending = pending @ origin
             continue
         if j.type not in _MOVING:
-            raise ConfigError(f"{source}: joint '{j.name}' is {j.type}; a serial chain takes revolute, continuous, "
-                              "prismatic and fixed joints")
+            raise ConfigError(
+                f"{source}: joint '{j.name}' is {j.type}; a serial chain takes revolute, continuous, "
+                "prismatic and fixed joints"
+            )
         if j.mimic is not None:
-            raise ConfigError(f"{source}: joint '{j.name}' mimics '{j.mimic.joint}'; mimic joints are not independent "
-                              "serial joints (end the chain before it with --tip-link)")
+            raise ConfigError(
+                f"{source}: joint '{j.name}' mimics '{j.mimic.joint}'; mimic joints are not independent "
+                "serial joints (end the chain before it with --tip-link)"
+            )
         origins.append(pending @ origin)
         pending = np.eye(4)
         axes.append(np.array([1.0, 0.0, 0.0]) if j.axis is None else np.asarray(j.axis, dtype=float))

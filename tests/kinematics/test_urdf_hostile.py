@@ -1,0 +1,80 @@
+"""Hostile URDFs (found by the new-user/attacker review): entity declarations and external DTDs are
+refused before yourdfpy's own parser could expand them, and a URDF whose joints do not form a tree
+(a link with two parent joints, a loop of links no root reaches) is one ConfigError line instead of
+an endless walk."""
+
+from __future__ import annotations
+
+import pytest
+
+from skincal.errors import ConfigError
+from skincal.kinematics.urdf import chain_from_urdf
+
+JOINT = (
+    '<joint name="{name}" type="revolute"><parent link="{parent}"/><child link="{child}"/>'
+    '<origin xyz="0 0 0.3"/><axis xyz="0 0 1"/><limit lower="-2" upper="2" velocity="2" effort="10"/></joint>'
+)
+
+
+def urdf(links: list[str], joints: list[tuple[str, str, str]], doctype: str = "") -> str:
+    body = "".join(f'<link name="{link}"/>' for link in links)
+    body += "".join(JOINT.format(name=n, parent=p, child=c) for n, p, c in joints)
+    return f'<?xml version="1.0"?>\n{doctype}<robot name="r">{body}</robot>'
+
+
+CHAIN = (["base", "l1", "l2"], [("j1", "base", "l1"), ("j2", "l1", "l2")])
+
+
+def test_plain_chain_reads():
+    """The reference the hostile variants below differ from: two joints, base to l2."""
+    chain = chain_from_urdf(text=urdf(*CHAIN))
+    assert chain.joint_names == ("j1", "j2")
+    assert chain.link_names == ("base", "l1", "l2")
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize(
+    "doctype",
+    [
+        '<!DOCTYPE robot [<!ENTITY n "l1">]>',  # an internal entity yourdfpy's parser would expand
+        '<!DOCTYPE robot [<!ENTITY x SYSTEM "file:///etc/passwd">]>',
+        '<!DOCTYPE robot SYSTEM "file:///etc/passwd">',
+    ],
+)
+def test_entity_declarations_and_external_dtds_are_refused(doctype):
+    """README: "strict XML, no entities". The internal entity used to be expanded by yourdfpy (and
+    written back as a bare ``&n;`` by ``export -f urdf --robot``, an invalid URDF)."""
+    text = urdf(*CHAIN)
+    if "ENTITY n" in doctype:
+        text = text.replace('"l1"', '"&n;"')
+    text = text.replace("<robot ", doctype + "<robot ")
+    with pytest.raises(ConfigError, match="DOCTYPE declaring entities or an external DTD"):
+        chain_from_urdf(text=text)
+
+
+@pytest.mark.adversarial
+def test_a_link_with_two_parent_joints_is_refused():
+    """l1 hangs below base and below l2 (a loop through the root's chain): the tip search used to walk
+    base -> l1 -> l2 -> l1 ... forever."""
+    links, joints = CHAIN
+    with pytest.raises(ConfigError, match="'l1' is the child of several joints"):
+        chain_from_urdf(text=urdf(links, [*joints, ("j3", "l2", "l1")]))
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize("base_link", [None, "a"])
+def test_a_loop_no_root_reaches_is_refused(base_link):
+    """a -> b -> a with one parent each: no root; given --base-link a, the tip search used to walk the
+    loop forever."""
+    text = urdf(["a", "b"], [("j1", "a", "b"), ("j2", "b", "a")])
+    with pytest.raises(ConfigError, match="the joints form a loop through link"):
+        chain_from_urdf(text=text, base_link=base_link)
+
+
+@pytest.mark.adversarial
+def test_a_loop_beside_a_good_chain_is_refused():
+    """A detached loop next to a valid chain: the chain alone would read, the file is still no tree."""
+    links, joints = CHAIN
+    text = urdf([*links, "x", "y"], [*joints, ("jx", "x", "y"), ("jy", "y", "x")])
+    with pytest.raises(ConfigError, match="the joints form a loop through link"):
+        chain_from_urdf(text=text)
