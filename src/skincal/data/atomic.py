@@ -13,6 +13,7 @@ import contextlib
 import os
 import re
 import secrets
+import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -50,10 +51,11 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
-def remove_debris(target: str | Path) -> list[Path]:
+def remove_debris(target: str | Path, *, folders: bool = False) -> list[Path]:
     """Remove the temporaries ``.<name>.<pid>.<hex>.tmp`` that writers of ``target`` which are no
     longer alive left next to it (killed before they could clean up); returns the removed paths.
-    Temporaries of live writers (and of other targets) are left alone."""
+    Temporaries of live writers (and of other targets) are left alone. ``folders``: the target is a
+    folder (a ROS 2 bag) written as a temporary folder of that name; such folders are removed too."""
     target = Path(target)
     directory = target.parent if str(target.parent) else Path(".")
     pattern = re.compile(rf"\.{re.escape(target.name)}\.(\d+)\.[0-9a-f]+\.tmp")
@@ -69,6 +71,9 @@ def remove_debris(target: str | Path) -> list[Path]:
         with contextlib.suppress(OSError):
             if entry.is_file(follow_symlinks=False):
                 os.unlink(entry.path)
+                removed.append(Path(entry.path))
+            elif folders and entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(entry.path)
                 removed.append(Path(entry.path))
     return removed
 

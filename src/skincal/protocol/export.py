@@ -24,9 +24,10 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from skincal.data.atomic import atomic_path
+from skincal.data.atomic import atomic_path, remove_debris
 from skincal.data.dataset import Segments
 from skincal.data.jsonio import load_json
+from skincal.data.validate import validate_segments
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.transforms import FloatArray
 from skincal.protocol.config import ProtocolConfig
@@ -34,6 +35,12 @@ from skincal.protocol.trajectory import Trajectory
 
 FORMAT = "skincal-protocol"
 VERSION = 1
+MAX_RATE_HZ = 10_000.0
+"""Highest sample rate :func:`read_trajectory_json` evaluates, Hz (``skincal protocol --rate``'s)."""
+MAX_SAMPLES = 20_000_000
+"""Most samples :func:`read_trajectory_json` evaluates (a hostile file could ask for terabytes)."""
+MAX_JOINT_VALUE = 1e6
+"""Largest joint position, velocity or acceleration magnitude of a trajectory read back."""
 
 
 def _write_atomic(path: Path, write: Callable[[TextIO], object]) -> None:
@@ -116,15 +123,17 @@ def _write_bag(traj: Trajectory, path: Path, names: tuple[str, ...], ros_version
         return
     if path.exists():
         raise ConfigError(f"{path} exists; a ROS 2 bag folder is never overwritten")
+    remove_debris(path, folders=True)
+    # the bag is written as <tmp>/<name> (rosbags names its storage file after its folder), then moved
     tmp = path.parent / f".{path.name}.{os.getpid()}.{secrets.token_hex(6)}.tmp"
     try:
-        with Writer2(tmp, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        os.mkdir(tmp)
+        with Writer2(tmp / path.name, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
             conn = writer.add_connection(TRAJECTORY_TOPIC, kind, typestore=ts)
             writer.write(conn, 1, ts.serialize_cdr(msg, kind))
-        os.rename(tmp, path)
-    except BaseException:
+        os.rename(tmp / path.name, path)
+    finally:
         shutil.rmtree(tmp, ignore_errors=True)
-        raise
 
 
 def _flow(values: FloatArray) -> str:
@@ -220,7 +229,7 @@ def read_trajectory_json(path: str | Path) -> Trajectory:
         poses = np.asarray(doc["poses"], dtype=float)
     except KeyError as exc:
         raise DatasetError(f"{path}: missing field {exc}") from None
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise DatasetError(f"{path}: malformed trajectory field ({exc})") from None
     K = knots.size - 1
     if (
@@ -231,6 +240,15 @@ def read_trajectory_json(path: str | Path) -> Trajectory:
         or not (B.shape == w.shape == coef.shape[:2])
     ):
         raise DatasetError(f"{path}: fields 'knots', 'coef', 'sine_amplitude', 'sine_omega' have inconsistent shapes")
+    if knots.ndim != 1 or not np.all(np.diff(knots) > 0):
+        raise DatasetError(f"{path}: field 'knots' must be strictly increasing times")
+    samples = (knots[-1] - knots[0]) * config.rate_hz
+    if config.rate_hz > MAX_RATE_HZ or not samples <= MAX_SAMPLES:
+        raise DatasetError(
+            f"{path}: {knots[-1] - knots[0]:.6g} s at {config.rate_hz:.6g} Hz is beyond what this reader "
+            f"evaluates (at most {MAX_RATE_HZ:g} Hz and {MAX_SAMPLES:g} samples)"
+        )
+    validate_segments(segments, coef.shape[1], f"{path}: field 'segments'")
     traj = Trajectory(
         t=np.empty(0), q=np.empty((0, coef.shape[1])), qd=np.empty((0, coef.shape[1])),
         qdd=np.empty((0, coef.shape[1])), segments=segments, config=config, poses=poses, knots=knots,
@@ -239,5 +257,8 @@ def read_trajectory_json(path: str | Path) -> Trajectory:
     from dataclasses import replace
 
     t = np.arange(int(np.floor(traj.duration * config.rate_hz + 1e-9)) + 1) / config.rate_hz
-    q, qd, qdd = traj.evaluate(t)
+    with np.errstate(all="ignore"):  # huge coefficients are refused below, not warned about
+        q, qd, qdd = traj.evaluate(t)
+    if not all(np.all(np.abs(x) <= MAX_JOINT_VALUE) for x in (q, qd, qdd)):
+        raise DatasetError(f"{path}: the motion leaves +-{MAX_JOINT_VALUE:g} rad (or m, per s, per s^2): not a robot's")
     return replace(traj, t=t, q=q, qd=qd, qdd=qdd)
