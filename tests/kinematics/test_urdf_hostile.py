@@ -78,3 +78,20 @@ def test_a_loop_beside_a_good_chain_is_refused():
     text = urdf([*links, "x", "y"], [*joints, ("jx", "x", "y"), ("jy", "y", "x")])
     with pytest.raises(ConfigError, match="the joints form a loop through link"):
         chain_from_urdf(text=text)
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize("limit", ["1e16", "1e308"])
+def test_huge_position_limits_mean_no_limit_to_the_protocol(limit):
+    """URDFs write +-1e16 for "no limit": the protocol draws such a joint's poses in [-pi, pi] as for
+    a continuous joint (was: a 133 GiB allocation at 1e9, an OverflowError, exit 3, at 1e308)."""
+    import numpy as np
+
+    from skincal.protocol import build_trajectory, get_protocol
+
+    text = urdf(*CHAIN).replace('lower="-2" upper="2"', f'lower="-{limit}" upper="{limit}"', 1)
+    chain = chain_from_urdf(text=text)
+    assert chain.joint_upper[0] == float(limit)
+    traj = build_trajectory(chain, get_protocol("fast"), np.random.default_rng(0))
+    assert np.all(np.abs(traj.poses[:, 0]) <= np.pi)
+    assert np.all(np.abs(traj.q) < 10) and traj.duration < 120

@@ -27,14 +27,18 @@ from skincal.protocol.motion import excitation_envelope
 _TOL = 1e-9
 
 
+NO_LIMIT_BEYOND = 1e3
+"""A position limit beyond this magnitude (rad or m) counts as none: URDFs write ``+-1e16`` for "no limit"."""
+
+
 def position_bounds(chain: SerialChain) -> tuple[FloatArray, FloatArray]:
     """``(lower, upper)`` position limits ``(n,)``; ``[-pi, pi]`` where the chain has none or they
-    are infinite (continuous joints)."""
+    are infinite (continuous joints) or beyond :data:`NO_LIMIT_BEYOND`."""
     n = chain.n_joints
     if chain.joint_lower is None or chain.joint_upper is None:
         return np.full(n, -np.pi), np.full(n, np.pi)
-    lower = np.where(np.isfinite(chain.joint_lower), chain.joint_lower, -np.pi)
-    upper = np.where(np.isfinite(chain.joint_upper), chain.joint_upper, np.pi)
+    lower = np.where(np.abs(chain.joint_lower) <= NO_LIMIT_BEYOND, chain.joint_lower, -np.pi)
+    upper = np.where(np.abs(chain.joint_upper) <= NO_LIMIT_BEYOND, chain.joint_upper, np.pi)
     return lower, upper
 
 
