@@ -1,10 +1,12 @@
 """Benchmark of the IMU-only unit-to-unit calibration (issue 18) on simulated hand-held sessions.
 
 Usage: ``python benchmarks/bench_imu_only.py [--runs 20] [--duration 60] [--imu real] [--clock driver]
-[--scale-free] [--json out.json]``
+[--scale-free] [--holds N] [--json out.json]``
 
 A thin script over :func:`skincal.workflows.handheld.bench_relative`: two units 0.2 m apart on one
-hand-moved body, errors of the second unit's pose in the first's frame, and the RMS of error / std.
+hand-moved body ("turn it over": still holds in orientations spread over the sphere, from which the
+accelerometers' scale is fitted; ``--holds 0``: a motion without them), errors of the second unit's pose
+in the first's frame, and the RMS of error / std.
 All figures are SIMULATED.
 """
 
@@ -24,9 +26,12 @@ def main() -> None:
     ap.add_argument("--imu", default="real")
     ap.add_argument("--clock", default="driver")
     ap.add_argument("--scale-free", action="store_true", help="accelerometers without scale/misalignment errors")
+    ap.add_argument("--holds", type=int, default=None, help="still holds in the motion (default: 12, as fit)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
-    doc = bench_relative(args.runs, args.duration, args.spacing, args.imu, args.clock, scale_free=args.scale_free)
+    doc = bench_relative(
+        args.runs, args.duration, args.spacing, args.imu, args.clock, scale_free=args.scale_free, holds=args.holds
+    )
     for key, value in doc.items():
         print(f"{key:32} {value:.4g}" if isinstance(value, float) else f"{key:32} {value}")
     if args.json:

@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from skincal.calib import calibrate_relative, compare_with_joint_result
-from skincal.calib.imu_only import coarse_offset
+from skincal.calib.imu_only import _symmetric, coarse_offset, common_rests, fit_accel_ellipsoid, still_mask
 from skincal.cli import main
 from skincal.data.hdf5 import write_dataset
 from skincal.data.result import CalibrationResult, UnitResult, read_result, result_from_dict, result_to_dict
@@ -142,20 +142,161 @@ def test_cli_calibrate_with_reference(tmp_path, capsys):
     assert "reference unit 'nobody' is not in the dataset" in capsys.readouterr().err
 
 
-def test_real_preset_errors_are_covered_by_the_reported_std():
-    """``real`` IMUs: the reference accelerometer's scale (3 %) is the positions' gauge; with its size
-    given, the std covers the error, and the rotation meets the 0.1 deg target."""
+def test_real_preset_without_rests_keeps_the_reference_gauge():
+    """``real`` IMUs, a motion without holds: no rests, so the reference accelerometer's scale (3 %) is
+    the positions' gauge; with its size given, the std covers the error, a note says what is missing,
+    and the rotation meets the 0.1 deg target."""
     from skincal.workflows.handheld import handheld_dataset, relative_errors
 
-    ds = handheld_dataset(units=3, duration_s=30.0, imu="real", clock="driver", seed=7)
+    ds = handheld_dataset(units=3, duration_s=30.0, imu="real", clock="driver", seed=7, holds=0)
     result = calibrate_relative(ds, "su1", reference_scale_std=0.03, reference_misalignment_std=0.01)
     errors = relative_errors(result, ds)
     assert set(errors) == {"su2", "su3"}
     for e in errors.values():
         assert np.all(np.abs(e["position_error_m"]) < 4 * e["position_std_m"])
+        assert np.linalg.norm(e["position_std_m"]) > 0.01 * np.linalg.norm(ds.truth_body["su2"].T_body_su[:3, 3])
         assert np.degrees(np.linalg.norm(e["rotation_error_rad"])) < 0.1
         assert np.all(np.abs(np.degrees(e["rotation_error_rad"])) < 4 * e["rotation_std_deg"])
-    assert "scale of su1's accelerometer" in result.units["su2"].extras["notes"][0]
+    notes = result.units["su2"].extras["notes"]
+    assert "scale of su1's accelerometer" in notes[0]
+    assert "0 rest(s)" in notes[1] and "in 12 more" in notes[1]
+    assert result.extras["accel_scale_fit"]["model"] == "none" and result.units["su2"].imu is None
+
+
+def test_too_few_orientations_say_how_many_more():
+    """Four holds: the rests are found, but four orientations cannot fit a scale (6 unknowns at least):
+    positions stay in the reference's scale (its std in the position std) and the note asks for 8 more."""
+    from skincal.workflows.handheld import handheld_dataset
+
+    ds = handheld_dataset(units=2, duration_s=30.0, imu="real", clock="driver", seed=2, holds=4)
+    free = calibrate_relative(ds, "su1", units=["su2"])
+    result = calibrate_relative(ds, "su1", units=["su2"], reference_scale_std=0.03)
+    fit = result.extras["accel_scale_fit"]
+    assert fit["model"] == "none" and fit["rests"] == 4 and fit["orientations"] == 4
+    assert "4 rest(s) in 4 distinct orientation(s)" in fit["note"] and "in 8 more" in fit["note"]
+    assert result.units["su2"].extras["notes"][1] == fit["note"]
+    r = np.linalg.norm(result.units["su2"].pose.p_link_su)
+    assert (
+        np.linalg.norm(result.units["su2"].position_std_m)
+        > 0.03 * r
+        > 5 * np.linalg.norm(free.units["su2"].position_std_m)
+    )
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_real_imus_with_rests_meet_the_targets(seed):
+    """``real`` IMUs and clocks on a 30 s "turn it over" motion (11 holds of 1.5 s): the reference's
+    accelerometer scale is fitted from the rests, so positions come out in metres: <= 1 mm, <= 0.1 deg,
+    errors within the reported std, which carries the fitted scale's std."""
+    from skincal.workflows.handheld import handheld_dataset, relative_errors
+
+    ds = handheld_dataset(units=2, duration_s=30.0, imu="real", clock="driver", seed=seed)
+    result = calibrate_relative(ds, "su1", reference_scale_std=0.03, reference_misalignment_std=0.01)
+    errors = relative_errors(result, ds)["su2"]
+    assert np.linalg.norm(errors["position_error_m"]) <= 1e-3
+    assert np.degrees(np.linalg.norm(errors["rotation_error_rad"])) <= 0.1
+    assert np.all(np.abs(errors["position_error_m"]) < 4 * errors["position_std_m"])
+    assert np.all(errors["position_std_m"] < 1e-3)  # the 3 % given for the reference is not used
+    fit = result.extras["accel_scale_fit"]
+    assert fit["model"] == "symmetric" and fit["rests"] == fit["orientations"] == 11
+    assert "position in metres" in result.units["su2"].extras["notes"][0]
+    # each unit's accelerometer, fitted to the rests, against the truth
+    for name in ("su1", "su2"):
+        truth, imu = ds.truth_sensor[name], result.units[name].imu
+        assert imu is not None and imu.accel_scale_misalignment is not None and imu.accel_bias_mps2 is not None
+        A = np.diag(truth["accel_scale"]) @ truth["accel_misalignment"]
+        assert np.max(np.abs(imu.accel_scale_misalignment - A)) < 0.004  # the scale errors are ~0.03
+        assert np.all(np.abs(imu.accel_bias_mps2 - truth["accel_bias"]) < 4 * imu.accel_bias_std_mps2 + 1e-3)
+
+
+def _sphere(n: int) -> np.ndarray:
+    k = np.arange(n) + 0.5
+    z = 1 - 2 * k / n
+    phi = np.pi * (1 + np.sqrt(5)) * k
+    return np.stack([np.sqrt(1 - z**2) * np.cos(phi), np.sqrt(1 - z**2) * np.sin(phi), z], axis=1)
+
+
+def test_ellipsoid_fit_recovers_a_known_accelerometer():
+    """Exact rest means ``a = A u g + b`` in 12 directions: the fit gives ``b`` and ``C = (A A^T)^(-1/2)``
+    (``C A`` a rotation: the part an ellipsoid cannot see); the diagonal model recovers a diagonal ``A``;
+    with noise the errors are within the reported std."""
+    g = 9.81
+    A = np.diag([1.03, 0.97, 1.01]) @ (np.eye(3) + np.array([[0, 0.01, -0.02], [0.01, 0, 0.005], [-0.02, 0.005, 0]]))
+    b = np.array([0.3, -0.2, 0.1])
+    means = g * _sphere(12) @ A.T + b
+    counts, noise = np.full(12, 100.0), np.full(3, 0.01)
+    fit = fit_accel_ellipsoid(means, counts, noise, g)
+    assert fit is not None and fit.model == "symmetric" and fit.orientations == 12
+    np.testing.assert_allclose(fit.b, b, atol=1e-9)
+    w, V = np.linalg.eigh(A @ A.T)
+    np.testing.assert_allclose(fit.C, (V / np.sqrt(w)) @ V.T, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(fit.apply(means), axis=1), g, atol=1e-9)
+    Q = fit.C @ A
+    np.testing.assert_allclose(Q @ Q.T, np.eye(3), atol=1e-9)
+    D = np.diag([1.03, 0.97, 1.01])
+    diag = fit_accel_ellipsoid(g * _sphere(7) @ D + b, np.full(7, 100.0), noise, g, "diagonal")
+    assert diag is not None and diag.model == "diagonal"
+    np.testing.assert_allclose(diag.C, np.linalg.inv(D), atol=1e-9)
+    assert np.all(diag.cov[3:6] == 0)  # cross-axis terms not fitted
+    rng = np.random.default_rng(3)
+    z = []
+    for _ in range(40):
+        noisy = means + rng.normal(0, np.sqrt(0.01 / 100), means.shape)
+        f = fit_accel_ellipsoid(noisy, counts, noise, g)
+        assert f is not None
+        p = np.concatenate([np.diag(f.C), [f.C[0, 1], f.C[0, 2], f.C[1, 2]], f.b])
+        p0 = np.concatenate([np.diag(fit.C), [fit.C[0, 1], fit.C[0, 2], fit.C[1, 2]], b])
+        z.append((p - p0) / np.sqrt(np.diag(f.cov)))
+    assert 0.6 < np.sqrt(np.mean(np.square(z))) < 1.6
+    assert fit_accel_ellipsoid(means[:8], counts[:8], noise, g) is None  # 8 equations, 9 unknowns
+
+
+def test_rests_are_found_from_the_gyroscopes():
+    """The holds of the motion are found (all units agreeing), inside the true holds; a unit on another
+    body that never rests does not veto them."""
+    from skincal.workflows.handheld import handheld_dataset
+
+    ds = handheld_dataset(units=2, duration_s=30.0, imu="real", clock="driver", seed=4, other_body=1)
+    rests = common_rests(ds.imu, "su1")
+    assert len(rests) == 11
+    # the hold times of the preset: 11 holds of 1.5 s evenly spaced (stamps run ~15 ms late)
+    move = (30.0 - 11 * 1.5) / 12
+    starts = move + np.arange(11) * (1.5 + move)
+    assert np.all(rests[:, 0] > starts - 0.05) and np.all(rests[:, 1] < starts + 1.55)
+    assert np.all(rests[:, 1] - rests[:, 0] > 1.0)
+    stream = ds.imu["su1"]
+    assert stream.gyro is not None
+    assert not still_mask(stream.t, stream.gyro, stream.accel)[(stream.t > 0.2) & (stream.t < move - 0.4)].any()
+
+
+def test_position_std_carries_the_fitted_scale():
+    """``dr/dp`` of the position with respect to the reference accelerometer's calibration (what the
+    std propagates) against re-fits with a perturbed calibration."""
+    from dataclasses import replace as dc_replace
+
+    from skincal.calib.imu_only import AccelFit, fit_relative, fit_unit_accelerometer
+    from skincal.workflows.handheld import handheld_dataset
+
+    ds = handheld_dataset(units=2, duration_s=20.0, imu="real", clock="driver", seed=5)
+    ref, unit = ds.imu["su1"], ds.imu["su2"]
+    acc, _ = fit_unit_accelerometer(ref, common_rests(ds.imu, "su1"), 9.81)
+    assert acc is not None
+    base = fit_relative(dc_replace(ref, accel=acc.apply(ref.accel)), unit, ref_jacobian=acc.jacobian(ref.accel))
+    assert not isinstance(base, str) and base.gauge_jacobian is not None
+    p = np.concatenate([np.diag(acc.C), [acc.C[0, 1], acc.C[0, 2], acc.C[1, 2]], acc.b])
+    for k in (0, 4, 7):
+        h = 1e-4
+        step = np.zeros(9)
+        step[k] = h
+        q = p + step
+        moved = AccelFit(_symmetric(q[:6]), q[6:], acc.cov, acc.model, acc.rests, acc.orientations, 0.0)
+        other = fit_relative(dc_replace(ref, accel=moved.apply(ref.accel)), unit)
+        assert not isinstance(other, str)
+        numeric, linear = (other.r - base.r) / h, base.gauge_jacobian[:, k]
+        assert np.linalg.norm(numeric - linear) <= 0.05 * np.linalg.norm(linear) + 1e-4  # Huber weights move too
+    # a common scale of the reference's accelerometer scales r (the sum of the diagonal entries' columns)
+    np.testing.assert_allclose(base.gauge_jacobian[:, :3].sum(axis=1), base.r, atol=0.01)
+    assert np.all(np.abs(base.gauge_jacobian[:, 6:]) < 1e-6)  # a bias goes into the offset d
 
 
 def test_handheld_session_with_a_second_body():
@@ -169,16 +310,18 @@ def test_handheld_session_with_a_second_body():
 
 @pytest.mark.slow
 def test_benchmark_targets_over_20_runs():
-    """The issue's figures (simulated): 60 s, two units 0.2 m apart, ``real`` preset, 20 runs. The
-    rotation and the std calibration meet their targets; the position error is the reference
-    accelerometer's scale (median ~4 mm, see README), so only its calibration is asserted."""
+    """The issue's figures (simulated): 60 s "turn it over" motion with 12 holds, two units 0.2 m apart,
+    ``real`` preset, 20 runs: 1 mm, 0.1 deg and the std's calibration; without holds the position error
+    is the reference accelerometer's scale (median ~4 mm, see README), so only its calibration is asserted."""
     from skincal.workflows.handheld import bench_relative
 
     doc = bench_relative(runs=20)
-    assert doc["rotation_error_deg_max"] <= 0.1
+    assert doc["position_error_mm_max"] <= 1.0 and doc["rotation_error_deg_max"] <= 0.1
     assert 0.5 <= doc["position_error_over_std_rms"] <= 2.0 and 0.5 <= doc["rotation_error_over_std_rms"] <= 2.0
-    assert doc["position_error_mm_max"] < 0.06 * 200  # 3 % scale std of the reference, 2 sigma
-    calibrated = bench_relative(runs=20, scale_free=True)  # the reference accelerometer's scale known
+    no_rests = bench_relative(runs=20, holds=0)
+    assert no_rests["position_error_mm_max"] < 0.06 * 200  # 3 % scale std of the reference, 2 sigma
+    assert 0.5 <= no_rests["position_error_over_std_rms"] <= 2.0
+    calibrated = bench_relative(runs=20, scale_free=True, holds=0)  # the reference accelerometer's scale known
     assert calibrated["position_error_mm_max"] <= 1.0 and calibrated["rotation_error_deg_max"] <= 0.1
     assert 0.5 <= calibrated["position_error_over_std_rms"] <= 2.0
 
@@ -261,7 +404,7 @@ def test_real_imus_with_a_calibrated_reference_meet_the_targets(seed):
     """``real`` IMUs and clocks, 25 s, the accelerometers' scale known: <= 1 mm and <= 0.1 deg."""
     from skincal.workflows.handheld import handheld_dataset, relative_errors
 
-    ds = handheld_dataset(units=2, duration_s=25.0, imu="real", clock="driver", seed=seed, scale_free=True)
+    ds = handheld_dataset(units=2, duration_s=25.0, imu="real", clock="driver", seed=seed, scale_free=True, holds=0)
     errors = relative_errors(calibrate_relative(ds, "su1"), ds)["su2"]
     assert np.linalg.norm(errors["position_error_m"]) <= 1e-3
     assert np.degrees(np.linalg.norm(errors["rotation_error_rad"])) <= 0.1

@@ -92,3 +92,40 @@ def test_dataset_has_no_joints_and_body_truth():
 def test_unknown_body_is_refused():
     with pytest.raises(ConfigError, match="body 'arm'"):
         simulate_rigid_bodies({"su1": ("arm", np.eye(4))}, {}, 1.0, get_imu_model("none"), np.random.default_rng(0))
+
+
+def test_turn_over_motion_holds_still_in_orientations_spread_over_the_sphere():
+    """The "turn it over" motion: exactly still inside each hold (|f| = g), the holds' gravity directions
+    spread over the sphere, a hand's rates between them, and exact signals (finite differences of the
+    motion, away from the ends of the ramps, where the envelope's third derivative jumps)."""
+    motion = HandMotion.turn_over(np.random.default_rng(6), 30.0, holds=10, hold_s=1.2)
+    assert motion.hold_times.shape == (10, 2)
+    np.testing.assert_allclose(np.diff(motion.hold_times, axis=1), 1.2)
+    T = _pose([0.3, 0.2, -0.4], [0.1, -0.05, 0.02])
+    t = np.linspace(0.05, 29.95, 2000)
+    f, w = unit_truth(motion, T, t)
+    still = motion.still(t)
+    assert still.sum() > 700 and np.all(w[still] == 0.0)
+    np.testing.assert_allclose(np.linalg.norm(f[still], axis=1), 9.81, atol=1e-9)
+    assert 1.0 < np.sqrt(np.mean(np.sum(w[~still] ** 2, axis=1))) < 3.0
+    ups, _ = unit_truth(motion, np.eye(4), motion.hold_times.mean(axis=1))
+    ups /= np.linalg.norm(ups, axis=1, keepdims=True)
+    assert np.linalg.svd(ups, compute_uv=False).min() > 0.5 * np.sqrt(10 / 3)  # no plane, no cone
+    assert np.min(np.arccos(np.clip(ups @ ups.T - 2 * np.eye(10), -1, 1))) > np.radians(30)  # all distinct
+    edges = np.concatenate([motion.hold_times.ravel() + d for d in (-motion.ramp_s, 0.0, motion.ramp_s)])
+    away = np.min(np.abs(t[:, None] - edges[None]), axis=1) > 0.01
+    h = 1e-3
+
+    def unit_position(tt):
+        return motion.position(tt) + motion.rotation(tt) @ T[:3, 3]
+
+    a_fd = (unit_position(t + h) - 2 * unit_position(t) + unit_position(t - h)) / h**2
+    f_fd = np.einsum("mji,mj->mi", motion.rotation(t) @ T[:3, :3], a_fd - GRAVITY_BASE)
+    np.testing.assert_allclose(f[away], f_fd[away], atol=1e-3)
+
+
+def test_turn_over_refuses_holds_that_do_not_fit():
+    with pytest.raises(ConfigError, match="do not fit in 10 s"):
+        HandMotion.turn_over(np.random.default_rng(0), 10.0, holds=8, hold_s=1.5)
+    with pytest.raises(ConfigError, match="holds >= 1"):
+        HandMotion.turn_over(np.random.default_rng(0), 10.0, holds=0)

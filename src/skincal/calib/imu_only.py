@@ -17,6 +17,18 @@ rigid-body terms. For the reference unit ``ref`` and another unit ``j`` with pos
   a robust Gauss-Newton. The reference accelerometer is the gauge: its scale errors carry over to
   ``r`` (a common scale of both accelerometers scales ``r``, and the equation cannot see it).
 
+**The absolute scale from rests.** When the body was held still in enough orientations (the
+"turn it over" motion of :meth:`skincal.sim.rigid_body.HandMotion.turn_over`), every unit's
+accelerometer is fitted to its rests first (:func:`fit_accel_ellipsoid`: ``|C (a - b)| = |g|``, ``C``
+symmetric 3x3, i.e. scale and cross-axis terms, and the bias ``b``; 9 unknowns, one equation per
+orientation, so 9 distinct orientations at least; 6 give the diagonal scale and the bias). Rests are
+found from the gyroscopes (:func:`still_mask`: over a window the rates' spread and their mean less the
+bias within noise-derived limits, all units on the body agreeing, :func:`common_rests`). The
+reference's calibrated specific force ``C (a_ref - b)`` then replaces ``a_ref`` in the position
+equation, so positions come out in metres, and the fit's covariance is carried into the position's
+(linearised at the solution). Without enough rests the reference's accelerometer stays the gauge and
+a note says how many more orientations are needed.
+
 The covariance is the normal matrix's inverse times the robust residual variance, inflated by the
 residuals' autocorrelation (the functions of :mod:`skincal.calib.mle.solver`). A unit whose rates
 disagree with the reference's beyond ``other_body_ratio`` of their RMS after the best rotation is on
@@ -41,7 +53,10 @@ from scipy.signal import savgol_filter
 
 from skincal.calib.closed_form import wahba
 from skincal.calib.mle.solver import _huber, _pinv, _residual_correlation, _robust_sigma
+from skincal.calib.preprocess import white_noise_std
+from skincal.calib.rest import _windowed_mean, runs
 from skincal.data.dataset import Dataset, ImuStream
+from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.names import name_problem, printable
 from skincal.data.result import REFERENCE, REFERENCE_LINK, CalibrationResult, UnitResult
 from skincal.errors import ConfigError, DatasetError
@@ -55,6 +70,28 @@ reference's rate RMS (centred) moves on another rigid body."""
 MIN_AXIS_RATIO = 0.05
 """Rotation about fewer than two axes: the second singular value of the centred rates below this
 fraction of the first."""
+REST_WINDOW_S = 0.3
+"""Window over which a unit is judged still, s."""
+REST_SPREAD_FACTOR = 2.0
+"""Still: the rates' and accelerations' std over the window below this multiple of their noise std."""
+REST_MEAN_FACTOR = 4.0
+"""Still: the window's mean rate less the gyroscope bias below this many standard errors of the mean."""
+REST_GUARD_S = 0.05
+"""Cut from both ends of a rest (beyond the window's reach: the units' stamp offsets), s."""
+REST_GAP_S = 0.15
+"""A still run broken for less than this (a noise excursion of the window's tests) is one rest, s."""
+MIN_REST_S = 0.4
+"""Shortest rest used for the accelerometers, s (after the guard)."""
+DISTINCT_DEG = 15.0
+"""Rests whose gravity directions are closer than this count as one orientation, deg."""
+ORIENTATIONS_FULL = 9
+"""Distinct orientations needed for the symmetric (scale and cross-axis) fit: 6 + 3 unknowns."""
+ORIENTATIONS_DIAGONAL = 6
+"""Distinct orientations needed for the diagonal scale and the bias: 3 + 3 unknowns."""
+ORIENTATIONS_ADVISED = 12
+"""Distinct orientations a user is asked for (the symmetric fit's 9 and a margin for its conditioning)."""
+MAX_SCALE_STD = 0.01
+"""A fit whose scale or cross-axis std exceeds this (orientations too alike) is not used."""
 
 
 @dataclass(frozen=True)
@@ -75,6 +112,239 @@ class RelativeFit:
     gyro_sigma: float
     correlation: float
     null_axis: FloatArray | None
+    gauge_jacobian: FloatArray | None = None
+    """``(3, P)`` derivative of ``r`` with respect to the reference accelerometer's calibration."""
+
+
+@dataclass(frozen=True)
+class AccelFit:
+    """One accelerometer fitted to its rests: the specific force is ``C (a - b)``.
+
+    Attributes:
+        C: ``(3, 3)`` symmetric correction (the inverse of the scale and cross-axis matrix, up to a
+            rotation that an ellipsoid cannot see; identity-like), ``b``: ``(3,)`` bias, m/s^2.
+        cov: ``(9, 9)`` covariance of ``p = [C11, C22, C33, C12, C13, C23, b1, b2, b3]`` (zero rows
+            for the cross-axis terms of the diagonal model).
+        model: ``"symmetric"`` or ``"diagonal"``.
+        rests, orientations: rests used and how many distinct gravity directions they have.
+        residual_std: RMS of ``|C (a - b)| - |g|`` over the rests, m/s^2.
+    """
+
+    C: FloatArray
+    b: FloatArray
+    cov: FloatArray
+    model: str
+    rests: int
+    orientations: int
+    residual_std: float
+
+    def apply(self, accel: FloatArray) -> FloatArray:
+        """Calibrated specific force ``(M, 3)`` of raw readings ``accel`` ``(M, 3)``."""
+        return (accel - self.b) @ self.C.T
+
+    def jacobian(self, accel: FloatArray) -> FloatArray:
+        """``(M, 3, 9)`` derivative of :meth:`apply` with respect to ``p``."""
+        y = accel - self.b
+        J = np.zeros((len(y), 3, 9))
+        for i in range(3):
+            J[:, i, i] = y[:, i]
+        for k, (i, j) in enumerate(_OFF_DIAGONAL):
+            J[:, i, 3 + k] = y[:, j]
+            J[:, j, 3 + k] = y[:, i]
+        J[:, :, 6:] = -self.C
+        return J
+
+    @property
+    def scale_std(self) -> float:
+        """Largest std of the entries of ``C`` (dimensionless)."""
+        return float(np.sqrt(np.max(np.diag(self.cov)[:6])))
+
+    def imu_calibration(self) -> ImuCalibration:
+        """As :class:`~skincal.data.imu_calibration.ImuCalibration`: ``A = C^-1`` and the bias."""
+        bias_std = np.sqrt(np.maximum(np.diag(self.cov)[6:], 0.0))
+        return ImuCalibration(accel_bias_mps2=self.b.copy(), accel_bias_std_mps2=bias_std,
+                              accel_scale_misalignment=np.linalg.inv(self.C))  # fmt: skip
+
+
+_OFF_DIAGONAL = ((0, 1), (0, 2), (1, 2))
+
+
+def _symmetric(p: FloatArray) -> FloatArray:
+    C = np.diag(p[:3])
+    for k, (i, j) in enumerate(_OFF_DIAGONAL):
+        C[i, j] = C[j, i] = p[3 + k]
+    return C
+
+
+def still_mask(t: FloatArray, gyro: FloatArray, accel: FloatArray, window_s: float = REST_WINDOW_S) -> np.ndarray:
+    """``(M,)`` True where a unit is still: over ``window_s`` around each sample the std of its rates and
+    accelerations stays below ``REST_SPREAD_FACTOR`` times their white-noise std (from 4th differences,
+    :func:`~skincal.calib.preprocess.white_noise_std`) and the mean rate less the gyroscope bias (the
+    median rate over those samples) below ``REST_MEAN_FACTOR`` standard errors of the mean."""
+    sg = np.maximum(white_noise_std(gyro, 4), 1e-6)
+    sa = np.maximum(white_noise_std(accel, 4), 1e-6)
+    mg, n = _windowed_mean(t, gyro, window_s)
+    ma, _ = _windowed_mean(t, accel, window_s)
+    vg = np.maximum(_windowed_mean(t, gyro**2, window_s)[0] - mg**2, 0.0)
+    va = np.maximum(_windowed_mean(t, accel**2, window_s)[0] - ma**2, 0.0)
+    quiet = np.all(vg < (REST_SPREAD_FACTOR * sg) ** 2, axis=1) & np.all(va < (REST_SPREAD_FACTOR * sa) ** 2, axis=1)
+    if not quiet.any():
+        return quiet
+    bias = np.median(gyro[quiet], axis=0)
+    still = quiet & np.all(np.abs(mg - bias) < REST_MEAN_FACTOR * sg / np.sqrt(n)[:, None], axis=1)
+    bounds = runs(still)
+    for (_, end), (start, _) in zip(bounds[:-1], bounds[1:], strict=True):
+        if t[start] - t[end - 1] < REST_GAP_S:
+            still[end:start] = True
+    return still
+
+
+def common_rests(streams: dict[str, ImuStream], reference: str) -> FloatArray:
+    """``(S, 2)`` start and end (reference stamps, s) of the rests of the body: where the reference is
+    still (:func:`still_mask`) and so is every other unit that is still for at least half of that time
+    (the units on the reference's body; a unit on another body moves on), less ``REST_GUARD_S`` at both
+    ends, at least ``MIN_REST_S`` long."""
+    ref = streams[reference]
+    assert ref.gyro is not None
+    common = still_mask(ref.t, ref.gyro, ref.accel)
+    total = max(int(common.sum()), 1)
+    for name, stream in streams.items():
+        if name == reference or stream.gyro is None or len(stream.t) < 10:
+            continue
+        mine = still_mask(stream.t, stream.gyro, stream.accel)
+        i = np.clip(np.searchsorted(stream.t, ref.t), 1, len(stream.t) - 1)
+        i -= (ref.t - stream.t[i - 1]) < (stream.t[i] - ref.t)
+        at_ref = mine[i]
+        if np.count_nonzero(at_ref & common) >= 0.5 * total:
+            common &= at_ref
+    out = []
+    for a, b in runs(common):
+        t0, t1 = ref.t[a] + REST_GUARD_S, ref.t[b - 1] - REST_GUARD_S
+        if t1 - t0 >= MIN_REST_S:
+            out.append((t0, t1))
+    return np.array(out, dtype=float).reshape(-1, 2)
+
+
+def rest_means(stream: ImuStream, rests: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Per rest ``(S, 2)``: the mean acceleration ``(S, 3)``, the sample count ``(S,)`` and the
+    within-rest variance ``(S, 3)`` of one unit."""
+    means, counts, var = [], [], []
+    for t0, t1 in rests:
+        a = stream.accel[(stream.t >= t0) & (stream.t <= t1)]
+        if len(a) < 3:
+            a = np.full((3, 3), np.nan)
+        means.append(a.mean(axis=0))
+        counts.append(len(a))
+        var.append(a.var(axis=0, ddof=1))
+    return np.array(means).reshape(-1, 3), np.array(counts, dtype=float), np.array(var).reshape(-1, 3)
+
+
+def distinct_orientations(directions: FloatArray, deg: float = DISTINCT_DEG) -> int:
+    """How many of the gravity directions ``(S, 3)`` differ by more than ``deg`` from each other
+    (greedy: each direction joins the first earlier one within ``deg``)."""
+    unit = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    kept: list[FloatArray] = []
+    for u in unit:
+        if all(float(u @ v) < math.cos(math.radians(deg)) for v in kept):
+            kept.append(u)
+    return len(kept)
+
+
+def _ellipsoid_start(means: FloatArray, gravity: float, model: str) -> tuple[FloatArray, FloatArray] | None:
+    """Algebraic fit of ``(a - b)^T Q (a - b) = g^2`` (linear in ``Q``, ``-2 Q b``, a constant; the
+    smallest singular vector), ``C = Q^(1/2)``; None when the quadric is no ellipsoid."""
+    a = means
+    quad = [a[:, 0] ** 2, a[:, 1] ** 2, a[:, 2] ** 2]
+    if model == "symmetric":
+        quad += [2 * a[:, i] * a[:, j] for i, j in _OFF_DIAGONAL]
+    D = np.column_stack([*quad, a, np.ones(len(a))])
+    scale = np.linalg.norm(D, axis=0)
+    z = np.linalg.svd(D / scale, full_matrices=False)[2][-1] / scale
+    nq = len(quad)
+    Q = _symmetric(np.concatenate([z[:nq], np.zeros(6 - nq)]))
+    L, k = z[nq : nq + 3], z[-1]
+    eig = np.linalg.eigvalsh(Q)
+    if eig[0] * eig[-1] <= 0:
+        return None
+    if eig[0] < 0:
+        Q, L, k = -Q, -L, -k
+    b = -0.5 * np.linalg.solve(Q, L)
+    denom = float(b @ Q @ b - k)
+    if denom <= 0:
+        return None
+    w, V = np.linalg.eigh(Q * gravity**2 / denom)
+    return (V * np.sqrt(w)) @ V.T, b
+
+
+def fit_accel_ellipsoid(
+    means: FloatArray,
+    counts: FloatArray,
+    noise_var: FloatArray,
+    gravity: float,
+    model: str = "symmetric",
+    iterations: int = 30,
+) -> AccelFit | None:
+    """Fit ``|C (m_k - b)| = gravity`` to rest means ``m_k`` ``(S, 3)`` (``counts`` ``(S,)`` samples,
+    per-axis sample noise variance ``noise_var`` ``(3,)``): the algebraic start, then Gauss-Newton
+    weighted by each mean's std along gravity; ``model`` ``"symmetric"`` (``C`` 3x3 symmetric) or
+    ``"diagonal"``. The covariance is the weighted normal matrix's inverse, inflated by the reduced
+    chi-square when it exceeds 1 and there are 3 or more redundant rests. None without an ellipsoid."""
+    need = ORIENTATIONS_FULL if model == "symmetric" else ORIENTATIONS_DIAGONAL
+    ok = np.all(np.isfinite(means), axis=1)
+    means, counts = means[ok], counts[ok]
+    if len(means) < need:
+        return None
+    start = _ellipsoid_start(means, gravity, model)
+    if start is None:
+        return None
+    C, b = start
+    free = np.ones(9, dtype=bool)
+    if model == "diagonal":
+        free[3:6] = False
+        C = np.diag(np.diag(C))
+    p = np.concatenate([np.diag(C), [C[i, j] for i, j in _OFF_DIAGONAL], b])
+    H = np.eye(9)
+    e = np.zeros(len(means))
+    for _ in range(iterations):
+        fit = AccelFit(_symmetric(p[:6]), p[6:], np.zeros((9, 9)), model, len(means), 0, 0.0)
+        f = fit.apply(means)
+        norm = np.linalg.norm(f, axis=1)
+        n = f / norm[:, None]
+        e = norm - gravity
+        sigma2 = np.einsum("si,ij,sj->s", n @ fit.C, np.diag(noise_var), n @ fit.C) / counts
+        J = np.einsum("si,sip->sp", n, fit.jacobian(means))[:, free]
+        Jw = J / np.sqrt(sigma2)[:, None]
+        H = Jw.T @ Jw
+        step = -np.linalg.lstsq(Jw, e / np.sqrt(sigma2), rcond=None)[0]
+        p[free] += step
+        if np.max(np.abs(step)) < 1e-12:
+            break
+    dof = len(means) - int(free.sum())
+    chi2 = float(np.sum(e**2 / sigma2))
+    inflate = max(1.0, chi2 / dof) if dof >= 3 else 1.0
+    cov = np.zeros((9, 9))
+    cov[np.ix_(free, free)] = _pinv(H) * inflate
+    return AccelFit(_symmetric(p[:6]), p[6:], cov, model, len(means), distinct_orientations(means),
+                    float(np.sqrt(np.mean(e**2))))  # fmt: skip
+
+
+def fit_unit_accelerometer(stream: ImuStream, rests: FloatArray, gravity: float) -> tuple[AccelFit | None, int]:
+    """The best identifiable accelerometer fit of one unit over ``rests`` (symmetric with
+    ``ORIENTATIONS_FULL`` distinct orientations, diagonal with ``ORIENTATIONS_DIAGONAL``, none below; a
+    fit whose scale std exceeds ``MAX_SCALE_STD`` is refused) and the number of distinct orientations."""
+    means, counts, var = rest_means(stream, rests)
+    ok = np.all(np.isfinite(means), axis=1)
+    if not ok.any():
+        return None, 0
+    distinct = distinct_orientations(means[ok])
+    noise_var = np.median(var[ok], axis=0)
+    for model, need in (("symmetric", ORIENTATIONS_FULL), ("diagonal", ORIENTATIONS_DIAGONAL)):
+        if distinct < need:
+            continue
+        fit = fit_accel_ellipsoid(means, counts, noise_var, gravity, model)
+        if fit is not None and fit.scale_std <= MAX_SCALE_STD:
+            return fit, distinct
+    return None, distinct
 
 
 def _uniform_grid(t: FloatArray) -> tuple[FloatArray, float]:
@@ -153,8 +423,11 @@ def fit_relative(
     max_offset_s: float = 1.0,
     iterations: int = 20,
     other_body_ratio: float = OTHER_BODY_RATIO,
+    ref_jacobian: FloatArray | None = None,
 ) -> RelativeFit | str:
-    """Fit one unit against the reference; a reason (str) when it cannot be calibrated."""
+    """Fit one unit against the reference; a reason (str) when it cannot be calibrated.
+    ``ref_jacobian`` ``(len(ref.t), 3, P)``: derivative of the reference's accelerations with respect to
+    ``P`` calibration parameters (``ref`` calibrated); the fit then returns ``dr/dp`` (``gauge_jacobian``)."""
     if ref.gyro is None or unit.gyro is None:
         return "no gyroscope stream (the IMU-only calibration needs both units' angular rates)"
     if len(unit.t) < 50 or len(ref.t) < 50:
@@ -218,7 +491,13 @@ def fit_relative(
     rho = _residual_correlation(res)
     sw = np.sqrt(weights)[:, None, None]
     Jw = (J * sw).reshape(-1, 18)
-    cov = _pinv(Jw.T @ Jw) * sigma**2 * rho
+    H_inv = _pinv(Jw.T @ Jw)
+    cov = H_inv * sigma**2 * rho
+    gauge_jacobian = None
+    if ref_jacobian is not None:
+        # theta minimises sum w |res|^2, res = ... - a_ref: d theta = H^-1 J^T W d a_ref
+        dA = (ref_jacobian[inside] * sw).reshape(-1, ref_jacobian.shape[2])
+        gauge_jacobian = (H_inv @ (Jw.T @ dA))[3:6]
     # rotation covariance from the gyroscope equation: d(res_g) = [R w_j]x dphi
     sigma_g = float(np.sqrt(np.mean(res_g**2)))
     A = _skew(w_j @ R.T - (w_j @ R.T).mean(axis=0))
@@ -239,6 +518,7 @@ def fit_relative(
         gyro_sigma=sigma_g,
         correlation=rho,
         null_axis=null_axis,
+        gauge_jacobian=gauge_jacobian,
     )
 
 
@@ -285,37 +565,104 @@ def calibrate_relative(
     ref = dataset.imu[reference]
     if ref.gyro is None:
         raise DatasetError(f"reference unit '{printable(reference)}' has no gyroscope stream")
+    gravity = float(np.linalg.norm(dataset.gravity))
+    streams = {name: dataset.imu[name] for name in dict.fromkeys([reference, *names])}
+    rests = common_rests(streams, reference) if len(ref.t) >= 50 else np.zeros((0, 2))
+    accel_fits: dict[str, AccelFit] = {}
+    for name, stream in streams.items():
+        fit_a, _ = fit_unit_accelerometer(stream, rests, gravity)
+        if fit_a is not None:
+            accel_fits[name] = fit_a
+    ref_fit = accel_fits.get(reference)
+    ref_distinct = distinct_orientations(rest_means(ref, rests)[0]) if len(rests) else 0
+    gauge = _gauge_notes(reference, ref_fit, len(rests), ref_distinct, gravity)
+    ref_jacobian = None
+    if ref_fit is not None:
+        ref_jacobian = ref_fit.jacobian(ref.accel)
+        ref = replace(ref, accel=ref_fit.apply(ref.accel))
     out: dict[str, UnitResult] = {}
     failed: dict[str, str] = {}
     for name in names:
+        imu = accel_fits[name].imu_calibration() if name in accel_fits else None
         if name == reference:
             out[name] = UnitResult(
                 SkinUnitPose(REFERENCE_LINK, np.eye(3), np.zeros(3)),
                 position_std_m=np.zeros(3),
                 rotation_std_deg=np.zeros(3),
                 extras={"link_name": f"{reference} (reference)"},
+                imu=imu,
             )
             continue
-        fit = fit_relative(ref, dataset.imu[name], max_offset_s=max_offset_s, other_body_ratio=other_body_ratio)
+        fit = fit_relative(
+            ref, dataset.imu[name], max_offset_s=max_offset_s, other_body_ratio=other_body_ratio,
+            ref_jacobian=ref_jacobian,
+        )  # fmt: skip
         if isinstance(fit, str):
             failed[name] = fit
             continue
         r2 = fit.r**2
-        gauge = reference_scale_std**2 * r2 + reference_misalignment_std**2 * (r2.sum() - r2)
-        fit = replace(fit, position_cov=fit.position_cov + np.diag(gauge))
-        out[name] = _unit_result(fit, reference)
+        if ref_fit is None:  # the reference accelerometer is the gauge
+            extra = np.diag(reference_scale_std**2 * r2 + reference_misalignment_std**2 * (r2.sum() - r2))
+        else:
+            assert fit.gauge_jacobian is not None
+            extra = fit.gauge_jacobian @ ref_fit.cov @ fit.gauge_jacobian.T
+            if ref_fit.model == "diagonal":  # cross-axis terms not fitted
+                extra = extra + np.diag(reference_misalignment_std**2 * (r2.sum() - r2))
+        fit = replace(fit, position_cov=fit.position_cov + extra)
+        out[name] = _unit_result(fit, reference, gauge, imu)
     robot = dataset.robot.name if dataset.robot is not None else "none"
     extras: dict = {REFERENCE: reference}
+    extras["accel_scale_fit"] = {
+        "model": ref_fit.model if ref_fit is not None else "none",
+        "rests": int(len(rests)),
+        "orientations": int(ref_distinct),
+        "note": gauge[-1],
+    }
     if failed:
         extras["failed_units"] = failed
     return CalibrationResult(METHOD, robot, dataset_sha256, time.perf_counter() - start, out, extras)
 
 
-def _unit_result(fit: RelativeFit, reference: str) -> UnitResult:
+def _gauge_notes(reference: str, fit: AccelFit | None, rests: int, distinct: int, gravity: float) -> list[str]:
+    """What sets the positions' scale, and (last) what the rests gave or what is missing."""
+    found = f"{rests} rest(s) in {distinct} distinct orientation(s)"
+    if fit is not None and fit.model == "symmetric":
+        return [
+            f"position in metres: {reference}'s accelerometer scale and cross-axis terms fitted to {found} "
+            f"(|g| = {gravity:.4g} m/s^2; scale std {100 * fit.scale_std:.2g} %)",
+            f"accelerometer scale fitted from {found}",
+        ]
+    more_full = max(ORIENTATIONS_FULL - distinct, 1)
+    if fit is not None:
+        return [
+            f"position in metres: {reference}'s accelerometer scale fitted to {found}, its cross-axis terms "
+            "not (their size, reference_misalignment_std, is in the std)",
+            f"accelerometer scale fitted from {found}; {more_full} more orientation(s) would fit the cross-axis "
+            "terms too",
+        ]
+    more = max(ORIENTATIONS_ADVISED - distinct, 1)
+    if distinct >= ORIENTATIONS_DIAGONAL:
+        missing = (
+            f"{found}: too few or too alike to fit the accelerometer's scale to {100 * MAX_SCALE_STD:g} %; hold the "
+            f"body still for 1-2 s in {more} more orientation(s), spread over the sphere (face up, face down, on "
+            "each edge)"
+        )
+    else:
+        missing = (
+            f"{found}: the accelerometer's scale needs {ORIENTATIONS_FULL} (at least {ORIENTATIONS_DIAGONAL}) "
+            f"distinct orientations; hold the body still for 1-2 s in {more} more, spread over the sphere "
+            "(face up, face down, on each edge)"
+        )
+    return [
+        f"position in the scale of {reference}'s accelerometer (its scale error carries over to the position)",
+        missing,
+    ]
+
+
+def _unit_result(fit: RelativeFit, reference: str, notes: list[str], imu: ImuCalibration | None) -> UnitResult:
     pos_std = np.sqrt(np.maximum(np.diag(fit.position_cov), 0.0))
     rot_std = np.degrees(np.sqrt(np.maximum(np.diag(fit.rotation_cov), 0.0)))
     warnings: list[str] = []
-    notes = [f"position in the scale of {reference}'s accelerometer (its scale error carries over to the position)"]
     observable = True
     if fit.null_axis is not None:
         observable = False
@@ -338,7 +685,7 @@ def _unit_result(fit: RelativeFit, reference: str) -> UnitResult:
         "residual_std_mps2": fit.accel_sigma,
         "gyro_residual_std_rps": fit.gyro_sigma,
         "residual_correlation": fit.correlation,
-        "notes": notes,
+        "notes": list(notes),
     }
     return UnitResult(
         SkinUnitPose(REFERENCE_LINK, _closest_rotation(fit.R), fit.r),
@@ -347,6 +694,7 @@ def _unit_result(fit: RelativeFit, reference: str) -> UnitResult:
         rotation_std_deg=rot_std,
         warnings=tuple(warnings),
         extras=extras,
+        imu=imu,
     )
 
 

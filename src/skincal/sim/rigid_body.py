@@ -10,7 +10,15 @@ A unit at ``T_body_su = (R_bs, r)`` then measures (:func:`unit_truth`)::
 
     f_su = R_bs^T (R^T (a - g) + ([dw]x + [w]x^2) r),      w_su = R_bs^T w
 
-and :func:`simulate_rigid_bodies` draws each unit's IMU errors and clock with the same steps as the
+**Holds** (:meth:`HandMotion.turn_over`): the motion a user makes to calibrate the accelerometers'
+scale by hand. Hold the body still for 1-2 s, turn it over to another orientation, hold it again,
+and so on, 9 or more times (12 by default), so that the direction of gravity seen by the units
+covers the whole sphere (face up, face down, on each edge, and in between); shake and twist it
+freely between the holds. Inside a hold the body is exactly still; the random motion fades in and
+out over ``ramp_s`` around each hold (a quintic smoothstep envelope, C2), while the base orientation
+turns from one hold's orientation to the next along a smoothstep geodesic.
+
+Then :func:`simulate_rigid_bodies` draws each unit's IMU errors and clock with the same steps as the
 robot simulators (:mod:`skincal.sim.common`): a :class:`~skincal.data.dataset.Dataset` with no robot
 and no joints, the true poses as ``truth_body`` (``/truth/<unit>`` attrs ``body``, ``T_body_su``).
 """
@@ -18,7 +26,7 @@ and no joints, the true poses as ``truth_body`` (``/truth/<unit>`` attrs ``body`
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -33,6 +41,8 @@ from skincal.skin.imu import ImuModel, apply_imu_model, draw_imu_errors, sample_
 
 _H_ROT = 1e-6  # s, central difference of the rotation (analytic phi, so only round-off limits it)
 _H_RATE = 1e-4  # s, central difference of the angular velocity
+MIN_MOVE_S = 1.0
+"""Shortest motion before, between and after the holds of :meth:`HandMotion.turn_over`, s."""
 
 
 def skew(v: FloatArray) -> FloatArray:
@@ -60,7 +70,9 @@ class HandMotion:
             rotation vector's sinusoids, per axis.
         freq_pos, amp_pos, phase_pos: ``(K, 3)`` the same for the position (m).
         R0: ``(3, 3)`` the orientation at rotation vector 0.
-        axes: ``(3,)`` bool, which rotation-vector axes move (all, unless limited to test excitation).
+        hold_times: ``(H, 2)`` start and end (s) of the holds, in time order (none: no holds).
+        hold_R: ``(H, 3, 3)`` orientation ``R_world_body`` during each hold.
+        ramp_s: the random motion fades out before and in after a hold over this time, s.
     """
 
     freq_rot: FloatArray
@@ -70,6 +82,9 @@ class HandMotion:
     amp_pos: FloatArray
     phase_pos: FloatArray
     R0: FloatArray
+    hold_times: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    hold_R: FloatArray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    ramp_s: float = 0.4
 
     @classmethod
     def random(
@@ -104,14 +119,101 @@ class HandMotion:
             phases[0] = phases[0][:, :1]
         return cls(f_rot, amp_rot, phases[0], f_pos, amp_pos, phases[1], R0)
 
+    @classmethod
+    def turn_over(
+        cls,
+        rng: np.random.Generator,
+        duration_s: float,
+        *,
+        holds: int = 12,
+        hold_s: float = 1.5,
+        **random: object,
+    ) -> HandMotion:
+        """A hand-held "turn it over" calibration motion of ``duration_s``: ``holds`` still periods of
+        ``hold_s`` s whose gravity directions (body frame) are spread over the sphere (Fibonacci points,
+        randomly rotated, visited nearest-first, random heading), evenly spaced in time with the random
+        motion of :meth:`random` (``random``: its options) in the moves before, between and after them."""
+        if holds < 1 or not (hold_s > 0 and np.isfinite(hold_s)):
+            raise ConfigError(f"hand motion: need holds >= 1 and a positive hold time, got {holds}, {hold_s}")
+        move_s = (duration_s - holds * hold_s) / (holds + 1)
+        if not move_s >= MIN_MOVE_S:
+            raise ConfigError(
+                f"hand motion: {holds} holds of {hold_s:g} s do not fit in {duration_s:g} s "
+                f"(at least {MIN_MOVE_S:g} s of motion before, between and after them)"
+            )
+        motion = cls.random(rng, **random)  # type: ignore[arg-type]
+        k = np.arange(holds) + 0.5
+        z = 1.0 - 2.0 * k / holds
+        azimuth = np.pi * (1.0 + np.sqrt(5.0)) * k
+        up = np.stack([np.sqrt(1 - z**2) * np.cos(azimuth), np.sqrt(1 - z**2) * np.sin(azimuth), z], axis=1)
+        up = up @ Rotation.random(random_state=np.random.default_rng(rng.integers(2**32))).as_matrix().T
+        order = [0]
+        while len(order) < holds:
+            left = [i for i in range(holds) if i not in order]
+            order.append(left[int(np.argmax(up[left] @ up[order[-1]]))])
+        hold_R = []
+        for i in order:
+            # R_world_body with R^T e_z = up (gravity's direction in the body frame), then a random heading
+            align = Rotation.align_vectors([[0.0, 0.0, 1.0]], [up[i]])[0]
+            heading = Rotation.from_rotvec([0.0, 0.0, rng.uniform(-np.pi / 3, np.pi / 3)])
+            hold_R.append((heading * align).as_matrix())
+        starts = move_s + np.arange(holds) * (hold_s + move_s)
+        times = np.stack([starts, starts + hold_s], axis=1)
+        return replace(motion, hold_times=times, hold_R=np.array(hold_R), ramp_s=min(0.4, move_s / 2))
+
+    def _envelope(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Weight of the random motion and its first two time derivatives ``(M,)``: 0 inside a hold,
+        a quintic smoothstep of the distance to the nearest hold over ``ramp_s``, 1 beyond."""
+        one = np.ones_like(t)
+        if not len(self.hold_times):
+            return one, 0 * one, 0 * one
+        a, b = self.hold_times[:, 0][None], self.hold_times[:, 1][None]
+        before, after = a - t[:, None], t[:, None] - b
+        dist = np.maximum(np.maximum(before, after), 0.0)
+        k = np.argmin(dist, axis=1)
+        rows = np.arange(len(t))
+        d = dist[rows, k]
+        sign = np.where(after[rows, k] > 0, 1.0, np.where(before[rows, k] > 0, -1.0, 0.0))
+        x = d / self.ramp_s
+        ramp = x < 1.0
+        xc = np.minimum(x, 1.0)
+        e = 10 * xc**3 - 15 * xc**4 + 6 * xc**5
+        de = np.where(ramp, 30 * x**2 * (1 - x) ** 2, 0.0) * sign / self.ramp_s
+        dde = np.where(ramp, 60 * x * (1 - x) * (1 - 2 * x), 0.0) * sign**2 / self.ramp_s**2
+        return e, de, dde
+
+    def _base_rotation(self, t: FloatArray) -> FloatArray:
+        """``(M, 3, 3)``: ``R0`` without holds; else the hold orientation, turning to the next one along
+        a smoothstep geodesic between holds (the first before, the last after them)."""
+        if not len(self.hold_times):
+            return np.broadcast_to(self.R0, (len(t), 3, 3))
+        out = np.empty((len(t), 3, 3))
+        i = np.searchsorted(self.hold_times[:, 0], t, side="right") - 1  # last hold started
+        out[:] = self.hold_R[np.clip(i, 0, None)]
+        for k in range(len(self.hold_times) - 1):
+            t1, t2 = self.hold_times[k, 1], self.hold_times[k + 1, 0]
+            m = (t > t1) & (t < t2)
+            if not m.any():
+                continue
+            x = (t[m] - t1) / (t2 - t1)
+            s = 10 * x**3 - 15 * x**4 + 6 * x**5
+            step = Rotation.from_matrix(self.hold_R[k].T @ self.hold_R[k + 1]).as_rotvec()
+            out[m] = self.hold_R[k] @ Rotation.from_rotvec(s[:, None] * step[None]).as_matrix()
+        return out
+
     def _rotvec(self, t: FloatArray) -> FloatArray:
         arg = 2 * np.pi * self.freq_rot[None] * t[:, None, None] + self.phase_rot[None]
-        return np.sum(self.amp_rot[None] * np.sin(arg), axis=1)
+        return np.sum(self.amp_rot[None] * np.sin(arg), axis=1) * self._envelope(t)[0][:, None]
 
     def rotation(self, t: FloatArray) -> FloatArray:
         """``(M, 3, 3)`` orientation ``R_world_body`` at instants ``t`` ``(M,)`` s."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        return self._base_rotation(t) @ Rotation.from_rotvec(self._rotvec(t)).as_matrix()
+
+    def still(self, t: FloatArray) -> np.ndarray:
+        """``(M,)`` True inside a hold."""
         t = np.asarray(t, dtype=float)
-        return self.R0 @ Rotation.from_rotvec(self._rotvec(t)).as_matrix()
+        return np.any((t[:, None] >= self.hold_times[:, 0]) & (t[:, None] <= self.hold_times[:, 1]), axis=1)
 
     def angular_velocity(self, t: FloatArray) -> FloatArray:
         """``(M, 3)`` body-frame angular velocity, rad/s (``vee(R^T dR/dt)``, central difference)."""
@@ -125,13 +227,18 @@ class HandMotion:
         """``(M, 3)`` world position of the body origin, m."""
         t = np.asarray(t, dtype=float)
         arg = 2 * np.pi * self.freq_pos[None] * t[:, None, None] + self.phase_pos[None]
-        return np.sum(self.amp_pos[None] * np.sin(arg), axis=1)
+        return np.sum(self.amp_pos[None] * np.sin(arg), axis=1) * self._envelope(t)[0][:, None]
 
     def acceleration(self, t: FloatArray) -> FloatArray:
         """``(M, 3)`` world acceleration of the body origin, m/s^2 (analytic)."""
         t = np.asarray(t, dtype=float)
         om = 2 * np.pi * self.freq_pos[None]
-        return -np.sum(self.amp_pos[None] * om**2 * np.sin(om * t[:, None, None] + self.phase_pos[None]), axis=1)
+        arg = om * t[:, None, None] + self.phase_pos[None]
+        p = np.sum(self.amp_pos[None] * np.sin(arg), axis=1)
+        dp = np.sum(self.amp_pos[None] * om * np.cos(arg), axis=1)
+        ddp = -np.sum(self.amp_pos[None] * om**2 * np.sin(arg), axis=1)
+        e, de, dde = self._envelope(t)
+        return e[:, None] * ddp + 2 * de[:, None] * dp + dde[:, None] * p
 
     def state(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """``(R_world_body (M, 3, 3), w (M, 3), dw (M, 3), a (M, 3))`` at instants ``t``."""

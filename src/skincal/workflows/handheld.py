@@ -2,8 +2,10 @@
 the IMU-only unit-to-unit calibration (:func:`skincal.calib.imu_only.calibrate_relative`).
 
 :func:`handheld_dataset` is the preset of such a session: ``units`` units ``spacing`` m apart along the
-body's x axis, each with a random orientation, a hand-like motion (:class:`skincal.sim.rigid_body.HandMotion`),
-the named IMU and clock presets, and optionally ``other_body`` units on a second, independently moved body.
+body's x axis, each with a random orientation, a hand-like "turn it over" motion with still holds in
+orientations spread over the sphere (:meth:`skincal.sim.rigid_body.HandMotion.turn_over`: the motion a user
+should make, so that the accelerometers' scale can be fitted), the named IMU and clock presets, and
+optionally ``other_body`` units on a second, independently moved body (moved without holds).
 :func:`bench_relative` runs it ``runs`` times and measures the errors against the truth and the
 calibration of the reported std (RMS of error / std per axis).
 """
@@ -22,10 +24,15 @@ from skincal.data.dataset import Dataset
 from skincal.data.result import CalibrationResult
 from skincal.errors import ConfigError
 from skincal.kinematics.transforms import FloatArray
-from skincal.sim.rigid_body import HandMotion, simulate_rigid_bodies
+from skincal.sim.rigid_body import MIN_MOVE_S, HandMotion, simulate_rigid_bodies
 from skincal.skin.clock import get_clock_model
 from skincal.skin.imu import get_imu_model
 
+HOLDS = 12
+"""Still holds of the preset's hand motion (9 are needed to fit an accelerometer's scale and cross-axis
+terms, each orientation giving one equation |f| = g; a few more for the conditioning)."""
+HOLD_S = 1.5
+"""Length of each hold, s."""
 BODY = "hand"
 OTHER_BODY = "other"
 
@@ -39,16 +46,24 @@ def handheld_dataset(
     seed: int = 0,
     other_body: int = 0,
     scale_free: bool = False,
+    holds: int | None = None,
+    hold_s: float = HOLD_S,
 ) -> Dataset:
     """A simulated hand-held session (see the module docstring); units are ``su1``, ``su2``, ...
     ``scale_free``: the IMU preset without accelerometer scale and misalignment errors (as after a
-    calibration of the accelerometers), to measure what the reference's gauge costs."""
+    calibration of the accelerometers), to measure what the reference's gauge costs. ``holds``: still
+    periods of ``hold_s`` s in the hand's motion (``None``: as many as fit, up to ``HOLDS``, with at least
+    ``MIN_MOVE_S`` of motion around each; 0: none, a motion without rests)."""
     if units < 1 or other_body < 0 or units + other_body < 2:
         raise ConfigError(f"hand-held session: need at least 2 units in all, got {units} + {other_body}")
     if not (0 < spacing < 10):
         raise ConfigError(f"hand-held session: spacing must be in (0, 10) m, got {spacing}")
     rng = np.random.default_rng(seed)
-    motions = {BODY: HandMotion.random(rng)}
+    if holds is None:
+        holds = int(min(HOLDS, max(0, (duration_s - MIN_MOVE_S) // (hold_s + MIN_MOVE_S))))
+    motions = {
+        BODY: HandMotion.turn_over(rng, duration_s, holds=holds, hold_s=hold_s) if holds else HandMotion.random(rng)
+    }
     if other_body:
         motions[OTHER_BODY] = HandMotion.random(rng)
     placement: dict[str, tuple[str, FloatArray]] = {}
@@ -57,7 +72,9 @@ def handheld_dataset(
         T[:3, :3] = Rotation.random(random_state=np.random.default_rng(rng.integers(2**32))).as_matrix()
         T[:3, 3] = [spacing * (k if k < units else k - units), 0.0, 0.0]
         placement[f"su{k + 1}"] = (BODY if k < units else OTHER_BODY, T)
-    description = f"simulated hand-held session: {units} units {spacing} m apart, {imu} IMUs, {clock} clocks"
+    description = (
+        f"simulated hand-held session: {units} units {spacing} m apart, {holds} holds, {imu} IMUs, {clock} clocks"
+    )
     model = get_imu_model(imu)
     if scale_free:
         model = replace(model, accel_scale_std=0.0, misalignment_std=0.0)
@@ -96,13 +113,15 @@ def bench_relative(
     clock: str = "driver",
     seed: int = 0,
     scale_free: bool = False,
+    holds: int | None = None,
 ) -> dict[str, Any]:
     """The IMU-only calibration of two units ``spacing`` apart over ``runs`` simulated hand-held sessions:
     position and rotation errors (max, median), RMS of error / std per axis, run time. The reported
-    std includes the reference accelerometer's scale and misalignment std of the IMU preset."""
-    p_err, r_err, z_p, z_r, times = [], [], [], [], []
+    std includes the reference accelerometer's scale and misalignment std of the IMU preset where its
+    scale is not fitted from rests (``holds``: of the hand's motion, as :func:`handheld_dataset`)."""
+    p_err, r_err, z_p, z_r, times, fitted = [], [], [], [], [], 0
     for k in range(runs):
-        ds = handheld_dataset(2, spacing, duration_s, imu, clock, seed + k, scale_free=scale_free)
+        ds = handheld_dataset(2, spacing, duration_s, imu, clock, seed + k, scale_free=scale_free, holds=holds)
         start = time.perf_counter()
         model = (
             replace(get_imu_model(imu), accel_scale_std=0.0, misalignment_std=0.0) if scale_free else get_imu_model(imu)
@@ -111,6 +130,7 @@ def bench_relative(
             ds, "su1", reference_scale_std=model.accel_scale_std, reference_misalignment_std=model.misalignment_std
         )
         times.append(time.perf_counter() - start)
+        fitted += result.extras["accel_scale_fit"]["model"] != "none"
         for e in relative_errors(result, ds).values():
             p_err.append(float(np.linalg.norm(e["position_error_m"])))
             r_err.append(float(np.degrees(np.linalg.norm(e["rotation_error_rad"]))))
@@ -122,6 +142,8 @@ def bench_relative(
         "imu": imu,
         "clock": clock,
         "scale_free": scale_free,
+        "holds": "as fit" if holds is None else holds,
+        "runs_with_scale_fitted": fitted,
         "position_error_mm_max": 1e3 * max(p_err),
         "position_error_mm_median": 1e3 * float(np.median(p_err)),
         "rotation_error_deg_max": max(r_err),
