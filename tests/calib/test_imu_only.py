@@ -408,3 +408,22 @@ def test_real_imus_with_a_calibrated_reference_meet_the_targets(seed):
     errors = relative_errors(calibrate_relative(ds, "su1"), ds)["su2"]
     assert np.linalg.norm(errors["position_error_m"]) <= 1e-3
     assert np.degrees(np.linalg.norm(errors["rotation_error_rad"])) <= 0.1
+
+
+def test_cli_handheld_with_holds_prints_the_scale_fit_and_round_trips(tmp_path, capsys):
+    """``simulate --handheld`` (30 s: 11 holds) then ``calibrate --reference``: the note on the positions'
+    scale is printed, and the fitted accelerometers and ``accel_scale_fit`` survive the result file."""
+    data, out = tmp_path / "hand.h5", tmp_path / "rel.json"
+    args = ["simulate", "--handheld", "--units", "2", "--duration", "30", "--noise", "real", "-o", str(data)]
+    assert main(args) == 0
+    capsys.readouterr()
+    assert main(["calibrate", str(data), "--reference", "su1", "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "note: accelerometer scale fitted from 11 rest(s) in 11 distinct orientation(s)" in printed
+    result = read_result(out)
+    assert result.extras["accel_scale_fit"]["model"] == "symmetric" and result.extras["accel_scale_fit"]["rests"] == 11
+    for name in ("su1", "su2"):
+        imu = result.units[name].imu
+        assert imu is not None and imu.accel_scale_misalignment is not None
+        assert np.all(np.abs(np.diag(imu.accel_scale_misalignment) - 1) < 0.15)
+    assert np.linalg.norm(result.units["su2"].pose.p_link_su) == pytest.approx(0.2, abs=1e-3)

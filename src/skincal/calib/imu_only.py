@@ -76,6 +76,9 @@ REST_SPREAD_FACTOR = 2.0
 """Still: the rates' and accelerations' std over the window below this multiple of their noise std."""
 REST_MEAN_FACTOR = 4.0
 """Still: the window's mean rate less the gyroscope bias below this many standard errors of the mean."""
+NOISE_FLOOR = 1e-4
+"""Smallest noise std assumed for the rest tests (rad/s, m/s^2): noise-free data still rest, and the
+windowed variances' round-off (sums of squares of ~10 m/s^2) stays far below the limits."""
 REST_GUARD_S = 0.05
 """Cut from both ends of a rest (beyond the window's reach: the units' stamp offsets), s."""
 REST_GAP_S = 0.15
@@ -181,8 +184,8 @@ def still_mask(t: FloatArray, gyro: FloatArray, accel: FloatArray, window_s: flo
     accelerations stays below ``REST_SPREAD_FACTOR`` times their white-noise std (from 4th differences,
     :func:`~skincal.calib.preprocess.white_noise_std`) and the mean rate less the gyroscope bias (the
     median rate over those samples) below ``REST_MEAN_FACTOR`` standard errors of the mean."""
-    sg = np.maximum(white_noise_std(gyro, 4), 1e-6)
-    sa = np.maximum(white_noise_std(accel, 4), 1e-6)
+    sg = np.maximum(white_noise_std(gyro, 4), NOISE_FLOOR)
+    sa = np.maximum(white_noise_std(accel, 4), NOISE_FLOOR)
     mg, n = _windowed_mean(t, gyro, window_s)
     ma, _ = _windowed_mean(t, accel, window_s)
     vg = np.maximum(_windowed_mean(t, gyro**2, window_s)[0] - mg**2, 0.0)
@@ -337,7 +340,7 @@ def fit_unit_accelerometer(stream: ImuStream, rests: FloatArray, gravity: float)
     if not ok.any():
         return None, 0
     distinct = distinct_orientations(means[ok])
-    noise_var = np.median(var[ok], axis=0)
+    noise_var = np.maximum(np.median(var[ok], axis=0), NOISE_FLOOR**2)
     for model, need in (("symmetric", ORIENTATIONS_FULL), ("diagonal", ORIENTATIONS_DIAGONAL)):
         if distinct < need:
             continue
@@ -540,14 +543,19 @@ def calibrate_relative(
 ) -> CalibrationResult:
     """Poses of ``units`` (default: every unit) in the frame of unit ``reference`` from the IMUs alone.
 
-    The reference accelerometer is the gauge of every position (its scale error ``s`` makes
+    When the body rests in enough distinct orientations (module docstring), the reference's accelerometer
+    is fitted to the rests and positions come out in metres, with the fit's std in theirs. Otherwise the
+    reference accelerometer is the gauge of every position (its scale error ``s`` makes
     ``r_est = (1 + s) r``): ``reference_scale_std`` and ``reference_misalignment_std`` (the size of its
     uncalibrated per-axis scale error and symmetric cross-axis error, e.g. 0.03 and 0.01 for the
-    ``real`` IMU preset) add that to the position std; 0 (default) takes the reference as exact.
+    ``real`` IMU preset) add that to the position std; 0 (default) takes the reference as exact. With
+    the diagonal fit (6-8 orientations) only ``reference_misalignment_std`` is added.
 
     Returns a :class:`~skincal.data.result.CalibrationResult` with ``method = "imu-only"``,
-    ``extras["reference"] = reference`` and per unit ``T_ref_su`` at ``link = 0``; units on another
-    rigid body (or without a gyroscope) are in ``extras["failed_units"]`` with the reason.
+    ``extras["reference"] = reference``, ``extras["accel_scale_fit"]`` (the rests' fit of the reference's
+    accelerometer: model, rests, distinct orientations, a note) and per unit ``T_ref_su`` at ``link = 0``
+    (with ``imu``: its accelerometer fitted to the rests, when they allow it); units on another rigid
+    body (or without a gyroscope) are in ``extras["failed_units"]`` with the reason.
     """
     start = time.perf_counter()
     problem = name_problem(reference)

@@ -174,6 +174,8 @@ def _calibrate_relative(
     write_result(result, out)
     title = f"imu-only (frame of {reference}): {len(result.units)} units in {result.runtime_s:.2f} s"
     console.print(_unit_table(result, title))
+    if "accel_scale_fit" in result.extras:  # the positions' scale: fitted from rests, or what is missing
+        console.print(f"note: {shown(result.extras['accel_scale_fit']['note'])}", highlight=False)
     for name, reason in result.extras.get("failed_units", {}).items():
         console.print(f"[yellow]warning[/]: unit {shown(name)} not calibrated: {shown(reason)}", highlight=False)
     if joint is not None:
