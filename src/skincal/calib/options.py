@@ -28,6 +28,10 @@ class NoOptions:
     """The options of a method that takes none."""
 
 
+INT_OPTION_MAX = 2**31 - 1
+"""Largest magnitude of an integer option (the optimisers take C ``int``)."""
+
+
 def _coerce(method: str, name: str, kind: type, value: object) -> bool | int | float:
     where = f"method '{method}': option {name}"
     if kind is bool:
@@ -46,6 +50,8 @@ def _coerce(method: str, name: str, kind: type, value: object) -> bool | int | f
         raise ConfigError(f"{where} expects an integer, got {value!r}")
     if not math.isfinite(number):
         raise ConfigError(f"{where} must be finite, got {value!r}")
+    if kind is int and abs(number) > INT_OPTION_MAX:  # the optimisers take C ints
+        raise ConfigError(f"{where} must be at most {INT_OPTION_MAX} in magnitude, got {value!r}")
     return number
 
 
