@@ -95,3 +95,15 @@ def test_huge_position_limits_mean_no_limit_to_the_protocol(limit):
     traj = build_trajectory(chain, get_protocol("fast"), np.random.default_rng(0))
     assert np.all(np.abs(traj.poses[:, 0]) <= np.pi)
     assert np.all(np.abs(traj.q) < 10) and traj.duration < 120
+
+
+@pytest.mark.adversarial
+def test_a_urdf_text_over_the_file_limit_is_refused_unparsed():
+    """The text of a bag's /robot_description (or a dataset's) had no size limit, unlike a file."""
+    from skincal.kinematics.urdf import MAX_URDF_BYTES
+
+    links = [f"l{i}" for i in range(MAX_URDF_BYTES // 16)]
+    text = urdf(links, [])
+    assert len(text) > MAX_URDF_BYTES
+    with pytest.raises(ConfigError, match="is too large for a URDF"):
+        chain_from_urdf(text=text)

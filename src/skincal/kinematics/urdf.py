@@ -143,6 +143,8 @@ def chain_from_urdf(
     source = str(path) if path is not None else "URDF"
     if text is None:
         text = read_urdf_text(path)  # type: ignore[arg-type]
+    elif len(text) > MAX_URDF_BYTES:  # a bag's /robot_description, a dataset's URDF: the file limit too
+        raise ConfigError(f"{source}: {len(text)} characters is too large for a URDF")
     urdf = _parse(text, source)
     robot = urdf.robot
     joints = {j.child: j for j in robot.joints}
