@@ -427,3 +427,37 @@ def test_cli_handheld_with_holds_prints_the_scale_fit_and_round_trips(tmp_path, 
         assert imu is not None and imu.accel_scale_misalignment is not None
         assert np.all(np.abs(np.diag(imu.accel_scale_misalignment) - 1) < 0.15)
     assert np.linalg.norm(result.units["su2"].pose.p_link_su) == pytest.approx(0.2, abs=1e-3)
+
+
+@pytest.mark.adversarial
+def test_a_body_that_never_moves_is_named_not_called_another_body():
+    from dataclasses import replace as dc_replace
+
+    rng = np.random.default_rng(0)
+    motion = HandMotion.random(rng)
+    motion = dc_replace(motion, amp_rot=0 * motion.amp_rot, amp_pos=0 * motion.amp_pos)
+    ds = simulate_rigid_bodies({"su1": ("hand", np.eye(4)), "su2": ("hand", T_J)}, {"hand": motion}, 10.0,
+                               get_imu_model("real"), rng)  # fmt: skip
+    result = calibrate_relative(ds, "su1")
+    assert "did not turn" in result.extras["failed_units"]["su2"]
+    fit = result.extras["accel_scale_fit"]
+    assert fit["rests"] == 1 and fit["orientations"] == 1 and "in 11 more" in fit["note"]
+
+
+@pytest.mark.adversarial
+def test_a_rest_counts_only_where_every_unit_on_the_body_is_still():
+    """A knock on su2 in the middle of a hold (its data only): that part is no rest of the body."""
+    from dataclasses import replace as dc_replace
+
+    from skincal.workflows.handheld import handheld_dataset
+
+    ds = handheld_dataset(units=2, duration_s=30.0, imu="real", clock="driver", seed=4)
+    clean = common_rests(ds.imu, "su1")
+    t0 = float(clean[5].mean())
+    su2 = ds.imu["su2"]
+    assert su2.gyro is not None
+    knock = np.exp(-(((su2.t - t0) / 0.05) ** 2))[:, None] * np.array([0.5, -0.3, 0.2])
+    knocked = dict(ds.imu, su2=dc_replace(su2, accel=su2.accel + 20 * knock, gyro=su2.gyro + 2 * knock))
+    rests = common_rests(knocked, "su1")
+    assert not np.any((rests[:, 0] < t0) & (rests[:, 1] > t0))
+    assert len(rests) >= len(clean) - 1 and len(clean) == 11

@@ -76,6 +76,8 @@ REST_SPREAD_FACTOR = 2.0
 """Still: the rates' and accelerations' std over the window below this multiple of their noise std."""
 REST_MEAN_FACTOR = 4.0
 """Still: the window's mean rate less the gyroscope bias below this many standard errors of the mean."""
+MIN_MOTION_FACTOR = 3.0
+"""The body turned: the reference's centred rate RMS exceeds this multiple of the gyroscope's noise."""
 NOISE_FLOOR = 1e-4
 """Smallest noise std assumed for the rest tests (rad/s, m/s^2): noise-free data still rest, and the
 windowed variances' round-off (sums of squares of ~10 m/s^2) stays far below the limits."""
@@ -456,6 +458,9 @@ def fit_relative(
     w_j, a_j = spline_w(t + delta), spline_a(t + delta)
     R, c, res_g = _gyro_fit(w_ref, w_j)
     centred = w_ref - w_ref.mean(axis=0)
+    noise = float(np.linalg.norm(np.maximum(white_noise_std(w_ref, 4), NOISE_FLOOR)))
+    if float(np.sqrt(np.mean(np.sum(centred**2, axis=1)))) < MIN_MOTION_FACTOR * noise:
+        return "the body did not turn (the reference's angular rates stay at the gyroscope's noise): move and turn it"
     ratio = float(np.sqrt(np.mean(res_g**2) / max(np.mean(centred**2), 1e-300)))
     if ratio > other_body_ratio:
         return (
