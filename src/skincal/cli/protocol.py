@@ -65,6 +65,8 @@ def protocol_cmd(
         raise ConfigError(f"--poses must be one of {', '.join(POSE_SELECTIONS)}, got {poses!r}")
     if not (math.isfinite(rate) and 0 < rate <= 10_000):
         raise ConfigError(f"--rate must be a positive sample rate up to 10000 Hz, got {rate}")
+    if out.suffix == "" and out.exists():  # (check_output would call it "a folder; give a file name")
+        raise ConfigError(f"{out} exists; a ROS 2 bag folder is never overwritten, even with --force (remove it)")
     check_output(out, force=force, inputs=() if robot in PRESETS else (Path(robot),))
     chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
     config = replace(fit_to_limits(chain, get_protocol(protocol)), collision_check=True, pose_selection=poses)
