@@ -247,7 +247,17 @@ def export_robot(
             raise ConfigError("--base-link and --tip-link apply to a URDF robot given with --robot")
         if result.robot not in PRESETS:
             return None
-        robot = result.robot
+        chain = get_robot(result.robot)
+        check_links(result, chain, "result")
+        for name, unit in result.units.items():  # a URDF robot may bear a preset's name (example-robot-data's UR5)
+            recorded, preset = unit.extras.get("link_name"), chain.link_name(unit.pose.link)
+            if isinstance(recorded, str) and recorded != preset:
+                raise ConfigError(
+                    f"result: unit '{_shown(name)}' is on link '{_shown(recorded)}', which preset '{chain.name}' "
+                    f"calls '{_shown(preset)}': the result is of another robot of that name (a URDF?); give it with "
+                    "--robot"
+                )
+        return chain
     chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
     check_links(result, chain, "result")
     return chain
