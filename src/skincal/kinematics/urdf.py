@@ -52,6 +52,8 @@ def _parse(text: str, source: str):  # -> yourdfpy.URDF
         raise ConfigError("reading a URDF needs yourdfpy (pip install yourdfpy)") from None
     from lxml import etree  # yourdfpy's own XML library
 
+    if len(text) > MAX_URDF_BYTES:  # a bag's /robot_description, a dataset's URDF: the file limit too
+        raise ConfigError(f"{source}: {len(text)} characters is too large for a URDF")
     data = text.encode("utf-8")
     try:  # strictly well-formed, no entities, no network (yourdfpy alone would "recover" broken XML)
         root = etree.fromstring(data, parser=etree.XMLParser(resolve_entities=False, no_network=True, recover=False))
@@ -143,8 +145,6 @@ def chain_from_urdf(
     source = str(path) if path is not None else "URDF"
     if text is None:
         text = read_urdf_text(path)  # type: ignore[arg-type]
-    elif len(text) > MAX_URDF_BYTES:  # a bag's /robot_description, a dataset's URDF: the file limit too
-        raise ConfigError(f"{source}: {len(text)} characters is too large for a URDF")
     urdf = _parse(text, source)
     robot = urdf.robot
     joints = {j.child: j for j in robot.joints}
