@@ -107,3 +107,17 @@ def test_a_urdf_text_over_the_file_limit_is_refused_unparsed():
     assert len(text) > MAX_URDF_BYTES
     with pytest.raises(ConfigError, match="is too large for a URDF"):
         chain_from_urdf(text=text)
+
+
+@pytest.mark.adversarial
+def test_a_long_run_of_fixed_joints_is_no_recursion_error():
+    """3000 fixed joints below the one moving joint: the tip search recursed once per link (RecursionError,
+    exit 3); given as the tip, the last link is the flange, 2999 mm up."""
+    n = 3000
+    fixed = '<joint name="f{i}" type="fixed"><parent link="l{i}"/><child link="l{j}"/><origin xyz="0 0 0.001"/></joint>'
+    text = urdf([f"l{i}" for i in range(n + 1)], [("j0", "l0", "l1")])
+    text = text.replace("</robot>", "".join(fixed.format(i=i, j=i + 1) for i in range(1, n)) + "</robot>")
+    assert chain_from_urdf(text=text).link_names == ("l0", "l1")
+    chain = chain_from_urdf(text=text, tip_link=f"l{n}")
+    assert chain.n_joints == 1 and chain.link_names == ("l0", "l1")
+    assert chain.T_link_flange[2, 3] == pytest.approx((n - 1) * 0.001)

@@ -175,8 +175,15 @@ def chain_from_urdf(
             raise ConfigError(f"{source}: the URDF has {len(roots)} root links ({', '.join(roots)}); give --base-link")
         base_link = roots[0]
 
+    order = [link for link in links if link not in joints]  # every link, parents first (the joints form a tree)
+    for link in order:
+        order.extend(children[link])
+    below: dict[str, bool] = {}  # whether a moving joint is below the link (bottom-up: no recursion, no rescans)
+    for link in reversed(order):
+        below[link] = any(joints[c].type != "fixed" or below[c] for c in children[link])
+
     def moving_below(link: str) -> bool:
-        return any(joints[c].type != "fixed" or moving_below(c) for c in children[link])
+        return below[link]
 
     branches: list[str] = []
     if tip_link is None:
