@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -533,6 +533,24 @@ def fit_relative(
 def _closest_rotation(R: FloatArray) -> FloatArray:
     U, _, Vt = np.linalg.svd(R)
     return U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+
+
+@dataclass(frozen=True)
+class RelativeOptions:
+    """Options of :func:`calibrate_relative` (``skincal calibrate --reference UNIT --option name=value``),
+    parsed by :func:`skincal.calib.options.parse_options` like every method's.
+
+    Attributes:
+        max_offset_s: largest time offset between two units' stamps searched, s.
+        other_body_ratio: angular-velocity misfit (relative) above which a unit is on another body.
+        reference_scale_std, reference_misalignment_std: the reference accelerometer's uncalibrated
+            per-axis scale and cross-axis error (used when the rests do not calibrate it).
+    """
+
+    max_offset_s: float = field(default=1.0, metadata={"min": 0.0})
+    other_body_ratio: float = field(default=OTHER_BODY_RATIO, metadata={"min": 0.0})
+    reference_scale_std: float = field(default=0.0, metadata={"min": 0.0, "max": 0.999})
+    reference_misalignment_std: float = field(default=0.0, metadata={"min": 0.0, "max": 0.999})
 
 
 def calibrate_relative(

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import typer
@@ -137,33 +136,22 @@ def calibrate(
     console.print(f"wrote {shown(out)}", highlight=False)
 
 
-RELATIVE_OPTIONS = ("max_offset_s", "other_body_ratio", "reference_scale_std", "reference_misalignment_std")
-"""``--option`` names accepted with ``--reference`` (floats)."""
-
-
 def _calibrate_relative(
     dataset: Path, out: Path, reference: str, unit: list[str] | None, compare_with: Path | None, force: bool,
     option: list[str],
 ) -> None:  # fmt: skip
     """``--reference``: the IMU-only unit-to-unit calibration (joints or not), and with ``--compare-with``
     the disagreement with a joint-based result per unit on the reference's link. ``--option`` takes the
-    float options of :func:`skincal.calib.imu_only.calibrate_relative` (:data:`RELATIVE_OPTIONS`)."""
-    from skincal.calib.imu_only import calibrate_relative, compare_with_joint_result
-    from skincal.calib.options import parse_option_strings
+    options of :class:`skincal.calib.imu_only.RelativeOptions`."""
+    import dataclasses
+
+    from skincal.calib.imu_only import RelativeOptions, calibrate_relative, compare_with_joint_result
+    from skincal.calib.options import parse_option_strings, parse_options
     from skincal.data.atomic import check_output
     from skincal.data.hdf5 import read_dataset
     from skincal.data.result import read_result, sha256_file, write_result
 
-    options: dict[str, float] = {}
-    for key, text in parse_option_strings(option).items():
-        if key not in RELATIVE_OPTIONS:
-            raise ConfigError(f"--option {key}: not an option of --reference (known: {', '.join(RELATIVE_OPTIONS)})")
-        try:
-            options[key] = float(text)
-        except ValueError:
-            raise ConfigError(f"--option {key}: expected a number, got {text!r}") from None
-        if not math.isfinite(options[key]) or options[key] < 0:
-            raise ConfigError(f"--option {key}: expected a non-negative number, got {text!r}")
+    options = dataclasses.asdict(parse_options(RelativeOptions, parse_option_strings(option), "imu-only"))
     inputs = (dataset,) if compare_with is None else (dataset, compare_with)
     check_output(out, force=force, inputs=inputs)
     joint = read_result(compare_with) if compare_with is not None else None
