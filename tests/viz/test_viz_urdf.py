@@ -4,6 +4,7 @@ outside its roots whatever the URDF names."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
 import sys
@@ -490,3 +491,27 @@ def test_viewer_screenshot_shows_the_meshes(viser_server, tmp_path: Path):
     assert all(drawn), f"no mesh drawn around {np.round(px[~np.array(drawn)])}"
     top = int(px[:, 1].min()) - 80
     assert top > 60 and img[20:top, 450:850].mean() > 0.97
+
+
+@pytest.mark.adversarial
+def test_cli_view_never_opens_a_file_named_only_inside_the_result(tmp_path: Path, capsys, monkeypatch):
+    """A result whose robot is 'ok.urdf' (or a URDF robot named like a preset) is not drawn on
+    whatever that name finds: the robot comes from --robot or a dataset; a preset name is used only
+    when the result's link names are the preset's."""
+    pytest.importorskip("viser")
+    chain = get_robot(str(registry_urdf("ur5")))  # example-robot-data's UR5 is <robot name="ur5">
+    res = tmp_path / "res.json"
+    result = _empty_result(chain)
+    write_result(dataclasses.replace(result, robot="ok.urdf"), res)
+    (tmp_path / "ok.urdf").write_text("<robot name='trap'/>")
+    monkeypatch.chdir(tmp_path)
+    assert main(["view", str(res), "--duration", "0"]) == 2
+    assert "is not a preset: give its description with --robot" in capsys.readouterr().err
+    assert main(["view", str(res), "--base-link", "base_link", "--duration", "0"]) == 2
+    assert "apply to a URDF robot given with --robot" in capsys.readouterr().err
+    pose = SkinUnitPose(2, np.eye(3), np.array([0.0, 0.05, 0.1]))
+    unit = UnitResult(pose, extras={"link_name": "upper_arm_link"})
+    urdf_ur5 = CalibrationResult("mle", "ur5", "", 0.0, {"su1": unit})
+    write_result(urdf_ur5, res)
+    assert main(["view", str(res), "--duration", "0"]) == 2  # not drawn on the DH preset's frames
+    assert "the result is of another robot of that name" in capsys.readouterr().err

@@ -242,9 +242,9 @@ def export_cmd(
     console.print(printable(f"wrote {out}: {len(frames)} unit(s) as {fmt} onto " + ", ".join(
         sorted({f.parent for f in frames}))), highlight=False, markup=False)
     if robot is not None:
-        from skincal.data.export import export_robot
+        from skincal.data.provenance import result_robot
 
-        chain = export_robot(res, robot, base_link=base_link, tip_link=tip_link)
+        chain = result_robot(res, robot, base_link=base_link, tip_link=tip_link)
         if chain is not None and chain.name != res.robot:
             shown = printable(f"the result is for robot '{res.robot}', exported onto '{chain.name}' ({robot})")
             console.print("[yellow]warning[/]: " + escape(shown), highlight=False)

@@ -24,7 +24,11 @@ def view(
     result: Path | None = typer.Argument(None, help="calibration result (.json); optional with --scenario"),
     truth: Path | None = typer.Option(None, help="simulated dataset with /truth: show the true poses too"),
     play: Path | None = typer.Option(None, help="dataset to play back (joint motion, ToF rays and points)"),
-    robot: str | None = typer.Option(None, help="robot preset or chain file when no dataset is given"),
+    robot: str | None = typer.Option(
+        None, help="robot preset, .urdf or chain file when no dataset is given (default: the result's preset)"
+    ),
+    base_link: str | None = typer.Option(None, help="URDF link the chain starts from (with --robot arm.urdf)"),
+    tip_link: str | None = typer.Option(None, help="URDF link the chain ends at (with --robot arm.urdf)"),
     port: int = typer.Option(0, min=0, max=65535, help="TCP port (0: any free port)"),
     host: str = typer.Option("127.0.0.1", help="interface to serve on; anything but loopback needs --public"),
     public: bool = typer.Option(False, "--public", help="allow a non-loopback --host (the viewer has no login)"),
@@ -85,16 +89,25 @@ def view(
         warnings += check_result_dataset(res, result, play_ds, play, allow_other=allow_other, same_file=False)[1]
     for warning in warnings:
         console_warning(warning)
+    if (base_link is not None or tip_link is not None) and robot is None:
+        raise ConfigError("--base-link and --tip-link apply to a URDF robot given with --robot")
     source = play_ds or truth_ds
     urdf_dir = None  # a dataset's URDF has no folder: its meshes are looked up in the package paths only
     if source is not None:
         chain = source.robot
     else:
-        from skincal.kinematics import get_robot
+        from skincal.data.provenance import result_robot
 
-        chain = get_robot(robot or res.robot)
-        if Path(robot or res.robot).suffix.lower() == ".urdf":
-            urdf_dir = Path(os.path.abspath(Path(robot or res.robot).parent))
+        # never a file the user did not name: the result's robot only when it is a preset (and its links)
+        found = result_robot(res, robot, base_link=base_link, tip_link=tip_link)
+        if found is None:
+            raise ConfigError(
+                f"{printable(str(result))}: robot '{printable(res.robot)}' is not a preset: give its description "
+                "with --robot arm.urdf, or the dataset with --play or --truth"
+            )
+        chain = found
+        if robot is not None and Path(robot).suffix.lower() == ".urdf":
+            urdf_dir = Path(os.path.abspath(Path(robot).parent))
     meshes = dataclasses.replace(meshes, urdf_dir=urdf_dir)
     recording = Recording.from_dataset(play_ds) if play_ds is not None else None
     viewer = start_viewer(

@@ -63,7 +63,8 @@ from scipy.spatial.transform import Rotation
 from skincal.data.atomic import write_bytes_atomic
 from skincal.data.jsonio import load_yaml
 from skincal.data.names import name_problem, printable
-from skincal.data.result import CalibrationResult, UnitResult, check_links
+from skincal.data.provenance import result_robot
+from skincal.data.result import CalibrationResult, UnitResult
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.chain import PRISMATIC, SerialChain
 from skincal.kinematics.transforms import FloatArray
@@ -233,36 +234,6 @@ def load_link_map(path: str | Path) -> dict[int, LinkFrame]:
     return out
 
 
-def export_robot(
-    result: CalibrationResult, robot: str | None = None, *, base_link: str | None = None, tip_link: str | None = None
-) -> SerialChain | None:
-    """The robot of an export: ``robot`` (a preset, a ``.urdf`` with ``base_link``/``tip_link``,
-    or a DH chain file), else the result's robot when it is a preset, else None. Refuses (one-line
-    :class:`DatasetError`) a result with units on links the robot does not have."""
-    from skincal.kinematics import get_robot
-    from skincal.kinematics.presets import PRESETS
-
-    if robot is None:
-        if base_link is not None or tip_link is not None:
-            raise ConfigError("--base-link and --tip-link apply to a URDF robot given with --robot")
-        if result.robot not in PRESETS:
-            return None
-        chain = get_robot(result.robot)
-        check_links(result, chain, "result")
-        for name, unit in result.units.items():  # a URDF robot may bear a preset's name (example-robot-data's UR5)
-            recorded, preset = unit.extras.get("link_name"), chain.link_name(unit.pose.link)
-            if isinstance(recorded, str) and recorded != preset:
-                raise ConfigError(
-                    f"result: unit '{_shown(name)}' is on link '{_shown(recorded)}', which preset '{chain.name}' "
-                    f"calls '{_shown(preset)}': the result is of another robot of that name (a URDF?); give it with "
-                    "--robot"
-                )
-        return chain
-    chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
-    check_links(result, chain, "result")
-    return chain
-
-
 def link_frames_for(chain: SerialChain | None, link_map: str | Path | None = None) -> dict[int, LinkFrame] | None:
     """The link frames: from ``link_map`` when given, else named after ``chain``
     (:func:`robot_names`, identity offsets); ``None`` when neither is given."""
@@ -331,7 +302,7 @@ def unit_frames(
     """
     if frame not in FRAMES:
         raise ConfigError(f"unknown frame '{_shown(str(frame))}' (use {' or '.join(FRAMES)})")
-    links = links if links is not None else link_frames_for(export_robot(result))
+    links = links if links is not None else link_frames_for(result_robot(result))
     if links is None:
         raise ConfigError(
             f"robot '{_shown(str(result.robot))}' is not a preset; give the robot (--robot arm.urdf or "
@@ -888,7 +859,7 @@ def export_text(
             "a complete URDF names its own links: --robot-links does not apply to -f urdf (use -f xacro "
             "to add the units to your own robot description)"
         )
-    chain = export_robot(result, robot, base_link=base_link, tip_link=tip_link)
+    chain = result_robot(result, robot, base_link=base_link, tip_link=tip_link)
     links = link_frames_for(chain, link_map)
     frames = unit_frames(result, links, frame=frame, prefix=prefix) if links is not None else None
     if frames is None:

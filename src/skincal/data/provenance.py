@@ -11,8 +11,9 @@ from pathlib import Path
 
 from skincal.data.dataset import Dataset
 from skincal.data.names import printable
-from skincal.data.result import CalibrationResult, sha256_file
-from skincal.errors import DatasetError
+from skincal.data.result import CalibrationResult, check_links, sha256_file
+from skincal.errors import ConfigError, DatasetError
+from skincal.kinematics.chain import SerialChain
 
 
 def check_result_dataset(
@@ -60,3 +61,33 @@ def check_result_dataset(
             f"(SHA-256 {result.dataset_sha256[:12]}... recorded, {digest[:12]}... found)"
         )
     return digest, warnings
+
+
+def result_robot(
+    result: CalibrationResult, robot: str | None = None, *, base_link: str | None = None, tip_link: str | None = None
+) -> SerialChain | None:
+    """The robot a result is drawn or exported on: ``robot`` (a preset, a ``.urdf`` with ``base_link``/``tip_link``,
+    or a DH chain file), else the result's robot when it is a preset, else None. Refuses (one-line
+    :class:`DatasetError`) a result with units on links the robot does not have."""
+    from skincal.kinematics import get_robot
+    from skincal.kinematics.presets import PRESETS
+
+    if robot is None:
+        if base_link is not None or tip_link is not None:
+            raise ConfigError("--base-link and --tip-link apply to a URDF robot given with --robot")
+        if result.robot not in PRESETS:
+            return None
+        chain = get_robot(result.robot)
+        check_links(result, chain, "result")
+        for name, unit in result.units.items():  # a URDF robot may bear a preset's name (example-robot-data's UR5)
+            recorded, preset = unit.extras.get("link_name"), chain.link_name(unit.pose.link)
+            if isinstance(recorded, str) and recorded != preset:
+                raise ConfigError(
+                    f"result: unit '{printable(name)}' is on link '{printable(recorded)}', which preset '{chain.name}' "
+                    f"calls '{printable(preset)}': the result is of another robot of that name (a URDF?); give it with "
+                    "--robot"
+                )
+        return chain
+    chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
+    check_links(result, chain, "result")
+    return chain
