@@ -21,9 +21,9 @@ from hypothesis import strategies as st
 
 from skincal.cli import main
 from skincal.data.export import export_result, load_link_map
-from skincal.data.names import name_problem
 from skincal.data.result import CalibrationResult, UnitResult, result_to_dict
 from skincal.errors import ConfigError, DatasetError
+from skincal.names import name_problem
 from skincal.skin.pose import SkinUnitPose
 
 pytestmark = pytest.mark.adversarial
@@ -37,7 +37,7 @@ METHODS = [
     '=HYPERLINK("http://x") \\ \\" \\n',
     "m\u00e9thode \u65b9\u6cd5 \U0001f916 \u202e reversed \ud800 -",
 ]
-# names that pass skincal.data.names.name_problem but carry XML, Python and CSV syntax
+# names that pass skincal.names.name_problem but carry XML, Python and CSV syntax
 UNIT_NAMES = [
     'su"""' + CODE.replace("/", "") + '"""',
     "su'''x'''",

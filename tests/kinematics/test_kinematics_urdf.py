@@ -247,3 +247,19 @@ def test_same_motion_and_description_do_not_depend_on_the_chains_origin():
     assert (urdf.described_by, panda().described_by, get_robot("ur5").described_by) == (
         "URDF", "modified DH", "standard DH",
     )  # fmt: skip
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize("bad", ["a/b", "bidi\u202ename", " padded", "x" * 129])
+def test_urdf_names_that_no_dataset_can_carry_are_refused_on_read(bad):
+    """Joint and link names of the chain (and the robot's) go into datasets, results and exports:
+    the one name rule is applied when the URDF is read, naming the URDF, not later naming an output."""
+    from xml.sax.saxutils import quoteattr
+
+    for body in (
+        f"<link name='a'/><link name={quoteattr(bad)}/>" + _joint("j1", "a", bad),
+        "<link name='a'/><link name='b'/>" + _joint(bad, "a", "b"),
+    ):
+        with pytest.raises(ConfigError, match=r"URDF: (joint|link) name .* ") as info:
+            chain_from_urdf(text=URDF_HEAD + body + "</robot>")
+        assert "\n" not in str(info.value)

@@ -17,9 +17,9 @@ from hypothesis import strategies as st
 from skincal.cli import main
 from skincal.data.hdf5 import write_dataset
 from skincal.data.imu_calibration import ImuCalibration
-from skincal.data.names import name_problem
 from skincal.data.result import CalibrationResult, UnitResult, write_result
 from skincal.kinematics import get_robot
+from skincal.names import name_problem
 from skincal.protocol import build_trajectory, get_protocol
 from skincal.sim.analytic import simulate
 from skincal.skin.imu import ImuModel

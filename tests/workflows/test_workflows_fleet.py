@@ -66,6 +66,8 @@ def test_two_datasets_with_one_name_or_a_file_as_folder_are_refused(fleet, tmp_p
     twin.write_bytes(paths[0].read_bytes())
     assert main(["calibrate", str(paths[0]), str(twin), "-o", str(tmp_path)]) == 2
     assert "would both write" in capsys.readouterr().err
+    assert main(["calibrate", str(paths[0]), str(paths[0]), "-o", str(tmp_path)]) == 2
+    assert "is given twice" in capsys.readouterr().err
     assert main(["calibrate", *map(str, paths), "-o", str(tmp_path / "r.json")]) == 2
     assert "--out is a folder that exists" in capsys.readouterr().err
 

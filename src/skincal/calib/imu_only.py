@@ -57,10 +57,10 @@ from skincal.calib.preprocess import white_noise_std
 from skincal.calib.rest import _windowed_mean, runs
 from skincal.data.dataset import Dataset, ImuStream
 from skincal.data.imu_calibration import ImuCalibration
-from skincal.data.names import name_problem, printable
 from skincal.data.result import REFERENCE, REFERENCE_LINK, CalibrationResult, UnitResult
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.transforms import FloatArray
+from skincal.names import name_problem, printable
 from skincal.skin.pose import SkinUnitPose
 
 METHOD = "imu-only"

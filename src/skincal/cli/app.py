@@ -22,7 +22,7 @@ err_console = Console(stderr=True)
 def console_error(message: str) -> None:
     """Print a one-line error to stderr: no markup interpretation of user text, and control
     characters (ESC sequences, newlines) shown escaped so the message stays one line."""
-    from skincal.data.names import printable
+    from skincal.names import printable
 
     err_console.print(f"error: {printable(message)}", markup=False, highlight=False, soft_wrap=True)
 
@@ -30,17 +30,17 @@ def console_error(message: str) -> None:
 def console_warning(message: str) -> None:
     """Print a one-line warning to stderr (kept off stdout, where ``--json`` output goes), escaped as
     :func:`console_error` escapes."""
-    from skincal.data.names import printable
+    from skincal.names import printable
 
     err_console.print(f"warning: {printable(message)}", markup=False, highlight=False, soft_wrap=True)
 
 
 def shown(text: object) -> str:
     """``text`` (a name, a note, a file name: anything that came from a file or a user) for a rich
-    table cell or a markup string: control characters escaped (:func:`skincal.data.names.printable`)
+    table cell or a markup string: control characters escaped (:func:`skincal.names.printable`)
     and rich markup neutralised, so it shows as stored and cannot restyle or rewrite the terminal."""
     from rich.markup import escape
 
-    from skincal.data.names import printable
+    from skincal.names import printable
 
     return escape(printable(str(text)))

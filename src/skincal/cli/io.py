@@ -71,7 +71,7 @@ def _segments_from_protocol(ds, protocol: Path):
     """``ds`` with the segments of the protocol file, aligned by cross-correlation of joint positions."""
     from dataclasses import replace
 
-    from skincal.data.names import printable
+    from skincal.names import printable
     from skincal.protocol import read_trajectory_json
     from skincal.protocol.align import align_to_protocol
 
@@ -116,11 +116,11 @@ def import_bag(
 
     from skincal.data.atomic import check_output
     from skincal.data.hdf5 import write_dataset
-    from skincal.data.names import printable
     from skincal.data.ros import topic_map
     from skincal.data.segment import segment_dataset
     from skincal.errors import ConfigError
     from skincal.kinematics import PRESETS
+    from skincal.names import printable
 
     robot_file = (Path(robot),) if robot is not None and robot not in PRESETS else ()
     check_output(out, force=force, inputs=(bag, *robot_file, *((protocol,) if protocol else ())))
@@ -229,9 +229,9 @@ def export_cmd(
 
     from skincal.data.atomic import check_output
     from skincal.data.export import export_result
-    from skincal.data.names import printable
     from skincal.data.result import failed_units, read_result
     from skincal.kinematics import PRESETS
+    from skincal.names import printable
 
     robot_file = (Path(robot),) if robot is not None and robot not in PRESETS else ()
     check_output(out, force=force, inputs=(result, *robot_file, *((robot_links,) if robot_links else ())))

@@ -48,9 +48,9 @@ def protocol_cmd(
     import numpy as np
 
     from skincal.data.atomic import check_output
-    from skincal.data.names import printable
     from skincal.errors import ConfigError
     from skincal.kinematics import PRESETS, get_robot
+    from skincal.names import printable
     from skincal.protocol import build_trajectory, get_protocol
     from skincal.protocol.config import POSE_SELECTIONS
     from skincal.protocol.export import TRAJECTORY_SUFFIXES, export_trajectory

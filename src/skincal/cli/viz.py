@@ -58,10 +58,10 @@ def view(
     import time
 
     from skincal.data.hdf5 import read_dataset
-    from skincal.data.names import printable
     from skincal.data.provenance import check_result_dataset
     from skincal.data.result import read_result
     from skincal.hw.net import check_bind
+    from skincal.names import printable
     from skincal.viz.meshes import MeshResolver
     from skincal.viz.model import Recording
     from skincal.viz.viewer import serve_forever, start_viewer
@@ -199,7 +199,7 @@ def report(
         check_output(out, force=force, inputs=(result, dataset))
     from rich.markup import escape
 
-    from skincal.data.names import printable
+    from skincal.names import printable
 
     with err_console.status("reading the result and the dataset") as status:  # transient, on stderr
         progress = lambda message: status.update(escape(printable(f"report: {message}")))  # noqa: E731

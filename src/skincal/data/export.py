@@ -27,7 +27,7 @@ qz``. Files are written atomically.
 
 Escaping by construction (no user text is ever pasted into a template):
 
-* names: every unit name and the robot name must pass :func:`skincal.data.names.name_problem`, and
+* names: every unit name and the robot name must pass :func:`skincal.names.name_problem`, and
   the parent and child frame names (link map, ``prefix``) the same rule for each ``/``-separated
   part; anything else is refused with a one-line error naming it, before a byte is written;
 * URDF and xacro: built with :mod:`xml.etree.ElementTree` (the user's URDF parsed with ``lxml``
@@ -62,12 +62,12 @@ from scipy.spatial.transform import Rotation
 
 from skincal.data.atomic import write_bytes_atomic
 from skincal.data.jsonio import load_yaml
-from skincal.data.names import name_problem, printable
 from skincal.data.provenance import result_robot
 from skincal.data.result import CalibrationResult, UnitResult
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.chain import PRISMATIC, SerialChain
 from skincal.kinematics.transforms import FloatArray
+from skincal.names import name_problem, printable
 
 FORMATS = ("urdf", "xacro", "yaml", "json", "tf", "tf-ros2", "tf-ros1", "csv")
 """Export formats; ``tf`` is ``tf-ros2``."""
@@ -367,7 +367,7 @@ def _frame_problem(frame: object) -> str | None:
 def check_names(result: CalibrationResult, frames: list[UnitFrame]) -> None:
     """Refuse, with a one-line :class:`DatasetError` (names from the result) or :class:`ConfigError`
     (frame names from the link map or the prefix), any name an export would carry that
-    :func:`skincal.data.names.name_problem` refuses. Every writer calls it before writing a byte."""
+    :func:`skincal.names.name_problem` refuses. Every writer calls it before writing a byte."""
     problem = name_problem(result.robot)
     if problem is not None:
         raise DatasetError(f"robot name '{_shown(str(result.robot))}' {problem}; the result cannot be exported")

@@ -48,11 +48,11 @@ import numpy as np
 from skincal.data.atomic import atomic_path
 from skincal.data.dataset import BodyPose, Dataset, ImuStream, JointStates, Segments, TofStream
 from skincal.data.jsonio import regular_file
-from skincal.data.names import printable
 from skincal.data.validate import TRUTH_BODY_ATTRS, check_unit_name, shown, validate_dataset
 from skincal.errors import ConfigError, DatasetError
 from skincal.errors import first_line as _first_line
 from skincal.kinematics.chain import CONVENTIONS, GRAVITY_BASE, SerialChain
+from skincal.names import printable
 from skincal.skin.pose import SkinUnitPose
 
 FORMAT = "skincal-dataset"

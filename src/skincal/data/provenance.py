@@ -10,10 +10,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from skincal.data.dataset import Dataset
-from skincal.data.names import printable
 from skincal.data.result import CalibrationResult, check_links, sha256_file
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.chain import SerialChain
+from skincal.names import printable
 
 
 def check_result_dataset(

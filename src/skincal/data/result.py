@@ -50,9 +50,9 @@ import numpy as np
 from skincal.data.atomic import write_bytes_atomic
 from skincal.data.imu_calibration import IMU_KEYS, IMU_SHAPES, INTEGER_KEYS, ImuCalibration, imu_to_fields
 from skincal.data.jsonio import load_json, regular_file
-from skincal.data.names import MAX_NAME_CHARS, name_problem
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.transforms import FloatArray
+from skincal.names import MAX_NAME_CHARS, name_problem
 from skincal.skin.pose import SkinUnitPose
 
 FORMAT = "skincal-result"
@@ -488,7 +488,7 @@ def read_result(path: str | Path) -> CalibrationResult:
         DatasetError: missing file, not a regular file, too large, not JSON (or JSON that
             :func:`skincal.data.jsonio.load_json` refuses: duplicate keys, nesting deeper than 64,
             NaN/Infinity, overflowing numbers), wrong format or version, a malformed field, a bad
-            unit or robot name (:func:`skincal.data.names.name_problem`), no units, a position
+            unit or robot name (:func:`skincal.names.name_problem`), no units, a position
             beyond :data:`MAX_POSITION_M`, or a link beyond a preset robot's links; one line naming
             the file and the field (``units.su1.position_m``).
     """

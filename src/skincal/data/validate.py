@@ -12,10 +12,10 @@ from collections.abc import Mapping
 import numpy as np
 
 from skincal.data.dataset import DYNAMIC, STATIC, BodyPose, Dataset, Segments
-from skincal.data.names import name_problem, printable
 from skincal.data.result import MAX_POSITION_M
 from skincal.errors import DatasetError
 from skincal.kinematics.chain import CONVENTIONS, SerialChain
+from skincal.names import name_problem, printable
 from skincal.skin.pose import SkinUnitPose
 
 TRUTH_SENSOR_SHAPES: dict[str, tuple[int, ...]] = {
@@ -96,7 +96,7 @@ def shown(value: object) -> str:
 
 
 def check_unit_name(name: object, source: str, group: str) -> None:
-    """Refuse a unit name that :func:`skincal.data.names.name_problem` refuses (the one rule for names)."""
+    """Refuse a unit name that :func:`skincal.names.name_problem` refuses (the one rule for names)."""
     problem = name_problem(name)
     if problem is not None:
         raise _fail(source, group, f"has an invalid unit name {shown(name)}: it {problem}")

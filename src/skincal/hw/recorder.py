@@ -48,12 +48,12 @@ import numpy as np
 
 from skincal.data.atomic import atomic_path
 from skincal.data.hdf5 import FORMAT, VERSION, write_robot
-from skincal.data.names import name_problem, printable
 from skincal.errors import ConfigError, DatasetError
 from skincal.hw.clock import ClockFit
 from skincal.hw.packet import JointPacket, SkinPacket
 from skincal.hw.receiver import Delivery, ReceiverStats, StreamKey
 from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
+from skincal.names import name_problem, printable
 
 MAX_UNIT_SAMPLES = 1 << 22
 """Default cap on the samples one group (``imu/<unit>``, ``tof/<unit>``, ``joints``) keeps."""
@@ -63,7 +63,7 @@ IGNORE_REASONS = ("no_place", "other_robot", "no_gyro", "not_increasing", "over_
 """Why samples were not recorded: gyro-only samples (no place in the layout); a second robot or joint
 count; IMU samples without gyro in a group with gyro; device time not after the previous sample's;
 beyond ``max_unit_samples``; a group already fed by another stream (two unit ids mapped to one name);
-a unit name refused by :func:`skincal.data.names.name_problem`; ToF samples of a unit that never sent IMU."""
+a unit name refused by :func:`skincal.names.name_problem`; ToF samples of a unit that never sent IMU."""
 
 _MIN_STEP_S = 1e-9  # least increase of t between consecutive samples of a group
 _TOF_WAIT_SAMPLES = 4096  # ToF samples kept per unit while its IMU group does not exist yet
@@ -135,7 +135,7 @@ class Recorder:
         path: output file; refused if it exists unless ``overwrite``.
         robot: written to ``/robot`` (name, convention, DH table, limits) when given.
         unit_names: unit id -> name (default :func:`default_unit_name`); each name must pass
-            :func:`skincal.data.names.name_problem`.
+            :func:`skincal.names.name_problem`.
         flush_every_samples, flush_every_s: flush thresholds (samples buffered, seconds since last).
         chunk_rows: HDF5 chunk length in samples.
         t_origin_s: host time of ``t = 0`` (default: now on ``host_clock``).

@@ -39,6 +39,7 @@ import numpy as np
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import PRISMATIC, REVOLUTE, SerialChain
 from skincal.kinematics.inertia import LinkInertial, combine
+from skincal.names import name_problem, printable
 
 _MOVING = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
 MAX_URDF_BYTES = 32 * 1024 * 1024
@@ -235,6 +236,13 @@ def chain_from_urdf(
         effort.append(None if limit is None or not limit.effort else float(limit.effort))
         joint_names.append(j.name)
         link_names.append(j.child)
+    # the names the chain carries into datasets, results and exports follow the one rule for names
+    checked = [("robot", name or robot.name or Path(source).stem), ("link", base_link)]
+    checked += [("joint", n) for n in joint_names] + [("link", n) for n in link_names]
+    for what, label in checked:
+        problem = name_problem(label)
+        if problem is not None:
+            raise ConfigError(f"{source}: {what} name '{printable(str(label))}' {problem}")
     if not origins and len(branches) > 1:
         raise ConfigError(
             f"{source}: not a serial chain: it branches at '{tip_link}' into "

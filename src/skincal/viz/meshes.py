@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from skincal.data.names import name_problem, printable
 from skincal.errors import ConfigError
+from skincal.names import name_problem, printable
 
 MAX_MESH_BYTES = 50 * 1024 * 1024
 """Largest mesh file read, bytes."""

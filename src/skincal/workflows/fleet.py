@@ -70,6 +70,8 @@ def fleet_jobs(datasets: Sequence[Path], out_dir: Path, **settings: Any) -> list
     stems: dict[str, Path] = {}
     for path in datasets:
         other = stems.setdefault(path.stem, path)
+        if other == path and datasets.count(path) > 1:
+            raise ConfigError(f"{path} is given twice")
         if other != path:
             raise ConfigError(f"{other} and {path} would both write {out_dir / (path.stem + '.json')}")
     return [FleetJob(Path(p), out_dir / f"{Path(p).stem}.json", **settings) for p in datasets]

@@ -10,8 +10,8 @@ from collections.abc import Callable
 def run_script(main: Callable[[], object]) -> int:
     """Call ``main()``; a :class:`~skincal.errors.SkincalError` becomes ``error: <message>`` and exit code 2,
     Ctrl-C exit code 130."""
-    from skincal.data.names import printable
     from skincal.errors import SkincalError
+    from skincal.names import printable
 
     try:
         main()

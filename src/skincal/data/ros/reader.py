@@ -9,7 +9,7 @@ Reads ROS 1 (``.bag``) and ROS 2 bags (a directory with ``metadata.yaml``, or a 
 * ``sensor_msgs/Imu``: ``linear_acceleration`` -> ``/imu/<unit>/accel`` and ``angular_velocity``
   -> ``gyro``. One unit per topic and ``header.frame_id``: a topic whose messages carry several
   frame_ids (IMUs sharing a topic) gives one unit per frame_id, named by it. Unit name: the map,
-  else ``header.frame_id``, else the topic; names follow :func:`skincal.data.names.name_problem`.
+  else ``header.frame_id``, else the topic; names follow :func:`skincal.names.name_problem`.
   Samples of several sources interleaved under one frame_id are refused, never merged: stamps that
   go back (more than :data:`INTERLEAVED_FRACTION` of the steps in bag order; repeated stamps alone
   are a coarse clock, dropped later with a note), or samples
@@ -47,7 +47,6 @@ from typing import Any
 import numpy as np
 
 from skincal.data.dataset import Dataset, ImuStream, JointStates, TofStream
-from skincal.data.names import printable
 from skincal.data.ros.topics import (
     IMU,
     JOINTS,
@@ -64,6 +63,7 @@ from skincal.data.validate import validate_dataset
 from skincal.errors import ConfigError, DatasetError
 from skincal.errors import first_line as _first_line
 from skincal.kinematics.chain import SerialChain
+from skincal.names import printable
 from skincal.skin.imu import STANDARD_GRAVITY
 
 PROGRESS_EVERY = 5000

@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from skincal.data.jsonio import load_yaml
-from skincal.data.names import name_problem, printable
 from skincal.errors import ConfigError, DatasetError
+from skincal.names import name_problem, printable
 
 IMU, JOINTS, RANGE, SCAN = (f"sensor_msgs/msg/{x}" for x in ("Imu", "JointState", "Range", "LaserScan"))
 STRING = "std_msgs/msg/String"
@@ -48,7 +48,7 @@ def topic_map(
     """A :class:`TopicMap` from a YAML file (``imu``, ``joints``, ``range``, ``joint_names`` keys;
     ``imu``/``range`` a topic -> unit mapping or a list of topics) overridden by options
     (``TOPIC`` or ``TOPIC=UNIT`` strings). Unit names given here follow
-    :func:`skincal.data.names.name_problem`."""
+    :func:`skincal.names.name_problem`."""
     doc: dict[str, Any] = {}
     if path is not None:
         doc = load_yaml(path, "topic map", ConfigError) or {}
@@ -88,7 +88,7 @@ def unit_from_topic(topic: str) -> str:
 
 
 def unit_name(name: str, source: str, topic: str, what: str) -> str:
-    """``name`` if :func:`skincal.data.names.name_problem` accepts it, else a one-line
+    """``name`` if :func:`skincal.names.name_problem` accepts it, else a one-line
     :class:`DatasetError` naming the bag, the topic and where the name came from."""
     problem = name_problem(name)
     if problem is not None:
