@@ -98,7 +98,6 @@ def calibrate(
     from rich.progress import Progress
 
     from skincal.calib import calibrate as run
-    from skincal.calib.options import parse_option_strings
     from skincal.data.atomic import check_output
     from skincal.data.hdf5 import read_dataset
     from skincal.data.result import sha256_file, write_result
@@ -110,7 +109,7 @@ def calibrate(
             raise ConfigError("--reference calibrates one dataset; give one dataset with it")
         _calibrate_relative(datasets[0], out, reference, unit, compare_with, force, option or [])
         return
-    options = parse_option_strings(option or [])
+    options = _method_options(method, option or [])  # refused before any dataset is read
     if len(datasets) > 1 or dask is not None:
         _calibrate_fleet(datasets, out, method, seed, links, use_truth_links, use_dataset_qdd, unit, workers, dask,
                          options, force)  # fmt: skip
@@ -120,7 +119,7 @@ def calibrate(
     ds = read_dataset(dataset)
     link_map = read_links_file(links) if links is not None else None
     names = unit or ds.units
-    with Progress(console=console, transient=True) as progress:
+    with Progress(console=console, transient=True, disable=not console.is_terminal) as progress:
         task = progress.add_task(f"calibrating ({method})", total=len(names))
         result = run(
             ds, method, seed=seed, links=link_map, use_truth_links=use_truth_links,
@@ -179,6 +178,19 @@ def _calibrate_relative(
     console.print(f"wrote {shown(out)}", highlight=False)
 
 
+def _method_options(method: str, option: list[str]) -> dict[str, str]:
+    """``--option name=value`` strings of ``method``, checked (known method, known options, typed
+    values) so that a mistake is refused before any dataset is read; returned as given."""
+    from skincal.calib import METHODS
+    from skincal.calib.options import parse_option_strings, parse_options
+
+    if method not in METHODS:
+        raise ConfigError(f"unknown method '{method}' (available: {', '.join(sorted(METHODS))})")
+    options = parse_option_strings(option)
+    parse_options(METHODS[method].options, options, method)
+    return options
+
+
 def _calibrate_fleet(
     datasets: list[Path], out: Path, method: str, seed: int, links: Path | None, use_truth_links: bool,
     use_dataset_qdd: bool, unit: list[str] | None, workers: int, dask: str | None, options: dict[str, str],
@@ -189,23 +201,18 @@ def _calibrate_fleet(
     from rich.progress import Progress
     from rich.table import Table
 
-    from skincal.calib import METHODS
-    from skincal.calib.options import parse_options
     from skincal.data.atomic import check_output
     from skincal.workflows.fleet import calibrate_fleet, fleet_jobs
 
     if unit:
         raise ConfigError("--unit selects units of one dataset; give one dataset with it")
-    if method not in METHODS:
-        raise ConfigError(f"unknown method '{method}' (available: {', '.join(sorted(METHODS))})")
-    parse_options(METHODS[method].options, options, method)  # refused before any dataset is read
     jobs = fleet_jobs(
         datasets, out, method=method, seed=seed, links=read_links_file(links) if links is not None else None,
         use_truth_links=use_truth_links, use_dataset_qdd=use_dataset_qdd, options=options,
     )  # fmt: skip
     for job in jobs:
         check_output(job.out, force=force, inputs=tuple(datasets))
-    with Progress(console=console, transient=True) as progress:
+    with Progress(console=console, transient=True, disable=not console.is_terminal) as progress:
         task = progress.add_task(f"calibrating {len(jobs)} datasets ({method})", total=len(jobs))
         records = calibrate_fleet(jobs, workers=workers, dask=dask, progress=lambda _r: progress.advance(task))
     table = Table(title=f"{method}: {len(jobs)} datasets")
