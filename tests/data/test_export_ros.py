@@ -119,6 +119,8 @@ def test_complete_urdf_of_every_preset_gives_skincals_unit_frames(tmp_path, pres
         np.testing.assert_allclose(model.get_transform("panda_link8", "panda_link7")[:3, 3], [0, 0, 0.107], atol=1e-15)
     elif preset == "xarm7":
         assert {"link_base", *(f"link{i}" for i in range(1, 8))} <= links
+    elif chain.source is not None:  # a preset from its maker's description (gen3): the maker's names
+        assert set(chain.link_names) <= links
     else:  # DH frames that are not the maker's URDF frames are not called by the maker's names
         assert {f"{preset}_dh_link{i}" for i in range(chain.n_joints + 1)} <= links
 

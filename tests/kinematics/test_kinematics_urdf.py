@@ -263,3 +263,28 @@ def test_urdf_names_that_no_dataset_can_carry_are_refused_on_read(bad):
         with pytest.raises(ConfigError, match=r"URDF: (joint|link) name .* ") as info:
             chain_from_urdf(text=URDF_HEAD + body + "</robot>")
         assert "\n" not in str(info.value)
+
+
+def test_gen3_preset_agrees_with_kinovas_classical_dh_table():
+    """Kinova Gen3: the preset (Kinova's URDF joint origins) against the classical DH table of Kinova's
+    user guide (base frame Rx(pi), alpha = pi/2 (x6), pi; theta offsets 0, pi, ...; d sums of the
+    actuator lengths): the same joint axis lines with the same directions at random configurations, to
+    the table's rounding (it gives lengths to 0.1 mm)."""
+    from skincal.kinematics import SerialChain, get_robot
+    from skincal.kinematics.transforms import rot_x
+
+    pi = np.pi
+    d = [-(0.1564 + 0.1284), -(0.0054 + 0.0064), -(0.2104 + 0.2104), -(0.0064 + 0.0064), -(0.2084 + 0.1059), 0.0,
+         -(0.1059 + 0.0615)]  # fmt: skip
+    table = np.column_stack([[0.0] + [pi] * 6, d, np.zeros(7), [pi / 2] * 6 + [pi]])
+    guide = SerialChain.from_dh("gen3-guide", "standard", table)
+    preset = get_robot("gen3")
+    q = np.random.default_rng(5).uniform(-2.0, 2.0, (20, 7))
+    T_base_0 = np.eye(4)
+    T_base_0[:3, :3] = rot_x(pi)
+    (cu, zu), (cd, zd) = preset.joint_axes(preset.link_frames(q)), guide.joint_axes(T_base_0 @ guide.link_frames(q))
+    np.testing.assert_allclose(zu, zd, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(np.cross(cu - cd, zd), axis=-1), 0.0, atol=1e-3)
+    flange = (preset.link_frames(q)[:, -1] @ preset.T_link_flange)[:, :3, 3]
+    np.testing.assert_allclose(flange, (T_base_0 @ guide.link_frames(q))[:, -1, :3, 3], atol=1e-3)
+    assert preset.joint_names == tuple(f"joint_{i}" for i in range(1, 8)) and np.isinf(preset.joint_upper[0])

@@ -9,7 +9,7 @@ import typer
 
 from skincal.cli.app import app, console, err_console
 
-ROBOT_HELP = "robot preset (panda, iiwa14, sawyer, ur5, ur5e, ur10e, xarm7), a .urdf file, or a DH chain .yaml/.json"
+ROBOT_HELP = "robot preset (panda, iiwa14, gen3, sawyer, ur5, ur5e, ur10e, xarm7), a .urdf file, or a DH chain file"
 
 
 @app.command()

@@ -8,6 +8,8 @@ Presets:
 * ``ur5``, ``ur10e``: Universal Robots UR5 (CB3) and UR10e, standard DH (UR's published tables).
 * ``xarm7``: UFactory xArm7, modified DH and limits of UFactory's URDF.
 * ``iiwa14``: KUKA LBR iiwa 14 R820, standard DH, KUKA's axis ranges and speeds.
+* ``gen3``: Kinova Gen3 7-DoF from Kinova's URDF joint origins (its link frames and names are
+  Kinova's; continuous joints 1, 3, 5, 7).
 
 ``--robot`` also takes a URDF (``.urdf``, :mod:`skincal.kinematics.urdf`) or a DH chain file.
 
@@ -165,7 +167,54 @@ def iiwa14() -> SerialChain:
     )
 
 
-PRESETS = {"panda": panda, "iiwa14": iiwa14, "sawyer": sawyer, "ur5": ur5, "ur5e": ur5e, "ur10e": ur10e, "xarm7": xarm7}
+def _gen3_urdf() -> str:
+    """The kinematic part of Kinova's Gen3 7-DoF description (``ros_kortex``'s ``gen3.urdf``): joint
+    origins in m with the rotations written exactly (pi/2, pi), Kinova's link and joint names,
+    continuous joints 1, 3, 5, 7 and Kinova's ranges of joints 2, 4, 6 (128.9, 147.8, 120.3 deg),
+    speeds 80 deg/s (actuators 1-4) and 70 deg/s (5-7)."""
+    p, h = repr(_PI), repr(_PI / 2)
+    rows = [  # (joint, parent, child, xyz, rpy, limit degrees or None, speed deg/s)
+        ("joint_1", "base_link", "shoulder_link", "0 0 0.15643", f"{p} 0 0", None, 80.0),
+        ("joint_2", "shoulder_link", "half_arm_1_link", "0 0.005375 -0.12838", f"{h} 0 0", 128.9, 80.0),
+        ("joint_3", "half_arm_1_link", "half_arm_2_link", "0 -0.21038 -0.006375", f"-{h} 0 0", None, 80.0),
+        ("joint_4", "half_arm_2_link", "forearm_link", "0 0.006375 -0.21038", f"{h} 0 0", 147.8, 80.0),
+        ("joint_5", "forearm_link", "spherical_wrist_1_link", "0 -0.20843 -0.006375", f"-{h} 0 0", None, 70.0),
+        ("joint_6", "spherical_wrist_1_link", "spherical_wrist_2_link", "0 0.00017505 -0.10593", f"{h} 0 0", 120.3,
+         70.0),  # fmt: skip
+        ("joint_7", "spherical_wrist_2_link", "bracelet_link", "0 -0.10593 -0.00017505", f"-{h} 0 0", None, 70.0),
+    ]
+    links = ["base_link"] + [r[2] for r in rows] + ["end_effector_link"]
+    text = ['<robot name="gen3">'] + [f'<link name="{name}"/>' for name in links]
+    for joint, parent, child, xyz, rpy, limit, speed in rows:
+        v = repr(float(np.radians(speed)))
+        r = repr(float(np.radians(limit))) if limit is not None else ""
+        bounds = f'lower="-{r}" upper="{r}" ' if r else ""
+        lim = f'<limit {bounds}velocity="{v}" effort="39"/>'
+
+        kind = "revolute" if limit is not None else "continuous"
+        text.append(
+            f'<joint name="{joint}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+            f'<origin xyz="{xyz}" rpy="{rpy}"/><axis xyz="0 0 1"/>{lim}</joint>'
+        )
+    text.append(
+        '<joint name="end_effector" type="fixed"><parent link="bracelet_link"/><child link="end_effector_link"/>'
+        f'<origin xyz="0 0 -0.061525" rpy="{p} 0 0"/></joint></robot>'
+    )
+    return "\n".join(text)
+
+
+def gen3() -> SerialChain:
+    """Kinova Gen3 (7 DoF) from Kinova's own description (:func:`_gen3_urdf`); its link frames are
+    Kinova's URDF frames, checked against the classical DH table of Kinova's user guide."""
+    from skincal.kinematics.urdf import chain_from_urdf
+
+    return chain_from_urdf(text=_gen3_urdf(), name="gen3", tip_link="end_effector_link")
+
+
+PRESETS = {
+    "panda": panda, "iiwa14": iiwa14, "gen3": gen3, "sawyer": sawyer, "ur5": ur5, "ur5e": ur5e, "ur10e": ur10e,
+    "xarm7": xarm7,
+}  # fmt: skip
 
 
 def get_robot(name: str, *, base_link: str | None = None, tip_link: str | None = None) -> SerialChain:
