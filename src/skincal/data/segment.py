@@ -44,7 +44,7 @@ class SegmentationConfig:
     The defaults accept every preset protocol (:data:`skincal.protocol.PROTOCOLS`): its shortest rest
     (``fast``: 0.4 s) less the two ``static_margin_s`` leaves 0.3 s, above ``min_static_s`` = 0.25 s;
     its shortest excitation (``fast``: 1 s) is detected a little shorter (speeds below
-    ``rest_velocity`` at both ends), above ``min_dynamic_s`` = 0.8 s. ``tests/test_segment.py`` checks
+    ``rest_velocity`` at both ends), above ``min_dynamic_s`` = 0.8 s. ``tests/data/test_segment.py`` checks
     both margins for every preset.
     """
 
