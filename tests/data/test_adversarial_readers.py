@@ -14,6 +14,7 @@ import stat
 import tempfile
 import threading
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import h5py
@@ -27,6 +28,7 @@ from test_data_result import make_result
 from skincal.cli import main
 from skincal.data import CalibrationResult, Dataset, read_dataset, read_result, write_dataset, write_result
 from skincal.data import hdf5 as hdf5_module
+from skincal.data.hdf5 import open_dataset
 from skincal.data.jsonio import MAX_DEPTH, MAX_TEXT_BYTES, load_json, load_yaml
 from skincal.errors import ConfigError, DatasetError, SkincalError
 from skincal.kinematics import load_chain
@@ -34,6 +36,19 @@ from skincal.kinematics import load_chain
 pytestmark = pytest.mark.adversarial
 
 DEV_ZERO = Path("/dev/zero")
+Reader = Callable[[Path], Dataset]
+
+
+def read_streamed(path: Path) -> Dataset:
+    """The streaming reader (:func:`open_dataset`), every unit read through its lazy ``imu``."""
+    with open_dataset(path) as ds:
+        return replace(ds, imu=dict(ds.imu))
+
+
+@pytest.fixture(params=["read_dataset", "open_dataset"])
+def read(request: pytest.FixtureRequest) -> Reader:
+    """Both dataset readers: every hostile HDF5 file is refused by each, with the same message."""
+    return read_dataset if request.param == "read_dataset" else read_streamed
 
 
 # ---------------------------------------------------------------------- helpers
@@ -96,7 +111,7 @@ def without_blocking(read: Callable[[], object], fifo: Path) -> BaseException | 
 
 
 # ---------------------------------------------------------------------- HDF5: links and storage
-def test_external_link_to_a_host_file_is_refused(good_h5: Path, tmp_path: Path, capsys) -> None:
+def test_external_link_to_a_host_file_is_refused(read: Reader, good_h5: Path, tmp_path: Path, capsys) -> None:
     host = tmp_path / "host.h5"  # any file the attacker wants read: here another dataset's samples
     shutil.copyfile(good_h5, host)
 
@@ -105,20 +120,20 @@ def test_external_link_to_a_host_file_is_refused(good_h5: Path, tmp_path: Path, 
         f["imu/su1/accel"] = h5py.ExternalLink(str(host), "/imu/su1/accel")
 
     path = crafted(good_h5, tmp_path, link)
-    refused(lambda: read_dataset(path), str(path), "/imu/su1/accel is an external link", str(host))
+    refused(lambda: read(path), str(path), "/imu/su1/accel is an external link", str(host))
     cli_one_line(["info", str(path)], capsys, "external link")
 
 
-def test_external_link_to_a_group_is_refused(good_h5: Path, tmp_path: Path) -> None:
+def test_external_link_to_a_group_is_refused(read: Reader, good_h5: Path, tmp_path: Path) -> None:
     def link(f: h5py.File) -> None:
         del f["joints"]
         f["joints"] = h5py.ExternalLink(str(good_h5), "/joints")
 
     path = crafted(good_h5, tmp_path, link)
-    refused(lambda: read_dataset(path), "/joints is an external link")
+    refused(lambda: read(path), "/joints is an external link")
 
 
-def test_soft_link_duplicating_a_unit_is_refused(good_h5: Path, tmp_path: Path, capsys) -> None:
+def test_soft_link_duplicating_a_unit_is_refused(read: Reader, good_h5: Path, tmp_path: Path, capsys) -> None:
     """/imu/su1 -> /imu/forearm_left: su1 would be calibrated from another unit's samples."""
 
     def link(f: h5py.File) -> None:
@@ -126,39 +141,39 @@ def test_soft_link_duplicating_a_unit_is_refused(good_h5: Path, tmp_path: Path, 
         f["imu/su1"] = h5py.SoftLink("/imu/forearm_left")
 
     path = crafted(good_h5, tmp_path, link)
-    refused(lambda: read_dataset(path), str(path), "/imu/su1 is a soft link to /imu/forearm_left")
+    refused(lambda: read(path), str(path), "/imu/su1 is a soft link to /imu/forearm_left")
     cli_one_line(["info", str(path)], capsys, "soft link")
 
 
-def test_soft_link_to_a_dataset_is_refused(good_h5: Path, tmp_path: Path) -> None:
+def test_soft_link_to_a_dataset_is_refused(read: Reader, good_h5: Path, tmp_path: Path) -> None:
     def link(f: h5py.File) -> None:
         del f["joints/qd"]
         f["joints/qd"] = h5py.SoftLink("/joints/q")
 
-    refused(lambda: read_dataset(crafted(good_h5, tmp_path, link)), "/joints/qd is a soft link to /joints/q")
+    refused(lambda: read(crafted(good_h5, tmp_path, link)), "/joints/qd is a soft link to /joints/q")
 
 
-def test_hard_link_making_two_units_one_object_is_refused(good_h5: Path, tmp_path: Path, capsys) -> None:
+def test_hard_link_making_two_units_one_object_is_refused(read: Reader, good_h5: Path, tmp_path: Path, capsys) -> None:
     def link(f: h5py.File) -> None:
         del f["imu/su1"]
         f["imu/su1"] = f["imu/forearm_left"]  # a second hard link to the same group
         del f["tof"]  # keep the rest of the file consistent
 
     path = crafted(good_h5, tmp_path, link)
-    message = refused(lambda: read_dataset(path), str(path), "is the same HDF5 object as")
+    message = refused(lambda: read(path), str(path), "is the same HDF5 object as")
     assert "/imu/su1" in message and "/imu/forearm_left" in message
     cli_one_line(["info", str(path)], capsys, "same HDF5 object")
 
 
-def test_hard_linked_dataset_reused_as_another_stream_is_refused(good_h5: Path, tmp_path: Path) -> None:
+def test_hard_linked_dataset_reused_as_another_stream_is_refused(read: Reader, good_h5: Path, tmp_path: Path) -> None:
     def link(f: h5py.File) -> None:
         del f["imu/su1/gyro"]
         f["imu/su1/gyro"] = f["imu/su1/accel"]  # same shape: only the object identity gives it away
 
-    refused(lambda: read_dataset(crafted(good_h5, tmp_path, link)), "/imu/su1/", "same HDF5 object")
+    refused(lambda: read(crafted(good_h5, tmp_path, link)), "/imu/su1/", "same HDF5 object")
 
 
-def test_dataset_with_external_raw_data_is_refused(good_h5: Path, tmp_path: Path) -> None:
+def test_dataset_with_external_raw_data_is_refused(read: Reader, good_h5: Path, tmp_path: Path) -> None:
     raw = tmp_path / "host.bin"
     raw.write_bytes(np.zeros((117, 3)).tobytes())
 
@@ -166,21 +181,23 @@ def test_dataset_with_external_raw_data_is_refused(good_h5: Path, tmp_path: Path
         del f["imu/su1/accel"]
         f.create_dataset("imu/su1/accel", shape=(117, 3), dtype="f8", external=[(str(raw), 0, 117 * 3 * 8)])
 
-    refused(lambda: read_dataset(crafted(good_h5, tmp_path, external)), "/imu/su1/accel", "external file")
+    refused(lambda: read(crafted(good_h5, tmp_path, external)), "/imu/su1/accel", "external file")
 
 
-def test_virtual_dataset_is_refused(good_h5: Path, tmp_path: Path) -> None:
+def test_virtual_dataset_is_refused(read: Reader, good_h5: Path, tmp_path: Path) -> None:
     def virtual(f: h5py.File) -> None:
         layout = h5py.VirtualLayout(shape=(117, 3), dtype="f8")
         layout[:] = h5py.VirtualSource(str(good_h5), "/imu/su1/accel", shape=(117, 3))
         del f["imu/su1/accel"]
         f["imu"]["su1"].create_virtual_dataset("accel", layout)
 
-    refused(lambda: read_dataset(crafted(good_h5, tmp_path, virtual)), "/imu/su1/accel", "virtual dataset")
+    refused(lambda: read(crafted(good_h5, tmp_path, virtual)), "/imu/su1/accel", "virtual dataset")
 
 
 # ---------------------------------------------------------------------- HDF5: declared sizes
-def test_huge_declared_shape_in_a_tiny_file_is_refused_before_reading(good_h5: Path, tmp_path: Path, capsys) -> None:
+def test_huge_declared_shape_in_a_tiny_file_is_refused_before_reading(
+    read: Reader, good_h5: Path, tmp_path: Path, capsys
+) -> None:
     """2e9 samples declared, nothing written: 48 GB would be allocated (and filled with zeros)."""
 
     def huge(f: h5py.File) -> None:
@@ -189,11 +206,11 @@ def test_huge_declared_shape_in_a_tiny_file_is_refused_before_reading(good_h5: P
 
     path = crafted(good_h5, tmp_path, huge)
     assert path.stat().st_size < 200_000
-    refused(lambda: read_dataset(path), str(path), "/imu/su1/accel declares shape (2000000000, 3)", "stores 0 bytes")
+    refused(lambda: read(path), str(path), "/imu/su1/accel declares shape (2000000000, 3)", "stores 0 bytes")
     cli_one_line(["info", str(path)], capsys, "refused before reading")
 
 
-def test_huge_shape_with_a_few_real_chunks_is_refused(good_h5: Path, tmp_path: Path) -> None:
+def test_huge_shape_with_a_few_real_chunks_is_refused(read: Reader, good_h5: Path, tmp_path: Path) -> None:
     """Some compressed chunks written, so the stored size is not zero; the ratio is still impossible."""
 
     def huge(f: h5py.File) -> None:
@@ -202,28 +219,28 @@ def test_huge_shape_with_a_few_real_chunks_is_refused(good_h5: Path, tmp_path: P
         ds[:65536] = np.random.default_rng(0).normal(size=(65536, 7))
 
     path = crafted(good_h5, tmp_path, huge)
-    refused(lambda: read_dataset(path), "/joints/q declares shape (300000000, 7)")
+    refused(lambda: read(path), "/joints/q declares shape (300000000, 7)")
 
 
-def test_unwritten_uncompressed_chunks_are_refused(good_h5: Path, tmp_path: Path) -> None:
+def test_unwritten_uncompressed_chunks_are_refused(read: Reader, good_h5: Path, tmp_path: Path) -> None:
     def sparse(f: h5py.File) -> None:
         del f["joints/t"]
         f.create_dataset("joints/t", shape=(50_000_000,), dtype="f8", chunks=(1024,))
 
-    refused(lambda: read_dataset(crafted(good_h5, tmp_path, sparse)), "/joints/t declares shape (50000000,)")
+    refused(lambda: read(crafted(good_h5, tmp_path, sparse)), "/joints/t declares shape (50000000,)")
 
 
 def test_total_declared_bytes_are_bounded_by_the_file_size(
-    good_h5: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    read: Reader, good_h5: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Each array may be plausible on its own; all together may not exceed the per-file budget
     (here made small so the test needs no gigabytes)."""
     monkeypatch.setattr(hdf5_module, "MAX_READ_BYTES", 4096)
     monkeypatch.setattr(hdf5_module, "READ_BYTES_PER_FILE_BYTE", 0)
-    refused(lambda: read_dataset(good_h5), "more than a", "refused before reading")
+    refused(lambda: read(good_h5), "more than a", "refused before reading")
 
 
-def test_a_legitimately_compressed_dataset_reads(good_h5: Path, tmp_path: Path) -> None:
+def test_a_legitimately_compressed_dataset_reads(read: Reader, good_h5: Path, tmp_path: Path) -> None:
     """Compression another writer may use (gzip, shuffle, highly compressible zeros) is accepted."""
     ds = make_dataset()
 
@@ -231,24 +248,24 @@ def test_a_legitimately_compressed_dataset_reads(good_h5: Path, tmp_path: Path) 
         del f["imu/su1/gyro"]
         f.create_dataset("imu/su1/gyro", data=np.zeros_like(ds.imu["su1"].gyro), compression="gzip", shuffle=True)
 
-    back = read_dataset(crafted(good_h5, tmp_path, gzip))
+    back = read(crafted(good_h5, tmp_path, gzip))
     assert np.array_equal(back.imu["su1"].gyro, np.zeros_like(ds.imu["su1"].gyro))
     assert np.array_equal(back.imu["su1"].accel, ds.imu["su1"].accel)
 
 
-def test_huge_attribute_is_refused(good_h5: Path, tmp_path: Path) -> None:
+def test_huge_attribute_is_refused(read: Reader, good_h5: Path, tmp_path: Path) -> None:
     def big(f: h5py.File) -> None:
         f["robot"].attrs.create("gravity", np.zeros(300_000))
 
-    refused(lambda: read_dataset(crafted(good_h5, tmp_path, big)), "/robot attr 'gravity' declares 2400000 bytes")
+    refused(lambda: read(crafted(good_h5, tmp_path, big)), "/robot attr 'gravity' declares 2400000 bytes")
 
 
-def test_string_dataset_is_refused_before_reading(good_h5: Path, tmp_path: Path) -> None:
+def test_string_dataset_is_refused_before_reading(read: Reader, good_h5: Path, tmp_path: Path) -> None:
     def strings(f: h5py.File) -> None:
         del f["joints/t"]
         f.create_dataset("joints/t", data=np.array([b"x" * 10] * 3), dtype=h5py.string_dtype())
 
-    refused(lambda: read_dataset(crafted(good_h5, tmp_path, strings)), "/joints/t has dtype", "expected real numbers")
+    refused(lambda: read(crafted(good_h5, tmp_path, strings)), "/joints/t has dtype", "expected real numbers")
 
 
 # ---------------------------------------------------------------------- HDF5: names
@@ -262,34 +279,32 @@ def test_string_dataset_is_refused_before_reading(good_h5: Path, tmp_path: Path)
         ("\u202eevil", "control character"),
     ],
 )
-def test_unit_names_follow_the_one_rule(good_h5: Path, tmp_path: Path, bad: str, problem: str) -> None:
+def test_unit_names_follow_the_one_rule(read: Reader, good_h5: Path, tmp_path: Path, bad: str, problem: str) -> None:
     def rename(f: h5py.File) -> None:
         f.move("imu/forearm_left", f"imu/{bad}")
         f.move("truth/forearm_left", f"truth/{bad}")
 
-    message = refused(
-        lambda: read_dataset(crafted(good_h5, tmp_path, rename)), "/imu has an invalid unit name", problem
-    )
+    message = refused(lambda: read(crafted(good_h5, tmp_path, rename)), "/imu has an invalid unit name", problem)
     assert "\x1b" not in message and "\u202e" not in message  # shown escaped
 
 
 @pytest.mark.parametrize(
     ("bad", "problem"), [("", "empty"), ("pan\nda", "control"), ("a/b", "'/'"), ("panda ", "white")]
 )
-def test_robot_name_follows_the_one_rule(good_h5: Path, tmp_path: Path, bad: str, problem: str) -> None:
+def test_robot_name_follows_the_one_rule(read: Reader, good_h5: Path, tmp_path: Path, bad: str, problem: str) -> None:
     def rename(f: h5py.File) -> None:
         f["robot"].attrs["name"] = bad
 
     path = crafted(good_h5, tmp_path, rename)
-    refused(lambda: read_dataset(path), "/robot attr 'name'", "not a valid robot name", problem)
+    refused(lambda: read(path), "/robot attr 'name'", "not a valid robot name", problem)
 
 
 # ---------------------------------------------------------------------- non-regular files
-def test_dataset_path_that_is_a_device_or_fifo_is_refused(tmp_path: Path, capsys) -> None:
-    refused(lambda: read_dataset(DEV_ZERO), "/dev/zero: is a character device")
+def test_dataset_path_that_is_a_device_or_fifo_is_refused(read: Reader, tmp_path: Path, capsys) -> None:
+    refused(lambda: read(DEV_ZERO), "/dev/zero: is a character device")
     fifo = tmp_path / "pipe.h5"
     os.mkfifo(fifo)
-    outcome = without_blocking(lambda: read_dataset(fifo), fifo)
+    outcome = without_blocking(lambda: read(fifo), fifo)
     assert isinstance(outcome, DatasetError) and "is a FIFO" in str(outcome), outcome
     cli_one_line(["info", str(DEV_ZERO)], capsys, "character device")
 

@@ -22,6 +22,8 @@ Layout (optional parts in brackets)::
 
 Reading opens the file read-only, checks the structure, builds a :class:`Dataset` and runs
 :func:`~skincal.data.validate.validate_dataset`; writing validates first, then writes atomically.
+:func:`open_dataset` reads the same way but keeps the file open and reads each unit's IMU stream
+only when asked (:class:`LazyImu`), so that a large file is streamed one unit at a time.
 
 The reader trusts nothing in the file's structure: it follows only hard links (a soft or external
 link, an external raw-data file or a virtual dataset could put another file's data, or another
@@ -39,8 +41,10 @@ without checksums (other writers) read just as well. Unit groups keep their crea
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Literal, overload
+from typing import Any, Literal, cast, overload
 
 import h5py
 import numpy as np
@@ -85,6 +89,7 @@ class _Reader:
         self.file_size = file_size
         self.budget = max(MAX_READ_BYTES, READ_BYTES_PER_FILE_BYTE * file_size)
         self.declared = 0  # bytes declared by the arrays read so far
+        self.counted: set[str] = set()  # paths whose declared bytes are in ``declared`` (a re-read counts once)
         self.version = VERSION  # set by header()
         self.seen: dict[object, str] = {}  # HDF5 object id -> the first path it was reached by
 
@@ -161,6 +166,9 @@ class _Reader:
                 f"declares shape {obj.shape} of {obj.dtype} ({declared} bytes) but stores {stored} bytes; "
                 "refused before reading",
             )
+        if path in self.counted:
+            return
+        self.counted.add(path)
         self.declared += declared
         if self.declared > self.budget:
             raise self.fail(
@@ -391,18 +399,21 @@ class _Reader:
             qdd=self.array("/joints/qdd", required=False),
         )
 
+    def imu_names(self) -> list[str]:
+        return self.unit_names(self.group("/imu"), "/imu")
+
+    def imu_unit(self, unit: str) -> ImuStream:
+        """The IMU stream of one unit (``/imu/<unit>``), read with every check of :meth:`array`."""
+        base = f"/imu/{unit}"
+        self.group(base)
+        return ImuStream(
+            t=self.array(f"{base}/t"),
+            accel=self.array(f"{base}/accel"),
+            gyro=self.array(f"{base}/gyro", required=False),
+        )
+
     def imu(self) -> dict[str, ImuStream]:
-        grp = self.group("/imu")
-        out = {}
-        for unit in self.unit_names(grp, "/imu"):
-            base = f"/imu/{unit}"
-            self.group(base)
-            out[unit] = ImuStream(
-                t=self.array(f"{base}/t"),
-                accel=self.array(f"{base}/accel"),
-                gyro=self.array(f"{base}/gyro", required=False),
-            )
-        return out
+        return {unit: self.imu_unit(unit) for unit in self.imu_names()}
 
     def tof(self) -> dict[str, TofStream]:
         grp = self.group("/tof", required=False)
@@ -468,14 +479,8 @@ class _Reader:
             raise self.fail(base, f"is not a valid pose: {exc}") from None
 
 
-def read_dataset(path: str | Path) -> Dataset:
-    """Read and validate a dataset file (opened read-only; the file is never modified).
-
-    Raises:
-        DatasetError: missing, truncated or non-HDF5 file, wrong format string or version, missing
-            group or field, or any validation failure; one line naming the file and the field.
-    """
-    path = Path(path)
+def _open(path: Path) -> tuple[h5py.File, _Reader]:
+    """The file opened read-only and its :class:`_Reader` (one-line DatasetError when it cannot be)."""
     source = str(path)
     size = regular_file(path, "dataset file (.h5)", DatasetError)  # before opening: a FIFO would block
     try:
@@ -484,20 +489,79 @@ def read_dataset(path: str | Path) -> Dataset:
         f = h5py.File(path, "r", rdcc_nbytes=0)
     except OSError as exc:
         raise DatasetError(f"{source}: not a readable HDF5 file ({_first_line(exc)})") from None
-    with f:
-        r = _Reader(f, source, size)
+    return f, _Reader(f, source, size)
+
+
+def _damaged(source: str, exc: Exception) -> DatasetError:
+    return DatasetError(f"{source}: damaged file ({_first_line(exc)})")
+
+
+_H5PY_ERRORS = (OSError, RuntimeError, KeyError, ValueError, TypeError)  # what h5py raises on damaged files
+
+
+class LazyImu(Mapping[str, ImuStream]):
+    """The ``/imu`` streams of an open file, read one unit at a time on access (never kept: each
+    access reads the unit again), with every check of :func:`read_dataset`; see :func:`open_dataset`."""
+
+    def __init__(self, reader: _Reader, names: list[str]) -> None:
+        self._reader = reader
+        self._names = dict.fromkeys(names)
+
+    def __getitem__(self, unit: str) -> ImuStream:
+        if unit not in self._names:
+            raise KeyError(unit)
+        if not self._reader.f.id.valid:
+            raise DatasetError(f"{self._reader.source}: read /imu/{printable(unit)} after the file was closed")
         try:
-            description = r.header()
-            robot, gravity = r.robot_if_any(has_joints=r.link("/joints"))
-            joints = r.joints()
-            imu = r.imu()
-            tof = r.tof()
-            segments = r.segments()
-            truth, truth_sensor, truth_body = r.truth()
+            return self._reader.imu_unit(unit)
         except DatasetError:
             raise
-        except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:  # h5py on damaged files
-            raise DatasetError(f"{source}: damaged file ({_first_line(exc)})") from None
+        except _H5PY_ERRORS as exc:
+            raise _damaged(self._reader.source, exc) from None
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+    def __contains__(self, unit: object) -> bool:
+        return unit in self._names
+
+
+@contextmanager
+def open_dataset(path: str | Path) -> Iterator[Dataset]:
+    """A dataset file opened for streaming: within the ``with`` block, a validated :class:`Dataset`
+    whose ``imu`` is a :class:`LazyImu` (each unit read from the file when accessed, so that memory
+    holds one unit's IMU data at a time); everything else is read at once, as by :func:`read_dataset`.
+
+    The same checks as :func:`read_dataset` run before the dataset is given (every unit is read once
+    for the validation, then dropped), and every later read of a unit repeats the structural ones.
+
+    Raises:
+        DatasetError: as :func:`read_dataset`; also on reading a unit after the block.
+    """
+    f, r = _open(Path(path))
+    with f:
+        ds = _build(r, lazy=True)
+        yield ds
+
+
+def _build(r: _Reader, lazy: bool) -> Dataset:
+    """Read the open file's parts (the IMU streams as a :class:`LazyImu` when ``lazy``) and validate."""
+    source = r.source
+    try:
+        description = r.header()
+        robot, gravity = r.robot_if_any(has_joints=r.link("/joints"))
+        joints = r.joints()
+        imu = cast("dict[str, ImuStream]", LazyImu(r, r.imu_names())) if lazy else r.imu()
+        tof = r.tof()
+        segments = r.segments()
+        truth, truth_sensor, truth_body = r.truth()
+    except DatasetError:
+        raise
+    except _H5PY_ERRORS as exc:
+        raise _damaged(source, exc) from None
     ds = Dataset(
         robot=robot,
         joints=joints,
@@ -512,6 +576,18 @@ def read_dataset(path: str | Path) -> Dataset:
     )
     validate_dataset(ds, source=source)
     return ds
+
+
+def read_dataset(path: str | Path) -> Dataset:
+    """Read and validate a dataset file (opened read-only; the file is never modified).
+
+    Raises:
+        DatasetError: missing, truncated or non-HDF5 file, wrong format string or version, missing
+            group or field, or any validation failure; one line naming the file and the field.
+    """
+    f, r = _open(Path(path))
+    with f:
+        return _build(r, lazy=False)
 
 
 def _write_floats(grp: h5py.Group, name: str, value: object) -> None:
