@@ -177,9 +177,12 @@ def report(
         False, "--allow-other-dataset",
         help="report even if --dataset is not the result's dataset (other file or robot)",
     ),
+    workers: int = typer.Option(
+        2, min=1, help="units whose residuals are computed at once (forked processes on Linux; same report)"
+    ),
 ) -> None:
     """Write a calibration report: per-unit table, residuals, sensor parameters, coverage, errors."""
-    from skincal.data.hdf5 import read_dataset
+    from skincal.data.hdf5 import open_dataset
     from skincal.data.provenance import check_result_dataset
     from skincal.data.result import read_result
     from skincal.viz.content import collect
@@ -201,20 +204,28 @@ def report(
 
     from skincal.names import printable
 
-    with err_console.status("reading the result and the dataset") as status:  # transient, on stderr
+    # the dataset is streamed: its joints at once, one unit's IMU data at a time (issue 19, report memory)
+    with (
+        err_console.status("reading the result and the dataset") as status,  # transient, on stderr
+        open_dataset(dataset) as ds,
+    ):
         progress = lambda message: status.update(escape(printable(f"report: {message}")))  # noqa: E731
         res = read_result(result)
-        ds = read_dataset(dataset)
         ds.require_joints("report (its residuals are predicted from the joint stream)", source=str(dataset))
         digest, warnings = check_result_dataset(res, result, ds, dataset, allow_other=allow_other)
         for warning in warnings:
             console_warning(warning)
         if out is None:
-            text = render_markdown(collect(res, ds, use_dataset_qdd=use_dataset_qdd, shown=0, progress=progress))
+            text = render_markdown(
+                collect(res, ds, use_dataset_qdd=use_dataset_qdd, shown=0, progress=progress, workers=workers)
+            )
         else:
             from skincal.viz.report import write_report
 
-            write_report(res, ds, out, fmt, dataset_sha256=digest, use_dataset_qdd=use_dataset_qdd, progress=progress)
+            write_report(
+                res, ds, out, fmt, dataset_sha256=digest, use_dataset_qdd=use_dataset_qdd, progress=progress,
+                workers=workers,
+            )
     if out is None:
         typer.echo(text, nl=False)
         return

@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, field
+import multiprocessing
+import os
+from collections import deque
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from skincal.calib.metrics import evaluate
 from skincal.calib.preprocess import JointInterpolator
-from skincal.data.dataset import Dataset
+from skincal.data.dataset import Dataset, ImuStream
 from skincal.data.result import CalibrationResult, failed_units
 from skincal.errors import DatasetError
 from skincal.kinematics.transforms import FloatArray
@@ -18,6 +22,17 @@ from skincal.viz.residuals import PLOT_POINTS, UnitResiduals, unit_activity, uni
 
 WORST_SHOWN = 10
 """Units whose residuals the HTML report plots: the worst by the report's key figure (:class:`Ranking`)."""
+
+_UnitOutcome = tuple[float, "UnitResiduals | None", FloatArray]
+"""One unit's residual RMS, its thinned residual trace (None: not plotted) and its activity row."""
+_FORKED: dict[int, Callable[[str, ImuStream], _UnitOutcome]] = {}
+"""Per-unit closures of the running :func:`collect` calls by token, inherited by forked workers."""
+
+
+def _forked_unit(token: int, name: str, imu: ImuStream) -> _UnitOutcome:
+    """Entry point of a forked worker: the inherited closure on one unit's IMU stream (sent by the
+    parent, which alone reads the dataset file)."""
+    return _FORKED[token](name, imu)
 
 
 @dataclass(frozen=True)
@@ -99,6 +114,7 @@ def collect(
     shown: int = WORST_SHOWN,
     max_points: int = PLOT_POINTS,
     progress: Callable[[str], None] | None = None,
+    workers: int = 1,
 ) -> ReportContent:
     """Recompute residuals and coverage for every unit of ``result`` on ``dataset``.
 
@@ -106,7 +122,10 @@ def collect(
     from the velocities (as ``skincal calibrate --use-dataset-qdd`` does). ``shown``: how many of
     the worst units keep their residual traces (thinned to ``max_points`` samples) for plots; the
     others keep only their RMS figures, so memory does not grow with the recording times the units.
-    ``progress``: called with a short message as each unit is done."""
+    ``progress``: called with a short message as each unit is done. ``workers``: units computed at
+    once, in forked processes where the platform can fork (the results are the same as with one);
+    the units' IMU streams are read from ``dataset.imu`` one at a time, in this process, so a dataset
+    of :func:`skincal.data.hdf5.open_dataset` holds one unit's data at a time (a few per worker)."""
     missing = [u for u in result.units if u not in dataset.imu]
     if missing:
         raise DatasetError(f"dataset has no IMU data for unit(s) {', '.join(missing)} of the result")
@@ -116,21 +135,31 @@ def collect(
     interp = JointInterpolator(dataset.joints, use_dataset_qdd=use_dataset_qdd)
     evaluation = evaluate(result, dataset) if dataset.truth and all(u in dataset.truth for u in result.units) else None
     ranking = None
+    keep: set[str] = set()
     if evaluation is not None:  # the key figure is known before the residuals: keep only the shown units' traces
         ranking = rank_units({u: evaluation["units"][u]["position_error_mm"] for u in result.units},
                              "position error against the truth [mm]")
         keep = set(ranking.worst(shown))
+    keep_all = ranking is None
+
+    def one(name: str, imu: ImuStream) -> _UnitOutcome:
+        single = replace(dataset, imu={name: imu})  # this unit alone: the others are not read
+        r = unit_residuals(single, name, result.units[name], interp)
+        trace = r.thinned(max_points) if keep_all or name in keep else None
+        return r.rms, trace, unit_activity(single, name, interp)
+
     traces: dict[str, UnitResiduals] = {}
     rms: dict[str, float] = {}
     activity = np.full((len(result.units), dataset.robot.n_joints), np.nan)
-    total = len(result.units)
-    for i, (name, unit) in enumerate(result.units.items()):
-        r = unit_residuals(dataset, name, unit, interp)
-        rms[name] = r.rms
-        if ranking is None or name in keep:
-            traces[name] = r.thinned(max_points)
-        del r
-        activity[i] = unit_activity(dataset, name, interp)
+    names = list(result.units)
+    total = len(names)
+    for i, (name, (unit_rms, trace, act)) in enumerate(
+        zip(names, _per_unit(one, dataset, names, interp, workers), strict=True)
+    ):
+        rms[name] = unit_rms
+        if trace is not None:
+            traces[name] = trace
+        activity[i] = act
         note(f"residuals and coverage {i + 1}/{total}: {name}")
     if ranking is None:
         ranking = rank_units(rms, "accelerometer residual RMS [m/s²]")
@@ -156,3 +185,44 @@ def collect(
             )
         )
     return ReportContent(result, dataset, rows, residuals, activity, evaluation, failed_units(result), ranking)
+
+
+def _per_unit(
+    one: Callable[[str, ImuStream], _UnitOutcome],
+    dataset: Dataset,
+    names: list[str],
+    interp: JointInterpolator,
+    workers: int,
+) -> Iterator[_UnitOutcome]:
+    """``one(name, dataset.imu[name])`` for each unit in order; with ``workers > 1`` (and ``fork``) in
+    that many forked processes, at most two units per worker read ahead (bounded memory)."""
+    n_workers = max(1, min(int(workers), len(names), os.cpu_count() or 1))
+    if n_workers == 1 or "fork" not in multiprocessing.get_all_start_methods():
+        for name in names:
+            yield one(name, dataset.imu[name])
+        return
+    from skincal.processes import worker_initializer
+
+    interp.warm()  # computed once here, inherited by every child
+    token = id(one)
+    _FORKED[token] = one
+    pending: deque[Future[_UnitOutcome]] = deque()
+    queue = iter(names)
+    try:
+        with ProcessPoolExecutor(
+            max_workers=n_workers, mp_context=multiprocessing.get_context("fork"), initializer=worker_initializer
+        ) as pool:
+            for name in queue:
+                pending.append(pool.submit(_forked_unit, token, name, dataset.imu[name]))
+                if len(pending) >= 2 * n_workers:
+                    break
+            while pending:
+                outcome = pending.popleft().result()
+                name = next(queue, None)
+                if name is not None:
+                    pending.append(pool.submit(_forked_unit, token, name, dataset.imu[name]))
+                yield outcome
+    finally:
+        for future in pending:
+            future.cancel()
+        _FORKED.pop(token, None)

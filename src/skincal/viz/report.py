@@ -248,17 +248,19 @@ def write_report(
     use_dataset_qdd: bool = False,
     worst: int = WORST_SHOWN,
     progress: Callable[[str], None] | None = None,
+    workers: int = 1,
 ) -> ReportContent:
     """Write the HTML report (``fmt="html"``) or the markdown summary (``"md"``) to ``out`` atomically
     (``use_dataset_qdd``: see :func:`skincal.viz.content.collect`; ``worst``: units in the worst-units
-    table and with residual plots; ``progress``: called with a short message at each step)."""
+    table and with residual plots; ``progress``: called with a short message at each step; ``workers``:
+    units computed at once, see :func:`~skincal.viz.content.collect`)."""
     from skincal.errors import ConfigError
     from skincal.viz.summary import render_markdown
 
     if fmt not in ("html", "md"):
         raise ConfigError(f"report format must be 'html' or 'md', got '{fmt}'")
     shown = worst if fmt == "html" else 0
-    content = collect(result, dataset, use_dataset_qdd=use_dataset_qdd, shown=shown, progress=progress)
+    content = collect(result, dataset, use_dataset_qdd=use_dataset_qdd, shown=shown, progress=progress, workers=workers)
     if fmt == "html":
         text = render_html(content, dataset_sha256, worst=worst, progress=progress)
     else:

@@ -111,7 +111,8 @@ def unit_residuals(
         interpolator = JointInterpolator(dataset.joints)
     if unit.imu is not None:  # the stamps put on the motion's clock (offset and drift)
         imu = dataset.imu[name]
-        dataset = replace(dataset, imu={**dataset.imu, name: replace(imu, t=calibrated_instants(unit.imu, imu.t))})
+        # a dataset of this unit alone: the others' streams are not read (a lazily read file streams them)
+        dataset = replace(dataset, imu={name: replace(imu, t=calibrated_instants(unit.imu, imu.t))})
     s = unit_samples(dataset, name, interpolator=interpolator)
     pose, gravity = unit.pose, np.asarray(dataset.gravity, dtype=float)
     g0 = float(np.linalg.norm(gravity))
