@@ -21,7 +21,6 @@ import numpy as np
 from skincal.data.atomic import write_bytes_atomic
 from skincal.data.dataset import Dataset
 from skincal.data.result import CalibrationResult
-from skincal.viz import plots
 from skincal.viz.content import WORST_SHOWN, ReportContent, UnitRow, collect
 
 _CSS = """
@@ -118,6 +117,7 @@ def _worst_section(content: ReportContent, n: int) -> str:
 
 def _residual_section(content: ReportContent, n_joints: int, note: Callable[[str], None]) -> str:
     """Residual figures of the units in ``content.residuals`` (the worst ones), one figure at a time."""
+    from skincal.viz import plots
     ds, total, shown = content.dataset, len(content.ranking.values) or len(content.rows), len(content.residuals)
     intro = ("<h2>Accelerometer residuals</h2><p class=\"muted\">Measured minus predicted specific force "
              "f = A R<sup>T</sup>(u + K p) + b at t &minus; time offset, in the unit frame. ")
@@ -133,6 +133,8 @@ def _residual_section(content: ReportContent, n_joints: int, note: Callable[[str
 
 
 def _errors_section(content: ReportContent) -> str:
+    from skincal.viz import plots
+
     ev = content.evaluation
     if ev is None:
         return '<p class="muted">The dataset has no truth (a real recording): no errors to show.</p>'
@@ -152,6 +154,8 @@ def _errors_section(content: ReportContent) -> str:
 
 
 def _sensor_section(content: ReportContent) -> str:
+    from skincal.viz import plots
+
     truth = content.dataset.truth_sensor
     rows = []
     for r in content.rows:
@@ -186,6 +190,9 @@ def render_html(
     """The report page as one HTML string (no external resources). ``dataset_sha256``: digest of the
     dataset file, compared with the one the result records; ``worst``: rows of the worst-units table;
     ``progress``: called with a short message before each figure."""
+    # matplotlib is imported here, after the residuals: not in memory while they are computed (issue 19)
+    from skincal.viz import plots
+
     with plots.style():
         return _render_html(content, dataset_sha256, worst, progress or (lambda _message: None))
 
@@ -210,6 +217,8 @@ def _render_html(content: ReportContent, dataset_sha256: str | None, worst: int,
                        f"<b>{ev['mean_rotation_error_deg']:.4f} deg</b>; links {ev['links_correct']}/"
                        f"{ev['units_total']} correct")
     failed = "".join(f"<li><b>{_e(k)}</b>: {_e(v)}</li>" for k, v in content.failed.items())
+    from skincal.viz import plots
+
     note("plot: data coverage")
     coverage = plots.png_data_uri(plots.activity_figure(content.activity, [r.name for r in content.rows]))
     note("plot: errors against the truth")
