@@ -10,17 +10,24 @@ kernel (``wait4``, the figure ``/usr/bin/time -v`` prints as "Maximum resident s
 reference it also measures ``skincal info`` on the same dataset: reading and validating the dataset
 alone, the floor under the report's memory.
 
-Measured 2026-11-30 on the shared 2-core machine (load ~4-5, so wall times are inflated; CPU is
-user + system), 100 units, ``realistic`` IMUs, HTML report:
+Measured 2026-11-30 on the shared 2-core machine (load ~2-5, so wall times are inflated; CPU is
+user + system, of the report and its workers), 100 units, ``realistic`` IMUs, HTML report:
 
-=============================  ==================================  ==================================
-dataset                        before (5fd141f~1)                  after
-=============================  ==================================  ==================================
+=============================  ===================================  ===================================
+dataset                        before (5fd141f~1)                   whole-file read (3be49bb)
+=============================  ===================================  ===================================
 ``fast`` (83 s, 50 MB file)    69 s wall, 33 s CPU, 408 MB, 6.0 MB  17 s wall, 8.9 s CPU, 248 MB, 0.8 MB
 ``paper-sim`` (681 s, 401 MB)  58 s wall, 61 s CPU, 1412 MB, 6.3 MB 33 s wall, 29 s CPU, 750 MB, 1.0 MB
-=============================  ==================================  ==================================
+=============================  ===================================  ===================================
 
-(``skincal info`` alone: 158 MB and 522 MB; the paper-sim page is the issue's 6.3 MB one.)
+Streamed (``open_dataset``: the joints, then one unit's IMU data at a time; 2 forked workers, the
+default ``--workers 2``): ``fast`` 6.7 s wall, 8.8 s CPU, 212 MB; ``paper-sim`` 20.0 s wall, 31.7 s
+CPU, 382 MB (one worker: 31 s, 385 MB; the peak RSS is the largest single process, the forked
+workers share the parent's pages: the summed PSS of parent and workers peaks at ~420 MB). The
+paper-sim peak is the joint interpolator's construction (``calib/preprocess.py``, ~165 MB for
+340k x 7 joint samples) on top of the imports (~120 MB) and the joint stream (~40 MB).
+
+(``skincal info`` alone: 159 MB and 522 MB; the paper-sim page is the issue's 6.3 MB one.)
 """
 
 from __future__ import annotations
