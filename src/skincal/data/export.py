@@ -696,17 +696,7 @@ def to_csv(result: CalibrationResult, frames: list[UnitFrame], frame: str = "uni
 
 
 # ---------------------------------------------------------------------- TF nodes
-_ROS2_HEAD = '''"""Static transforms of skin units calibrated by skincal, all sent at once by one ROS 2 node
-(tf2_ros StaticTransformBroadcaster, latched). Run it as a launch file (ros2 launch <this file>) or
-as a node (python3 <this file>). TRANSFORMS: (parent frame, child frame, (x, y, z) in m, quaternion
-(x, y, z, w) in ROS order). CALIBRATION names the robot, the calibration method and the frames.
-"""
-
-import sys
-
-'''
-
-_ROS2_BODY = '''
+_TRANSFORMS_FN = '''
 
 def transforms(stamp, message_type):
     """TRANSFORMS as messages of message_type (geometry_msgs TransformStamped) stamped stamp."""
@@ -721,7 +711,20 @@ def transforms(stamp, message_type):
         rotation.x, rotation.y, rotation.z, rotation.w = quaternion
         messages.append(message)
     return messages
+'''
+"""The message builder both TF nodes share (ROS 1 and ROS 2 messages have the same fields)."""
 
+_ROS2_HEAD = '''"""Static transforms of skin units calibrated by skincal, all sent at once by one ROS 2 node
+(tf2_ros StaticTransformBroadcaster, latched). Run it as a launch file (ros2 launch <this file>) or
+as a node (python3 <this file>). TRANSFORMS: (parent frame, child frame, (x, y, z) in m, quaternion
+(x, y, z, w) in ROS order). CALIBRATION names the robot, the calibration method and the frames.
+"""
+
+import sys
+
+'''
+
+_ROS2_BODY = _TRANSFORMS_FN + '''
 
 def main(args=None):
     import rclpy
@@ -764,22 +767,7 @@ the calibration method and the frames.
 
 '''
 
-_ROS1_BODY = '''
-
-def transforms(stamp, message_type):
-    """TRANSFORMS as messages of message_type (geometry_msgs TransformStamped) stamped stamp."""
-    messages = []
-    for parent, child, xyz, quaternion in TRANSFORMS:
-        message = message_type()
-        message.header.stamp = stamp
-        message.header.frame_id = parent
-        message.child_frame_id = child
-        translation, rotation = message.transform.translation, message.transform.rotation
-        translation.x, translation.y, translation.z = xyz
-        rotation.x, rotation.y, rotation.z, rotation.w = quaternion
-        messages.append(message)
-    return messages
-
+_ROS1_BODY = _TRANSFORMS_FN + '''
 
 def main():
     import rospy

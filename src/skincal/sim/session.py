@@ -70,26 +70,26 @@ def register_backend(name: str) -> Callable[[Backend], Backend]:
     return add
 
 
-@register_backend("analytic")
-def _analytic(session: Session, progress: Progress | None = None, **options: Any) -> Dataset:
-    from skincal.sim.analytic import simulate as run
-
-    s = session
+def _run(run: Callable[..., Dataset], s: Session, progress: Progress | None, options: dict[str, Any]) -> Dataset:
+    """Call a simulator function with the session's parts (both share this signature)."""
     return run(
         s.chain, s.placements, s.trajectory, s.imu_model, s.rng, gravity=s.gravity, description=s.description,
         joint_model=s.joint_model, clock_model=s.clock_model, progress=progress, **options,
     )  # fmt: skip
+
+
+@register_backend("analytic")
+def _analytic(session: Session, progress: Progress | None = None, **options: Any) -> Dataset:
+    from skincal.sim.analytic import simulate
+
+    return _run(simulate, session, progress, options)
 
 
 @register_backend("mujoco")
 def _mujoco(session: Session, progress: Progress | None = None, **options: Any) -> Dataset:
-    from skincal.sim.mujoco_backend import simulate_mujoco as run
+    from skincal.sim.mujoco_backend import simulate_mujoco
 
-    s = session
-    return run(
-        s.chain, s.placements, s.trajectory, s.imu_model, s.rng, gravity=s.gravity, description=s.description,
-        joint_model=s.joint_model, clock_model=s.clock_model, progress=progress, **options,
-    )  # fmt: skip
+    return _run(simulate_mujoco, session, progress, options)
 
 
 def simulate(session: Session, backend: str = "analytic", progress: Progress | None = None, **options: Any) -> Dataset:
