@@ -8,7 +8,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 
 from skincal.errors import ConfigError
-from skincal.hw.receiver import ReceiverStats, SkinReceiver
+from skincal.hw.receiver import Delivery, ReceiverStats, SkinReceiver
 from skincal.hw.recorder import MAX_UNIT_SAMPLES, Recorder, RecordingSummary
 from skincal.kinematics.chain import SerialChain
 
@@ -32,6 +32,7 @@ async def record(
     on_start: Callable[[int], None] | None = None,
     on_tick: Callable[[ReceiverStats, Recorder, SkinReceiver], None] | None = None,
     on_flush: Callable[[int], None] | None = None,
+    on_delivery: Callable[[Delivery, Recorder, SkinReceiver], None] | None = None,
     max_units: int = 64,
     max_robots: int = 4,
     max_unit_samples: int = MAX_UNIT_SAMPLES,
@@ -39,7 +40,8 @@ async def record(
     """Receive on ``host:port`` and record to ``path`` until ``duration_s`` (s) elapses or ``stop`` is set.
 
     ``on_start(port)`` is called once bound; ``on_tick(stats, recorder, receiver)`` every ``tick_s``
-    seconds (live status); ``on_flush(total_samples)`` after each flush. On the way out (normal end,
+    seconds (live status); ``on_flush(total_samples)`` after each flush; ``on_delivery(delivery, recorder,
+    receiver)`` with each in-order packet after the recorder took it (a live consumer). On the way out (normal end,
     ``stop``, or cancellation) the reorder buffers are drained and the file finished atomically, with
     the receiver's counters as root attributes. ``max_units``/``max_robots`` cap the sources accepted
     (:class:`SkinReceiver`), ``max_unit_samples`` the samples kept per group (:class:`Recorder`).
@@ -62,7 +64,15 @@ async def record(
     except BaseException:
         await receiver.stop()
         raise
-    receiver.on_packet = recorder.add
+    if on_delivery is None:
+        receiver.on_packet = recorder.add
+    else:
+
+        def deliver(delivery: Delivery) -> None:
+            recorder.add(delivery)
+            on_delivery(delivery, recorder, receiver)
+
+        receiver.on_packet = deliver
     receiver.on_restart = recorder.restart
     if on_start is not None:
         on_start(bound)
