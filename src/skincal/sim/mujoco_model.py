@@ -41,7 +41,7 @@ from skincal.errors import ConfigError
 from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
 from skincal.kinematics.geometry import DEFAULT_LINK_RADIUS, link_capsules
 from skincal.kinematics.inertia import LinkInertial
-from skincal.kinematics.presets import panda
+from skincal.kinematics.presets import iiwa14, panda, ur5e
 from skincal.kinematics.transforms import FloatArray, quat_wxyz_from_matrix
 from skincal.skin.pose import SkinUnitPose
 
@@ -82,6 +82,33 @@ PANDA_INERTIALS: tuple[LinkInertial, ...] = (
     _li(0.735522, [0.010517, -0.004252, 0.061597], [0.012516, 0.010027, 0.004815, -0.000428, -0.001196, -0.000741]),
 )
 
+# Universal Robots UR5e links 1-6 in the standard DH frames of the ``ur5e`` preset: masses and centres of
+# mass from UR's "DH parameters for calculations of kinematics and dynamics" (given there in these DH
+# frames), inertia tensors about the CoM from UR's ur_description (config/ur5e/physical_parameters.yaml,
+# whose inertia frames are rotated onto the same DH axes). Columns as PANDA_INERTIALS.
+UR5E_INERTIALS: tuple[LinkInertial, ...] = (
+    _li(3.761, [0.0, -0.02561, 0.00193], [0.0070021, 0.00648091, 0.00657286, 0.00000073, -0.00001053, 0.00049994]),
+    _li(8.058, [0.2125, 0.0, 0.11336], [0.01505885, 0.33388086, 0.33247207, -0.000054, 0.00000563, -0.00000181]),
+    _li(2.846, [0.15, 0.0, 0.0265], [0.00399632, 0.07879254, 0.0784851, -0.00001365, 0.00137272, -0.0000066]),
+    _li(1.37, [0.0, -0.0018, 0.01634], [0.00165491, 0.00135962, 0.00126279, -0.00000282, -0.00000438, 0.00010157]),
+    _li(1.3, [0.0, 0.0018, 0.01634], [0.00135617, 0.00127827, 0.00096614, -0.00000274, 0.00000444, -0.00005048]),
+    _li(0.365, [0.0, 0.0, -0.001159], [0.00018694, 0.00018908, 0.00025756, 0.00000006, -0.00000017, -0.00000092]),
+)
+
+# KUKA LBR iiwa 14 R820 links 1-7 in the standard DH frames of the ``iiwa14`` preset: the link inertials of
+# Drake's iiwa14 description (manipulation/models/iiwa_description, as in MuJoCo Menagerie's kuka_iiwa_14;
+# KUKA publishes none), each moved from its URDF link frame into the DH frame by the constant transform
+# between the two (exact axis permutations: the two chains agree for every q, joint signs equal).
+IIWA14_INERTIALS: tuple[LinkInertial, ...] = (
+    _li(5.76, [0.0, 0.0825, -0.03], [0.0333, 0.0123, 0.033, 0.0, 0.0, 0.0]),
+    _li(6.35, [-0.0003, 0.042, 0.059], [0.0305, 0.011, 0.0304, 0.0, 0.0, 0.0]),
+    _li(3.5, [0.0, -0.0855, -0.03], [0.025, 0.0076, 0.0238, 0.0, 0.0, 0.0]),
+    _li(3.5, [0.0, -0.034, 0.067], [0.017, 0.006, 0.0164, 0.0, 0.0, 0.0]),
+    _li(3.5, [-0.0001, 0.1395, -0.021], [0.01, 0.00449, 0.0087, 0.0, 0.0, 0.0]),
+    _li(1.8, [0.0, 0.0004, 0.0006], [0.0049, 0.0036, 0.0047, 0.0, 0.0, 0.0]),
+    _li(1.2, [0.0, 0.0, -0.025], [0.001, 0.001, 0.001, 0.0, 0.0, 0.0]),
+)
+
 
 def require_mujoco() -> Any:
     """Import and return the ``mujoco`` module, or raise :class:`ConfigError` saying how to install it."""
@@ -101,6 +128,20 @@ def default_inertials(chain: SerialChain) -> list[LinkInertial | None] | None:
     return list(PANDA_INERTIALS) if chain.same_motion(panda()) else None
 
 
+def published_inertials(chain: SerialChain) -> list[LinkInertial | None] | None:
+    """Inertials of links ``1..n`` for dynamics (:mod:`skincal.sim.dynamics`): the chain's own, else the
+    maker's published ones of the Panda, UR5e or iiwa14 (:data:`PANDA_INERTIALS`, :data:`UR5E_INERTIALS`,
+    :data:`IIWA14_INERTIALS`, matched by motion), else ``None`` (the capsules'). :func:`default_inertials`
+    (what :func:`build_mjcf` uses unless told) keeps capsule inertias for UR5e and iiwa14, so the
+    kinematic simulators' models are unchanged."""
+    if chain.inertials is not None:
+        return list(chain.inertials[1:])
+    for table, preset in ((PANDA_INERTIALS, panda), (UR5E_INERTIALS, ur5e), (IIWA14_INERTIALS, iiwa14)):
+        if chain.same_motion(preset()):
+            return list(table)
+    return None
+
+
 # ---------------------------------------------------------------------------------------------- names
 def body_name(link: int) -> str:
     """Name of the body of link frame ``link`` (0 = base)."""
@@ -115,6 +156,11 @@ def joint_name(joint: int) -> str:
 def site_name(unit: str) -> str:
     """Name of the site of skin unit ``unit``."""
     return f"su/{unit}"
+
+
+def motor_name(joint: int) -> str:
+    """Name of the torque (``motor``) actuator of joint ``joint`` (1-based)."""
+    return f"{joint_name(joint)}/motor"
 
 
 def sensor_name(unit: str, kind: str) -> str:
@@ -205,6 +251,9 @@ def build_mjcf(
     gravity_compensation: bool = False,
     range_directions: FloatArray | None = None,
     gravity: FloatArray = GRAVITY_BASE,
+    motor_limits: float | Sequence[float] | None = None,
+    armature: float | Sequence[float] | None = None,
+    damping: float | Sequence[float] | None = None,
 ) -> str:
     """MJCF text of ``chain`` with one site and accelerometer/gyro/rangefinder per skin unit.
 
@@ -228,6 +277,12 @@ def build_mjcf(
             :func:`skincal.skin.tof.cone_directions`): rangefinders ``su/u/range{k}`` on extra sites
             ``su/u/ray{k}`` at the unit's origin. Default: one rangefinder ``su/u/range`` along +z.
         gravity: ``(3,)`` gravity in the base frame, m/s^2.
+        motor_limits: when given, one MuJoCo ``motor`` actuator ``joint{i}/motor`` per joint (after any
+            velocity actuators): ``ctrl`` is the joint torque (N m; force N for a prismatic joint),
+            ``ctrlrange`` +-these limits (one or ``(n,)``, e.g. the chain's ``effort_limit``).
+        armature: rotor inertia reflected at each joint, kg m^2 (one or ``(n,)``; MuJoCo ``armature``).
+        damping: viscous joint damping, N m s/rad (one or ``(n,)``; MuJoCo ``damping``).
+        Without ``motor_limits``, ``armature`` and ``damping`` the text is what it was before they existed.
     """
     placements = dict(placements or {})
     _check_placements(chain, placements)
@@ -236,6 +291,9 @@ def build_mjcf(
         inertials = default_inertials(chain)
     if inertials is not None and len(inertials) != n:
         raise ConfigError(f"robot '{chain.name}': inertials must list {n} links, got {len(inertials)}")
+    motor = _joint_values(motor_limits, n, "motor_limits", positive=True)
+    joint_armature = _joint_values(armature, n, "armature")
+    joint_damping = _joint_values(damping, n, "damping")
     g = np.asarray(gravity, dtype=float)
     if g.shape != (3,) or not np.all(np.isfinite(g)):
         raise ConfigError(f"gravity must be 3 finite numbers in m/s^2, got {np.asarray(gravity).tolist()}")
@@ -263,6 +321,10 @@ def build_mjcf(
             and np.isfinite(chain.joint_upper[i - 1])
         ):
             jattrs["range"] = mjcf_floats([chain.joint_lower[i - 1], chain.joint_upper[i - 1]])
+        if joint_armature is not None:
+            jattrs["armature"] = mjcf_floats(joint_armature[i - 1])
+        if joint_damping is not None:
+            jattrs["damping"] = mjcf_floats(joint_damping[i - 1])
         ET.SubElement(body, "joint", jattrs)
         if inertials is not None:
             _add_inertial(body, inertials[i - 1])
@@ -322,6 +384,7 @@ def build_mjcf(
             )
             ET.SubElement(sensors, "rangefinder", {"name": sensor_name(unit, f"range{k}"), "site": ray_site})
 
+    actuators = None
     if velocity_gain is not None:
         kv = np.broadcast_to(np.asarray(velocity_gain, dtype=float), (n,))
         if not np.all(np.isfinite(kv) & (kv > 0)):
@@ -333,10 +396,37 @@ def build_mjcf(
                 "velocity",
                 {"name": f"{joint_name(i)}/velocity", "joint": joint_name(i), "kv": repr(float(kv[i - 1]))},
             )
+    if motor is not None:
+        actuators = actuators if actuators is not None else ET.SubElement(root, "actuator")
+        for i in range(1, n + 1):
+            limit = float(motor[i - 1])
+            ET.SubElement(
+                actuators,
+                "motor",
+                {"name": motor_name(i), "joint": joint_name(i), "ctrlrange": mjcf_floats([-limit, limit])},
+            )
     if scene is not None:
         scene.add_to_mjcf(world)
     ET.indent(root)
     return ET.tostring(root, encoding="unicode")
+
+
+def _joint_values(
+    values: float | Sequence[float] | None, n: int, what: str, positive: bool = False
+) -> FloatArray | None:
+    """``(n,)`` finite per-joint values (one broadcast to all), non-negative (positive when told), or
+    ``None``; a one-line :class:`ConfigError` otherwise."""
+    if values is None:
+        return None
+    try:
+        arr = np.broadcast_to(np.asarray(values, dtype=float), (n,))
+    except ValueError:
+        raise ConfigError(f"{what} must be one number or {n} numbers, got {np.shape(values)}") from None
+    bad = ~np.isfinite(arr) | (arr <= 0 if positive else arr < 0)
+    if np.any(bad):
+        need = "positive" if positive else "non-negative"
+        raise ConfigError(f"{what} must be finite {need} numbers, got {arr.tolist()}")
+    return arr
 
 
 def _frames_along(directions: FloatArray) -> FloatArray:
