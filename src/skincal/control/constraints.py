@@ -32,9 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from skincal.kinematics.chain import SerialChain, cross
+from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray
-from skincal.perception.body import BodyProximity, RobotBody, body_proximity
+from skincal.perception.body import BodyProximity, RobotBody, body_proximity, point_jacobians
 
 SATURATION = 0.99
 """Fraction of ``v_max`` the bound reaches at the notice distance."""
@@ -73,22 +73,6 @@ class FrameCache:
         for i in range(n):
             T[i + 1] = T[i] @ steps[i]
         return T
-
-
-def point_jacobians(chain: SerialChain, T_base_link: FloatArray, links: ArrayLike, p_base: ArrayLike) -> FloatArray:
-    """Position Jacobians ``(K, 3, n)`` of points ``p_base`` ``(K, 3)`` (base frame, m) fixed to ``links`` ``(K,)``.
-
-    Column ``j`` (0-based) of a point on link ``l`` is ``z_j x (p - c_j)`` for ``j < l`` and 0 otherwise,
-    with joint axis ``z_j`` through ``c_j`` (:meth:`SerialChain.joint_axes`); a point on the base
-    (link 0) has a zero Jacobian. ``T_base_link``: ``(n + 1, 4, 4)`` at one configuration.
-    """
-    c, z = chain.joint_axes(np.asarray(T_base_link)[None])
-    c, z = c[0], z[0]  # (n, 3)
-    p = np.asarray(p_base, dtype=float).reshape(-1, 3)
-    links = np.asarray(links, dtype=int).reshape(-1)
-    cols = cross(z[None, :, :], p[:, None, :] - c[None, :, :])  # (K, n, 3)
-    mask = np.arange(chain.n_joints)[None, :] < links[:, None]
-    return np.swapaxes(cols * mask[..., None], 1, 2)
 
 
 @dataclass(frozen=True)
@@ -155,8 +139,9 @@ def obstacle_rows(
         C = cand.shape[1]
         prox_all = body_proximity(body, T_base_link, cand.reshape(-1, 3))
         best = np.argmin(prox_all.distance.reshape(K, C), axis=1) + C * np.arange(K)
-        prox = BodyProximity(*(getattr(prox_all, f)[best] for f in ("distance", "capsule", "link", "p_base_robot",
-                                                                    "normal")))
+        prox = BodyProximity(
+            *(getattr(prox_all, f)[best] for f in ("distance", "capsule", "link", "p_base_robot", "normal"))
+        )
     else:
         prox = body_proximity(body, T_base_link, pts)
     J = point_jacobians(body.chain, T_base_link, prox.link, prox.p_base_robot)

@@ -217,9 +217,7 @@ class AvoidanceController:
         violation = float(np.max(prob.G @ qd - prob.h, initial=0.0))
         return qd, max(violation, 0.0), elapsed
 
-    def step(
-        self, q: ArrayLike, x_des: ArrayLike, xd_des: ArrayLike, points: ArrayLike | ObstaclePoints
-    ) -> StepResult:
+    def step(self, q: ArrayLike, x_des: ArrayLike, xd_des: ArrayLike, points: ArrayLike | ObstaclePoints) -> StepResult:
         """Joint velocities for this step (see :meth:`problem`)."""
         prob = self.problem(q, x_des, xd_des, points)
         qd, feasible, violation, elapsed = self.solve(prob)

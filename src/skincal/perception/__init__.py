@@ -1,6 +1,13 @@
 """Proximity perception: time-of-flight readings + calibrated unit poses -> obstacle points in the base frame."""
 
-from skincal.perception.body import BodyProximity, RobotBody, body_proximity, closest_on_segments, segment_distance
+from skincal.perception.body import (
+    BodyProximity,
+    RobotBody,
+    body_proximity,
+    closest_on_segments,
+    point_jacobians,
+    segment_distance,
+)
 from skincal.perception.points import (
     ObstaclePoints,
     PerceptionConfig,
@@ -11,6 +18,14 @@ from skincal.perception.points import (
     valid_ranges,
 )
 from skincal.perception.tracker import ProximityTracker, ray_velocity
+from skincal.perception.uncertainty import (
+    SkinUncertainty,
+    assumed_pose_covariance,
+    point_covariance,
+    pose_jacobian,
+    reading_covariance,
+    unit_pose_covariance,
+)
 
 __all__ = [
     "BodyProximity",
@@ -18,13 +33,20 @@ __all__ = [
     "PerceptionConfig",
     "ProximityTracker",
     "RobotBody",
+    "SkinUncertainty",
+    "assumed_pose_covariance",
     "body_proximity",
     "closest_on_segments",
     "interpolate_joints",
+    "point_covariance",
+    "point_jacobians",
     "points_from_streams",
+    "pose_jacobian",
     "ray_velocity",
+    "reading_covariance",
     "segment_distance",
     "unit_points",
+    "unit_pose_covariance",
     "unit_rays",
     "valid_ranges",
 ]

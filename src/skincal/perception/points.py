@@ -50,6 +50,10 @@ class PerceptionConfig:
         jump: a reading this far from a track's prediction starts a new track (the old one is
             remembered), and a reading passing a memory point by this much clears it, m.
         n_memory: memory points kept at most.
+        assumed_position_std_m, assumed_rotation_std_deg: the pose std assumed, per link axis, for a unit
+            whose calibration gives none (or leaves an axis undetermined), m and deg: a point's
+            covariance is never silently zero (:mod:`skincal.perception.uncertainty`). 5 mm and 2 deg
+            are a unit placed by hand from a drawing.
     """
 
     min_range: float = 0.01
@@ -65,6 +69,8 @@ class PerceptionConfig:
     memory_s: float = 1.5
     jump: float = 0.1
     n_memory: int = 4
+    assumed_position_std_m: float = 0.005
+    assumed_rotation_std_deg: float = 2.0
 
     def __post_init__(self) -> None:
         if not (0 <= self.min_range < self.max_range) or not np.isfinite(self.max_range):
@@ -77,6 +83,9 @@ class PerceptionConfig:
             raise ConfigError("perception: need predict_s >= 0 s, coast_m >= 0 m, max_speed > 0 m/s and jump > 0 m")
         if int(self.n_memory) != self.n_memory or self.n_memory < 0:
             raise ConfigError(f"perception: n_memory must be a non-negative integer, got {self.n_memory}")
+        for name in ("assumed_position_std_m", "assumed_rotation_std_deg"):
+            if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
+                raise ConfigError(f"perception: {name} must be a finite non-negative number, got {getattr(self, name)}")
 
 
 @dataclass(frozen=True)
@@ -92,6 +101,9 @@ class ObstaclePoints:
         axes: ``(K, 3)`` unit +z axis (the ray) of the reading unit, base frame.
         spread: ``(K,)`` lateral uncertainty of the point across the ray, m (the cone: ``r sin(fov/2)``;
             0: on the axis).
+        cov: ``(K, 3, 3)`` covariance of each position, base frame, m^2 (from the unit's pose
+            covariance, the ToF noise and the joint noise: :mod:`skincal.perception.uncertainty`);
+            zeros when unknown (the default when not given).
     """
 
     positions: FloatArray
@@ -101,6 +113,11 @@ class ObstaclePoints:
     velocities: FloatArray
     axes: FloatArray
     spread: FloatArray
+    cov: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        if self.cov is None:
+            object.__setattr__(self, "cov", np.zeros((np.shape(self.positions)[0], 3, 3)))
 
     @classmethod
     def empty(cls) -> ObstaclePoints:
@@ -189,14 +206,20 @@ def points_from_streams(
     tof: Mapping[str, tuple[ArrayLike, ArrayLike]],
     config: PerceptionConfig = PerceptionConfig(),
     body: RobotBody | None = None,
+    uncertainty=None,
 ) -> ObstaclePoints:
     """Every valid reading of every unit as a point (no temporal filter), e.g. from a dataset.
 
     ``tof``: unit -> ``(t (M,) s, range (M,) m)`` (a :class:`skincal.data.dataset.TofStream` works via
     ``(s.t, s.range)``); units without a pose are an error. Joints ``(N,)``/``(N, n)`` are
-    interpolated to each reading's instant. Points are sorted by stamp.
+    interpolated to each reading's instant. Points are sorted by stamp. Each point's ``cov`` comes from
+    ``uncertainty`` (a :class:`skincal.perception.uncertainty.SkinUncertainty`; default: none known, the
+    assumed pose std of ``config``).
     """
-    pos, units, stamps, rng_, axes = [], [], [], [], []
+    from skincal.perception.uncertainty import SkinUncertainty, reading_covariance
+
+    unc = uncertainty if uncertainty is not None else SkinUncertainty()
+    pos, units, stamps, rng_, axes, covs = [], [], [], [], [], []
     for name, (t, r) in tof.items():
         if name not in poses:
             raise ConfigError(f"ToF stream of unit '{name}' has no calibrated pose")
@@ -205,6 +228,20 @@ def points_from_streams(
         p, ok = unit_points(chain, poses[name], q, r, config, body)
         axes.append(unit_rays(chain, poses[name], q[ok])[1])
         pos.append(p[ok])
+        pose = poses[name]
+        k = int(ok.sum())
+        covs.append(
+            reading_covariance(
+                chain,
+                chain.link_frames(q[ok]) if k else np.zeros((0, chain.n_joints + 1, 4, 4)),
+                np.full(k, pose.link),
+                np.broadcast_to(pose.R_link_su, (k, 3, 3)),
+                np.asarray(r, dtype=float)[ok],
+                p[ok],
+                np.broadcast_to(unc.unit_covariances([name], config)[0], (k, 6, 6)),
+                unc,
+            )
+        )
         stamps.append(t[ok])
         rng_.append(np.asarray(r, dtype=float)[ok])
         units += [name] * int(ok.sum())
@@ -222,4 +259,5 @@ def points_from_streams(
         np.zeros((r_all.size, 3)),
         np.concatenate(axes)[order],
         r_all * np.sin(np.deg2rad(config.fov_deg) / 2),
+        np.concatenate(covs)[order],
     )

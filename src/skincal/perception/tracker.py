@@ -33,6 +33,13 @@ Every published point carries the cone's lateral uncertainty ``spread = r sin(fo
 VL53L1X reports the nearest target *anywhere* in its cone, so the target lies on the spherical cap of
 radius ``r`` about the unit, not necessarily on its axis (the controller takes the cap point nearest to
 the robot, :func:`skincal.control.constraints.obstacle_rows`).
+
+**Covariance.** Every point also carries its position covariance ``cov`` (base frame, m^2,
+:mod:`skincal.perception.uncertainty`: the unit's pose covariance, the ToF noise, the joint noise),
+that of the track's NEWEST reading (the median filter only narrows the ToF part, and the calibration
+part is the same bias for every reading of a unit, so the newest reading's is a fair and slightly
+cautious figure); an extrapolated point keeps it (the velocity's own error is not added), a memory
+point keeps the covariance it had when remembered.
 """
 
 from __future__ import annotations
@@ -45,6 +52,7 @@ from numpy.typing import ArrayLike
 from skincal.kinematics.chain import SerialChain
 from skincal.perception.body import RobotBody, body_proximity
 from skincal.perception.points import ObstaclePoints, PerceptionConfig, valid_ranges
+from skincal.perception.uncertainty import SkinUncertainty, reading_covariance
 from skincal.skin.pose import SkinUnitPose
 
 _BUFFER = 12
@@ -65,9 +73,12 @@ def ray_velocity(t: ArrayLike, p: ArrayLike, axis: ArrayLike) -> np.ndarray:
     return float(v @ a) * a
 
 
-
 class ProximityTracker:
-    """Readings of all units at one instant in (:meth:`update`), live obstacle points out (:meth:`points`)."""
+    """Readings of all units at one instant in (:meth:`update`), live obstacle points out (:meth:`points`).
+
+    ``uncertainty``: the units' pose covariances, the ToF and joint noise behind each point's ``cov``
+    (default: none known, so every unit gets the assumed std of ``config``).
+    """
 
     def __init__(
         self,
@@ -75,8 +86,10 @@ class ProximityTracker:
         poses: Mapping[str, SkinUnitPose],
         config: PerceptionConfig = PerceptionConfig(),
         body: RobotBody | None = None,
+        uncertainty: SkinUncertainty | None = None,
     ) -> None:
         self.chain = chain
+        self.uncertainty = uncertainty if uncertainty is not None else SkinUncertainty()
         self.poses = dict(poses)
         self.config = config
         self.body = body if body is not None else RobotBody.of(chain)
@@ -85,6 +98,8 @@ class ProximityTracker:
         self._half = np.deg2rad(config.fov_deg) / 2
         self._links = np.array([self.poses[u].link for u in self.units], dtype=int)
         self._T_link_su = np.stack([self.poses[u].T_link_su for u in self.units]) if U else np.zeros((0, 4, 4))
+        self._pose_cov = self.uncertainty.unit_covariances(self.units, config)  # (U, 6, 6)
+        self._cov = np.zeros((U, 3, 3))  # covariance of each track's newest reading, m^2
         self._bt = np.full((U, _BUFFER), -np.inf)  # reading instants, s (-inf = empty slot)
         self._bp = np.full((U, _BUFFER, 3), np.nan)  # points, base frame, m
         self._br = np.full((U, _BUFFER), np.nan)  # ranges, m
@@ -102,6 +117,7 @@ class ProximityTracker:
         self._mr = np.full(M, np.nan)
         self._ma = np.zeros((M, 3))
         self._mu = [""] * M
+        self._mc = np.zeros((M, 3, 3))
 
     # ------------------------------------------------------------------ update
     def update(self, t: float, q: ArrayLike, ranges: Mapping[str, float]) -> None:
@@ -123,8 +139,22 @@ class ProximityTracker:
         # free space seen along each cone: up to the reading, up to max_range when there was none
         nothing = np.isnan(r) | (r > cfg.max_range)
         self._carve(t, idx, o, a, np.where(ok, r, np.where(nothing, cfg.max_range, 0.0)))
-        for k in np.flatnonzero(ok & ~is_self):  # a few units per instant (the robot itself is no news)
+        new = np.flatnonzero(ok & ~is_self)
+        if new.size:
+            u = idx[new]
+            cov = reading_covariance(
+                self.chain,
+                T,
+                self._links[u],
+                self._T_link_su[u, :3, :3],
+                r[new],
+                p[new],
+                self._pose_cov[u],
+                self.uncertainty,
+            )
+        for j, k in enumerate(new):  # a few units per instant (the robot itself is no news)
             self._add(int(idx[k]), t, p[k], r[k], o[k], a[k])
+            self._cov[idx[k]] = cov[j]
 
     def _add(self, i: int, t: float, p: np.ndarray, r: float, o: np.ndarray, a: np.ndarray) -> None:
         cfg = self.config
@@ -138,7 +168,7 @@ class ProximityTracker:
         self._br[i] = np.roll(self._br[i], -1)
         self._bt[i, -1], self._bp[i, -1], self._br[i, -1] = t, p, r
         recent = np.isfinite(self._bt[i]) & (t - self._bt[i] <= cfg.max_age_s)
-        last = np.flatnonzero(recent)[-int(cfg.window):]
+        last = np.flatnonzero(recent)[-int(cfg.window) :]
         self._pos[i] = np.median(self._bp[i, last], axis=0)
         self._range[i] = float(np.median(self._br[i, last]))
         self._t_ref[i] = float(np.median(self._bt[i, last]))
@@ -157,6 +187,7 @@ class ProximityTracker:
         slot = int(np.argmin(self._mt))
         self._mp[slot], self._mt[slot], self._mr[slot] = self._pos[i], self._t_last[i], self._range[i]
         self._ma[slot], self._mu[slot] = self._axis[i], self.units[i]
+        self._mc[slot] = self._cov[i]
 
     def _clear_memory(self, t: float, o: np.ndarray, a: np.ndarray, r: np.ndarray, ok: np.ndarray) -> None:
         """Forget expired memory points and those a new reading lands on (within ``jump``)."""
@@ -221,4 +252,5 @@ class ProximityTracker:
             velocities=np.concatenate([vel[alive], np.zeros((int(mem.sum()), 3))]),
             axes=np.concatenate([self._axis[alive], self._ma[mem]]),
             spread=ranges * np.sin(self._half),
+            cov=np.concatenate([self._cov[alive], self._mc[mem]]),
         )
