@@ -1,39 +1,69 @@
-"""Human-approach scenarios for the avoidance controller: the task (a circle) and who comes close.
+"""Human-approach scenarios for the avoidance controller: the robot's start, its task, and who comes close.
 
-Robot: the Panda at ``Q_START``. The approach lines are laid out along the lines of sight of the
-paper's Table II units (:func:`skincal.skin.placement.paper_placement`, one per link 2..7). At
-``Q_START`` they look: su1 forward (+x) from low on the upper arm, su2 sideways (-y) from the upper
-arm, su3 up, su4 sideways (+y) from the forearm, su5 backward from the wrist, su6 forward-right
-(+x -y) from the hand. The skin the loop simulates is the caller's choice (``skincal avoid
---placement``): six 27 deg cones leave most directions unseen, so a person's leg or the far side of
-an arm comes within about 0.1 m unnoticed (``arm`` 0.088 m, ``walk`` 0.111 m in
-``benchmarks/bench_avoid.py --placement paper``); the default is the dense ring skin
-(:func:`skincal.skin.placement.ring_placement`, 49 units), with which every scenario keeps 0.2 m.
+A scenario is a YAML/JSON file (format below); the shipped ones live in
+``skincal/workflows/scenario_files/`` and are named by their stem (``skincal avoid --scenario hand``),
+any other file by its path (``--scenario my.yaml``). Positions are given in the robot's base axes,
+either absolute or relative to a point of the robot at its start configuration (``relative_to``), so one
+file works on every robot.
+
+Robot and start (:func:`start_configuration`): the Panda preset starts at ``Q_START`` (the legacy
+configuration, flange about 0.47 m in front of the base and 0.52 m high, the tool pointing down). Any
+other chain gets a configuration computed from its kinematics alone: the flange at ``0.5 R`` in front of
+its shoulder (joint 2) and ``0.2 R`` above it (``R`` the chain's reach from the shoulder), the tool
+pointing down where the chain allows it, the elbow above the shoulder-flange line, inside the joint
+limits less 0.15 rad, and of the solutions from 24 seeded starts the one with the best-conditioned
+position Jacobian (largest smallest singular value).
 
 Task (paper Sec. V-C): the flange tracks a circle of radius 0.1 m in the vertical y-z plane in front of
-the robot, starting where the flange is at ``Q_START`` (period 5 s, 0.126 m/s).
+the robot starting where the flange is at the start (period 5 s, 0.126 m/s), or a pick-and-place cycle
+(:class:`PickPlace`: down to a pick point 0.1 m below and 0.15 m to the right, up, across, down to the
+place point 0.15 m to the left, up, back; minimum-jerk legs at 0.25 m/s peak, 0.3 s dwell at pick and
+place).
 
-Scenarios (all positions in the base frame, m; obstacles are :mod:`skincal.sim.scene` objects). Each
-is built to discriminate: unavoided (a blind robot just tracking its circle) the person comes within
-a few centimetres of the robot or touches it, and the approach runs along a unit's line of sight
-(at the arrival instant ``T_ARRIVE``), so good perception can see it coming:
+Scenario file (every key optional unless said; lengths m, times s, speeds m/s)::
 
-* ``none``: nobody; the task alone.
-* ``arm``: a person's forearm (capsule, r = 4.5 cm) comes along su4's line of sight (+y) onto the
-  robot's forearm at 0.3 m/s, holds 3 s and withdraws at 0.5 m/s.
-* ``hand``: a hand (sphere, r = 5 cm) comes along su6's line of sight (+x -y) into the space the
-  flange sweeps at 0.3 m/s, holds 3 s and withdraws: the task itself must give way.
-* ``walk``: a standing person (:func:`skincal.sim.scene.human`) walks at 0.8 m/s diagonally from the
-  front right, where su6 and su1 look, close past the flange and off to the left.
-* ``fast``: the hand of ``hand`` at 1 m/s.
+    name: hand                     # default: the file's stem
+    description: a hand reaches into the end effector's path
+    human_speed: 2.0               # v_h of ISO 13855 for the protective separation (1.6 walking, 2.0 hand)
+    duration: 20                   # run length; default: when the last person has left + `after`
+    after: 4.0                     # default 4
+    people:                        # moving obstacles, at most 16
+      - name: hand                 # required, unique (skincal.names rule)
+        shape: sphere              # sphere (radius) | capsule (radius, length, axis) | human (height)
+        radius: 0.05
+        speed: 0.3                 # speed of every leg without its own (skincal avoid --speed overrides it)
+        relative_to: flange        # base (default) | flange | shoulder | elbow | wrist | upper_arm | forearm
+                                   # | {joint: k} | {link: k}: that point at the start configuration
+        floor: false               # true: the z of the waypoints is absolute (feet on the floor); human: true
+        start: 1.0                 # instant the first leg starts (default 0) ...
+        arrive: {waypoint: 2, at: 7.0}  # ... or: the instant waypoint k (1-based) is reached
+        waypoints:                 # at least 1, at most 256
+          - {p: [0.645, -1.657, 0.433]}
+          - {p: [0.033, -0.310, 0.187], hold: 3.0}   # hold: s to stay once there
+          - {p: [0.645, -1.657, 0.433], speed: 0.5}  # this leg's own speed
+    obstacles:                     # static, at most 16: sphere | capsule, with p (and relative_to, floor)
+      - {name: post, shape: capsule, radius: 0.05, length: 1.0, axis: [0, 0, 1], p: [0.6, 0.4, 0.5]}
 
-Each has ``t_leave``, the instant the person has fully left (the tracking error should recover after it).
+A human is :func:`skincal.sim.scene.human` (capsules and a sphere), feet on the waypoints, facing the
+direction of its first leg. Each scenario has ``t_leave``, the instant the last person reaches its last
+waypoint (and its hold ends): the tracking error should recover after it.
+
+The four legacy scenarios (issue 7) are files that reproduce the former Python definitions on the Panda
+(their points written relative to the flange at ``Q_START``): ``arm`` (a forearm along su4's line of
+sight onto the robot's forearm at 0.3 m/s), ``hand`` (a hand along su6's line of sight into the space
+the flange sweeps, 0.3 m/s), ``walk`` (a standing person at 0.8 m/s diagonally close past the flange),
+``fast`` (``hand`` at 1 m/s); ``none`` is nobody. The issue-17 approaches: ``elbow`` (a hand onto the
+elbow from behind and below, 1.0 m/s), ``lower`` (a forearm lowered onto the upper arm from above,
+0.8 m/s), ``pinch`` (two hands closing on the wrist from both sides, 0.5 m/s), ``walk-at`` (a person
+walking straight at the flange at 1.6 m/s and stopping in front of it).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -41,22 +71,26 @@ from numpy.typing import ArrayLike
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray
+from skincal.names import name_problem, printable
 from skincal.sim.scene import Obstacle, Primitive, Scene, TimeTable, human
 
 Q_START = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
 """Start configuration of the Panda, rad (flange about 0.47 m in front of the base, 0.52 m high)."""
 
-SU6_VIEW = (np.array([0.466, -0.22, 0.686]), np.array([0.408, -0.898, 0.164]))
-SU4_VIEW = (np.array([0.306, -0.02, 0.68]), np.array([0.329, 0.944, 0.034]))
-"""Origin (m) and axis of su6 and su4 at ``T_ARRIVE`` while tracking the circle (base frame)."""
-T_ARRIVE = 7.0
-"""Instant the hand and the arm reach their hold points, s."""
-HAND_FAR, HAND_NEAR = SU6_VIEW[0] + 1.6 * SU6_VIEW[1], SU6_VIEW[0] + 0.1 * SU6_VIEW[1]
-"""The hand comes along su6's line of sight at arrival, into the space the flange sweeps, m."""
-ARM_FAR, ARM_NEAR = SU4_VIEW[0] + 1.6 * SU4_VIEW[1], SU4_VIEW[0] + 0.12 * SU4_VIEW[1]
-"""The person's forearm (centre of a capsule along x) comes along su4's line of sight onto the robot's forearm, m."""
-WALK_PATH = np.array([[1.6, -1.9, 0.0], [0.74, -0.1, 0.0], [0.9, 1.8, 0.0]])
-"""The walker's feet: start, closest pass, end, m."""
+MAX_OBJECTS = 16
+MAX_WAYPOINTS = 256
+MAX_DURATION = 600.0
+MAX_COORD = 100.0
+MAX_SPEED = 10.0
+MAX_SIZE = 5.0
+TASKS = ("circle", "pick-place")
+
+
+# ---------------------------------------------------------------------------------------------- tasks
+class Task(Protocol):
+    """A flange reference: ``at(t) -> (position (M, 3) m, velocity (M, 3) m/s)`` at instants ``t`` ``(M,)`` s."""
+
+    def at(self, t: ArrayLike) -> tuple[FloatArray, FloatArray]: ...
 
 
 @dataclass(frozen=True)
@@ -95,98 +129,508 @@ class Circle:
 
 
 @dataclass(frozen=True)
+class PickPlace:
+    """A pick-and-place cycle through ``points`` ``(K, 3)`` (base frame, m; the first is the start and the
+    cycle returns to it), each leg a minimum-jerk (quintic) move of ``durations`` ``(K,)`` s, with
+    ``dwell`` s at the points flagged in ``dwell_at`` ``(K,)`` (after arriving). Periodic."""
+
+    points: FloatArray
+    durations: FloatArray
+    dwell_at: np.ndarray
+    dwell: float
+
+    @classmethod
+    def around(
+        cls, start: ArrayLike, width: float = 0.15, depth: float = 0.1, peak_speed: float = 0.25, dwell: float = 0.3
+    ) -> PickPlace:
+        """The cycle of the module docstring around ``start`` ``(3,)`` m: pick at ``-width`` in y, place at
+        ``+width``, both ``depth`` below; leg durations from ``peak_speed`` (a quintic's peak speed is
+        1.875 times its mean)."""
+        s = np.asarray(start, dtype=float)
+        dy, dz = np.array([0.0, width, 0.0]), np.array([0.0, 0.0, depth])
+        pts = np.array([s, s - dy, s - dy - dz, s - dy, s + dy, s + dy - dz, s + dy])
+        nxt = np.roll(pts, -1, axis=0)
+        L = np.linalg.norm(nxt - pts, axis=1)
+        dur = np.maximum(1.875 * L / peak_speed, 0.2)
+        return cls(pts, dur, np.array([False, False, True, False, False, True, False]), float(dwell))
+
+    @property
+    def period(self) -> float:
+        """Length of one cycle, s."""
+        return float(self.durations.sum() + self.dwell * self.dwell_at.sum())
+
+    def at(self, t: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Position ``(M, 3)`` m and velocity ``(M, 3)`` m/s at instants ``t`` ``(M,)`` s."""
+        t = np.mod(np.atleast_1d(np.asarray(t, dtype=float)), self.period)
+        seg = self.durations + self.dwell * self.dwell_at  # each point's dwell, then its leg
+        starts = np.concatenate([[0.0], np.cumsum(seg)[:-1]])
+        k = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(seg) - 1)
+        tau = t - starts[k] - self.dwell * self.dwell_at[k]
+        s = np.clip(tau / self.durations[k], 0.0, 1.0)
+        blend = s**3 * (10 - 15 * s + 6 * s * s)
+        rate = np.where((s > 0) & (s < 1), 30 * s * s * (1 - s) ** 2 / self.durations[k], 0.0)
+        a, b = self.points[k], self.points[(k + 1) % len(self.points)]
+        return a + blend[:, None] * (b - a), rate[:, None] * (b - a)
+
+
+def make_task(kind: str, start: ArrayLike) -> Circle | PickPlace:
+    """The task ``circle`` or ``pick-place`` starting at the flange position ``start`` ``(3,)`` m."""
+    if kind == "circle":
+        return Circle.through(start)
+    if kind == "pick-place":
+        return PickPlace.around(start)
+    raise ConfigError(f"unknown task '{printable(str(kind))}' (use {' or '.join(TASKS)})")
+
+
+# ---------------------------------------------------------------------------------------------- robot
+def _limits(chain: SerialChain, margin: float = 0.15) -> tuple[FloatArray, FloatArray]:
+    n = chain.n_joints
+    lo = np.full(n, -np.pi) if chain.joint_lower is None else np.maximum(chain.joint_lower, -np.pi)
+    hi = np.full(n, np.pi) if chain.joint_upper is None else np.minimum(chain.joint_upper, np.pi)
+    m = np.minimum(margin, 0.25 * (hi - lo))
+    return lo + m, hi - m
+
+
+def robot_points(chain: SerialChain, q: ArrayLike) -> dict[str, FloatArray]:
+    """Named points ``(3,)`` of the robot at ``q`` (base frame, m): ``base``, ``flange``, ``shoulder``
+    (joint 2's point), ``wrist`` (joint ``n - 1``'s), ``elbow`` (the point of the link axes' polyline
+    between them farthest from the shoulder-wrist line), ``upper_arm`` and ``forearm`` (midpoints)."""
+    q = np.asarray(q, dtype=float)
+    n = chain.n_joints
+    T = chain.link_frames(q)[0]
+    c = chain.joint_axes(T[None])[0][0]
+    shoulder = c[min(1, n - 1)]
+    wrist = c[max(n - 2, 0)]
+    from skincal.kinematics.geometry import link_capsules
+
+    cand = [T[cp.link, :3, :3] @ p + T[cp.link, :3, 3] for cp in link_capsules(chain) for p in (cp.p0, cp.p1)]
+    cand += list(c)
+    cand = np.array(cand)
+    axis = wrist - shoulder
+    L = float(np.linalg.norm(axis))
+    if L > 1e-9:
+        rel = cand - shoulder
+        s = np.clip(rel @ axis / L**2, 0.0, 1.0)
+        # only points beside the middle of the shoulder-wrist segment count as the elbow
+        d = np.where((s > 0.05) & (s < 0.95), np.linalg.norm(rel - s[:, None] * axis, axis=1), -1.0)
+        elbow = cand[int(np.argmax(d))] if d.max() > 0 else 0.5 * (shoulder + wrist)
+    else:
+        elbow = shoulder.copy()
+    flange = (T[n] @ chain.T_link_flange)[:3, 3]
+    return {
+        "base": np.zeros(3),
+        "flange": flange,
+        "shoulder": shoulder,
+        "elbow": elbow,
+        "wrist": wrist,
+        "upper_arm": 0.5 * (shoulder + elbow),
+        "forearm": 0.5 * (elbow + wrist),
+    }
+
+
+def _is_panda(chain: SerialChain) -> bool:
+    from skincal.kinematics import panda
+
+    return chain.n_joints == 7 and chain.same_motion(panda())
+
+
+def start_configuration(chain: SerialChain) -> FloatArray:
+    """The start configuration ``(n,)`` rad of ``chain`` (module docstring): ``Q_START`` on the Panda,
+    else computed (seeded, deterministic)."""
+    if _is_panda(chain):
+        return Q_START.copy()
+    from scipy.optimize import least_squares
+
+    n = chain.n_joints
+    if n < 3:
+        raise ConfigError(f"robot '{chain.name}': an avoidance task needs at least 3 joints, got {n}")
+    rng = np.random.default_rng(0)
+    lo, hi = _limits(chain)
+    mid = 0.5 * (lo + hi)
+    shoulder = chain.joint_axes(chain.link_frames(mid))[0][0][1]
+    reach = float(np.linalg.norm(chain.flange_pose(rng.uniform(lo, hi, (2000, n)))[:, :3, 3] - shoulder, axis=1).max())
+    target = shoulder + np.array([0.5 * reach, 0.0, 0.2 * reach])
+    down = np.array([0.0, 0.0, -1.0])
+
+    def residual(q: FloatArray) -> FloatArray:
+        T = chain.flange_pose(q)[0]
+        return np.concatenate([10.0 * (T[:3, 3] - target), 0.5 * (T[:3, 2] - down), 0.05 * (q - mid) / (hi - lo)])
+
+    best, best_score = None, -np.inf
+    for q_init in rng.uniform(lo, hi, size=(24, n)):
+        q = least_squares(residual, q_init, bounds=(lo, hi)).x
+        if np.linalg.norm(chain.flange_pose(q)[0, :3, 3] - target) > 1e-3:
+            continue
+        pts = robot_points(chain, q)
+        line = pts["wrist"] - pts["shoulder"]
+        s = float(np.clip((pts["elbow"] - pts["shoulder"]) @ line / max(line @ line, 1e-12), 0, 1))
+        elbow_up = pts["elbow"][2] > pts["shoulder"][2] + s * line[2]
+        J = chain.point_jacobian(q, n, chain.T_link_flange[:3, 3])[:3]
+        score = float(np.linalg.svd(J, compute_uv=False).min()) + (1.0 if elbow_up else 0.0)
+        if score > best_score:
+            best, best_score = q, score
+    if best is None:
+        raise ConfigError(f"robot '{chain.name}': found no start configuration with the flange in front of the base")
+    return best
+
+
+# ---------------------------------------------------------------------------------------------- scenarios
+@dataclass(frozen=True)
 class Scenario:
     """One closed-loop run: start configuration, task, obstacles, duration and when the person has left.
 
     Attributes:
         name, description: labels.
         q0: ``(n,)`` start configuration, rad.
-        circle: the flange reference.
+        task: the flange reference (:class:`Circle` or :class:`PickPlace`).
         scene: obstacles with their time tables.
         duration: s.
         t_leave: instant (s) after which nobody is near any more (``0`` when nobody comes).
+        human_speed: ``v_h`` (m/s) the protective separation assumes for this scenario's people.
+        source: the file it was read from.
     """
 
     name: str
     description: str
     q0: FloatArray
-    circle: Circle
+    task: Circle | PickPlace
     scene: Scene
     duration: float
     t_leave: float
+    human_speed: float = 1.6
+    source: str = ""
+
+    @property
+    def circle(self) -> Circle | PickPlace:
+        """The task (legacy name)."""
+        return self.task
+
+    def without_people(self) -> Scenario:
+        """The same run with nobody (the reference run of the task time lost)."""
+        from dataclasses import replace
+
+        return replace(self, name=f"{self.name} (nobody)", scene=Scene(()))
 
 
-def _mover(name: str, prims: tuple[Primitive, ...], waypoints: list[tuple[float, ArrayLike]]) -> Obstacle:
-    t = [w[0] for w in waypoints]
-    p = np.array([w[1] for w in waypoints], dtype=float)
-    return Obstacle(name, prims, p[0], path=TimeTable(t, p))
+def scenario_dir() -> Path:
+    """The folder of the shipped scenario files."""
+    return Path(str(resources.files("skincal.workflows") / "scenario_files"))
 
 
-def _approach(name: str, prims, far, near, t1: float, speed: float, hold: float) -> tuple[Obstacle, float]:
-    """Come from ``far`` to ``near`` at ``speed`` m/s arriving at ``t1``, hold ``hold`` s, go back at 0.5 m/s."""
-    far, near = np.asarray(far, dtype=float), np.asarray(near, dtype=float)
-    L = float(np.linalg.norm(near - far))
-    t_in = t1 - L / speed
-    t2 = t1 + hold
-    t3 = t2 + L / 0.5
-    return _mover(name, prims, [(0.0, far), (t_in, far), (t1, near), (t2, near), (t3, far)]), t3
+def shipped_scenarios() -> tuple[str, ...]:
+    """Names of the shipped scenario files (stems), sorted."""
+    return tuple(sorted(p.stem for p in scenario_dir().glob("*.yaml")))
 
 
-def _arm(chain: SerialChain, q0: FloatArray) -> tuple[Scene, float, float, str]:
-    # A horizontal forearm along x, reaching in from +y (along su4's line of sight) to rest on the
-    # robot's forearm (x ~ 0.1-0.35, z ~ 0.62-0.74): unavoided, it touches.
-    prims = (Primitive("capsule", [0.045, 0.13], [0.0, 0.0, 0.0], _rot_y_90()),)
-    arm, t_out = _approach("arm", prims, ARM_FAR, ARM_NEAR, T_ARRIVE, 0.3, 3.0)
-    return Scene((arm,)), t_out, t_out + 4.0, "a person's forearm reaches onto the robot's forearm from +y (0.3 m/s)"
+class _Fields:
+    """Reads one mapping of a scenario file, naming ``where`` (e.g. ``people[0]``) in every error."""
+
+    def __init__(self, source: str, where: str, value: Any, known: tuple[str, ...]) -> None:
+        self.source, self.where = source, where
+        if not isinstance(value, dict):
+            self.fail(f"must be a mapping, got {type(value).__name__}")
+        for key in value:
+            if key not in known:
+                shown = printable(str(key))[:60]
+                self.fail(f"unknown key '{shown}' (known: {', '.join(known)})", key=None)
+        self.value = value
+
+    def path(self, key: str | None) -> str:
+        if key is None:
+            return self.where or "top level"
+        return f"{self.where}.{key}" if self.where else key
+
+    def fail(self, message: str, key: str | None = None) -> None:
+        raise ConfigError(f"{self.source}: {self.path(key)}: {message}")
+
+    def has(self, key: str) -> bool:
+        return key in self.value
+
+    def number(self, key: str, default: float | None = None, lo: float = -np.inf, hi: float = np.inf,
+               open_lo: bool = False) -> float:  # fmt: skip
+        if key not in self.value:
+            if default is None:
+                self.fail("is required", key)
+            return float(default)
+        v = self.value[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            self.fail(f"must be a number, got {type(v).__name__}", key)
+        v = float(v)
+        if not np.isfinite(v) or v < lo or v > hi or (open_lo and v <= lo):
+            rng = f"{'(' if open_lo else '['}{lo:g}, {hi:g}]"
+            self.fail(f"must be a finite number in {rng}, got {v!r}", key)
+        return v
+
+    def vector(self, key: str, required: bool = True) -> FloatArray | None:
+        if key not in self.value:
+            if required:
+                self.fail("is required", key)
+            return None
+        v = self.value[key]
+        if not (isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                             for x in v)):  # fmt: skip
+            self.fail("must be a list of 3 numbers", key)
+        a = np.array(v, dtype=float)
+        if not np.all(np.isfinite(a)) or np.abs(a).max() > MAX_COORD:
+            self.fail(f"must be finite numbers within +-{MAX_COORD:g} m, got {v}", key)
+        return a
+
+    def text(self, key: str, default: str | None = None) -> str:
+        if key not in self.value:
+            if default is None:
+                self.fail("is required", key)
+            return default
+        v = self.value[key]
+        if not isinstance(v, str):
+            self.fail(f"must be a string, got {type(v).__name__}", key)
+        return v
+
+    def flag(self, key: str, default: bool) -> bool:
+        v = self.value.get(key, default)
+        if not isinstance(v, bool):
+            self.fail(f"must be true or false, got {printable(str(v))[:40]}", key)
+        return v
+
+    def items(self, key: str, most: int) -> list:
+        v = self.value.get(key, [])
+        if not isinstance(v, list):
+            self.fail(f"must be a list, got {type(v).__name__}", key)
+        if len(v) > most:
+            self.fail(f"has {len(v)} entries (at most {most})", key)
+        return v
 
 
-def _hand(chain: SerialChain, q0: FloatArray, speed: float = 0.3) -> tuple[Scene, float, float, str]:
-    # Along su6's line of sight (it looks +x -y from the hand) into the flange's circle: unavoided, it touches.
-    prims = (Primitive("sphere", [0.05]),)
-    hand, t_out = _approach("hand", prims, HAND_FAR, HAND_NEAR, T_ARRIVE, speed, 3.0)
-    return Scene((hand,)), t_out, t_out + 4.0, f"a hand reaches into the end effector's path at {speed} m/s"
+_TOP = ("name", "description", "human_speed", "duration", "after", "people", "obstacles")
+_PERSON = ("name", "shape", "radius", "length", "axis", "height", "speed", "relative_to", "floor", "start", "arrive",
+           "waypoints")  # fmt: skip
+_OBSTACLE = ("name", "shape", "radius", "length", "axis", "p", "relative_to", "floor")
+_WAYPOINT = ("p", "hold", "speed")
 
 
-def _walk(chain: SerialChain, q0: FloatArray) -> tuple[Scene, float, float, str]:
-    # Diagonally from the front right (where su6 and su1 look) close past the flange, off to the left.
-    t = [1.0, 1.0 + np.linalg.norm(WALK_PATH[1] - WALK_PATH[0]) / 0.8]
-    t.append(t[1] + np.linalg.norm(WALK_PATH[2] - WALK_PATH[1]) / 0.8)
-    heading = WALK_PATH[1] - WALK_PATH[0]
-    person = human("walker", WALK_PATH[0], float(np.arctan2(heading[1], heading[0])), path=TimeTable(t, WALK_PATH))
-    return Scene((person,)), t[-1], t[-1] + 4.0, "a person walks close past the robot's hand (0.8 m/s)"
+def _anchor(f: _Fields, points: dict[str, FloatArray], chain: SerialChain, q0: FloatArray) -> FloatArray:
+    ref = f.value.get("relative_to", "base")
+    if isinstance(ref, str):
+        if ref not in points:
+            known = ", ".join(points)
+            f.fail(
+                f"unknown robot point '{printable(ref)[:40]}' (use {known}, {{joint: k}} or {{link: k}})", "relative_to"
+            )
+        return points[ref]
+    if isinstance(ref, dict) and len(ref) == 1:
+        ((kind, k),) = ref.items()
+        n = chain.n_joints
+        if kind in ("joint", "link") and isinstance(k, int) and not isinstance(k, bool):
+            lo = 1 if kind == "joint" else 0
+            if not lo <= k <= n:
+                f.fail(f"{kind} {k} does not exist on '{chain.name}' ({lo}..{n})", "relative_to")
+            T = chain.link_frames(q0)[0]
+            return chain.joint_axes(T[None])[0][0][k - 1] if kind == "joint" else T[k, :3, 3].copy()
+    f.fail("must be a robot point name, {joint: k} or {link: k}", "relative_to")
+    raise AssertionError  # unreachable
 
 
-def _none(chain: SerialChain, q0: FloatArray) -> tuple[Scene, float, float, str]:
-    return Scene(()), 0.0, 5.0, "nobody near: the task alone"
+def _place(f: _Fields, p: FloatArray, anchor: FloatArray, floor: bool) -> FloatArray:
+    out = p + anchor
+    if floor:
+        out[2] = p[2]
+    return out
 
 
-def _rot_y_90() -> FloatArray:
-    return np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+def _shape(f: _Fields, person: bool) -> tuple[Primitive, ...] | None:
+    shape = f.text("shape")
+    kinds = ("sphere", "capsule", "human") if person else ("sphere", "capsule")
+    if shape not in kinds:
+        f.fail(f"must be one of {', '.join(kinds)}, got '{printable(shape)[:40]}'", "shape")
+    extra = {"sphere": ("length", "axis", "height"), "capsule": ("height",), "human": ("radius", "length", "axis")}
+    for key in extra[shape]:
+        if f.has(key):
+            f.fail(f"does not apply to a {shape}", key)
+    if shape == "human":
+        f.number("height", 1.75, 0.5, 2.5)
+        return None
+    r = f.number("radius", None, 0.0, MAX_SIZE, open_lo=True)
+    if shape == "sphere":
+        return (Primitive("sphere", [r]),)
+    length = f.number("length", None, 0.0, 2 * MAX_SIZE, open_lo=True)
+    axis = f.vector("axis", required=False)
+    axis = np.array([0.0, 0.0, 1.0]) if axis is None else axis
+    if np.linalg.norm(axis) < 1e-9:
+        f.fail("must not be zero", "axis")
+    from skincal.skin.placement import frame_from_normal
+
+    z = axis / np.linalg.norm(axis)
+    R = frame_from_normal(z[None], np.zeros(1))[0]
+    if np.allclose(z, [1.0, 0.0, 0.0]):  # the legacy forearm's exact rotation (about y by 90 deg)
+        R = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+    return (Primitive("capsule", [r, 0.5 * length], [0.0, 0.0, 0.0], R),)
 
 
-SCENARIOS: dict[str, Callable[[SerialChain, FloatArray], tuple[Scene, float, float, str]]] = {
-    "none": _none,
-    "arm": _arm,
-    "hand": _hand,
-    "walk": _walk,
-    "fast": lambda chain, q0: _hand(chain, q0, speed=1.0),
-}
-"""Scenario builders by name: ``(chain, q0) -> (scene, t_leave, duration, description)``."""
+def _person(
+    f: _Fields, chain: SerialChain, q0: FloatArray, points: dict, speed_override: float | None
+) -> tuple[Obstacle, float]:
+    name = f.text("name")
+    problem = name_problem(name)
+    if problem:
+        f.fail(f"{printable(name)[:40]!r} {problem}", "name")
+    prims = _shape(f, person=True)
+    is_human = prims is None
+    speed = f.number("speed", 1.0, 0.0, MAX_SPEED, open_lo=True)
+    if speed_override is not None:
+        speed = speed_override
+    anchor = _anchor(f, points, chain, q0)
+    floor = f.flag("floor", is_human)
+    raw = f.items("waypoints", MAX_WAYPOINTS)
+    if not raw:
+        f.fail("needs at least one waypoint", "waypoints")
+    pts, holds, legs = [], [], []
+    for i, w in enumerate(raw):
+        wf = _Fields(f.source, f"{f.path('waypoints')}[{i}]", w, _WAYPOINT)
+        pts.append(_place(f, wf.vector("p"), anchor, floor))
+        holds.append(wf.number("hold", 0.0, 0.0, MAX_DURATION))
+        legs.append(wf.number("speed", speed, 0.0, MAX_SPEED, open_lo=True) if i > 0 else speed)
+        if i == 0 and wf.has("speed"):
+            wf.fail("the first waypoint has no leg to it", "speed")
+    leg_time = [0.0] + [float(np.linalg.norm(pts[i] - pts[i - 1])) / legs[i] for i in range(1, len(pts))]
+    if f.has("start") and f.has("arrive"):
+        f.fail("give start or arrive, not both", "arrive")
+    t0 = f.number("start", 0.0, -MAX_DURATION, MAX_DURATION)
+    if f.has("arrive"):
+        af = _Fields(f.source, f.path("arrive"), f.value["arrive"], ("waypoint", "at"))
+        k = af.number("waypoint", None, 1, len(pts))
+        if k != int(k):
+            af.fail("must be a whole waypoint number", "waypoint")
+        k = int(k) - 1
+        at = af.number("at", None, 0.0, MAX_DURATION)
+        t0 = at - sum(leg_time[1 : k + 1]) - sum(holds[:k])
+    # time table: rest at the first point until t0 (plus its hold), then leg by leg with the holds
+    table_t, table_p = [], []
+    t = t0 + holds[0]
+    if t > 0:
+        table_t.append(0.0)
+        table_p.append(pts[0])
+    table_t.append(t)
+    table_p.append(pts[0])
+    for i in range(1, len(pts)):
+        if leg_time[i] <= 0:
+            f.fail(f"waypoint {i + 1} is where waypoint {i} is (a leg of zero length)", "waypoints")
+        t += leg_time[i]
+        table_t.append(t)
+        table_p.append(pts[i])
+        if holds[i] > 0:
+            t += holds[i]
+            table_t.append(t)
+            table_p.append(pts[i])
+    if t > MAX_DURATION:
+        f.fail(f"the last waypoint is reached at {t:.1f} s (at most {MAX_DURATION:g} s)", "waypoints")
+    path = TimeTable(table_t, np.array(table_p)) if len(table_t) > 1 else None
+    if is_human:
+        step = next((pts[i] - pts[0] for i in range(1, len(pts)) if np.linalg.norm((pts[i] - pts[0])[:2]) > 1e-9), None)
+        yaw = float(np.arctan2(step[1], step[0])) if step is not None else np.pi
+        height = f.number("height", 1.75, 0.5, 2.5)
+        return human(name, pts[0], yaw, height, path), t
+    return Obstacle(name, prims, pts[0], path=path), t
 
 
-def get_scenario(name: str, chain: SerialChain, duration: float | None = None) -> Scenario:
-    """The scenario ``name`` (:data:`SCENARIOS`) for ``chain`` (the Panda: ``Q_START``), optionally shortened."""
-    if name not in SCENARIOS:
-        raise ConfigError(f"unknown scenario '{name}' (known: {', '.join(SCENARIOS)})")
-    if chain.n_joints != Q_START.size:
-        raise ConfigError(f"scenarios are set up for a 7-joint arm (the Panda), got '{chain.name}'")
-    q0 = Q_START.copy()
-    scene, t_leave, default_duration, text = SCENARIOS[name](chain, q0)
-    start = chain.flange_pose(q0)[0, :3, 3]
-    T = default_duration if duration is None else float(duration)
-    if T <= 0:
-        raise ConfigError(f"scenario duration must be positive s, got {T}")
-    return Scenario(name, text, q0, Circle.through(start), scene, T, t_leave)
+def _static(f: _Fields, chain: SerialChain, q0: FloatArray, points: dict) -> Obstacle:
+    name = f.text("name")
+    problem = name_problem(name)
+    if problem:
+        f.fail(f"{printable(name)[:40]!r} {problem}", "name")
+    prims = _shape(f, person=False)
+    p = _place(f, f.vector("p"), _anchor(f, points, chain, q0), f.flag("floor", False))
+    return Obstacle(name, prims, p)
+
+
+def parse_scenario(
+    spec: Any,
+    source: str,
+    chain: SerialChain,
+    *,
+    default_name: str = "scenario",
+    speed: float | None = None,
+    duration: float | None = None,
+    task: str = "circle",
+    q0: ArrayLike | None = None,
+) -> Scenario:
+    """The :class:`Scenario` of a parsed scenario file ``spec`` (module docstring) for ``chain``.
+
+    ``speed`` (m/s) overrides every person's ``speed``, ``duration`` (s) the run length; ``q0`` the start
+    configuration (default :func:`start_configuration`). A bad field is a one-line :class:`ConfigError`
+    naming ``source`` and the field.
+    """
+    if speed is not None and not (np.isfinite(speed) and 0 < speed <= MAX_SPEED):
+        raise ConfigError(f"--speed must be in (0, {MAX_SPEED:g}] m/s, got {speed}")
+    f = _Fields(source, "", spec, _TOP)
+    name = f.text("name", default_name)
+    problem = name_problem(name)
+    if problem:
+        f.fail(f"{printable(name)[:40]!r} {problem}", "name")
+    text = f.text("description", "")
+    v_h = f.number("human_speed", 1.6, 0.0, MAX_SPEED, open_lo=True)
+    after = f.number("after", 4.0, 0.0, MAX_DURATION)
+    q0 = start_configuration(chain) if q0 is None else chain.check_q(q0)[0]
+    points = robot_points(chain, q0)
+    people, t_leave = [], 0.0
+    for i, item in enumerate(f.items("people", MAX_OBJECTS)):
+        obs, t_end = _person(_Fields(source, f"people[{i}]", item, _PERSON), chain, q0, points, speed)
+        people.append(obs)
+        t_leave = max(t_leave, t_end)
+    static = [_static(_Fields(source, f"obstacles[{i}]", item, _OBSTACLE), chain, q0, points)
+              for i, item in enumerate(f.items("obstacles", MAX_OBJECTS))]  # fmt: skip
+    names = [o.name for o in people + static]
+    if len(set(names)) != len(names):
+        f.fail(f"names must be unique, got {', '.join(printable(n)[:40] for n in names)}", "people")
+    T = f.number("duration", t_leave + after if people else 5.0, 0.0, MAX_DURATION, open_lo=True)
+    if duration is not None:
+        if not (np.isfinite(duration) and 0 < duration <= MAX_DURATION):
+            raise ConfigError(f"scenario duration must be in (0, {MAX_DURATION:g}] s, got {duration}")
+        T = float(duration)
+    if T > MAX_DURATION:
+        f.fail(f"the run would last {T:.1f} s (at most {MAX_DURATION:g} s)", "duration")
+    start = points["flange"]
+    return Scenario(name, text, np.asarray(q0, dtype=float), make_task(task, start), Scene(tuple(people + static)),
+                    T, t_leave, v_h, source)  # fmt: skip
+
+
+def load_scenario(
+    path: str | Path,
+    chain: SerialChain,
+    *,
+    speed: float | None = None,
+    duration: float | None = None,
+    task: str = "circle",
+    q0: ArrayLike | None = None,
+) -> Scenario:
+    """Read a scenario file (YAML or JSON, through the guarded :mod:`skincal.data.jsonio` readers)."""
+    from skincal.data.jsonio import load_json, load_yaml
+
+    path = Path(path)
+    load = load_json if path.suffix.lower() == ".json" else load_yaml
+    spec = load(path, "scenario file", ConfigError)
+    return parse_scenario(spec, str(path), chain, default_name=path.stem, speed=speed, duration=duration, task=task,
+                          q0=q0)  # fmt: skip
+
+
+def get_scenario(
+    name: str,
+    chain: SerialChain,
+    duration: float | None = None,
+    *,
+    speed: float | None = None,
+    task: str = "circle",
+    q0: ArrayLike | None = None,
+) -> Scenario:
+    """A shipped scenario by name (:func:`shipped_scenarios`) or a scenario file by path, for ``chain``."""
+    shipped = shipped_scenarios()
+    if name in shipped:
+        path = scenario_dir() / f"{name}.yaml"
+    elif Path(name).suffix.lower() in (".yaml", ".yml", ".json"):
+        path = Path(name)
+    else:
+        raise ConfigError(
+            f"unknown scenario '{printable(name)[:60]}' (shipped: {', '.join(shipped)}; or a .yaml/.json file)"
+        )
+    return load_scenario(path, chain, speed=speed, duration=duration, task=task, q0=q0)
 
 
 def degrade_poses(poses: dict, position_m: float, angle_deg: float, rng: np.random.Generator) -> dict:
