@@ -8,7 +8,7 @@ from skincal.protocol.config import ProtocolConfig, with_poses
 from skincal.protocol.export import export_trajectory, read_trajectory_csv, read_trajectory_json
 from skincal.protocol.limits import check_limits, pose_box, sample_static_poses
 from skincal.protocol.presets import PROTOCOLS, get_protocol
-from skincal.protocol.trajectory import Trajectory, build_trajectory, protocol_duration
+from skincal.protocol.trajectory import Trajectory, build_trajectory, concatenate_trajectories, protocol_duration
 
 __all__ = [
     "PROTOCOLS",
@@ -16,6 +16,7 @@ __all__ = [
     "Trajectory",
     "build_trajectory",
     "check_limits",
+    "concatenate_trajectories",
     "export_trajectory",
     "get_protocol",
     "pose_box",

@@ -171,11 +171,16 @@ def build_trajectory(
     config: ProtocolConfig,
     rng: np.random.Generator | None = None,
     poses: ArrayLike | None = None,
+    *,
+    start: ArrayLike | None = None,
 ) -> Trajectory:
     """Lay out the protocol for ``chain``, sample it at ``config.rate_hz`` and check the limits.
 
     Static poses come from ``poses`` ``(P, n)`` rad, else ``config.poses``, else
-    :func:`sample_static_poses` with ``rng``. Raises :class:`ProtocolError` if an amplitude exceeds
+    :func:`sample_static_poses` with ``rng``. ``start`` ``(n,)`` rad: where the robot rests before
+    the motion; the motion then begins with the move from it to the first pose (no move when they
+    are equal), so that a piece of motion can be appended to one that ended at ``start``
+    (:func:`concatenate_trajectories`). Raises :class:`ProtocolError` if an amplitude exceeds
     a velocity limit, the motion leaves the margin-shrunk position limits or the acceleration bounds
     (:func:`skincal.protocol.limits.acceleration_bounds`), or -- with ``config.collision_check`` --
     collides with itself or the floor (:mod:`skincal.protocol.collision`, sampled every 50 ms);
@@ -199,10 +204,15 @@ def build_trajectory(
     stops = _stop_durations(config, n)
     D = config.excite_duration
     pieces = _Pieces(n)
+    if start is not None:
+        start = np.asarray(start, dtype=float)
+        if start.shape != (n,) or not np.all(np.isfinite(start)):
+            raise ConfigError(f"protocol '{config.name}': start must be a finite ({n},) configuration in rad")
     for p, q0 in enumerate(poses):
-        if p > 0:
-            T = move_duration(chain, config, poses[p - 1], q0)
-            pieces.add(T, quintic_move_coef(poses[p - 1], q0, T))
+        q_prev = poses[p - 1] if p > 0 else start
+        if q_prev is not None and (p > 0 or not np.array_equal(q_prev, q0)):
+            T = move_duration(chain, config, q_prev, q0)
+            pieces.add(T, quintic_move_coef(q_prev, q0, T))
         rest_start = pieces.add(config.rest_duration, hold_coef(q0))
         settle = 0.5 * (config.rest_duration - config.static_duration)
         pieces.segments.append((rest_start + settle, pieces.now - settle, STATIC, p, -1))
@@ -260,3 +270,46 @@ def _with_samples(traj: Trajectory, t: FloatArray, q: FloatArray, qd: FloatArray
     from dataclasses import replace
 
     return replace(traj, t=t, q=q, qd=qd, qdd=qdd)
+
+
+def concatenate_trajectories(parts: list[Trajectory]) -> Trajectory:
+    """One trajectory executing ``parts`` one after another (each starting where the previous ended,
+    e.g. built with ``build_trajectory(..., start=previous_end)``), sampled at the first part's rate.
+
+    Times, segments and pose indices of each part are shifted behind the previous ones; the config
+    is the first part's. Raises :class:`ConfigError` when a part does not start at the configuration
+    the previous one ended in (to 1e-9 rad) or the joint counts differ.
+    """
+    from dataclasses import replace
+
+    if not parts:
+        raise ConfigError("concatenate_trajectories: no trajectory given")
+    n = parts[0].n_joints
+    knots, coef, B, w, seg, poses = [np.zeros(1)], [], [], [], [], []
+    offset, n_poses = 0.0, 0
+    for k, part in enumerate(parts):
+        if part.n_joints != n:
+            raise ConfigError(f"concatenate_trajectories: part {k + 1} has {part.n_joints} joints, the first {n}")
+        if k > 0:
+            end = parts[k - 1].evaluate([parts[k - 1].knots[-1]])[0][0]
+            begin = part.evaluate([part.knots[0]])[0][0]
+            if not np.allclose(end, begin, rtol=0.0, atol=1e-9):
+                raise ConfigError(f"concatenate_trajectories: part {k + 1} does not start where part {k} ends")
+        shift = offset - float(part.knots[0])
+        knots.append(part.knots[1:] + shift)
+        coef.append(part.coef)
+        B.append(part.sine_amplitude)
+        w.append(part.sine_omega)
+        s = part.segments
+        seg.append((s.t_start + shift, s.t_end + shift, s.kind, s.pose + n_poses, s.joint))
+        poses.append(part.poses)
+        offset += part.duration
+        n_poses += part.poses.shape[0]
+    segments = Segments(*(np.concatenate([x[i] for x in seg]) for i in range(5)))
+    traj = replace(
+        parts[0], segments=segments, poses=np.concatenate(poses), knots=np.concatenate(knots),
+        coef=np.concatenate(coef), sine_amplitude=np.concatenate(B), sine_omega=np.concatenate(w),
+    )  # fmt: skip
+    rate = traj.config.rate_hz
+    t = np.arange(int(np.floor(offset * rate + 1e-9)) + 1) / rate
+    return _with_samples(traj, t, *traj.evaluate(t))

@@ -1,0 +1,326 @@
+"""The next best motion: which joint to excite, and where, for the most information per second.
+
+From the robot's current configuration ``q_now`` the candidates are segments the robot can execute
+(:func:`skincal.protocol.build_trajectory` with ``start=q_now``, one pose, one excited joint):
+
+* *excite joint j here*: rest, ``qd_j = A_j sin(2 pi f_j t)`` for ``excite_duration`` s (amplitude and
+  frequency of the segment protocol fitted to the robot, :func:`segment_config`), rest;
+* *move, then excite joint j*: the rest-to-rest quintic move to a new rest pose, then the same. The
+  new poses are drawn uniformly within the margin-shrunk position limits, collision-free, and the
+  :attr:`DesignOptions.pose_candidates` whose gravity directions in the link frames lie farthest from
+  those of the poses visited so far are kept (gravity diversity, as ``pose_selection="diverse"``).
+
+A candidate is offered only when its excursion stays within the limits (:func:`excitable`); the chosen
+one is built with every check of :func:`~skincal.protocol.build_trajectory` (limits at the protocol
+rate, self-collision and floor), and the next best is taken when it fails.
+
+Score (D-optimal, per second of motion)::
+
+    score = sum_u w_u [log det(I_u + P + dI_u) - log det(I_u + P)] / duration
+
+with ``I_u`` the unit's current information on its pose parameters ``[rotation (3, rad), position
+(3, m)]`` (:meth:`OnlineCalibrator.information`), ``dI_u`` the information the candidate's motion would
+add at the unit's current estimate (:meth:`OnlineCalibrator.pose_information_rate` of the motion
+sampled every :attr:`DesignOptions.dt` s), ``P`` a weak prior (std :attr:`DesignOptions.prior_rotation_rad`,
+:attr:`DesignOptions.prior_position_m`) that keeps the log det finite before a direction is observed,
+and ``w_u = 1``, or :attr:`DesignOptions.reached_weight` for a unit whose std already reached its target.
+The gain is invariant to the parameters' units (a log det ratio), so rad and m mix freely.
+
+Units without a link or an estimate yet cannot be scored; while there are any, the motion is chosen
+to find them (:func:`next_motion`): the joint most of them name as ``best_joint``, else the joint not
+yet excited nearest the tip.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Protocol
+
+import numpy as np
+
+from skincal.errors import ConfigError, ProtocolError
+from skincal.kinematics.chain import SerialChain
+from skincal.kinematics.transforms import FloatArray
+from skincal.protocol import ProtocolConfig, Trajectory, build_trajectory, get_protocol
+from skincal.protocol.limits import excursion_envelopes, fit_to_limits, position_bounds
+
+SEGMENT_PROTOCOL = "fast"
+"""The protocol whose excitation (amplitude, frequency, duration, rests, move speed) a segment uses."""
+
+
+@dataclass(frozen=True)
+class DesignOptions:
+    """How the next motion is chosen.
+
+    Attributes:
+        pose_candidates: new rest poses scored per decision (besides staying where the robot is).
+        pose_pool: uniform draws the new poses are chosen from (gravity diversity).
+        dt: step at which a candidate's motion is sampled for its information, s.
+        reached_weight: weight of a unit whose std already reached the target (others weigh 1).
+        prior_rotation_rad, prior_position_m: std of the weak prior regularising the log det.
+    """
+
+    pose_candidates: int = 6
+    pose_pool: int = 60
+    dt: float = 0.02
+    reached_weight: float = 0.1
+    prior_rotation_rad: float = 1.0
+    prior_position_m: float = 0.1
+
+    def __post_init__(self) -> None:
+        if self.pose_candidates < 0 or self.pose_pool < self.pose_candidates:
+            raise ConfigError("DesignOptions: need 0 <= pose_candidates <= pose_pool")
+        for name in ("dt", "prior_rotation_rad", "prior_position_m"):
+            if not (np.isfinite(getattr(self, name)) and getattr(self, name) > 0):
+                raise ConfigError(f"DesignOptions.{name} must be positive, got {getattr(self, name)!r}")
+        if not (0.0 <= self.reached_weight <= 1.0):
+            raise ConfigError(f"DesignOptions.reached_weight must be in [0, 1], got {self.reached_weight!r}")
+
+    @property
+    def prior(self) -> FloatArray:
+        """``(6, 6)`` prior information ``diag(1/sigma^2)`` over ``[rotation (3), position (3)]``."""
+        return np.diag([self.prior_rotation_rad**-2] * 3 + [self.prior_position_m**-2] * 3)
+
+
+class Informed(Protocol):
+    """What the design needs of the streaming calibrator (:class:`~skincal.calib.online.OnlineCalibrator`)."""
+
+    def status(self) -> Mapping[str, object]: ...
+
+    def information(self, unit: str) -> tuple[int, FloatArray]: ...
+
+    def pose_information_rate(
+        self, unit: str, link: int, q: FloatArray, qd: FloatArray, qdd: FloatArray, dt: float
+    ) -> FloatArray: ...
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One possible next segment.
+
+    Attributes:
+        pose: ``(n,)`` rest pose of the segment, rad (the current configuration when it does not move).
+        joint: 0-based excited joint.
+        moves: whether the segment starts with a move to ``pose``.
+        duration: length of the segment, s.
+        gain: weighted D-optimal information gain over all units (nats).
+        score: ``gain / duration``.
+        trajectory: the segment, time from 0, starting at the robot's current configuration.
+    """
+
+    pose: FloatArray
+    joint: int
+    moves: bool
+    duration: float
+    gain: float
+    score: float
+    trajectory: Trajectory
+
+    def describe(self) -> str:
+        """One line: what the robot does."""
+        where = "move to a new pose, then excite" if self.moves else "excite"
+        return f"{where} joint {self.joint + 1} ({self.duration:.1f} s, gain {self.gain:.2f})"
+
+
+def segment_config(chain: SerialChain, protocol: str | ProtocolConfig = SEGMENT_PROTOCOL) -> ProtocolConfig:
+    """The segment protocol fitted to ``chain`` (:func:`~skincal.protocol.limits.fit_to_limits`), one pose,
+    collision-checked."""
+    config = get_protocol(protocol) if isinstance(protocol, str) else protocol
+    return replace(fit_to_limits(chain, config), collision_check=True, n_poses=1, poses=None)
+
+
+def d_optimal_gain(information: FloatArray, added: FloatArray, prior: FloatArray | None = None) -> float:
+    """``log det(I + P + dI) - log det(I + P)`` (nats) for information ``I``, added ``dI`` and prior ``P``
+    (all ``(k, k)`` symmetric; ``P`` defaults to 0, then ``I`` must be positive definite)."""
+    base = np.asarray(information, dtype=float) + (0.0 if prior is None else np.asarray(prior, dtype=float))
+    sign0, log0 = np.linalg.slogdet(base)
+    sign1, log1 = np.linalg.slogdet(base + np.asarray(added, dtype=float))
+    if sign0 <= 0 or sign1 <= 0:
+        raise ConfigError("d_optimal_gain: the information (with the prior) is not positive definite")
+    return float(log1 - log0)
+
+
+def excitable(chain: SerialChain, config: ProtocolConfig, q: FloatArray) -> np.ndarray:
+    """``(K, n)`` bool: joint ``j`` may be excited at configuration ``q[k]`` (``(K, n)`` or ``(n,)``): every
+    joint within the margin-shrunk limits and joint ``j``'s excursion too (:func:`~skincal.protocol.limits.pose_box`
+    per joint)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    lower, upper = position_bounds(chain)
+    m = config.limit_margin
+    lo, hi = excursion_envelopes(chain, replace(config, excited_joints=None))
+    tol = 1e-9
+    inside = np.all((q >= lower + m - tol) & (q <= upper - m + tol), axis=1)
+    fits = (q >= lower + m - lo - tol) & (q <= upper - m - hi + tol)
+    return inside[:, None] & fits
+
+
+def build_segment(
+    chain: SerialChain, config: ProtocolConfig, start: FloatArray, pose: FloatArray, joint: int, *, check: bool = True
+) -> Trajectory:
+    """The segment from ``start`` (move when ``pose`` differs), rest, excite ``joint``, rest; with ``check``
+    every check of :func:`~skincal.protocol.build_trajectory` (limits, collision), else limits only."""
+    seg = replace(config, excited_joints=(int(joint),), collision_check=bool(check and config.collision_check))
+    return build_trajectory(chain, seg, poses=np.asarray(pose, dtype=float)[None], start=start)
+
+
+def gravity_features(chain: SerialChain, poses: FloatArray) -> FloatArray:
+    """Gravity direction in every link frame ``1..n``, flattened ``(K, 3 n)`` (as the diverse pose draw)."""
+    from skincal.protocol.limits import _gravity_features
+
+    return _gravity_features(chain, np.atleast_2d(np.asarray(poses, dtype=float)))
+
+
+def candidate_poses(
+    chain: SerialChain, config: ProtocolConfig, visited: FloatArray, rng: np.random.Generator, options: DesignOptions
+) -> FloatArray:
+    """``(K, n)`` new rest poses: uniform draws within the margin-shrunk limits, collision-free, the ``K``
+    farthest (greedy) from the visited poses ``(V, n)`` in gravity directions."""
+    from skincal.protocol.collision import CollisionModel
+
+    if options.pose_candidates == 0:
+        return np.zeros((0, chain.n_joints))
+    lower, upper = position_bounds(chain)
+    m = config.limit_margin
+    pool = rng.uniform(lower + m, upper - m, size=(options.pose_pool, chain.n_joints))
+    pool = pool[CollisionModel(chain).free(pool)]
+    if pool.shape[0] == 0:
+        return pool
+    feat = gravity_features(chain, pool)
+    ref = gravity_features(chain, visited) if len(visited) else np.zeros((0, feat.shape[1]))
+    dist = np.full(pool.shape[0], np.inf)
+    for r in ref:
+        dist = np.minimum(dist, np.sum((feat - r) ** 2, axis=1))
+    chosen: list[int] = []
+    for _ in range(min(options.pose_candidates, pool.shape[0])):
+        d = dist.copy()
+        d[chosen] = -np.inf
+        k = int(np.argmax(d))
+        chosen.append(k)
+        dist = np.minimum(dist, np.sum((feat - feat[k]) ** 2, axis=1))
+    return pool[chosen]
+
+
+def unit_weights(status: Mapping[str, object], reached_weight: float) -> dict[str, float]:
+    """Per scorable unit (a link and an estimate), its weight: 1, or ``reached_weight`` once at target."""
+    out: dict[str, float] = {}
+    for name, st in status.items():
+        if getattr(st, "link", None) is None or getattr(st, "pose", None) is None:
+            continue
+        out[name] = reached_weight if getattr(st, "reached", False) else 1.0
+    return out
+
+
+def motion_gain(
+    calibrator: Informed,
+    trajectory: Trajectory,
+    weights: Mapping[str, float],
+    options: DesignOptions,
+    current: Mapping[str, tuple[int, FloatArray]] | None = None,
+) -> float:
+    """Weighted D-optimal gain (module docstring) of executing ``trajectory`` for the units in ``weights``."""
+    t = np.arange(0.0, trajectory.duration, options.dt)
+    q, qd, qdd = trajectory.evaluate(t)
+    prior = options.prior
+    gain = 0.0
+    for unit, w in weights.items():
+        if w <= 0:
+            continue
+        link, info = current[unit] if current is not None else calibrator.information(unit)
+        added = calibrator.pose_information_rate(unit, link, q, qd, qdd, options.dt)
+        gain += w * d_optimal_gain(info, added, prior)
+    return gain
+
+
+def score_candidates(
+    calibrator: Informed,
+    chain: SerialChain,
+    config: ProtocolConfig,
+    q_now: FloatArray,
+    poses: FloatArray,
+    options: DesignOptions = DesignOptions(),
+    joints: Sequence[int] | None = None,
+) -> list[Candidate]:
+    """Every feasible candidate (here, and at each of ``poses`` ``(K, n)``; ``joints``: only these) scored,
+    best first. Candidates are built without the collision check (:func:`next_motion` checks the chosen)."""
+    q_now = np.asarray(q_now, dtype=float)
+    status = calibrator.status()
+    weights = unit_weights(status, options.reached_weight)
+    current = {u: calibrator.information(u) for u in weights}
+    sites = [q_now, *np.atleast_2d(poses)] if len(poses) else [q_now]
+    ok = excitable(chain, config, np.array(sites))
+    allowed = set(range(chain.n_joints) if joints is None else joints)
+    out: list[Candidate] = []
+    for k, pose in enumerate(sites):
+        for j in range(chain.n_joints):
+            if not ok[k, j] or j not in allowed:
+                continue
+            try:
+                traj = build_segment(chain, config, q_now, pose, j, check=False)
+            except ProtocolError:
+                continue
+            gain = motion_gain(calibrator, traj, weights, options, current) if weights else 0.0
+            out.append(Candidate(pose, j, k > 0, traj.duration, gain, gain / traj.duration, traj))
+    out.sort(key=lambda c: -c.score)
+    return out
+
+
+def next_motion(
+    calibrator: Informed,
+    chain: SerialChain,
+    q_now: FloatArray,
+    rng: np.random.Generator,
+    *,
+    config: ProtocolConfig | None = None,
+    visited: FloatArray | None = None,
+    excited: Sequence[int] = (),
+    options: DesignOptions = DesignOptions(),
+) -> Candidate:
+    """The best next segment from ``q_now`` (module docstring), checked (limits, collision).
+
+    Args:
+        calibrator: the streaming calibrator (its status and information).
+        chain: the robot.
+        q_now: ``(n,)`` the robot's configuration (at rest), rad.
+        rng: draws the candidate poses.
+        config: the segment protocol (default :func:`segment_config`).
+        visited: ``(V, n)`` rest poses visited so far (gravity diversity; default ``q_now`` only).
+        excited: joints excited so far (to find units before they can be scored).
+        options: :class:`DesignOptions`.
+
+    Raises :class:`ProtocolError` when no candidate passes the checks.
+    """
+    config = config or segment_config(chain)
+    q_now = np.asarray(q_now, dtype=float)
+    visited = np.atleast_2d(q_now if visited is None else np.asarray(visited, dtype=float))
+    status = calibrator.status()
+    unscored = [st for st in status.values() if getattr(st, "link", None) is None or getattr(st, "pose", None) is None]
+    joints: list[int] | None = None
+    poses = candidate_poses(chain, config, visited, rng, options)
+    if unscored:
+        poses = poses[:0]  # find the units first: no moves, the joint that tells their links
+        joints = _finding_joints(unscored, excited, chain.n_joints)
+    candidates = score_candidates(calibrator, chain, config, q_now, poses, options, joints)
+    if not candidates and joints is not None:  # the finding joint cannot move here: anywhere
+        poses = candidate_poses(chain, config, visited, rng, options)
+        candidates = score_candidates(calibrator, chain, config, q_now, poses, options, joints)
+    for cand in candidates:
+        try:
+            traj = build_segment(chain, config, q_now, cand.pose, cand.joint, check=True)
+        except ProtocolError:
+            continue
+        return replace(cand, trajectory=traj)
+    raise ProtocolError(
+        f"robot '{chain.name}': no next motion within the limits and collision-free from the current configuration"
+    )
+
+
+def _finding_joints(unscored: Sequence[object], excited: Sequence[int], n: int) -> list[int]:
+    """The joints to try while units have no link or estimate: their most named ``best_joint``, else the
+    joints not yet excited, nearest the tip first, else all."""
+    votes = [int(j) for j in (getattr(st, "best_joint", None) for st in unscored) if j is not None and 0 <= j < n]
+    if votes:
+        counts = np.bincount(votes, minlength=n)
+        return [int(j) for j in np.flatnonzero(counts == counts.max())]
+    fresh = [j for j in range(n - 1, -1, -1) if j not in set(excited)]
+    return fresh[:1] if fresh else list(range(n))
