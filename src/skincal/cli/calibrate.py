@@ -93,6 +93,21 @@ def calibrate(
     compare_with: Path | None = typer.Option(
         None, "--compare-with", help="with --reference: a joint-based result (e.g. mle) of the dataset to compare with"
     ),
+    follow: bool = typer.Option(
+        False, "--follow", help="stream the dataset (or a ROS bag) into the online calibrator with a live meter; stop "
+        "when every unit reaches --target (or at the data's end) and write the result"
+    ),
+    speed: float | None = typer.Option(
+        None, "--speed", help="--follow: data seconds per wall second (default 1: real speed; 0: as fast as possible)"
+    ),
+    target: str | None = typer.Option(
+        None, "--target", help="--follow: std to reach on every axis, position and rotation with units "
+        "(default 0.3mm,0.05deg)"
+    ),
+    robot: str | None = typer.Option(
+        None, "--robot", help="--follow of a ROS bag: robot preset, .urdf or chain file (default: the bag's "
+        "/robot_description, else panda)"
+    ),
 ) -> None:
     """Calibrate the skin units of a dataset (or of many: a fleet) and write the result JSON."""
     from rich.progress import Progress
@@ -104,6 +119,17 @@ def calibrate(
 
     if compare_with is not None and reference is None:
         raise ConfigError("--compare-with needs --reference (it compares an IMU-only result with a joint-based one)")
+    if follow:
+        if len(datasets) > 1 or dask is not None or reference is not None:
+            raise ConfigError("--follow streams one dataset or bag; give one, without --dask or --reference")
+        if method != "mle" or option or links is not None or use_truth_links or use_dataset_qdd:
+            raise ConfigError("--follow uses the online calibrator: --method, --option, --links, --use-truth-links "
+                              "and --use-dataset-qdd do not apply")  # fmt: skip
+        _calibrate_follow(datasets[0], out, speed, target, robot, unit, force)
+        return
+    for given, name in ((speed, "--speed"), (target, "--target"), (robot, "--robot")):
+        if given is not None:
+            raise ConfigError(f"{name} applies to --follow only")
     if reference is not None:
         if len(datasets) > 1 or dask is not None:
             raise ConfigError("--reference calibrates one dataset; give one dataset with it")
@@ -132,6 +158,68 @@ def calibrate(
         console.print(f"note: {shown(note)}", highlight=False)
     for name, reason in result.extras.get("failed_units", {}).items():
         console.print(f"[yellow]warning[/]: unit {shown(name)} not calibrated: {shown(reason)}", highlight=False)
+    console.print(f"wrote {shown(out)}", highlight=False)
+
+
+def _calibrate_follow(
+    source: Path, out: Path, speed: float | None, target_text: str | None, robot: str | None,
+    unit: list[str] | None, force: bool,
+) -> None:  # fmt: skip
+    """``--follow``: replay ``source`` (a dataset or a ROS bag) into the online calibrator at ``speed``
+    with the live meter (a rich table on a terminal, a line per second otherwise), stop at the target
+    or the data's end and write the result atomically (nothing is written when interrupted)."""
+    import math
+    import time
+
+    from rich.live import Live
+
+    from skincal.data.atomic import check_output
+    from skincal.data.result import sha256_file, write_result
+    from skincal.viz.meter import meter_line, meter_table
+    from skincal.workflows.live import Target, follow_dataset, is_bag, load_source, parse_target
+
+    target = parse_target(target_text) if target_text is not None else Target()
+    speed = 1.0 if speed is None else speed
+    if not math.isfinite(speed) or speed < 0:
+        raise ConfigError(f"--speed {speed}: a finite number >= 0 (0: as fast as possible)")
+    robot_file = (Path(robot),) if robot is not None and Path(robot).suffix.lower() in (".urdf", ".yaml", ".yml",
+                                                                                        ".json") else ()  # fmt: skip
+    check_output(out, force=force, inputs=(source, *robot_file))
+    ds = load_source(source, robot)
+    digest = "" if is_bag(source) and source.is_dir() else sha256_file(source)
+    title = f"follow {source.name}"
+    last = {"wall": -math.inf}
+    period = 0.25 if console.is_terminal else 1.0
+
+    def show(statuses, t_data: float, t_end: float | None, force_draw: bool = False) -> None:
+        now = time.monotonic()
+        if not force_draw and now - last["wall"] < period:
+            return
+        last["wall"] = now
+        if live is not None:
+            live.update(meter_table(statuses, target.position_m, target.rotation_deg, t_data, t_end, title))
+        else:
+            console.print(meter_line(statuses, target.position_m, target.rotation_deg, t_data, t_end),
+                          markup=False, highlight=False, soft_wrap=True)  # fmt: skip
+
+    live = Live(console=console, refresh_per_second=4, transient=False) if console.is_terminal else None
+    if live is not None:
+        live.start()
+    try:
+        outcome = follow_dataset(ds, target, speed=None if speed == 0 else speed, units=list(unit) if unit else None,
+                                 on_meter=show, dataset_sha256=digest)  # fmt: skip
+        show(outcome.statuses, outcome.t_data, outcome.t_end, force_draw=True)
+    finally:
+        if live is not None:
+            live.stop()
+    write_result(outcome.result, out)
+    if outcome.reached:
+        console.print(f"target {target.text()} reached by every unit after {outcome.t_data:.1f} s of data "
+                      f"(of {outcome.t_end:.1f} s)", highlight=False)  # fmt: skip
+    else:
+        missing = sum(1 for s in outcome.statuses.values() if not s.reached)
+        console.print(f"[yellow]warning[/]: the data ended ({outcome.t_data:.1f} s) before the target "
+                      f"{target.text()}: {missing} of {len(outcome.statuses)} units not there", highlight=False)
     console.print(f"wrote {shown(out)}", highlight=False)
 
 

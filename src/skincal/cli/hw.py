@@ -46,6 +46,22 @@ def record(
     robot: str | None = typer.Option(None, "--robot", help="robot preset written to /robot (e.g. panda)"),
     flush_every: float = typer.Option(1.0, "--flush-every", help="flush to disk at least every S seconds"),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
+    live: bool = typer.Option(
+        False, "--live", help="calibrate while recording (needs --robot and joint states): show the live meter and "
+        "stop when every unit reaches --target"
+    ),
+    target: str | None = typer.Option(
+        None, "--target", help="--live: std to reach on every axis, position and rotation with units "
+        "(default 0.3mm,0.05deg)"
+    ),
+    result: Path | None = typer.Option(
+        None, "--result", help="--live: write the online calibration result here (.json) when the target is reached "
+        "or at the end"
+    ),
+    keep_recording: bool = typer.Option(
+        False, "--keep-recording", help="--live: keep recording after the target is reached (until --duration or "
+        "Ctrl-C)"
+    ),
 ) -> None:
     """Record skin (and joint-state) UDP packets into an HDF5 dataset; Ctrl-C or SIGTERM stop cleanly."""
     from skincal.hw.net import check_bind
@@ -60,6 +76,14 @@ def record(
         raise ConfigError(f"--flush-every {flush_every} s must be > 0")
     if max_units < 1 or max_unit_samples < 1:
         raise ConfigError(f"--max-units {max_units} and --max-unit-samples {max_unit_samples} must be >= 1")
+    if live:
+        _record_live(out, chain, target, result, keep_recording, force,
+                     dict(host=bind, port=port, duration_s=duration, overwrite=force, flush_every_s=flush_every,
+                          max_units=max_units, max_unit_samples=max_unit_samples))  # fmt: skip
+        return
+    for given, name in ((target, "--target"), (result, "--result"), (keep_recording or None, "--keep-recording")):
+        if given is not None:
+            raise ConfigError(f"{name} applies to --live only")
 
     async def main() -> tuple:
         stop = asyncio.Event()
@@ -77,6 +101,10 @@ def record(
     summary, stats = asyncio.run(main())
     if not console.is_terminal:
         console.line()
+    _print_summary(summary, stats, chain)
+
+
+def _print_summary(summary, stats, chain) -> None:  # noqa: ANN001  (types from skincal.hw)
     lost = sum(s.lost for s in stats.streams.values())
     stale = sum(s.stale for s in stats.streams.values())
     console.print(f"wrote {summary.path}: {sum(summary.samples.values())} samples in {len(summary.samples)} "
@@ -88,6 +116,88 @@ def record(
     elif chain is None:
         console.print("note: joint states but no --robot: a dataset with joints needs its robot, so read_dataset, "
                       "skincal info and calibrate will refuse this recording", highlight=False)
+
+
+def _record_live(out: Path, chain, target_text: str | None, result: Path | None, keep_recording: bool, force: bool,
+                 options: dict) -> None:  # noqa: ANN001
+    """``record --live``: the recording session with the online calibrator fed from the same packets, the
+    meter (a rich table on a terminal, a line per second otherwise), a stop at the target unless
+    ``keep_recording``, and the result written atomically to ``result`` at the end."""
+    import time
+
+    from skincal.cli.app import shown
+    from skincal.data.atomic import check_output
+    from skincal.data.result import write_result
+    from skincal.viz.meter import meter_line, meter_table
+    from skincal.workflows.live import Target, parse_target, record_live
+
+    if chain is None:
+        raise ConfigError("--live needs --robot (the calibrator needs the robot's kinematics)")
+    target = parse_target(target_text) if target_text is not None else Target()
+    if result is not None:
+        check_output(result, force=force, inputs=(out,))
+        if result.resolve() == out.resolve():
+            raise ConfigError(f"--result {result} is the recording --out; give another file")
+    if out.exists() and not force:  # before binding (hw.session.record checks it too)
+        raise ConfigError(f"{out}: file exists (choose another --out or allow overwriting)")
+    last = {"wall": 0.0}
+    period = 0.25 if console.is_terminal else 1.0
+    port = options.pop("port")
+
+    async def main() -> tuple:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        live_view = Live(console=console, refresh_per_second=4, transient=False) if console.is_terminal else None
+
+        def on_meter(feed, stats, recorder, receiver) -> None:  # noqa: ANN001
+            now = time.monotonic()
+            if now - last["wall"] < period:
+                return
+            last["wall"] = now
+            title = f"record --live -> {recorder.path} (flushed {recorder.flushed_samples} samples)"
+            if live_view is not None:
+                live_view.update(meter_table(feed.statuses, target.position_m, target.rotation_deg, feed.t_data,
+                                             None, title, feed.notes()))  # fmt: skip
+            else:
+                line = meter_line(feed.statuses, target.position_m, target.rotation_deg, feed.t_data)
+                console.print("; ".join([line, *feed.notes()]), markup=False, highlight=False, soft_wrap=True)
+
+        if live_view is not None:
+            live_view.start()
+        try:
+            return await record_live(
+                out, chain, target, stop=stop, on_meter=on_meter, stop_at_target=not keep_recording, port=port,
+                on_start=lambda p: console.print(f"listening on {options['host']}:{p}", highlight=False), **options,
+            )  # fmt: skip
+        finally:
+            if live_view is not None:
+                live_view.stop()
+
+    summary, stats, feed = asyncio.run(main())
+    _print_summary(summary, stats, chain)
+    outcome = feed.outcome()
+    if outcome is None:
+        console.print("note: no joint states or no skin unit received: nothing calibrated", highlight=False)
+        return
+    console.print(meter_line(outcome.statuses, target.position_m, target.rotation_deg, outcome.t_data),
+                  markup=False, highlight=False, soft_wrap=True)  # fmt: skip
+    for note in outcome.notes:
+        console.print(f"note: {shown(note)}", highlight=False)
+    if outcome.reached:
+        console.print(f"target {target.text()} reached by every unit after {outcome.t_data:.1f} s", highlight=False)
+    else:
+        missing = sum(1 for s in outcome.statuses.values() if not s.reached)
+        console.print(f"[yellow]warning[/]: recording ended before the target {target.text()}: {missing} of "
+                      f"{len(outcome.statuses)} units not there", highlight=False)  # fmt: skip
+    if result is not None:
+        import dataclasses
+
+        from skincal.data.result import sha256_file
+
+        write_result(dataclasses.replace(outcome.result, dataset_sha256=sha256_file(out)), result)
+        console.print(f"wrote {shown(result)}", highlight=False)
 
 
 @app.command()

@@ -48,7 +48,7 @@ def _std_cell(value: float, target: float, scale: float, digits: int) -> str:
     if not math.isfinite(value):
         return f"[{UNKNOWN_STYLE}]undetermined[/]"
     style = REACHED_STYLE if value <= target else OPEN_STYLE
-    return f"[{style}]{scale * value:.{digits}f}[/] / {scale * target:.{digits}f}"
+    return f"[{style}]{scale * value:.{digits}f}[/]"
 
 
 def _link_cell(status: Any) -> str:
@@ -95,7 +95,7 @@ def meter_table(
         f"({target_position_m * 1e3:g} mm, {target_rotation_deg:g} deg); data {span}",
         title_justify="left",
     )
-    for col in ("unit", "link", "pos std (mm) / target", "rot std (deg) / target", "samples (moving)", "move",
+    for col in ("unit", "link", "pos std mm", "rot std deg", "samples (moving)", "move",
                 "missing"):  # fmt: skip
         table.add_column(col, justify="left" if col in ("unit", "missing") else "right")
     for name, s in statuses.items():

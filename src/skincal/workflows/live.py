@@ -1,0 +1,385 @@
+"""The live session: a data stream fed to the streaming calibrator until every unit reaches a target.
+
+Two sources, one calibrator (:class:`skincal.calib.online.OnlineCalibrator`):
+
+* :func:`follow_dataset`: a dataset (or a ROS bag, read by :func:`skincal.data.ros.read_bag`, the one
+  door for bags) replayed in arrival order at real speed or as fast as possible
+  (:func:`skincal.calib.online.replay`); ``skincal calibrate --follow``.
+* :func:`record_live`: the UDP receiver while ``skincal record`` writes the recording
+  (:func:`skincal.hw.session.record`): each in-order packet is also given to the calibrator, its
+  device times mapped to host time by the receiver's clock fit of the stream, exactly as the
+  recorder maps them (``t = fit.to_host(device_t) - t_origin``); ``skincal record --live``.
+
+Both stop by themselves when every unit's position and rotation std is within the :class:`Target`
+on every axis (or at the end of the data), and give the calibrator's result (method ``online``,
+the result JSON contract of every method); the CLI writes it atomically.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import math
+import re
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from skincal.errors import ConfigError
+from skincal.names import name_problem, printable
+
+if TYPE_CHECKING:
+    from skincal.calib.online import OnlineCalibrator, UnitStatus
+    from skincal.data.dataset import Dataset
+    from skincal.data.result import CalibrationResult
+    from skincal.hw.receiver import Delivery, SkinReceiver
+    from skincal.hw.recorder import Recorder
+    from skincal.kinematics.chain import SerialChain
+
+POSITION_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "µm": 1e-6}
+"""Length units a ``--target`` position may be given in -> metres."""
+ROTATION_UNITS = {"deg": 1.0, "rad": 180.0 / math.pi, "mrad": 0.18 / math.pi, "arcmin": 1.0 / 60.0}
+"""Angle units a ``--target`` rotation may be given in -> degrees."""
+BAG_SUFFIXES = (".bag", ".db3", ".mcap")
+"""A ROS bag (besides a ROS 2 bag directory): followed through :func:`skincal.data.ros.read_bag`."""
+CHUNK_S = 0.1
+"""Data fed to the calibrator per step of a replay, s."""
+LIVE_WARMUP_S = 2.0
+"""``record --live``: wall time after the first joint state during which units are gathered before the
+calibrator starts (a unit seen first after that is recorded but not followed), s."""
+
+_TERM = r"\s*([^\s,]*?)\s*([a-zµ]+)\s*"
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+
+
+@dataclass(frozen=True)
+class Target:
+    """Std to reach on every axis: position, m; rotation, deg."""
+
+    position_m: float = 3e-4
+    rotation_deg: float = 0.05
+
+    def text(self) -> str:
+        return f"{self.position_m * 1e3:g}mm,{self.rotation_deg:g}deg"
+
+
+def parse_target(text: str) -> Target:
+    """``--target`` text: a length and an angle with their units, comma-separated, in either order
+    (``0.3mm,0.05deg``; lengths :data:`POSITION_UNITS`, angles :data:`ROTATION_UNITS`); each a finite
+    number > 0. Anything else is a one-line :class:`ConfigError`."""
+    example = "give a position and a rotation std with their units, e.g. --target 0.3mm,0.05deg"
+    shown = printable(repr(str(text)))
+    parts = str(text).split(",")
+    if len(parts) != 2:
+        raise ConfigError(f"--target {shown}: {example}")
+    position = rotation = None
+    for part in parts:
+        m = re.fullmatch(_TERM, part.strip().lower())
+        if m is None or not m.group(1):
+            raise ConfigError(f"--target {shown}: '{printable(part.strip())}' has no number and unit; {example}")
+        number, unit = m.group(1), m.group(2)
+        if _NUMBER.fullmatch(number) is None:
+            raise ConfigError(f"--target {shown}: '{printable(number)}' is not a finite number; {example}")
+        value = float(number)
+        if not value > 0:
+            raise ConfigError(f"--target {shown}: {printable(part.strip())} must be > 0 (a std to reach)")
+        if unit in POSITION_UNITS and position is None:
+            position = value * POSITION_UNITS[unit]
+        elif unit in ROTATION_UNITS and rotation is None:
+            rotation = value * ROTATION_UNITS[unit]
+        elif unit in POSITION_UNITS or unit in ROTATION_UNITS:
+            raise ConfigError(f"--target {shown}: two {'positions' if unit in POSITION_UNITS else 'rotations'}; "
+                              f"{example}")  # fmt: skip
+        else:
+            units = ", ".join([*POSITION_UNITS, *ROTATION_UNITS])
+            raise ConfigError(f"--target {shown}: unknown unit '{printable(unit)}' (use {units})")
+    assert position is not None and rotation is not None
+    if not (math.isfinite(position) and math.isfinite(rotation)):
+        raise ConfigError(f"--target {shown}: not a finite number; {example}")
+    return Target(position, rotation)
+
+
+def all_reached(statuses: Mapping[str, UnitStatus]) -> bool:
+    """Every unit within the target (and at least one unit)."""
+    return bool(statuses) and all(s.reached for s in statuses.values())
+
+
+@dataclass(frozen=True)
+class LiveOutcome:
+    """How a live session ended.
+
+    Attributes:
+        result: the calibrator's result (method ``online``).
+        statuses: the units' last status.
+        reached: every unit reached the target (else the data ended or the session was stopped).
+        t_data: data followed, s since the data's start (when it stopped).
+        t_end: the data's length, s (a replay; ``None`` live).
+        notes: what the user should know (units not followed, ...).
+    """
+
+    result: CalibrationResult
+    statuses: dict[str, UnitStatus]
+    reached: bool
+    t_data: float
+    t_end: float | None
+    notes: tuple[str, ...] = ()
+
+
+MeterCallback = Callable[[Mapping[str, "UnitStatus"], float, "float | None"], None]
+"""``on_meter(statuses, t_data, t_end)``: the meter's view after a step (times in s since the data's start)."""
+
+
+class _Reached(Exception):
+    """Raised from the replay's chunk callback when every unit is at the target."""
+
+
+def make_calibrator(chain: SerialChain, units: list[str], gravity: Any, target: Target) -> OnlineCalibrator:
+    """The streaming calibrator of ``units`` on ``chain`` with ``target`` as its target."""
+    from skincal.calib.online import OnlineCalibrator, OnlineOptions
+
+    options = OnlineOptions(target_position_m=target.position_m, target_rotation_deg=target.rotation_deg)
+    return OnlineCalibrator(chain, units, gravity=np.asarray(gravity, dtype=float), options=options)
+
+
+def is_bag(path: str | Path) -> bool:
+    """A ROS bag (a directory, or a ``.bag``/``.db3``/``.mcap`` file) rather than an HDF5 dataset."""
+    p = Path(path)
+    return p.is_dir() or p.suffix.lower() in BAG_SUFFIXES
+
+
+def load_source(path: str | Path, robot: str | None = None) -> Dataset:
+    """The dataset of ``path``: a ROS bag through :func:`skincal.data.ros.read_bag` (``robot``: a preset,
+    ``.urdf`` or chain file; default the bag's ``/robot_description``, else panda) or an HDF5 dataset
+    (``robot`` must then be ``None``: the dataset has its own). Needs joint states."""
+    if is_bag(path):
+        from skincal.data.ros import read_bag
+
+        ds, _report = read_bag(path, robot)
+    else:
+        from skincal.data.hdf5 import read_dataset
+
+        if robot is not None:
+            raise ConfigError(f"{printable(str(path))}: --robot is for a bag; a dataset has its own robot")
+        ds = read_dataset(path)
+    ds.require_joints("calibrate --follow (the stream is absorbed against the joint states)", source=str(path))
+    return ds
+
+
+def follow_dataset(
+    ds: Dataset,
+    target: Target = Target(),
+    *,
+    speed: float | None = 1.0,
+    units: list[str] | None = None,
+    chunk_s: float = CHUNK_S,
+    on_meter: MeterCallback | None = None,
+    stop_at_target: bool = True,
+    dataset_sha256: str = "",
+) -> LiveOutcome:
+    """Replay ``ds`` into a streaming calibrator (at ``speed`` data seconds per wall second, ``None``: as
+    fast as possible) until every unit reaches ``target`` (``stop_at_target``) or the data end;
+    ``on_meter`` after every chunk. Ctrl-C propagates (nothing is written here)."""
+    from skincal.calib.online import replay
+
+    chain, joints = ds.require_joints("calibrate --follow")
+    if speed is not None and not (math.isfinite(speed) and speed > 0):
+        raise ConfigError(f"--speed {speed}: a finite number > 0 (0: as fast as possible)")
+    names = list(units) if units else ds.units
+    unknown = [u for u in names if u not in ds.imu]
+    if unknown:
+        raise ConfigError(
+            f"no unit {printable(unknown[0])!r} in the dataset (it has {', '.join(map(printable, ds.units))})"
+        )
+    follow = (
+        ds
+        if names == ds.units
+        else dataclasses.replace(
+            ds, imu={u: ds.imu[u] for u in names}, tof={u: s for u, s in ds.tof.items() if u in names}
+        )
+    )
+    t0 = min([float(joints.t[0]), *(float(s.t[0]) for s in follow.imu.values() if len(s.t))])
+    t1 = max([float(joints.t[-1]), *(float(s.t[-1]) for s in follow.imu.values() if len(s.t))])
+    cal = make_calibrator(chain, names, ds.gravity, target)
+    state = {"t": t0}
+
+    def on_chunk(t: float) -> None:
+        state["t"] = float(t)
+        statuses = cal.status()
+        if on_meter is not None:
+            on_meter(statuses, float(t) - t0, t1 - t0)
+        if stop_at_target and all_reached(statuses):
+            raise _Reached
+
+    reached = False
+    try:
+        replay(follow, cal, chunk_s=chunk_s, speed=speed, on_chunk=on_chunk)
+    except _Reached:
+        reached = True
+        cal.finish()
+    statuses = cal.status()
+    reached = reached or all_reached(statuses)
+    result = dataclasses.replace(cal.result(), dataset_sha256=dataset_sha256)
+    if on_meter is not None:
+        on_meter(statuses, state["t"] - t0, t1 - t0)
+    return LiveOutcome(result, dict(statuses), reached, state["t"] - t0, t1 - t0)
+
+
+# -- live from the UDP receiver --------------------------------------------------------------------
+
+
+@dataclass
+class LiveFeed:
+    """Deliveries of a recording session turned into calibrator input (``record --live``).
+
+    Packets are buffered until :meth:`tick` starts the calibrator (the first tick at least
+    :data:`LIVE_WARMUP_S` after the first joint state, with the units seen by then), then fed as they
+    arrive; :meth:`tick` absorbs what is complete and sets ``stop`` when every unit reached the target.
+    """
+
+    chain: SerialChain
+    target: Target
+    gravity: Any = None
+    warmup_s: float = LIVE_WARMUP_S
+    stop_at_target: bool = True
+    clock: Callable[[], float] = time.monotonic
+    calibrator: OnlineCalibrator | None = None
+    statuses: dict[str, UnitStatus] = field(default_factory=dict)
+    t_data: float = 0.0
+    reached: bool = False
+    late_units: set[str] = field(default_factory=set)
+    _joints: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
+    _imu: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray | None]]] = field(default_factory=dict)
+    _first_joint_s: float | None = None
+    _names: dict[int, str | None] = field(default_factory=dict)
+    _units: list[str] = field(default_factory=list)
+
+    def _unit_name(self, recorder: Recorder, unit_id: int) -> str | None:
+        from skincal.hw.recorder import default_unit_name
+
+        if unit_id not in self._names:
+            name = recorder.unit_names.get(unit_id, default_unit_name(unit_id))
+            self._names[unit_id] = name if name_problem(name) is None else None
+        return self._names[unit_id]
+
+    def on_delivery(self, delivery: Delivery, recorder: Recorder, receiver: SkinReceiver) -> None:
+        """One in-order packet: its samples on the recording's host time axis, to the calibrator (or the
+        buffer before it starts)."""
+        from skincal.hw.packet import JointPacket
+
+        p = delivery.packet
+        fit = receiver.clock_fit(delivery.key)
+        device_s = np.asarray(p.t_us, dtype=np.int64) * 1e-6
+        t = fit.to_host(device_s) if fit is not None else np.full(device_s.shape, delivery.host_receive_s)
+        t = np.asarray(t, dtype=float) - recorder.t_origin_s
+        if isinstance(p, JointPacket):
+            if p.q.shape[1] != self.chain.n_joints:
+                return  # another robot: the recorder ignores it too
+            if self._first_joint_s is None:
+                self._first_joint_s = self.clock()
+            q, qd = np.asarray(p.q, dtype=float), np.asarray(p.qd, dtype=float)
+            if self.calibrator is None:
+                self._joints.append((t, q, qd))
+            else:
+                self.calibrator.add_joint_states(t, q, qd)
+            self.t_data = max(self.t_data, float(t[-1]))
+            return
+        if p.accel is None:
+            return
+        name = self._unit_name(recorder, p.unit_id)
+        if name is None:
+            return
+        accel = np.asarray(p.accel, dtype=float)
+        gyro = None if p.gyro is None else np.asarray(p.gyro, dtype=float)
+        if self.calibrator is None:
+            self._imu.setdefault(name, []).append((t, accel, gyro))
+        elif name in self._units:
+            self.calibrator.add_imu(name, t, accel, gyro)
+        else:
+            self.late_units.add(name)
+
+    def _start(self) -> None:
+        self._units = sorted(self._imu)
+        from skincal.kinematics.chain import GRAVITY_BASE
+
+        gravity = self.gravity if self.gravity is not None else GRAVITY_BASE
+        self.calibrator = make_calibrator(self.chain, self._units, gravity, self.target)
+        for t, q, qd in self._joints:
+            self.calibrator.add_joint_states(t, q, qd)
+        for name, parts in self._imu.items():
+            for t, accel, gyro in parts:
+                self.calibrator.add_imu(name, t, accel, gyro)
+        self._joints.clear()
+        self._imu.clear()
+
+    def tick(self) -> bool:
+        """Start the calibrator when due, absorb what is complete, refresh :attr:`statuses`; returns
+        whether every unit is at the target."""
+        if self.calibrator is None:
+            if self._first_joint_s is None or not self._imu or self.clock() - self._first_joint_s < self.warmup_s:
+                return False
+            self._start()
+        assert self.calibrator is not None
+        self.calibrator.update()
+        self.statuses = dict(self.calibrator.status())
+        self.reached = all_reached(self.statuses)
+        return self.reached
+
+    def notes(self) -> tuple[str, ...]:
+        out = []
+        if self.calibrator is None:
+            out.append("waiting for joint states and skin units" if self._first_joint_s is None or not self._imu
+                       else "gathering units")  # fmt: skip
+        if self.late_units:
+            late = ", ".join(printable(n) for n in sorted(self.late_units))
+            out.append(f"recorded but not followed (first seen after the meter started): {late}")
+        return tuple(out)
+
+    def outcome(self) -> LiveOutcome | None:
+        """At the end of the session: absorb what is left and give the result (``None`` when the
+        calibrator never started: no joint states or no skin unit)."""
+        if self.calibrator is None:
+            if self._first_joint_s is None or not self._imu:
+                return None
+            self._start()
+        assert self.calibrator is not None
+        self.calibrator.finish()
+        self.statuses = dict(self.calibrator.status())
+        self.reached = all_reached(self.statuses)
+        return LiveOutcome(self.calibrator.result(), dict(self.statuses), self.reached, self.t_data, None,
+                           self.notes())  # fmt: skip
+
+
+async def record_live(
+    path: str | Path,
+    chain: SerialChain,
+    target: Target = Target(),
+    *,
+    stop: asyncio.Event | None = None,
+    on_meter: Callable[[LiveFeed, Any, Recorder, SkinReceiver], None] | None = None,
+    stop_at_target: bool = True,
+    warmup_s: float = LIVE_WARMUP_S,
+    **record_options: Any,
+) -> tuple[Any, Any, LiveFeed]:
+    """:func:`skincal.hw.session.record` with the live calibrator fed from the same packets (``robot`` is
+    ``chain``); ``on_meter(feed, stats, recorder, receiver)`` every tick; the session stops when every
+    unit reached ``target`` (``stop_at_target``), at ``duration_s`` or when ``stop`` is set. Returns the
+    recording summary, the receiver's counters and the :class:`LiveFeed` (its :meth:`LiveFeed.outcome`
+    gives the result)."""
+    from skincal.hw.session import record
+
+    stop = stop or asyncio.Event()
+    feed = LiveFeed(chain, target, warmup_s=warmup_s, stop_at_target=stop_at_target)
+
+    def on_tick(stats: Any, recorder: Recorder, receiver: SkinReceiver) -> None:
+        if feed.tick() and stop_at_target:
+            stop.set()
+        if on_meter is not None:
+            on_meter(feed, stats, recorder, receiver)
+
+    summary, stats = await record(path, stop=stop, robot=chain, on_tick=on_tick, on_delivery=feed.on_delivery,
+                                  **record_options)  # fmt: skip
+    return summary, stats, feed
