@@ -1,0 +1,165 @@
+"""Update cost of the streaming calibrator (issue 16's target: 100 units at 100 Hz with joint states at
+1 kHz followed in real time on one core, the result ready <= 0.5 s after the last sample).
+
+The data: a session from :func:`skincal.workflows.session.make_session` (the one factory; random
+placement of ``units`` units, ``realistic`` IMUs at 100 Hz, the ``fast`` protocol) whose joint stream
+is the ``controller`` preset at ``joint_rate_hz`` (1 kHz here, 500 Hz in the preset), simulated
+analytically. It is fed to :class:`skincal.calib.online.OnlineCalibrator` by
+:func:`skincal.calib.online.replay` in arrival order, ``chunk_s`` of data at a time, as fast as
+possible; each chunk's CPU time (``time.process_time``: every thread of the process) is measured.
+
+Figures:
+
+* ``cpu_s_per_data_s``: CPU seconds spent per second of data (stream, ``update`` and ``finish``);
+  below 1 means the stream is followed in real time on one core.
+* ``latency_s``: the delay from the last sample's arrival to the result in hand, on one core
+  following the stream in real time: each chunk is processed when it has arrived and the previous
+  one is done (its measured CPU time), then ``finish`` and ``result``; ``max_backlog_s`` is the
+  largest delay of a chunk's end over its arrival on the way.
+* ``status_cpu_s``: the CPU time of one ``status()`` of every unit (what the live meter asks for
+  after each chunk), mean over the chunks.
+* ``real_time`` (``real_time=True`` only): the same stream replayed at real speed (``speed=1``),
+  the measured wall delay from the last chunk's arrival to the result.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+Progress = Callable[[str], None]
+"""``progress(message)``: the step now running."""
+
+
+def bench_dataset(units: int = 100, seed: int = 0, robot: str = "panda", joint_rate_hz: float = 1000.0,
+                  noise: str = "realistic", protocol: str = "fast"):  # fmt: skip
+    """The benchmark's simulated dataset (module docstring)."""
+    from skincal.sim import simulate
+    from skincal.sim.joint_states import get_joint_model
+    from skincal.workflows.session import make_session
+
+    session = make_session(robot, "random", units, noise, protocol, seed, joints="controller")
+    session = replace(session, joint_model=replace(get_joint_model("controller"), rate_hz=float(joint_rate_hz)))
+    return simulate(session, "analytic")
+
+
+def _schedule(arrivals: np.ndarray, costs: np.ndarray) -> tuple[np.ndarray, float]:
+    """One core following the stream: chunk ``k`` starts at ``max(arrival_k, end_{k-1})`` and takes
+    ``costs[k]``; returns each chunk's end and the largest backlog (end minus arrival), s."""
+    ends = np.empty_like(costs)
+    end = -np.inf
+    for k, (a, c) in enumerate(zip(arrivals, costs, strict=True)):
+        end = max(a, end) + c
+        ends[k] = end
+    return ends, float(np.max(ends - arrivals)) if len(ends) else 0.0
+
+
+def run_online_benchmark(
+    units: int = 100,
+    seed: int = 0,
+    robot: str = "panda",
+    joint_rate_hz: float = 1000.0,
+    chunk_s: float = 0.1,
+    real_time: bool = False,
+    progress: Progress | None = None,
+    dataset: Any = None,
+) -> dict[str, Any]:
+    """Measure the update cost (module docstring); ``dataset`` replaces the simulated one (tests)."""
+    from skincal.calib.online import OnlineCalibrator, replay
+
+    note = progress or (lambda _m: None)
+    note(f"simulating {units} units (fast protocol, joint states at {joint_rate_hz:g} Hz)")
+    wall = time.perf_counter()
+    ds = dataset if dataset is not None else bench_dataset(units, seed, robot, joint_rate_hz)
+    sim_s = time.perf_counter() - wall
+    chain, joints = ds.require_joints("the online benchmark")
+    t0 = min(float(joints.t[0]), *(float(s.t[0]) for s in ds.imu.values()))
+    t1 = max(float(joints.t[-1]), *(float(s.t[-1]) for s in ds.imu.values()))
+    imu_rate = float(np.median([(len(s.t) - 1) / (s.t[-1] - s.t[0]) for s in ds.imu.values()]))
+    joint_rate = float((len(joints.t) - 1) / (joints.t[-1] - joints.t[0]))
+
+    note(f"following {t1 - t0:.1f} s of data as fast as possible")
+    cal = OnlineCalibrator(chain, ds.units, gravity=ds.gravity)
+    marks: list[tuple[float, float]] = []  # (data time of the chunk's end, process time when done)
+    status_cpu: list[float] = []
+
+    def on_chunk(t: float) -> None:
+        now = time.process_time()
+        marks.append((float(t), now))
+        cal.status()
+        status_cpu.append(time.process_time() - now)
+
+    cpu_start = time.process_time()
+    wall = time.perf_counter()
+    replay(ds, cal, chunk_s=chunk_s, speed=None, on_chunk=on_chunk)
+    cpu_replayed = time.process_time()
+    result = cal.result()
+    cpu_end = time.process_time()
+    wall_s = time.perf_counter() - wall
+    status_total = float(np.sum(status_cpu))
+    times = np.array([m[0] for m in marks]) - t0
+    done = np.array([m[1] for m in marks])
+    starts = np.r_[cpu_start, done[:-1] + np.asarray(status_cpu[:-1])]  # a chunk's cost excludes the meter's
+    costs = done - starts
+    finish_cpu = cpu_replayed - (done[-1] + status_cpu[-1]) if len(done) else cpu_replayed - cpu_start
+    result_cpu = cpu_end - cpu_replayed
+    ends, backlog = _schedule(times, costs)
+    last_arrival = t1 - t0
+    ready = max(float(ends[-1]) if len(ends) else 0.0, last_arrival) + finish_cpu + result_cpu
+    stream_cpu = float(costs.sum()) + finish_cpu
+    doc: dict[str, Any] = {
+        "robot": chain.name,
+        "units": len(ds.units),
+        "imu_rate_hz": round(imu_rate, 2),
+        "joint_rate_hz": round(joint_rate, 1),
+        "data_s": round(last_arrival, 3),
+        "imu_samples": int(sum(len(s.t) for s in ds.imu.values())),
+        "joint_samples": int(len(joints.t)),
+        "chunk_s": chunk_s,
+        "simulation_s": round(sim_s, 2),
+        "cpu_s": round(stream_cpu, 3),
+        "cpu_s_per_data_s": round(stream_cpu / last_arrival, 4),
+        "finish_cpu_s": round(finish_cpu, 4),
+        "result_cpu_s": round(result_cpu, 4),
+        "latency_s": round(ready - last_arrival, 4),
+        "max_backlog_s": round(backlog, 4),
+        "status_cpu_s": round(status_total / max(len(status_cpu), 1), 5),
+        "status_cpu_s_per_data_s": round(status_total / last_arrival, 4),
+        "wall_s": round(wall_s, 2),
+        "units_reached": sum(1 for s in cal.status().values() if s.reached),
+        "units_in_result": len(result.units),
+    }
+    if real_time:
+        note(f"following {t1 - t0:.1f} s of data at real speed")
+        cal = OnlineCalibrator(chain, ds.units, gravity=ds.gravity)
+        walls: list[tuple[float, float]] = []
+        replay(ds, cal, chunk_s=chunk_s, speed=1.0, on_chunk=lambda t: walls.append((float(t), time.perf_counter())))
+        cal.result()
+        ready_wall = time.perf_counter()
+        first_t, first_wall = walls[0]
+        arrival_last = first_wall + (t1 - first_t)  # the last sample's arrival, on the replay's own clock
+        doc["real_time"] = {"latency_s": round(ready_wall - arrival_last, 4)}
+    return doc
+
+
+def online_report(doc: dict[str, Any]) -> list[str]:
+    """The figures as lines of text."""
+    lines = [
+        f"{doc['units']} units at {doc['imu_rate_hz']:g} Hz, joint states at {doc['joint_rate_hz']:g} Hz on "
+        f"{doc['robot']}: {doc['data_s']:.1f} s of data ({doc['imu_samples']} IMU + {doc['joint_samples']} joint "
+        f"samples), chunks of {doc['chunk_s']:g} s",
+        f"CPU {doc['cpu_s']:.2f} s for {doc['data_s']:.1f} s of data: {doc['cpu_s_per_data_s']:.3f} CPU s per s of "
+        f"data (finish {doc['finish_cpu_s']:.3f} s, result {doc['result_cpu_s']:.3f} s)",
+        f"result ready {doc['latency_s']:.3f} s after the last sample on one core following in real time "
+        f"(largest backlog on the way {doc['max_backlog_s']:.3f} s)",
+        f"meter: status() of every unit {1e3 * doc['status_cpu_s']:.2f} ms CPU "
+        f"({doc['status_cpu_s_per_data_s']:.3f} CPU s per s of data at one call per chunk)",
+        f"units at the default target at the end: {doc['units_reached']}/{doc['units']}",
+    ]
+    if "real_time" in doc:
+        lines.append(f"replayed at real speed: result {doc['real_time']['latency_s']:.3f} s after the last sample")
+    return lines
