@@ -13,16 +13,26 @@ Per step ``k`` (``t = k dt``, ``dt = 1 ms``):
    among the obstacles (the robot's own capsule hull is hidden from the rays, see below),
    then :meth:`~skincal.skin.tof.TofModel.measure` (window, noise, rounding: the simulators' model
    and random stream); perception gets the reading with the joint state of its instant;
-3. the controller solves its QP with the live filtered points and the circle reference;
-4. the robot integrates the commanded velocity kinematically, ``q <- q + qd dt`` (an ideal velocity
-   interface, as a Panda under joint-velocity control at 1 kHz).
+3. the controller solves its QP with the live filtered points and the task reference;
+4. ``mode="kinematic"`` (default): the robot integrates the commanded velocity, ``q <- q + qd dt`` (an
+   ideal velocity interface, as a Panda under joint-velocity control at 1 kHz); ``mode="torque"``: the
+   command is tracked with joint torques by :class:`skincal.sim.dynamics.TorqueRobot` in the same MuJoCo
+   model (gravity and inertia from the model, torques clipped at the effort limits).
+
+**Retreat and resume** (``resume=True``): the reference runs on a task clock ``tau`` instead of ``t``.
+While the nearest perceived point is within the protective separation ``S_p`` of the step plus
+``resume_band`` (m), the clock's rate ramps down to 0 (the reference stops where it is and its
+velocity feed-forward with it; the controller keeps the distance, backing away when the person keeps
+coming); once free it ramps back to 1, each ramp taking ``RAMP_S``. The task time lost is then how far
+the clock lags behind the run without a person (:func:`skincal.workflows.avoid_metrics.task_time_lost`).
+Without ``resume`` the reference runs on ``t`` (the legacy loop, unchanged).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -35,10 +45,17 @@ from skincal.kinematics.transforms import FloatArray
 from skincal.perception.body import RobotBody
 from skincal.perception.points import PerceptionConfig
 from skincal.perception.tracker import ProximityTracker
+from skincal.perception.uncertainty import SkinUncertainty
 from skincal.sim.mujoco_model import SensorIndex, build_model, link_body_ids, require_mujoco
 from skincal.skin.pose import SkinUnitPose
 from skincal.skin.tof import TofModel, cone_directions, get_tof_model
 from skincal.workflows.scenarios import Scenario
+
+RAMP_S = 0.2
+"""Time the task clock takes to stop or to get back to full rate, s."""
+RESUME_BAND = 0.1
+"""Default band beyond ``S_p`` within which the task clock pauses, m."""
+MODES = ("kinematic", "torque")
 
 
 @dataclass(frozen=True)
@@ -59,6 +76,13 @@ class RunLog:
             query, QP set-up and solve); loop_time_s ``(S,)`` the whole loop iteration incl. sensing.
         units: unit names (true placement order); tof_t, tof_range: ``(M, U)`` reading instants (s)
             and readings (m, NaN = none) of each unit.
+        margin: ``(S,)`` the protective separation ``S_p`` of the nearest point at each step (m; the
+            fixed critical distance when the controller has no separation model).
+        terms: the parts of ``margin`` (``S_h, S_r, S_s, C, Z_d, Z_r``), each ``(S,)`` m, NaN where no
+            point was perceived; empty without a separation model.
+        task_time: ``(S,)`` the task clock, s (``t`` without resume).
+        protective_stop: ``(S,)`` the controller commanded its protective (safe) stop.
+        mode: ``kinematic`` or ``torque``.
     """
 
     scenario: Scenario
@@ -77,6 +101,11 @@ class RunLog:
     units: tuple[str, ...]
     tof_t: FloatArray
     tof_range: FloatArray
+    margin: FloatArray | None = None
+    terms: dict[str, FloatArray] = field(default_factory=dict)
+    task_time: FloatArray | None = None
+    protective_stop: np.ndarray | None = None
+    mode: str = "kinematic"
 
     @property
     def tracking_error(self) -> FloatArray:
@@ -95,12 +124,24 @@ def run_scenario(
     perception: PerceptionConfig = PerceptionConfig(),
     tof_model: TofModel | None = None,
     link_radius: float = DEFAULT_LINK_RADIUS,
+    uncertainty: SkinUncertainty | None = None,
+    resume: bool = False,
+    resume_band: float = RESUME_BAND,
+    mode: str = "kinematic",
+    torque: object | None = None,
 ) -> RunLog:
     """Run ``scenario`` in closed loop (see the module docstring) and log it.
 
     ``believed_poses`` may lack units (their readings are then unused) but not name unknown ones.
     ``tof_model``: default the VL53L1X preset (27 deg cone of 37 rays, 5 mm + 0.5 % noise).
+    ``uncertainty``: the believed poses' covariances behind each point's ``cov`` (perception's default
+    when None). ``resume``: the task clock of the module docstring. ``mode``: ``kinematic`` or ``torque``
+    (``torque``: a :class:`skincal.sim.dynamics.TorqueConfig`, default its defaults).
     """
+    if mode not in MODES:
+        raise ConfigError(f"unknown mode '{mode}' (use {' or '.join(MODES)})")
+    if not (np.isfinite(resume_band) and resume_band >= 0):
+        raise ConfigError(f"resume band must be a non-negative number of m, got {resume_band}")
     mujoco = require_mujoco()
     unknown = set(believed_poses) - set(true_poses)
     if unknown:
@@ -112,17 +153,33 @@ def run_scenario(
     model = build_model(
         chain, true_poses, scene=scenario.scene, range_directions=rays, board_geoms=False, link_radius=link_radius
     )
-    model.opt.timestep = dt
+    if mode == "kinematic":
+        model.opt.timestep = dt
     # Rays ignore transparent geoms: hide the robot's own capsule hull from the rangefinders (a unit
     # near a joint sits inside the neighbouring link's capsule, which the real arm does not have).
     robot_geoms = np.isin(model.geom_bodyid, link_body_ids(model, chain.n_joints))
     model.geom_rgba[robot_geoms, 3] = 0.0
     idx = SensorIndex.of(model, units, len(rays))
-    data = mujoco.MjData(model)
-
     S = int(round(scenario.duration / dt))
     t = dt * np.arange(S)
-    x_des, xd_des = scenario.circle.at(t)
+    n = chain.n_joints
+    q = scenario.q0.astype(float).copy()
+    robot = None
+    if mode == "torque":
+        from skincal.sim.dynamics import TorqueConfig, TorqueRobot
+
+        robot = TorqueRobot(chain, model, torque if torque is not None else TorqueConfig())
+        robot.data.qpos[:n] = q
+        robot.data.qvel[:n] = 0.0
+        mujoco.mj_forward(model, robot.data)
+        data = robot.data
+    else:
+        data = mujoco.MjData(model)
+    task = scenario.task
+    if not resume:
+        x_des, xd_des = task.at(t)
+    else:
+        x_des, xd_des = np.empty((S, 3)), np.empty((S, 3))
     mocap = scenario.scene.mocap_positions(t) if scenario.scene.obstacles else None
     period = max(1, int(round(1.0 / (tof_model.rate_hz * dt))))
     phase = (np.arange(len(units)) * period) // max(len(units), 1)
@@ -132,10 +189,14 @@ def run_scenario(
     count = np.zeros(len(units), dtype=int)
 
     body = RobotBody.of(chain, link_radius)
-    tracker = ProximityTracker(chain, {u: p for u, p in believed_poses.items()}, perception, body)
+    tracker = ProximityTracker(chain, dict(believed_poses), perception, body, uncertainty)
     ctl = AvoidanceController(chain, controller, body, q_posture=scenario.q0)
-    n = chain.n_joints
-    q = scenario.q0.astype(float).copy()
+    fixed_margin = float(controller.critical)
+    margin = np.full(S, fixed_margin)
+    separated = getattr(controller, "separation", None) is not None
+    terms = {k: np.full(S, np.nan) for k in TERMS} if separated else {}
+    task_time = t if not resume else np.zeros(S)
+    tau, rate, dr = 0.0, 1.0, dt / RAMP_S
     log_q, log_qd, log_x = np.empty((S, n)), np.empty((S, n)), np.empty((S, 3))
     feasible = np.ones(S, dtype=bool)
     violation, min_dist = np.zeros(S), np.full(S, np.inf)
@@ -145,7 +206,8 @@ def run_scenario(
         t0 = time.perf_counter()
         reading = np.flatnonzero((k - phase) % period == 0)
         if reading.size:
-            data.qpos[:] = q
+            if robot is None:
+                data.qpos[:] = q
             if mocap is not None:
                 data.mocap_pos[:] = mocap[k]
             mujoco.mj_fwdPosition(model, data)
@@ -159,12 +221,31 @@ def run_scenario(
             tracker.update(t[k], q, {units[u]: float(ru) for u, ru in zip(reading, r, strict=True)})
         t1 = time.perf_counter()
         pts = tracker.points(t[k])
+        if resume:
+            task_time[k] = tau
+            xk, vk = task.at(tau)
+            x_des[k], xd_des[k] = xk[0], rate * vk[0]
         res = ctl.step(q, x_des[k], xd_des[k], pts)
         step_t[k] = time.perf_counter() - t1
         log_q[k], log_qd[k], log_x[k] = q, res.qd, res.x
         feasible[k], violation[k], n_obs[k] = res.feasible, res.violation, res.n_obstacles
         min_dist[k], solve_t[k] = res.min_distance, res.solve_time_s
-        q = q + res.qd * dt
+        if separated:
+            margin[k] = getattr(res, "margin", fixed_margin)
+            parts = getattr(res, "terms", None)
+            if parts is not None and np.size(parts.S_h):
+                i = _binding(parts, res)
+                for name in TERMS:
+                    terms[name][k] = float(np.asarray(getattr(parts, name)).reshape(-1)[i])
+        if resume:
+            near = res.min_distance < margin[k] + resume_band
+            rate = max(rate - dr, 0.0) if near else min(rate + dr, 1.0)
+            tau += rate * dt
+        if robot is None:
+            q = q + res.qd * dt
+        else:
+            robot.step(res.qd, dt)
+            q = np.array(robot.q, dtype=float)
         loop_t[k] = time.perf_counter() - t0
     return RunLog(
         scenario,
@@ -183,7 +264,22 @@ def run_scenario(
         units,
         tof_t[: count.max()],
         tof_range[: count.max()],
+        margin,
+        terms,
+        task_time,
+        ~feasible,
+        mode,
     )
+
+
+TERMS = ("S_h", "S_r", "S_s", "C", "Z_d", "Z_r")
+"""The parts of ISO/TS 15066's protective separation distance ``S_p``, in its order."""
+
+
+def _binding(parts, res) -> int:
+    """Index of the point whose terms the step's margin is: the one whose ``S_p`` is the step's margin."""
+    total = np.asarray(parts.total, dtype=float).reshape(-1)
+    return int(np.argmin(np.abs(total - getattr(res, "margin", total.max()))))
 
 
 def simulated_skin(placement: str, chain) -> dict:
