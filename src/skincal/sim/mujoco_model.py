@@ -495,6 +495,17 @@ class SensorIndex:
             raise ConfigError(f"MuJoCo model has no skin unit sensors for {exc}") from None
 
 
+def full_mass_matrix(model: mujoco.MjModel, data: mujoco.MjData) -> FloatArray:
+    """Dense joint-space inertia ``(nv, nv)`` of ``data``'s last position pass (``mj_fwdPosition``)."""
+    mujoco = require_mujoco()
+    M = np.zeros((model.nv, model.nv))
+    try:
+        mujoco.mj_fullM(model, data, M)  # MuJoCo >= 3.3
+    except TypeError:  # pragma: no cover - older signature (m, dst, qM)
+        mujoco.mj_fullM(model, M, data.qM)
+    return M
+
+
 def link_body_ids(model: mujoco.MjModel, n_joints: int) -> np.ndarray:
     """Body ids ``(n + 1,)`` of link frames 0..n."""
     return np.array([model.body(body_name(i)).id for i in range(n_joints + 1)], dtype=int)
