@@ -9,53 +9,110 @@ import typer
 
 from skincal.cli.app import app, console
 
+ROBOT_HELP = "robot preset (panda, iiwa14, ur5e, ...), a .urdf file, or a DH chain file"
+
 
 @app.command()
 def avoid(
-    scenario: str = typer.Option("hand", help="none, arm, hand, walk or fast"),
-    placement: str = typer.Option("ring", help="simulated skin: ring (dense, 49 units) or paper (Table II, 6 units)"),
+    scenario: str = typer.Option(
+        "hand",
+        help="shipped scenario (arm, hand, walk, fast, none, elbow, lower, pinch, walk-at) or a .yaml/.json file",
+    ),
+    robot: str = typer.Option("panda", help=ROBOT_HELP),
+    base_link: str | None = typer.Option(None, help="URDF link the chain starts from (with --robot arm.urdf)"),
+    tip_link: str | None = typer.Option(None, help="URDF link the chain ends at (with --robot arm.urdf)"),
+    placement: str = typer.Option(
+        "ring", help="simulated skin: ring (dense, rings round the links) or paper (Table II)"
+    ),
     result: Path | None = typer.Option(None, help="calibration result (JSON) whose poses the controller uses"),
     truth: bool = typer.Option(False, "--truth", help="use the true unit poses (the default)"),
     degrade: str | None = typer.Option(None, help="truth degraded by 'METRES,DEGREES' per unit, e.g. 0.05,5"),
     blind: bool = typer.Option(False, "--blind", help="no perception at all (baseline)"),
+    speed: float | None = typer.Option(None, help="every person's speed, m/s (default: the scenario file's)"),
+    task: str = typer.Option("circle", help="the flange's task: circle or pick-place"),
+    mode: str = typer.Option("kinematic", help="kinematic (ideal velocity interface) or torque (MuJoCo dynamics)"),
+    margin: str = typer.Option(
+        "fixed",
+        help="fixed (the legacy critical distance) or iso (ISO/TS 15066 S_p from the pose covariance, "
+        "the robot's speed and its measured stopping)",
+    ),
+    resume: bool = typer.Option(False, "--resume", help="the task waits while a person is within S_p + a band"),
     duration: float | None = typer.Option(None, help="run length, s (default: the scenario's)"),
     seed: int = typer.Option(0, help="random seed (sensor noise, degradation)"),
-    plot: Path | None = typer.Option(None, help="write a Fig.-4-like plot (.png also writes .svg)"),
+    plot: Path | None = typer.Option(None, help="write a Fig.-4-like plot with clearance and S_p (.png also .svg)"),
+    force: bool = typer.Option(False, "--force", help="overwrite an existing --plot"),
     as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
 ) -> None:
-    """Track a circle with the Panda's flange while a person approaches; the skin (simulated at its
-    true poses: the dense ring skin, or the paper's Table II six units) feeds the controller through
-    the chosen calibration (a result file must come from a dataset of the same --placement)."""
+    """Track a circle (or a pick-and-place cycle) with the robot's flange while a person approaches; the
+    skin (simulated at its true poses) feeds the controller through the chosen calibration (a result
+    file must come from a dataset of the same --robot and --placement). With --resume the same run
+    without anybody is made too, for the task time lost."""
     import numpy as np
 
-    from skincal.kinematics import panda
+    from skincal.control import ControllerConfig
+    from skincal.data.atomic import check_output
+    from skincal.errors import ConfigError
+    from skincal.kinematics import get_robot
+    from skincal.names import printable
     from skincal.perception.body import RobotBody
     from skincal.workflows.avoid_metrics import summarize
-    from skincal.workflows.avoidance import believed_poses, run_scenario, simulated_skin
-    from skincal.workflows.scenarios import get_scenario
+    from skincal.workflows.avoidance import MODES, believed_skin, run_scenario, separation_for, simulated_skin
+    from skincal.workflows.scenarios import TASKS, get_scenario
 
-    chain = panda()
+    if mode not in MODES:
+        raise ConfigError(f"unknown --mode '{printable(mode)[:40]}' (use {' or '.join(MODES)})")
+    if margin not in ("fixed", "iso"):
+        raise ConfigError(f"unknown --margin '{printable(margin)[:40]}' (use fixed or iso)")
+    if task not in TASKS:
+        raise ConfigError(f"unknown --task '{printable(task)[:40]}' (use {' or '.join(TASKS)})")
+    plot_paths = []
+    if plot is not None:
+        if plot.suffix.lower() not in (".png", ".svg"):
+            raise ConfigError(f"{plot}: plot file must end in .png or .svg")
+        plot_paths = [plot] + ([plot.with_suffix(".svg")] if plot.suffix.lower() == ".png" else [])
+        for p in plot_paths:
+            check_output(p, force=force, inputs=tuple(x for x in (result,) if x is not None))
+    chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
     true_poses = simulated_skin(placement, chain)
-    poses, label = believed_poses(true_poses, result, degrade, blind, seed)
-    sc = get_scenario(scenario, chain, duration)
-    log = run_scenario(chain, sc, true_poses, poses, np.random.default_rng(seed))
-    metrics = summarize(log, RobotBody.of(chain), label)
+    poses, label, uncertainty = believed_skin(true_poses, result, degrade, blind, seed)
+    sc = get_scenario(scenario, chain, duration, speed=speed, task=task)
+    config = ControllerConfig()
+    if margin == "iso":
+        from dataclasses import replace
+
+        config = replace(config, separation=separation_for(chain, sc))
+    kw = dict(controller=config, uncertainty=uncertainty, resume=resume, mode=mode)
+    log = run_scenario(chain, sc, true_poses, poses, np.random.default_rng(seed), **kw)
+    reference = None
+    if resume:
+        reference = run_scenario(chain, sc.without_people(), true_poses, poses, np.random.default_rng(seed), **kw)
+    body = RobotBody.of(chain)
+    metrics = summarize(log, body, label, reference)
     written = []
     if plot is not None:
         from skincal.workflows.avoid_plot import plot_run
 
-        written = [str(p) for p in plot_run(log, plot)]
+        written = [str(p) for p in plot_run(log, plot, body=body)]
     if as_json:
-        typer.echo(json.dumps(metrics.to_dict() | {"plots": written}, indent=2))
+        extra = {"robot": chain.name, "task": task, "margin": margin, "resume": resume, "plots": written}
+        typer.echo(json.dumps(metrics.to_dict() | extra, indent=2))
         return
     m = metrics
-    console.print(
-        f"scenario {m.scenario} ({sc.description}), poses: {label}\n"
-        f"  min clearance {m.min_clearance_m:.3f} m, contacts {m.contacts}, infeasible steps {m.infeasible_steps}\n"
+    lines = [
+        f"scenario {printable(m.scenario)} ({printable(sc.description)}) on {printable(chain.name)}, {task}, "
+        f"{mode}, margin {margin}, poses: {printable(label)}",
+        f"  min clearance {m.min_clearance_m:.3f} m, contacts {m.contacts}, infeasible steps {m.infeasible_steps}",
+        f"  min(clearance - S_p) {m.min_clearance_minus_sp_m:.3f} m (S_p {m.margin_m:.3f} m there, largest "
+        f"{m.margin_max_m:.3f} m); protective stop {m.protective_stop_s:.2f} s; "
+        f"within S_p + 0.5 m {m.near_time_s:.2f} s",
         f"  EE error max {1e3 * m.max_tracking_error_m:.1f} mm, rms {1e3 * m.rms_tracking_error_m:.2f} mm, "
-        f"recovery {m.recovery_s:.2f} s after the person left\n"
+        f"recovery {m.recovery_s:.2f} s after the person left",
         f"  QP {m.qp_median_ms:.3f} ms median / {m.qp_p95_ms:.3f} ms p95; loop {m.loop_median_ms:.3f} ms median",
-        highlight=False,
-    )
+    ]
+    if m.margin_terms:
+        lines.append("  S_p parts there: " + ", ".join(f"{k} {v:.3f}" for k, v in m.margin_terms.items()) + " m")
+    if reference is not None:
+        lines.append(f"  task time lost {m.task_time_lost_s:.2f} s against the run without a person")
+    console.print("\n".join(lines), highlight=False)
     for p in written:
         console.print(f"  wrote {p}", highlight=False)

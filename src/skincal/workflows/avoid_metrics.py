@@ -4,6 +4,13 @@ Clearance at each control instant is the smallest surface-to-surface distance be
 TRUE link capsules (no padding) and the obstacle solids, in closed form: capsule-capsule
 ``|seg1 - seg2| - r1 - r2`` and capsule-sphere (a zero-length segment), via
 :func:`skincal.perception.body.segment_distance`. A contact is an interval of clearance < 0.
+
+Like ISO/TS 15066 speed and separation monitoring, each run reports the minimum over time of
+``clearance - S_p`` (``S_p`` the protective separation the controller used at that step, the fixed
+critical distance for the legacy controller; >= 0 at every step is the standard's condition), the
+parts of ``S_p`` at that step, the time in protective stop (steps where the controller commanded its
+safe stop), the time the person is within ``S_p + 0.5 m`` (``NEAR_BAND``), and the task time lost
+against the same run without a person (:func:`task_time_lost`).
 """
 
 from __future__ import annotations
@@ -16,10 +23,12 @@ from skincal.errors import ConfigError
 from skincal.kinematics.transforms import FloatArray
 from skincal.perception.body import RobotBody, segment_distance
 from skincal.skin import tof
-from skincal.workflows.avoidance import RunLog
+from skincal.workflows.avoidance import TERMS, RunLog
 
 RECOVERY_THRESHOLD = 0.005
 """Tracking error below which the task counts as recovered, m."""
+NEAR_BAND = 0.5
+"""The person counts as near while the clearance is below ``S_p`` plus this, m."""
 
 _CHUNK = 2000
 
@@ -84,6 +93,30 @@ def recovery_time(t: FloatArray, error: FloatArray, t_leave: float, threshold: f
     return float(t[last + 1] - t_leave)
 
 
+def margin_of(log: RunLog) -> FloatArray:
+    """``(S,)`` the protective separation ``S_p`` of each step, m."""
+    return log.margin if log.margin is not None else np.full(log.t.size, np.nan)
+
+
+def task_time_lost(log: RunLog, reference: RunLog) -> float:
+    """Task time lost by ``log`` against ``reference`` (the same run without a person), s.
+
+    With the task clock (``resume``): how far the clock lags the reference's at the end. Without it
+    (the reference runs on ``t``, so the task never waits): the extra time the flange is off its
+    reference by more than :data:`RECOVERY_THRESHOLD`.
+    """
+    if log.t.size != reference.t.size:
+        raise ConfigError(f"task time lost: runs of {log.t.size} and {reference.t.size} steps do not compare")
+    dt = float(log.t[1] - log.t[0]) if log.t.size > 1 else 0.0
+    clock = log.task_time if log.task_time is not None else log.t
+    ref_clock = reference.task_time if reference.task_time is not None else reference.t
+    if not np.array_equal(clock, log.t):  # the clock paused somewhere
+        end = clock[-1] + dt
+        return float(max(ref_clock[-1] + dt - end, 0.0))
+    off = np.sum(log.tracking_error > RECOVERY_THRESHOLD) - np.sum(reference.tracking_error > RECOVERY_THRESHOLD)
+    return float(max(off, 0) * dt)
+
+
 @dataclass(frozen=True)
 class AvoidMetrics:
     """Summary of one run (lengths m, times s unless the name says ms)."""
@@ -105,15 +138,39 @@ class AvoidMetrics:
     loop_median_ms: float
     loop_p95_ms: float
     steps: int
+    min_clearance_minus_sp_m: float = float("nan")
+    steps_below_sp: int = 0
+    margin_m: float = float("nan")
+    margin_max_m: float = float("nan")
+    margin_terms: dict | None = None
+    protective_stop_s: float = 0.0
+    near_time_s: float = 0.0
+    task_time_lost_s: float = float("nan")
+    mode: str = "kinematic"
 
     def to_dict(self) -> dict:
         """Plain JSON-ready dict (NaN/inf -> None)."""
-        return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in asdict(self).items()}
+
+        def plain(v):
+            if isinstance(v, dict):
+                return {k: plain(x) for k, x in v.items()}
+            return None if isinstance(v, float) and not np.isfinite(v) else v
+
+        return {k: plain(v) for k, v in asdict(self).items()}
 
 
-def summarize(log: RunLog, body: RobotBody, poses: str = "") -> AvoidMetrics:
-    """All metrics of a run; ``body`` is the TRUE robot geometry (as simulated)."""
+def summarize(log: RunLog, body: RobotBody, poses: str = "", reference: RunLog | None = None) -> AvoidMetrics:
+    """All metrics of a run; ``body`` is the TRUE robot geometry (as simulated); ``reference`` the same
+    run without a person (for the task time lost; NaN without it)."""
     clear = clearance(log, body)
+    sp = margin_of(log)
+    gap = clear - sp
+    finite = np.isfinite(gap)
+    worst = int(np.argmin(np.where(finite, gap, np.inf))) if np.any(finite) else -1
+    terms = None
+    if worst >= 0 and log.terms:
+        terms = {name: float(log.terms[name][worst]) for name in TERMS if name in log.terms}
+    stop = log.protective_stop if log.protective_stop is not None else ~log.feasible
     err = log.tracking_error
     dt = float(log.t[1] - log.t[0]) if log.t.size > 1 else 0.0
     ms = 1e3
@@ -135,4 +192,13 @@ def summarize(log: RunLog, body: RobotBody, poses: str = "") -> AvoidMetrics:
         loop_median_ms=float(np.median(log.loop_time_s) * ms),
         loop_p95_ms=float(np.percentile(log.loop_time_s, 95) * ms),
         steps=int(log.t.size),
+        min_clearance_minus_sp_m=float(gap[worst]) if worst >= 0 else float("inf"),
+        steps_below_sp=int(np.sum(finite & (gap < 0))),
+        margin_m=float(sp[worst]) if worst >= 0 else float("nan"),
+        margin_max_m=float(np.nanmax(sp)) if np.any(np.isfinite(sp)) else float("nan"),
+        margin_terms=terms,
+        protective_stop_s=float(np.sum(stop) * dt),
+        near_time_s=float(np.sum(finite & (gap < NEAR_BAND)) * dt),
+        task_time_lost_s=task_time_lost(log, reference) if reference is not None else float("nan"),
+        mode=log.mode,
     )

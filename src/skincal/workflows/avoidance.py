@@ -193,8 +193,13 @@ def run_scenario(
     ctl = AvoidanceController(chain, controller, body, q_posture=scenario.q0)
     fixed_margin = float(controller.critical)
     margin = np.full(S, fixed_margin)
-    separated = getattr(controller, "separation", None) is not None
+    separation = getattr(controller, "separation", None)
+    separated = separation is not None
     terms = {k: np.full(S, np.nan) for k in TERMS} if separated else {}
+    if separated:  # before any point is seen: S_p of a still robot and an exactly known point
+        from skincal.control.separation import protective_separation
+
+        still = float(protective_separation(separation, np.zeros(1), None, np.zeros(1)).total[0])
     task_time = t if not resume else np.zeros(S)
     tau, rate, dr = 0.0, 1.0, dt / RAMP_S
     log_q, log_qd, log_x = np.empty((S, n)), np.empty((S, n)), np.empty((S, 3))
@@ -231,7 +236,9 @@ def run_scenario(
         feasible[k], violation[k], n_obs[k] = res.feasible, res.violation, res.n_obstacles
         min_dist[k], solve_t[k] = res.min_distance, res.solve_time_s
         if separated:
-            margin[k] = getattr(res, "margin", fixed_margin)
+            # a step without any point keeps the last margin (the person is still where it was last seen)
+            m_k = float(getattr(res, "margin", np.nan))
+            margin[k] = m_k if np.isfinite(m_k) else margin[k - 1] if k else still
             parts = getattr(res, "terms", None)
             if parts is not None and np.size(parts.S_h):
                 i = _binding(parts, res)
@@ -294,11 +301,26 @@ def simulated_skin(placement: str, chain) -> dict:
 def believed_poses(true_poses: dict, result: Path | None, degrade: str | None, blind: bool, seed: int):
     """The poses the controller believes and their label: a result file's, degraded truth (``degrade``
     ``'METRES,DEGREES'``, seeded by ``seed + 1``), none (``blind``), or truth."""
+    poses, label, _ = believed_skin(true_poses, result, degrade, blind, seed)
+    return poses, label
+
+
+def degraded_uncertainty(units, position_m: float, angle_deg: float) -> SkinUncertainty:
+    """The pose covariance a ``position_m`` / ``angle_deg`` degradation (:func:`degrade_poses`: that
+    length in a uniformly random direction) has: per link axis std ``position_m / sqrt(3)`` and
+    ``angle_deg / sqrt(3)`` (the degraded std reported and given to perception)."""
+    std = np.array([position_m / np.sqrt(3)] * 3 + [np.radians(angle_deg) / np.sqrt(3)] * 3)
+    return SkinUncertainty({u: np.diag(std**2) for u in units})
+
+
+def believed_skin(true_poses: dict, result: Path | None, degrade: str | None, blind: bool, seed: int):
+    """``(poses, label, uncertainty)``: :func:`believed_poses` and the poses' covariances (a result's
+    own, the degradation's, perception's assumed std for the truth; ``None``: perception's default)."""
     chosen = [x for x in (result is not None, degrade is not None, blind) if x]
     if len(chosen) > 1:
         raise ConfigError("give at most one of --result, --degrade, --blind (--truth is the default)")
     if blind:
-        return {}, "blind (no perception)"
+        return {}, "blind (no perception)", None
     if result is not None:
         from skincal.data.result import read_result
 
@@ -315,7 +337,8 @@ def believed_poses(true_poses: dict, result: Path | None, degrade: str | None, b
                 f"result {result.name} puts {', '.join(moved[:5])} on other links than the simulated skin "
                 "(was it calibrated from a dataset of another --placement?)"
             )
-        return {u: r.pose for u, r in res.units.items()}, f"result {result.name} ({res.method})"
+        poses = {u: r.pose for u, r in res.units.items()}
+        return poses, f"result {result.name} ({res.method})", SkinUncertainty.from_result(res)
     if degrade is not None:
         from skincal.workflows.scenarios import degrade_poses
 
@@ -323,5 +346,36 @@ def believed_poses(true_poses: dict, result: Path | None, degrade: str | None, b
             pos, ang = (float(x) for x in degrade.split(","))
         except ValueError:
             raise ConfigError(f"--degrade must be 'METRES,DEGREES' (e.g. 0.05,5), got '{degrade}'") from None
-        return degrade_poses(true_poses, pos, ang, np.random.default_rng(seed + 1)), f"truth degraded {pos} m/{ang} deg"
-    return dict(true_poses), "truth"
+        if not (np.isfinite(pos) and np.isfinite(ang)):
+            raise ConfigError(f"--degrade must be finite 'METRES,DEGREES', got '{degrade}'")
+        poses = degrade_poses(true_poses, pos, ang, np.random.default_rng(seed + 1))
+        return poses, f"truth degraded {pos} m/{ang} deg", degraded_uncertainty(poses, pos, ang)
+    return dict(true_poses), "truth", None
+
+
+_STOPPING: dict = {}
+
+
+def stopping_model(chain: SerialChain):
+    """The robot's measured stopping model (:func:`skincal.workflows.stopping.measure_stopping`, cached per
+    chain for the process); the separation module's placeholder when the measurement is unavailable."""
+    key = (chain.name, chain.n_joints, chain.link_frames(np.zeros(chain.n_joints)).tobytes())
+    if key not in _STOPPING:
+        try:
+            from skincal.workflows.stopping import measure_stopping
+        except ImportError:  # pragma: no cover - the dynamics are a separate module
+            from skincal.control.separation import default_stopping
+
+            _STOPPING[key] = default_stopping()
+        else:
+            _STOPPING[key] = measure_stopping(chain)
+    return _STOPPING[key]
+
+
+def separation_for(chain: SerialChain, scenario: Scenario, human_speed: float | None = None):
+    """ISO/TS 15066 separation parameters for a run: ``v_h`` from the scenario (or ``human_speed``), the
+    robot's measured stopping model, the other terms the separation module's defaults."""
+    from skincal.control.separation import SeparationParams
+
+    v_h = scenario.human_speed if human_speed is None else float(human_speed)
+    return SeparationParams(human_speed_mps=v_h, stopping=stopping_model(chain))
