@@ -332,7 +332,7 @@ class _Fields:
         for key in value:
             if key not in known:
                 shown = printable(str(key))[:60]
-                self.fail(f"unknown key '{shown}' (known: {', '.join(known)})", key=None)
+                self.fail(f"unknown key (known: {', '.join(known)})", key=shown)
         self.value = value
 
     def path(self, key: str | None) -> str:
