@@ -1,0 +1,234 @@
+"""Sufficient statistics of the streaming calibrator and the pose solve from them.
+
+The accelerometer model of :mod:`skincal.calib.mle.model` (``a = A R^T v(s) + b`` with
+``v = u + K p`` in link frame, ``R = R_link_su``) is rearranged to be *linear* in its unknowns::
+
+    G a - h - K p - du * tau = u,      G = R A^-1 ~ R (I + E),   h = G b                        (1)
+
+(``du`` = du/ds: a small residual time offset ``tau`` of the unit's samples, linearised), and the
+gyroscope's ``g = R^T w + b_g`` likewise::
+
+    R g - c - dw * tau = w,            c = R b_g                                                (2)
+
+``u``, ``K``, ``w`` are :func:`skincal.calib.mle.signals.link_signals` of the unit's link at its
+sample instants (link frame), ``a`` and ``g`` its readings (unit frame). Each sample adds one
+3-row block ``Phi x - y`` to a linear least-squares problem, so everything the data say about the
+unknowns is the Gram matrix ``Z = sum [Phi y]^T [Phi y]`` of each equation (17 x 17 for (1) with
+``x_a = [vec(G) (9, row-major), h, p, tau]``, 14 x 14 for (2) with ``x_g = [vec(R), c, tau]``):
+no re-linearisation is ever needed, because (1) and (2) are exact in ``G``, ``R`` and the offsets
+(only ``tau`` is first order). The pose then follows from minimising, over ``R`` in SO(3), ``E``,
+``h``, ``p``, ``c``, ``tau``::
+
+    C = J_a(vec(R (I + E)), h, p, tau) / sigma_a^2 + J_g(vec(R), c, tau) / sigma_g^2 + |E|^2 / sigma_E^2
+
+with ``J(x) = [x; -1]^T Z [x; -1]`` the residual sum of squares: a Gauss-Newton over
+``delta = [dtheta (3, R <- R Exp(dtheta)), dE (9), dh, dp, dc, dtau]`` (:func:`solve`), started from
+the unconstrained linear solution of (2) (or of (1) without a gyroscope). The covariance is the
+inverse of its normal matrix; ``sigma_a``, ``sigma_g`` are the residual std of the fit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from skincal.kinematics.transforms import FloatArray, skew
+
+NA = 17
+"""Columns of the accelerometer Gram: ``[vec(G) 9, h 3, p 3, tau 1]`` and the right-hand side."""
+NG = 14
+"""Columns of the gyroscope Gram: ``[vec(R) 9, c 3, tau 1]`` and the right-hand side."""
+NP = 22
+"""Gauss-Newton unknowns: ``[dtheta 3, dE 9, h 3, p 3, c 3, tau 1]``."""
+SCALE_PRIOR = 0.02
+"""Prior std of each element of ``E`` (the accelerometer's scale/misalignment relative to 1)."""
+TAU_PRIOR_S = 0.01
+"""Prior std of the residual time offset after the coarse alignment, s."""
+_TH, _E, _H, _P, _C, _T = slice(0, 3), slice(3, 12), slice(12, 15), slice(15, 18), slice(18, 21), 21
+
+
+def accel_rows(a: FloatArray, u: FloatArray, K: FloatArray, du: FloatArray) -> FloatArray:
+    """``(..., M, 3, NA)`` rows ``[Phi y]`` of equation (1) for readings ``a`` ``(..., M, 3)`` and link
+    signals ``u`` ``(..., M, 3)``, ``K`` ``(..., M, 3, 3)``, ``du`` ``(..., M, 3)`` (module docstring)."""
+    Z = np.zeros((*u.shape[:-1], 3, NA))
+    for i in range(3):  # vec(G) row-major: (G a)_i = sum_j G_ij a_j
+        Z[..., i, 3 * i : 3 * i + 3] = a
+    Z[..., 9:12] = -np.eye(3)
+    Z[..., 12:15] = -K
+    Z[..., 15] = -du
+    Z[..., 16] = u
+    return Z
+
+
+def gyro_rows(g: FloatArray, w: FloatArray, dw: FloatArray) -> FloatArray:
+    """``(..., M, 3, NG)`` rows of equation (2) for rates ``g`` ``(..., M, 3)`` (unit frame) and the
+    link's ``w``, ``dw`` ``(..., M, 3)`` (link frame)."""
+    Z = np.zeros((*w.shape[:-1], 3, NG))
+    for i in range(3):
+        Z[..., i, 3 * i : 3 * i + 3] = g
+    Z[..., 9:12] = -np.eye(3)
+    Z[..., 12] = -dw
+    Z[..., 13] = w
+    return Z
+
+
+def gram(rows: FloatArray) -> FloatArray:
+    """``sum_m rows_m^T rows_m`` of ``(..., M, 3, k)`` rows: ``(..., k, k)``."""
+    flat = rows.reshape(*rows.shape[:-3], -1, rows.shape[-1])
+    return np.swapaxes(flat, -1, -2) @ flat
+
+
+def residual_sum(Z: FloatArray, x: FloatArray) -> float:
+    """``J(x) = [x; -1]^T Z [x; -1]``, the residual sum of squares of the equations whose Gram is ``Z``."""
+    xe = np.append(x, -1.0)
+    return float(max(xe @ Z @ xe, 0.0))
+
+
+@dataclass(frozen=True)
+class Solution:
+    """Minimiser of ``C`` (module docstring) for one unit on one link.
+
+    Attributes:
+        R: ``(3, 3)`` ``R_link_su``; ``p``: ``(3,)`` ``p_link_su``, m.
+        A: ``(3, 3)`` accelerometer scale/misalignment (``a = A f + b``); ``b``: ``(3,)`` its bias, m/s^2.
+        gyro_bias: ``(3,)`` rad/s (zeros without a gyroscope); ``tau``: residual time offset, s.
+        cov: ``(NP, NP)`` covariance of the Gauss-Newton unknowns at the solution (rotation about the
+            UNIT axes, ``R <- R Exp(dtheta)``), not yet inflated for correlated residuals.
+        sigma_a, sigma_g: residual std of equations (1) (m/s^2) and (2) (rad/s; nan: no gyroscope).
+        cost: ``J_a / sigma_a^2 + J_g / sigma_g^2`` at the solution with the noise levels given to
+            :func:`solve` (comparable between candidate links).
+        rss_a: ``J_a`` at the solution, (m/s^2)^2.
+        information: ``(NP, NP)`` the normal matrix (inverse of ``cov``).
+        x_a, x_g: the linear unknowns of (1) ``(NA - 1,)`` and (2) ``(NG - 1,)`` at the solution (for
+            :func:`residual_sum` of other Grams, e.g. per class of samples).
+    """
+
+    R: FloatArray
+    p: FloatArray
+    A: FloatArray
+    b: FloatArray
+    gyro_bias: FloatArray
+    tau: float
+    cov: FloatArray
+    sigma_a: float
+    sigma_g: float
+    cost: float
+    rss_a: float
+    information: FloatArray
+    x_a: FloatArray
+    x_g: FloatArray
+
+    def pose_covariance(self) -> FloatArray:
+        """``(6, 6)`` covariance of ``(x, y, z, rx, ry, rz)`` in the LINK frame's axes (m^2, rad^2): the
+        position block and the rotation block turned from unit axes to link axes (``phi = R dtheta``)."""
+        idx = np.r_[np.arange(15, 18), np.arange(0, 3)]
+        C = self.cov[np.ix_(idx, idx)]
+        T = np.eye(6)
+        T[3:, 3:] = self.R
+        return T @ C @ T.T
+
+
+def _vec_jacobians(R: FloatArray, F: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """d vec(R Exp(dth) F)/d dth ``(9, 3)``, d vec(R (F + dE))/d vec(dE) ``(9, 9)``, d vec(R Exp(dth))/d dth."""
+    gens = skew(np.eye(3))  # (3, 3, 3): [e_k]x
+    JG = np.stack([(R @ gk @ F).reshape(9) for gk in gens], axis=1)
+    JR = np.stack([(R @ gk).reshape(9) for gk in gens], axis=1)
+    JE = np.kron(R, np.eye(3))
+    return JG, JE, JR
+
+
+def _linear_start(Z: FloatArray, n: int) -> FloatArray | None:
+    """Unconstrained least-squares solution of the first ``n`` unknowns of a Gram ``Z`` (None: singular)."""
+    Q, b = Z[:n, :n], Z[:n, n]
+    try:
+        x = np.linalg.solve(Q + 1e-12 * np.trace(Q) / n * np.eye(n), b)
+    except np.linalg.LinAlgError:
+        return None
+    return x if np.all(np.isfinite(x)) else None
+
+
+def _nearest_rotation(M: FloatArray) -> FloatArray:
+    U, _, Vt = np.linalg.svd(M)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    return U @ D @ Vt
+
+
+def solve(
+    Za: FloatArray,
+    Zg: FloatArray | None,
+    sigma_a: float,
+    sigma_g: float,
+    *,
+    R0: FloatArray | None = None,
+    iterations: int = 12,
+) -> Solution | None:
+    """Gauss-Newton minimiser of ``C`` (module docstring) from the Grams ``Za`` ``(NA, NA)`` and ``Zg``
+    ``(NG, NG)`` (None: no gyroscope) with noise levels ``sigma_a`` (m/s^2), ``sigma_g`` (rad/s); ``R0``
+    a start rotation (default: the linear solution). None when the data determine nothing yet."""
+    have_g = Zg is not None and Zg[0, 0] > 0
+    if R0 is None:
+        start = _linear_start(Zg, NG - 1) if have_g else None
+        if start is not None and np.linalg.matrix_rank(Zg[:9, :9], tol=1e-9 * Zg[:9, :9].trace()) >= 9:
+            R0 = _nearest_rotation(start[:9].reshape(3, 3))
+        else:
+            sa = _linear_start(Za, NA - 1)
+            R0 = np.eye(3) if sa is None else _nearest_rotation(sa[:9].reshape(3, 3))
+    R, x = np.array(R0, dtype=float), np.zeros(NP)  # x holds E, h, p, c, tau (dtheta always 0 at the current R)
+    wa, wg = 1.0 / sigma_a**2, (1.0 / sigma_g**2 if have_g else 0.0)
+    prior = np.zeros(NP)
+    prior[_E] = 1.0 / SCALE_PRIOR**2
+    prior[_T] = 1.0 / TAU_PRIOR_S**2
+    H = np.eye(NP)
+    for it in range(iterations):
+        F = np.eye(3) + x[_E].reshape(3, 3)
+        G = R @ F
+        JG, JE, JR = _vec_jacobians(R, F)
+        # x_a = [vec(G), h, p, tau] as a linear function of delta around the current point
+        Ja = np.zeros((NA - 1, NP))
+        Ja[:9, _TH], Ja[:9, _E], Ja[9:12, _H], Ja[12:15, _P], Ja[15, _T] = JG, JE, np.eye(3), np.eye(3), 1.0
+        xa = np.concatenate([G.reshape(9), x[_H], x[_P], [x[_T]]])
+        ga = Za[: NA - 1, : NA - 1] @ xa - Za[: NA - 1, NA - 1]
+        H = wa * Ja.T @ Za[: NA - 1, : NA - 1] @ Ja + np.diag(prior)
+        grad = wa * Ja.T @ ga + prior * np.r_[np.zeros(3), x[3:]]
+        if have_g:
+            assert Zg is not None
+            Jg = np.zeros((NG - 1, NP))
+            Jg[:9, _TH], Jg[9:12, _C], Jg[12, _T] = JR, np.eye(3), 1.0
+            xg = np.concatenate([R.reshape(9), x[_C], [x[_T]]])
+            gg = Zg[: NG - 1, : NG - 1] @ xg - Zg[: NG - 1, NG - 1]
+            H = H + wg * Jg.T @ Zg[: NG - 1, : NG - 1] @ Jg
+            grad = grad + wg * Jg.T @ gg
+        if not have_g:
+            H[_C, _C] += np.eye(3)  # c does not enter: keep H invertible
+        try:
+            step = -np.linalg.solve(H + 1e-9 * np.diag(np.diag(H) + 1e-12), grad)
+        except np.linalg.LinAlgError:
+            return None
+        if not np.all(np.isfinite(step)):
+            return None
+        R = R @ Rotation.from_rotvec(step[_TH]).as_matrix()
+        x[3:] += step[3:]
+        if np.linalg.norm(step[_TH]) < 1e-10 and it > 1:
+            break
+    F = np.eye(3) + x[_E].reshape(3, 3)
+    G = R @ F
+    xa = np.concatenate([G.reshape(9), x[_H], x[_P], [x[_T]]])
+    rss_a = residual_sum(Za, xa)
+    xg = np.concatenate([R.reshape(9), x[_C], [x[_T]]])
+    rss_g = residual_sum(Zg, xg) if have_g and Zg is not None else 0.0
+    try:
+        cov = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        return None
+    A = np.linalg.inv(F)  # G = R A^-1
+    b = np.linalg.solve(G, x[_H])  # h = G b
+    gyro_bias = R.T @ x[_C] if have_g else np.zeros(3)
+    # Z[9, 9] counts the samples (the -I column): 3 rows each, less the unknowns
+    sa = float(np.sqrt(rss_a / max(3.0 * Za[9, 9] - 16.0, 1.0)))
+    sg = float(np.sqrt(rss_g / max(3.0 * Zg[9, 9] - 13.0, 1.0))) if have_g and Zg is not None else float("nan")
+    return Solution(
+        R=R, p=x[_P].copy(), A=A, b=b, gyro_bias=gyro_bias, tau=float(x[_T]), cov=cov, sigma_a=sa, sigma_g=sg,
+        cost=rss_a * wa + rss_g * wg, rss_a=rss_a, information=H, x_a=xa, x_g=xg,
+    )  # fmt: skip
