@@ -21,6 +21,7 @@ inertia (armature), joint damping and the torque limits all act:
        impedance:        tau = Kp e + Kd ed + ID(q, qd, qdd_ref)      Kp [N m/rad], Kd [N m s/rad]
 
    clipped to the effort limits (:attr:`TorqueRobot.saturated` tells which joints were clipped).
+   Anti-windup: the reference position stays within ``TorqueConfig.max_error`` of the robot's.
 
 Limits: the chain's own (``effort_limit``, ``velocity_limit``, ``acceleration_limit``), else the maker's
 published ones of the Panda, UR5e and iiwa14 (:data:`PUBLISHED_LIMITS`). A robot with no published
@@ -185,6 +186,9 @@ class TorqueConfig:
             :meth:`TorqueRobot.reset`).
         effort_limit, velocity_limit, acceleration_limit: ``(n,)`` overrides of the chain's / published
             limits (N m, rad/s, rad/s^2).
+        max_error: anti-windup, rad: the reference position is kept within this of the robot's (a
+            saturated robot lagging behind does not leave a growing error that it would later race to
+            close, faster than commanded).
         sensors: compute the model's sensors at every physics step (off: the caller reads the sensors
             it needs itself, e.g. the rangefinders at the ToF rate, as the avoidance loop does).
     """
@@ -195,11 +199,14 @@ class TorqueConfig:
     effort_limit: tuple[float, ...] | None = None
     velocity_limit: tuple[float, ...] | None = None
     acceleration_limit: tuple[float, ...] | None = None
+    max_error: float = 0.02
     sensors: bool = False
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ConfigError(f"torque mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        if not (isinstance(self.max_error, (int, float)) and np.isfinite(self.max_error) and self.max_error > 0):
+            raise ConfigError(f"max_error must be a positive number of rad, got {self.max_error!r}")
 
 
 def _vector(value: Any, n: int, what: str) -> FloatArray:
@@ -359,10 +366,16 @@ class TorqueRobot:
 
     def inverse_dynamics(self, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike) -> FloatArray:
         """Joint torques ``(n,)`` that give acceleration ``qdd`` at ``(q, qd)``: MuJoCo's ``mj_inverse``
-        (``M qdd + c + g`` less the passive forces: damping; armature is in ``M``)."""
-        s = self._scratch
+        on the controller's model (``M qdd + c + g`` less the passive forces: damping; armature is in
+        ``M``), without constraint forces (the joint-limit stops are the plant's, not the controller's)."""
+        s, opt = self._scratch, self._ctl.opt
         s.qpos[:], s.qvel[:], s.qacc[:] = q, qd, qdd
-        self._mj.mj_inverse(self._ctl, s)
+        flags = opt.disableflags
+        opt.disableflags = flags | self._mj.mjtDisableBit.mjDSBL_CONSTRAINT  # a controller models no limit stops
+        try:
+            self._mj.mj_inverse(self._ctl, s)
+        finally:
+            opt.disableflags = flags
         return s.qfrc_inverse.copy()
 
     def control_torque(self) -> FloatArray:
@@ -398,7 +411,11 @@ class TorqueRobot:
                 # MuJoCo's semi-implicit step moves a robot that follows it exactly
                 tau = self.control_torque()
                 self._qd_ref = self._qd_ref + self.h * self._qdd_ref
-                self._q_ref = self._q_ref + self.h * self._qd_ref
+                q_next = data.qpos[: self.n] + self.h * data.qvel[: self.n]  # about where the robot goes
+                lag = np.clip(
+                    self._q_ref + self.h * self._qd_ref - q_next, -self.config.max_error, self.config.max_error
+                )
+                self._q_ref = q_next + lag
                 clipped = np.clip(tau, -self.effort_limit, self.effort_limit)
                 sat = clipped != tau
                 if sat.any():
