@@ -10,21 +10,41 @@ from skincal.control.constraints import (
     approach_speed_bound,
     cap_candidates,
     joint_velocity_bounds,
+    obstacle_bounds,
+    obstacle_geometry,
     obstacle_rows,
     point_jacobians,
+    ramp_width,
 )
 from skincal.control.qp import AvoidanceController, ControllerConfig, QpProblem, StepResult
+from skincal.control.separation import (
+    HAND_SPEED_MPS,
+    WALKING_SPEED_MPS,
+    SeparationParams,
+    SeparationTerms,
+    StoppingModel,
+    protective_separation,
+)
 
 __all__ = [
+    "HAND_SPEED_MPS",
+    "WALKING_SPEED_MPS",
     "AvoidanceController",
     "ControllerConfig",
     "FrameCache",
     "ObstacleRows",
     "QpProblem",
+    "SeparationParams",
+    "SeparationTerms",
     "StepResult",
+    "StoppingModel",
     "approach_speed_bound",
     "cap_candidates",
     "joint_velocity_bounds",
+    "obstacle_bounds",
+    "obstacle_geometry",
     "obstacle_rows",
     "point_jacobians",
+    "protective_separation",
+    "ramp_width",
 ]

@@ -40,7 +40,9 @@ SATURATION = 0.99
 """Fraction of ``v_max`` the bound reaches at the notice distance."""
 
 
-def approach_speed_bound(distance: ArrayLike, critical: float, notice: float, v_max: float) -> FloatArray:
+def approach_speed_bound(
+    distance: ArrayLike, critical: float | ArrayLike, notice: float, v_max: float, width: float | None = None
+) -> FloatArray:
     """Allowed approach speed ``b(d)`` [m/s] at distance ``d`` [m]: a smooth sigmoid (tanh) ramp,
 
         b(d) = v_max tanh((d - d_c) / w),    w = (d_n - d_c) / atanh(0.99),
@@ -48,9 +50,16 @@ def approach_speed_bound(distance: ArrayLike, critical: float, notice: float, v_
     zero at the critical distance ``d_c``, 99 % of ``v_max`` at the notice distance ``d_n`` (and
     ``v_max`` beyond), negative below ``d_c`` (the robot must retreat, at up to ``v_max``).
     With the paper's values ``d_c = 0.12 m``, ``d_n = 0.3 m``, ``v_max = 0.3 m/s``.
+    ``width``: ``w`` given (m) instead, e.g. with a per-point ``d_c`` ``(K,)`` (the protective separation
+    ``S_p``, :mod:`skincal.control.separation`), the ramp keeps its shape and is shifted to start at it.
     """
-    w = (notice - critical) / np.arctanh(SATURATION)
+    w = (notice - critical) / np.arctanh(SATURATION) if width is None else width
     return v_max * np.tanh((np.asarray(distance, dtype=float) - critical) / w)
+
+
+def ramp_width(critical: float, notice: float) -> float:
+    """``w`` of :func:`approach_speed_bound` for a critical and notice distance, m."""
+    return float((notice - critical) / np.arctanh(SATURATION))
 
 
 class FrameCache:
@@ -117,6 +126,44 @@ def cap_candidates(
     return np.concatenate([p[:, None], rim], axis=1)
 
 
+def obstacle_geometry(
+    body: RobotBody, T_base_link: FloatArray, points: ArrayLike, candidates: ArrayLike | None = None
+) -> tuple[BodyProximity, FloatArray]:
+    """The closest robot point to each obstacle point ``(K, 3)`` (or to its candidate nearest the robot,
+    ``candidates`` ``(K, C, 3)``) and the rows ``G = n_i^T J_i`` ``(K, n)`` at one configuration."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    K = pts.shape[0]
+    if candidates is not None:
+        cand = np.asarray(candidates, dtype=float).reshape(K, -1, 3)
+        C = cand.shape[1]
+        prox_all = body_proximity(body, T_base_link, cand.reshape(-1, 3))
+        best = np.argmin(prox_all.distance.reshape(K, C), axis=1) + C * np.arange(K)
+        prox = BodyProximity(
+            *(getattr(prox_all, f)[best] for f in ("distance", "capsule", "link", "p_base_robot", "normal"))
+        )
+    else:
+        prox = body_proximity(body, T_base_link, pts)
+    J = point_jacobians(body.chain, T_base_link, prox.link, prox.p_base_robot)
+    return prox, np.einsum("ki,kij->kj", prox.normal, J)
+
+
+def obstacle_bounds(
+    prox: BodyProximity,
+    critical: float | ArrayLike,
+    notice: float,
+    v_max: float,
+    velocities: ArrayLike | None = None,
+    width: float | None = None,
+) -> FloatArray:
+    """``(K,)`` right-hand sides ``b(d_i) + min(n_i^T v_i, 0)`` (m/s) of the rows of ``prox``
+    (:func:`approach_speed_bound`; ``critical`` one distance or ``(K,)``)."""
+    h = approach_speed_bound(prox.distance, critical, notice, v_max, width)
+    if velocities is not None:
+        K = prox.distance.shape[0]
+        h = h + np.minimum(np.einsum("ki,ki->k", prox.normal, np.asarray(velocities, dtype=float).reshape(K, 3)), 0.0)
+    return h
+
+
 def obstacle_rows(
     body: RobotBody,
     T_base_link: FloatArray,
@@ -132,23 +179,8 @@ def obstacle_rows(
     ``velocities``: ``(K, 3)`` point velocities, m/s (default still). ``candidates``: ``(K, C, 3)``
     possible positions of each point (:func:`cap_candidates`); the one nearest the robot makes the row.
     """
-    pts = np.asarray(points, dtype=float).reshape(-1, 3)
-    K = pts.shape[0]
-    if candidates is not None:
-        cand = np.asarray(candidates, dtype=float).reshape(K, -1, 3)
-        C = cand.shape[1]
-        prox_all = body_proximity(body, T_base_link, cand.reshape(-1, 3))
-        best = np.argmin(prox_all.distance.reshape(K, C), axis=1) + C * np.arange(K)
-        prox = BodyProximity(
-            *(getattr(prox_all, f)[best] for f in ("distance", "capsule", "link", "p_base_robot", "normal"))
-        )
-    else:
-        prox = body_proximity(body, T_base_link, pts)
-    J = point_jacobians(body.chain, T_base_link, prox.link, prox.p_base_robot)
-    G = np.einsum("ki,kij->kj", prox.normal, J)
-    h = approach_speed_bound(prox.distance, critical, notice, v_max)
-    if velocities is not None:
-        h = h + np.minimum(np.einsum("ki,ki->k", prox.normal, np.asarray(velocities, dtype=float).reshape(K, 3)), 0.0)
+    prox, G = obstacle_geometry(body, T_base_link, points, candidates)
+    h = obstacle_bounds(prox, critical, notice, v_max, velocities)
     return ObstacleRows(G, h, prox.distance, prox.link, prox.normal, prox.p_base_robot)
 
 

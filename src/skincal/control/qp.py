@@ -18,6 +18,21 @@ controller never relaxes the obstacle rows silently. It solves the *least-violat
 ``min 1/2 (eps |qd|^2 + |s|^2)  s.t.  G qd - s <= h, s >= 0, lb <= qd <= ub`` (as still as possible
 while violating the rows by the least total amount) and flags the step ``feasible = False`` with
 the violation ``max s`` (m/s).
+
+Protective separation (``ControllerConfig.separation`` set, ISO/TS 15066 speed and separation
+monitoring, :mod:`skincal.control.separation`): the critical distance of each obstacle row is the point's
+own ``S_p,i = S_h + S_r + S_s + C + Z_d + Z_r`` computed at every step from
+
+* ``Z_d,i = sigma_level sqrt(n_i^T Cov_i n_i)``: the point's position covariance (``ObstaclePoints.cov``)
+  along its normal;
+* ``v_r,i = n_i^T J_i qd_prev``: the robot point's speed toward the obstacle under the previous command
+  (or the measured joint velocity passed to :meth:`AvoidanceController.step`), for ``S_r``, ``S_s``, ``T_s``;
+* ``v_h,i = max(v_h, -n_i^T v_i)``: the design human speed, or the point's measured approach speed when
+  larger;
+
+and the bound keeps its shape, shifted: ``b(d) = v_max tanh((d - S_p) / w)`` with the fixed ramp width
+``w = (notice - critical) / atanh(0.99)``. Below ``S_p`` the bound is negative, so the robot backs
+away. ``separation = None`` is the fixed critical distance, unchanged.
 """
 
 from __future__ import annotations
@@ -30,10 +45,19 @@ from numpy.typing import ArrayLike
 
 from skincal.control.constraints import (
     FrameCache,
+    approach_speed_bound,
     cap_candidates,
     joint_velocity_bounds,
+    obstacle_geometry,
     obstacle_rows,
     point_jacobians,
+    ramp_width,
+)
+from skincal.control.separation import (
+    SeparationParams,
+    SeparationTerms,
+    allowed_approach_speed,
+    protective_separation,
 )
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
@@ -69,6 +93,9 @@ class ControllerConfig:
         velocity_scale: fraction of the joint velocity limits used.
         limit_margin: keep this far inside the joint position limits, rad.
         solver: a :mod:`qpsolvers` backend name.
+        separation: ISO/TS 15066 protective separation per point instead of the fixed ``critical``
+            (module docstring; ``critical`` and ``notice`` then only set the ramp width); None: the
+            fixed critical distance.
     """
 
     dt: float = 0.001
@@ -83,8 +110,11 @@ class ControllerConfig:
     velocity_scale: float = 1.0
     limit_margin: float = 0.05
     solver: str = "daqp"
+    separation: SeparationParams | None = None
 
     def __post_init__(self) -> None:
+        if self.separation is not None and not isinstance(self.separation, SeparationParams):
+            raise ConfigError(f"controller: separation must be SeparationParams or None, got {self.separation!r}")
         if not (0 < self.critical < self.notice):
             raise ConfigError(f"controller: need 0 < critical < notice (m), got {self.critical}, {self.notice}")
         for name in ("dt", "damping", "v_max", "velocity_scale"):
@@ -107,6 +137,12 @@ class StepResult:
         n_obstacles: number of obstacle rows.
         min_distance: smallest distance of an obstacle point to the padded robot surface, m (inf if none).
         x: ``(3,)`` flange position at this step, base frame, m.
+        margin: the critical distance of the most critical point (smallest ``d_i - S_p,i``), m: its
+            ``S_p`` with ``separation``, else the fixed ``critical``; NaN without obstacle points.
+        terms: with ``separation``, every point's ``S_p`` terms (:class:`SeparationTerms`, ``(K,)``
+            each, in the order of the points); None otherwise.
+        clearance: ``min_i (d_i - S_p,i)`` (or ``min d_i - critical``), m; inf without points
+            (negative: inside the protective separation).
     """
 
     qd: FloatArray
@@ -116,11 +152,17 @@ class StepResult:
     n_obstacles: int
     min_distance: float
     x: FloatArray
+    margin: float = float("nan")
+    terms: SeparationTerms | None = None
+    clearance: float = float("inf")
 
 
 @dataclass(frozen=True)
 class QpProblem:
-    """The QP of one step: ``min 1/2 qd^T P qd + c^T qd  s.t.  G qd <= h, lb <= qd <= ub``."""
+    """The QP of one step: ``min 1/2 qd^T P qd + c^T qd  s.t.  G qd <= h, lb <= qd <= ub``.
+
+    ``distance`` ``(K,)``: every point's distance to the padded robot, m; ``critical`` ``(K,)``: the
+    critical distance of each (``S_p,i`` or the fixed one), m; ``terms``: the ``S_p`` terms or None."""
 
     P: FloatArray
     c: FloatArray
@@ -130,6 +172,26 @@ class QpProblem:
     ub: FloatArray
     x: FloatArray
     distance: FloatArray
+    critical: FloatArray | None = None
+    terms: SeparationTerms | None = None
+    separation_inputs: SeparationInputs | None = None
+
+
+@dataclass(frozen=True)
+class SeparationInputs:
+    """Per point ``(K,)``: what ``S_p`` is computed from (module docstring).
+
+    Attributes:
+        G: ``(K, n)`` rows ``n_i^T J_i`` (all points, before void rows are dropped).
+        v_now: the robot point's present speed toward the point, m/s.
+        v_h: the point's measured approach speed, m/s.
+        z_d: ``Z_d``, m.
+    """
+
+    G: FloatArray
+    v_now: FloatArray
+    v_h: FloatArray
+    z_d: FloatArray
 
 
 class AvoidanceController:
@@ -152,13 +214,22 @@ class AvoidanceController:
         self.q_posture = None if q_posture is None else np.asarray(q_posture, dtype=float)
         self._flange = chain.T_link_flange[:3, 3]
         self._frames = FrameCache(chain)
+        self._width = ramp_width(config.critical, config.notice)
+        self.qd_prev = np.zeros(chain.n_joints)
+        """The last command (rad/s): the robot's speed for ``S_p`` when the step is given none."""
 
     def problem(
-        self, q: ArrayLike, x_des: ArrayLike, xd_des: ArrayLike, points: ArrayLike | ObstaclePoints
+        self,
+        q: ArrayLike,
+        x_des: ArrayLike,
+        xd_des: ArrayLike,
+        points: ArrayLike | ObstaclePoints,
+        qd_now: ArrayLike | None = None,
     ) -> QpProblem:
         """Assemble the QP at joint angles ``q`` ``(n,)`` for reference ``x_des``, ``xd_des`` ``(3,)`` (m, m/s)
-        and obstacle points: :class:`ObstaclePoints` (velocities and cone spread used) or still
-        points ``(K, 3)`` exactly where given (base frame, m)."""
+        and obstacle points: :class:`ObstaclePoints` (velocities, cone spread and covariances used) or
+        still points ``(K, 3)`` exactly where given (base frame, m). ``qd_now`` ``(n,)``: the robot's
+        joint velocity for ``S_p`` (default: the last command, :attr:`qd_prev`)."""
         cfg = self.config
         q = np.asarray(q, dtype=float).reshape(-1)
         n = self.chain.n_joints
@@ -177,13 +248,37 @@ class AvoidanceController:
             cand = None
             if cfg.n_rim > 0 and np.any(obs.spread > 0):
                 cand = cap_candidates(pts, obs.axes, obs.ranges, obs.spread, int(cfg.n_rim))
-            rows = obstacle_rows(self.body, T, pts, cfg.critical, cfg.notice, cfg.v_max, obs.velocities, cand)
+            terms, sep_in = None, None
+            if cfg.separation is None:
+                rows = obstacle_rows(self.body, T, pts, cfg.critical, cfg.notice, cfg.v_max, obs.velocities, cand)
+                G_all, h_all, dist = rows.G, rows.h, rows.distance
+                crit = np.full(dist.shape, cfg.critical)
+            else:
+                prox, G_all = obstacle_geometry(self.body, T, pts, cand)
+                v_obs = np.einsum("ki,ki->k", prox.normal, obs.velocities)  # > 0: the point moves away
+                var = np.einsum("ki,kij,kj->k", prox.normal, obs.cov, prox.normal)
+                v_now = np.zeros(len(pts)) if qd_now is None else G_all @ np.asarray(qd_now, dtype=float).reshape(n)
+                sep_in = SeparationInputs(
+                    G_all, v_now, -v_obs, cfg.separation.sigma_level * np.sqrt(np.maximum(var, 0.0))
+                )
+                terms = protective_separation(cfg.separation, sep_in.v_now, sep_in.v_h, sep_in.z_d)
+                crit = terms.total
+                dist = prox.distance
+                v_allowed = allowed_approach_speed(
+                    cfg.separation, dist, sep_in.v_now, sep_in.v_h, sep_in.z_d, self._ramp
+                )
+                h_all = v_allowed + np.minimum(v_obs, 0.0)
             # A row with no lever on the robot (point at the base) and a non-negative bound is void.
-            keep = (np.abs(rows.G).max(axis=1) > 1e-9) | (rows.h < 0)
-            G, h, dist = rows.G[keep], rows.h[keep], rows.distance
+            keep = (np.abs(G_all).max(axis=1) > 1e-9) | (h_all < 0)
+            G, h = G_all[keep], h_all[keep]
         else:
-            G, h, dist = np.zeros((0, n)), np.zeros(0), np.zeros(0)
-        return QpProblem(P, c, G, h, lb, ub, x, dist)
+            G, h, dist, crit, terms = np.zeros((0, n)), np.zeros(0), np.zeros(0), np.zeros(0), None
+            sep_in = None
+        return QpProblem(P, c, G, h, lb, ub, x, dist, crit, terms, sep_in)
+
+    def _ramp(self, gap: FloatArray) -> FloatArray:
+        """The approach bound ``b`` at ``gap = d - S_p`` (m), m/s."""
+        return approach_speed_bound(gap, 0.0, self.config.notice, self.config.v_max, self._width)
 
     def solve(self, prob: QpProblem) -> tuple[FloatArray, bool, float, float]:
         """``(qd, feasible, violation, solve_time_s)`` of a problem, with the safe stop when infeasible."""
@@ -217,9 +312,30 @@ class AvoidanceController:
         violation = float(np.max(prob.G @ qd - prob.h, initial=0.0))
         return qd, max(violation, 0.0), elapsed
 
-    def step(self, q: ArrayLike, x_des: ArrayLike, xd_des: ArrayLike, points: ArrayLike | ObstaclePoints) -> StepResult:
-        """Joint velocities for this step (see :meth:`problem`)."""
-        prob = self.problem(q, x_des, xd_des, points)
+    def step(
+        self,
+        q: ArrayLike,
+        x_des: ArrayLike,
+        xd_des: ArrayLike,
+        points: ArrayLike | ObstaclePoints,
+        qd_now: ArrayLike | None = None,
+    ) -> StepResult:
+        """Joint velocities for this step (see :meth:`problem`); the command becomes :attr:`qd_prev`."""
+        prob = self.problem(q, x_des, xd_des, points, qd_now)
         qd, feasible, violation, elapsed = self.solve(prob)
+        self.qd_prev = qd
         d_min = float(prob.distance.min()) if prob.distance.size else float("inf")
-        return StepResult(qd, feasible, violation, elapsed, int(prob.G.shape[0]), d_min, prob.x)
+        margin, clearance = float("nan"), float("inf")
+        terms, critical = prob.terms, prob.critical
+        if prob.separation_inputs is not None and self.config.separation is not None:
+            # S_p as the step leaves it: at the commanded speed, or the present one when larger
+            s = prob.separation_inputs
+            terms = protective_separation(self.config.separation, np.maximum(s.G @ qd, s.v_now), s.v_h, s.z_d)
+            critical = terms.total
+        if prob.distance.size and critical is not None:
+            gap = prob.distance - critical
+            i = int(np.argmin(gap))
+            margin, clearance = float(critical[i]), float(gap[i])
+        return StepResult(
+            qd, feasible, violation, elapsed, int(prob.G.shape[0]), d_min, prob.x, margin, terms, clearance
+        )

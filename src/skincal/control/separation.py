@@ -31,6 +31,7 @@ the robot backs away.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,6 +40,7 @@ from numpy.typing import ArrayLike
 
 from skincal.errors import ConfigError
 from skincal.kinematics.transforms import FloatArray
+from skincal.names import printable
 
 WALKING_SPEED_MPS = 1.6
 """ISO 13855 approach speed of a walking person, m/s."""
@@ -140,7 +142,7 @@ class StoppingModel:
         if not isinstance(d, dict):
             raise ConfigError("stopping model must be a mapping with " + ", ".join(keys))
         missing = [k for k in keys if k not in d]
-        extra = sorted(str(k) for k in d if k not in keys)
+        extra = sorted(printable(str(k)) for k in d if k not in keys)
         if missing or extra:
             what = f"missing {', '.join(missing)}" if missing else f"unknown field(s) {', '.join(extra)}"
             raise ConfigError(f"stopping model: {what} (fields: {', '.join(keys)})")
@@ -199,7 +201,7 @@ class SeparationParams:
         keys = ("human_speed_mps", "intrusion_m", "robot_position_uncertainty_m", "sigma_level", "stopping")
         if not isinstance(d, dict):
             raise ConfigError("separation parameters must be a mapping")
-        extra = sorted(str(k) for k in d if k not in keys)
+        extra = sorted(printable(str(k)) for k in d if k not in keys)
         if extra:
             raise ConfigError(f"separation: unknown field(s) {', '.join(extra)} (fields: {', '.join(keys)})")
         kw = {k: d[k] for k in keys[:-1] if k in d}
@@ -230,6 +232,14 @@ class SeparationTerms:
         return out | {"S_p": float(self.total[i])}
 
 
+def _human_speed(params: SeparationParams, measured: ArrayLike | None, K: int) -> FloatArray:
+    """``(K,)`` ``v_h``: the design speed, or a point's measured approach speed when larger, m/s."""
+    v_h = np.full(K, params.human_speed_mps)
+    if measured is not None:
+        v_h = np.maximum(v_h, np.asarray(measured, dtype=float).reshape(-1))
+    return v_h
+
+
 def protective_separation(
     params: SeparationParams,
     robot_speed_toward: ArrayLike,
@@ -248,9 +258,7 @@ def protective_separation(
     """
     v_r = np.maximum(np.asarray(robot_speed_toward, dtype=float).reshape(-1), 0.0)
     K = v_r.size
-    v_h = np.full(K, params.human_speed_mps)
-    if human_speed_toward is not None:
-        v_h = np.maximum(v_h, np.asarray(human_speed_toward, dtype=float).reshape(-1))
+    v_h = _human_speed(params, human_speed_toward, K)
     stop = params.stopping
     T_r = stop.reaction_time_s
     return SeparationTerms(
@@ -261,3 +269,49 @@ def protective_separation(
         Z_d=np.broadcast_to(np.asarray(z_d, dtype=float).reshape(-1), (K,)).copy(),
         Z_r=np.full(K, params.robot_position_uncertainty_m),
     )
+
+
+def allowed_approach_speed(
+    params: SeparationParams,
+    distance: ArrayLike,
+    robot_speed_now: ArrayLike,
+    human_speed_toward: ArrayLike | None,
+    z_d: ArrayLike,
+    bound: Callable[[FloatArray], FloatArray],
+    iterations: int = 14,
+) -> FloatArray:
+    """The largest speed ``v`` (m/s, ``(K,)``) at which each robot point may approach its obstacle point:
+
+        v <= bound(d - S_p(max(v, v_now)))
+
+    with ``S_p(v_r)`` of :func:`protective_separation` and ``bound`` the increasing approach-speed ramp
+    (``b(d - S_p)``). ``S_p`` grows with the robot's speed, so the right-hand side falls as ``v`` rises and
+    the allowed set is ``v <= v*``, ``v*`` its fixed point. Taking ``S_p`` at the speed being commanded
+    (and at least at the robot's present speed ``v_now``, from which it would have to stop) rather than
+    at the previous command alone keeps the margin from chattering: an explicit ``S_p(v_prev)`` swings
+    between a large margin (robot fast -> retreat) and a small one (robot slow -> fast approach) at
+    every step when ``b'(.) dS_p/dv > 1`` (about 3 with a 0.1 s reaction time and the tanh ramp).
+
+    ``v*`` is found by bisection (``iterations`` halvings of ``[max(v_now, 0), bound(d - S_p(v_now))]``);
+    the value returned is the lower end, never above ``v*``. Where even the present speed's ``S_p`` gives
+    a bound below that speed, the bound itself (negative inside ``S_p``: retreat).
+    """
+    d = np.asarray(distance, dtype=float).reshape(-1)
+    K = d.size
+    v0 = np.maximum(np.broadcast_to(np.asarray(robot_speed_now, dtype=float).reshape(-1), (K,)), 0.0)
+    v_h = _human_speed(params, human_speed_toward, K)
+    const = params.intrusion_m + np.asarray(z_d, dtype=float).reshape(-1) + params.robot_position_uncertainty_m
+    stop = params.stopping
+    T_r = stop.reaction_time_s
+
+    def s_p(v: FloatArray) -> FloatArray:
+        return v_h * (T_r + stop.stopping_time(v)) + v * T_r + stop.stopping_distance(v) + const
+
+    b0 = bound(d - s_p(v0))
+    lo, hi = v0, np.maximum(b0, v0)
+    for _ in range(int(iterations)):
+        mid = 0.5 * (lo + hi)
+        ok = mid <= bound(d - s_p(mid))
+        lo = np.where(ok, mid, lo)
+        hi = np.where(ok, hi, mid)
+    return np.where(b0 <= v0, b0, lo)
