@@ -105,15 +105,18 @@ def task_time_lost(log: RunLog, reference: RunLog) -> float:
     (the reference runs on ``t``, so the task never waits): the extra time the flange is off its
     reference by more than :data:`RECOVERY_THRESHOLD`.
     """
-    if log.t.size != reference.t.size:
-        raise ConfigError(f"task time lost: runs of {log.t.size} and {reference.t.size} steps do not compare")
+    if reference.t.size < log.t.size:
+        raise ConfigError(
+            f"task time lost: a reference of {reference.t.size} steps is shorter than the run's {log.t.size}"
+        )
     dt = float(log.t[1] - log.t[0]) if log.t.size > 1 else 0.0
     clock = log.task_time if log.task_time is not None else log.t
-    ref_clock = reference.task_time if reference.task_time is not None else reference.t
+    S = log.t.size  # a longer reference (the same run without a person, run longer) is cut to the run
+    ref_clock = (reference.task_time if reference.task_time is not None else reference.t)[:S]
     if not np.array_equal(clock, log.t):  # the clock paused somewhere
-        end = clock[-1] + dt
-        return float(max(ref_clock[-1] + dt - end, 0.0))
-    off = np.sum(log.tracking_error > RECOVERY_THRESHOLD) - np.sum(reference.tracking_error > RECOVERY_THRESHOLD)
+        return float(max(ref_clock[-1] - clock[-1], 0.0))
+    ref_off = np.sum(reference.tracking_error[:S] > RECOVERY_THRESHOLD)
+    off = np.sum(log.tracking_error > RECOVERY_THRESHOLD) - ref_off
     return float(max(off, 0) * dt)
 
 

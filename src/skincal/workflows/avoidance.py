@@ -150,11 +150,14 @@ def run_scenario(
     dt = controller.dt
     units = tuple(true_poses)
     rays = cone_directions(tof_model.fov_deg, tof_model.n_rays)
-    model = build_model(
-        chain, true_poses, scene=scenario.scene, range_directions=rays, board_geoms=False, link_radius=link_radius
-    )
+    geometry = dict(scene=scenario.scene, range_directions=rays, board_geoms=False, link_radius=link_radius)
     if mode == "kinematic":
+        model = build_model(chain, true_poses, **geometry)
         model.opt.timestep = dt
+    else:  # motors, published inertials and limits (the model's own timestep, a divisor of dt)
+        from skincal.sim.dynamics import torque_model
+
+        model = torque_model(chain, true_poses, **geometry)
     # Rays ignore transparent geoms: hide the robot's own capsule hull from the rangefinders (a unit
     # near a joint sits inside the neighbouring link's capsule, which the real arm does not have).
     robot_geoms = np.isin(model.geom_bodyid, link_body_ids(model, chain.n_joints))
@@ -164,14 +167,11 @@ def run_scenario(
     t = dt * np.arange(S)
     n = chain.n_joints
     q = scenario.q0.astype(float).copy()
-    robot = None
+    robot, qd = None, np.zeros(n)
     if mode == "torque":
         from skincal.sim.dynamics import TorqueConfig, TorqueRobot
 
-        robot = TorqueRobot(chain, model, torque if torque is not None else TorqueConfig())
-        robot.data.qpos[:n] = q
-        robot.data.qvel[:n] = 0.0
-        mujoco.mj_forward(model, robot.data)
+        robot = TorqueRobot(chain, model, torque if torque is not None else TorqueConfig(), q0=q)
         data = robot.data
     else:
         data = mujoco.MjData(model)
@@ -230,7 +230,7 @@ def run_scenario(
             task_time[k] = tau
             xk, vk = task.at(tau)
             x_des[k], xd_des[k] = xk[0], rate * vk[0]
-        res = ctl.step(q, x_des[k], xd_des[k], pts)
+        res = ctl.step(q, x_des[k], xd_des[k], pts) if robot is None else ctl.step(q, x_des[k], xd_des[k], pts, qd)
         step_t[k] = time.perf_counter() - t1
         log_q[k], log_qd[k], log_x[k] = q, res.qd, res.x
         feasible[k], violation[k], n_obs[k] = res.feasible, res.violation, res.n_obstacles
@@ -252,7 +252,7 @@ def run_scenario(
             q = q + res.qd * dt
         else:
             robot.step(res.qd, dt)
-            q = np.array(robot.q, dtype=float)
+            q, qd = robot.q, robot.qd
         loop_t[k] = time.perf_counter() - t0
     return RunLog(
         scenario,
