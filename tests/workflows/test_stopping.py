@@ -37,10 +37,13 @@ def test_braking_distance_and_time_increase_with_speed(models, name):
     model = models[name]
     assert isinstance(model, separation.StoppingModel)
     np.testing.assert_array_equal(model.speeds, (0.0, *SPEEDS))
-    assert np.all(np.diff(model.distances) > 0) and np.all(np.diff(model.times) > 0)
-    # S_s ~ v T_s / 2 (braking at a constant rate along the path), and grows faster than linearly
-    np.testing.assert_allclose(model.distances[1:], model.speeds[1:] * model.times[1:] / 2, rtol=0.35)
-    assert model.distances[-1] / model.distances[1] > 1.5 * model.speeds[-1] / model.speeds[1]
+    assert np.all(np.diff(model.distances) > 0)
+    assert model.distances[-1] / model.distances[1] > model.speeds[-1] / model.speeds[1]  # faster than linear
+    # braking every joint at once from at most its velocity limit: T_s grows to max_i qd_max,i / a_i at most
+    robot = TorqueRobot(get_robot(name))
+    t_max = np.max(robot.velocity_limit / robot.acceleration_limit)
+    assert np.all(np.diff(model.times) >= 0) and model.times[-1] > 2 * model.times[1]
+    assert model.times[-1] <= t_max + 0.002
     assert model.reaction_time_s == pytest.approx(0.001 + SENSING_LATENCY_S)
     assert separation.StoppingModel.from_dict(model.to_dict()).to_dict() == model.to_dict()
 
@@ -48,9 +51,9 @@ def test_braking_distance_and_time_increase_with_speed(models, name):
 @pytest.mark.parametrize(("name", "speed"), [("panda", 0.8), ("ur5e", 1.2), ("iiwa14", 0.4)])
 def test_a_fresh_stop_ends_inside_the_measured_distance(models, name, speed):
     """Stops at a speed between the table's, from 4 configurations not in the table's sample, end within
-    the interpolated distance + 10 % (measured: 0.42-0.78 of it for these) and the interpolated time
-    + 10 % (measured: 0.48-0.87). Over 100 random configurations at 1.1 m/s, a table of 8 configurations
-    is exceeded by up to 11 % (panda) / 0 % (ur5e) / 31 % (iiwa14) in 4 / 0 / 12 % of them."""
+    the interpolated distance + 10 % (measured: 0.24-0.63 of it) and the interpolated time + 10 %
+    (measured: 0.31-0.66). (With the default table, none of 100 fresh random configurations at 1.1 m/s
+    exceeded it: the screened worst cases; module docstring.)"""
     chain = get_robot(name)
     model = models[name]
     robot = TorqueRobot(chain)
