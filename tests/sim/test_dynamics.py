@@ -18,6 +18,7 @@ from skincal.sim.mujoco_model import (
     motor_name,
     published_inertials,
 )
+from skincal.skin.pose import SkinUnitPose
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -275,3 +276,24 @@ def test_bad_commands_and_models_are_one_line_errors():
         TorqueRobot(chain, config=TorqueConfig(kp=-1.0))
     with pytest.raises(ConfigError, match="exactly the 6 joints"):
         TorqueRobot(ur5e(), torque_model(chain))
+
+
+def test_sensors_are_skipped_during_steps_unless_asked_and_the_flags_restored():
+    """The skin's sensors cost most of a step: TorqueRobot leaves them to the caller (sensordata stays
+    untouched, the model's flags are as before), or computes them with sensors=True (an accelerometer on
+    link 1 of a robot held still reads gravity, 9.81 m/s^2)."""
+    chain = panda()
+    placements = {"u1": SkinUnitPose(1, np.eye(3), np.array([0.05, 0.0, -0.1]))}
+    model = torque_model(chain, placements)
+    flags = model.opt.disableflags
+    quiet = TorqueRobot(chain, model, q0=PANDA_Q)
+    quiet.data.sensordata[:] = 0.0
+    for _ in range(20):
+        quiet.step(np.zeros(7), H)
+    assert model.opt.disableflags == flags
+    assert not quiet.data.sensordata.any()
+    loud = TorqueRobot(chain, model, TorqueConfig(sensors=True), q0=PANDA_Q)
+    for _ in range(20):
+        loud.step(np.zeros(7), H)
+    accel = loud.data.sensordata[model.sensor("su/u1/accel").adr[0] :][:3]
+    assert np.linalg.norm(accel) == pytest.approx(9.81, rel=1e-4)
