@@ -52,7 +52,7 @@ LIVE_WARMUP_S = 2.0
 """``record --live``: wall time after the first joint state during which units are gathered before the
 calibrator starts (a unit seen first after that is recorded but not followed), s."""
 
-_TERM = r"\s*([^\s,]*?)\s*([a-zµ]+)\s*"
+_UNITS_LONGEST_FIRST = sorted([*POSITION_UNITS, *ROTATION_UNITS], key=len, reverse=True)
 _NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
 
 
@@ -78,10 +78,17 @@ def parse_target(text: str) -> Target:
         raise ConfigError(f"--target {shown}: {example}")
     position = rotation = None
     for part in parts:
-        m = re.fullmatch(_TERM, part.strip().lower())
-        if m is None or not m.group(1):
-            raise ConfigError(f"--target {shown}: '{printable(part.strip())}' has no number and unit; {example}")
-        number, unit = m.group(1), m.group(2)
+        term = part.strip().lower()
+        unit = next((u for u in _UNITS_LONGEST_FIRST if term.endswith(u)), None)
+        if unit is None:
+            letters = re.search(r"[^\W\d_]+$", term)
+            if letters is None:
+                raise ConfigError(f"--target {shown}: '{printable(part.strip())}' has no unit; {example}")
+            units = ", ".join([*POSITION_UNITS, *ROTATION_UNITS])
+            raise ConfigError(f"--target {shown}: unknown unit '{printable(letters.group())}' (use {units})")
+        number = term[: -len(unit)].strip()
+        if not number:
+            raise ConfigError(f"--target {shown}: '{printable(part.strip())}' has no number; {example}")
         if _NUMBER.fullmatch(number) is None:
             raise ConfigError(f"--target {shown}: '{printable(number)}' is not a finite number; {example}")
         value = float(number)
@@ -91,12 +98,10 @@ def parse_target(text: str) -> Target:
             position = value * POSITION_UNITS[unit]
         elif unit in ROTATION_UNITS and rotation is None:
             rotation = value * ROTATION_UNITS[unit]
-        elif unit in POSITION_UNITS or unit in ROTATION_UNITS:
-            raise ConfigError(f"--target {shown}: two {'positions' if unit in POSITION_UNITS else 'rotations'}; "
-                              f"{example}")  # fmt: skip
         else:
-            units = ", ".join([*POSITION_UNITS, *ROTATION_UNITS])
-            raise ConfigError(f"--target {shown}: unknown unit '{printable(unit)}' (use {units})")
+            raise ConfigError(
+                f"--target {shown}: two {'positions' if unit in POSITION_UNITS else 'rotations'}; {example}"
+            )
     assert position is not None and rotation is not None
     if not (math.isfinite(position) and math.isfinite(rotation)):
         raise ConfigError(f"--target {shown}: not a finite number; {example}")
@@ -131,10 +136,6 @@ class LiveOutcome:
 
 MeterCallback = Callable[[Mapping[str, "UnitStatus"], float, "float | None"], None]
 """``on_meter(statuses, t_data, t_end)``: the meter's view after a step (times in s since the data's start)."""
-
-
-class _Reached(Exception):
-    """Raised from the replay's chunk callback when every unit is at the target."""
 
 
 def make_calibrator(chain: SerialChain, units: list[str], gravity: Any, target: Target) -> OnlineCalibrator:
@@ -204,24 +205,19 @@ def follow_dataset(
     t0 = min([float(joints.t[0]), *(float(s.t[0]) for s in follow.imu.values() if len(s.t))])
     t1 = max([float(joints.t[-1]), *(float(s.t[-1]) for s in follow.imu.values() if len(s.t))])
     cal = make_calibrator(chain, names, ds.gravity, target)
-    state = {"t": t0}
+    state = {"t": t0, "reached": False}
 
-    def on_chunk(t: float) -> None:
+    def on_chunk(t: float) -> bool:
         state["t"] = float(t)
         statuses = cal.status()
         if on_meter is not None:
             on_meter(statuses, float(t) - t0, t1 - t0)
-        if stop_at_target and all_reached(statuses):
-            raise _Reached
+        state["reached"] = all_reached(statuses)
+        return stop_at_target and state["reached"]
 
-    reached = False
-    try:
-        replay(follow, cal, chunk_s=chunk_s, speed=speed, on_chunk=on_chunk)
-    except _Reached:
-        reached = True
-        cal.finish()
-    statuses = cal.status()
-    reached = reached or all_reached(statuses)
+    replay(follow, cal, chunk_s=chunk_s, speed=speed, on_chunk=on_chunk)  # finish() at the end or the stop
+    statuses = cal.status()  # after finish(): what was left absorbed
+    reached = bool(state["reached"]) or all_reached(statuses)
     result = dataclasses.replace(cal.result(), dataset_sha256=dataset_sha256)
     if on_meter is not None:
         on_meter(statuses, state["t"] - t0, t1 - t0)
