@@ -189,7 +189,7 @@ def test_record_live_follows_the_received_stream_on_the_recording_clock(tmp_path
         assert f.attrs["recording_complete"]
         for unit, status in outcome.statuses.items():
             t_file = f[f"imu/{unit}/t"][...]
-            assert 0.8 * t_file.size <= status.samples <= t_file.size
+            assert 0.5 * t_file.size <= status.samples <= t_file.size
             assert abs(status.t_last - t_file[-1]) < 0.5  # host time of the recording, not device time
     truth = {u: p.link for u, p in fast_ds.truth.items()}
     assert {u: s.link for u, s in outcome.statuses.items()} == truth
