@@ -1,0 +1,351 @@
+"""A unit that moved is noticed, in simulation: everyday work, a knocked unit, the change detector.
+
+* :func:`work_session`: a simulated session whose motion is an everyday work cycle
+  (:mod:`skincal.protocol.workcycle`) instead of a calibration protocol;
+* :func:`knocked_dataset`: the same session with one unit knocked (moved by ``translation_m`` and
+  turned by ``rotation_deg``) at stamp ``t_knock`` (:func:`skincal.sim.faults.simulate_knock`);
+* :func:`monitor_batch`: the monitor on residuals computed with the batch model: the units are
+  calibrated with ``mle`` from the first ``initial_s`` s, their residuals over the rest of the session
+  (:func:`skincal.viz.residuals.unit_residuals`, divided by the unit's white-noise std) feed
+  :class:`~skincal.calib.online.monitor.MovedUnitMonitor`; on an alarm the unit is re-calibrated from
+  ``recal_s`` s of data after the estimated change and watched again from there on;
+* :func:`monitor_online`: the same with the streaming calibrator
+  (:class:`~skincal.calib.online.OnlineCalibrator`, the dataset replayed through it);
+* :func:`motion_time`: how long the unit's link moved between two instants (the delay "within 5 s of
+  motion" is motion time: a unit knocked while the robot rests cannot show a move of its position).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from skincal.calib.online.monitor import Alarm, MonitorOptions, MovedUnitMonitor
+from skincal.data.dataset import Dataset, ImuStream, JointStates, Segments
+from skincal.data.result import CalibrationResult, UnitResult
+from skincal.errors import ConfigError
+from skincal.kinematics.transforms import FloatArray
+from skincal.skin.pose import SkinUnitPose
+
+MOVING_SPEED = 0.05
+"""A joint moves when its reported speed exceeds this, rad/s (for :func:`motion_time`)."""
+
+
+def work_session(
+    robot: str = "panda",
+    noise: str = "realistic",
+    kind: str = "teleop",
+    duration_s: float = 120.0,
+    seed: int = 0,
+    *,
+    placement: str = "paper",
+    units: int | None = None,
+    joints: str = "auto",
+    clock: str = "auto",
+    rate_hz: float | None = None,
+):
+    """A :class:`~skincal.sim.Session` of everyday work: the preset session of
+    :func:`skincal.workflows.session.make_session` (robot, placement, IMU, joint and clock presets from
+    ``seed``) whose motion is the work cycle ``kind`` of ``duration_s`` s (drawn from ``seed + 1``);
+    ``rate_hz`` sets the robot stream's sampling (default the work cycle's)."""
+    from skincal.protocol.workcycle import WorkCycleConfig, work_cycle
+    from skincal.workflows.session import make_session
+
+    session = make_session(robot, placement, units, noise, "fast", seed, joints=joints, clock=clock)
+    config = WorkCycleConfig(duration_s=duration_s)
+    if rate_hz is not None:
+        config = replace(config, rate_hz=rate_hz)
+    traj = work_cycle(session.chain, kind, np.random.default_rng(seed + 1), config)
+    text = f"simulated work: robot={session.chain.name} {kind} noise={noise} seed={seed}"
+    return replace(session, trajectory=traj, description=text)
+
+
+def simulate_session(session, seed: int) -> Dataset:
+    """``session`` simulated (analytic) with a fresh generator from ``seed`` (the same data on every call)."""
+    from skincal.sim import simulate
+
+    return simulate(replace(session, rng=np.random.default_rng(seed)))
+
+
+def knocked_dataset(
+    session, unit: str, t_knock: float, translation_m: float, rotation_deg: float, seed: int = 0
+) -> Dataset:
+    """``session`` simulated with ``unit`` knocked at stamp ``t_knock`` by ``translation_m`` m and
+    ``rotation_deg`` deg in random directions (:func:`skincal.sim.faults.knocked_pose` from ``seed``);
+    truth as :func:`skincal.sim.faults.splice_knock` records it."""
+    from skincal.sim.faults import knocked_pose, simulate_knock
+
+    if unit not in session.placements:
+        raise ConfigError(f"unknown unit '{unit}' (session has: {', '.join(session.placements)})")
+    moved = knocked_pose(session.placements[unit], translation_m, rotation_deg, np.random.default_rng([seed, 7]))
+    return simulate_knock(
+        lambda placements: simulate_session(replace(session, placements=placements), seed),
+        session.placements, unit, t_knock, moved,
+    )  # fmt: skip
+
+
+def crop(dataset: Dataset, t0: float, t1: float) -> Dataset:
+    """The part of ``dataset`` in ``[t0, t1]`` s (joint and IMU streams by their own stamps, segments
+    cut to it; ToF streams dropped). The input is not modified."""
+    j = dataset.joint_states
+    keep = (j.t >= t0) & (j.t <= t1)
+    if np.count_nonzero(keep) < 2:
+        raise ConfigError(f"crop: fewer than two joint samples in [{t0:g}, {t1:g}] s")
+    joints = JointStates(j.t[keep], j.q[keep], j.qd[keep], None if j.qdd is None else j.qdd[keep])
+    imu = {}
+    for name, s in dataset.imu.items():
+        k = (s.t >= t0) & (s.t <= t1)
+        imu[name] = ImuStream(s.t[k], s.accel[k], None if s.gyro is None else s.gyro[k])
+    segments = dataset.segments
+    if segments is not None:
+        inside = (segments.t_start >= t0) & (segments.t_end <= t1)
+        segments = Segments(*(np.asarray(a)[inside] for a in (segments.t_start, segments.t_end, segments.kind,
+                                                                segments.pose, segments.joint)))  # fmt: skip
+    return replace(dataset, joints=joints, imu=imu, tof={}, segments=segments)
+
+
+def noise_std(dataset: Dataset, unit: str) -> FloatArray:
+    """``(3,)`` white-noise std of ``unit``'s accelerometer per axis, m/s^2 (second differences, robust:
+    :func:`skincal.calib.preprocess.white_noise_std`), floored at 1e-6."""
+    from skincal.calib.preprocess import white_noise_std
+
+    return np.maximum(white_noise_std(np.asarray(dataset.imu[unit].accel, dtype=float), 2), 1e-6)
+
+
+def normalised_residuals(
+    dataset: Dataset, unit: str, result: UnitResult, sigma: FloatArray, interpolator=None
+) -> tuple[FloatArray, FloatArray]:
+    """``t`` ``(M,)`` s and ``r`` ``(M, 3)``: ``unit``'s accelerometer residuals at ``result`` (the model
+    of :mod:`skincal.viz.residuals`) divided by ``sigma`` ``(3,)``."""
+    from skincal.viz.residuals import unit_residuals
+
+    res = unit_residuals(dataset, unit, result, interpolator)
+    return res.t, res.residual / sigma
+
+
+def motion_time(dataset: Dataset, link: int, t0: float, t1: float) -> float:
+    """Time in ``[t0, t1]`` during which one of joints ``1..link`` moved (reported speed above
+    :data:`MOVING_SPEED`), s."""
+    j = dataset.joint_states
+    inside = (j.t >= t0) & (j.t <= t1)
+    if np.count_nonzero(inside) < 2:
+        return 0.0
+    t = j.t[inside]
+    moving = np.any(np.abs(j.qd[inside][:, :link]) > MOVING_SPEED, axis=1)
+    dt = np.diff(t)
+    return float(np.sum(dt[moving[:-1]]))
+
+
+@dataclass
+class MonitorRun:
+    """What :func:`monitor_batch` / :func:`monitor_online` saw.
+
+    Attributes:
+        initial: the calibration the monitoring started from.
+        alarms: every alarm, in the order raised.
+        events: moved-unit events (contract fields of ``docs/interfaces.md``, with ``T_link_su_before``
+            and ``T_link_su_after`` ``(4, 4)`` lists).
+        poses: the final pose of every unit (after re-calibration for a moved one).
+        thresholds: per unit, the CUSUM threshold of its last warm-up (None: never left warm-up).
+        watched_s: per unit, the time span watched (after the warm-up), s.
+        result: the final calibration (online runs), else None.
+    """
+
+    initial: CalibrationResult | None
+    alarms: list[Alarm] = field(default_factory=list)
+    events: list[dict[str, Any]] = field(default_factory=list)
+    poses: dict[str, SkinUnitPose] = field(default_factory=dict)
+    thresholds: dict[str, float | None] = field(default_factory=dict)
+    watched_s: dict[str, float] = field(default_factory=dict)
+    result: CalibrationResult | None = None
+
+
+def monitor_batch(
+    dataset: Dataset,
+    initial_s: float = 60.0,
+    *,
+    recal_s: float = 60.0,
+    options: MonitorOptions = MonitorOptions(),
+    units: Sequence[str] | None = None,
+    initial: CalibrationResult | None = None,
+    chunk_s: float = 1.0,
+    on_alarm: Callable[[Alarm], None] | None = None,
+) -> MonitorRun:
+    """Watch every unit of ``dataset`` with the residuals of the batch model (module docstring).
+
+    ``initial`` (default: ``mle`` on the first ``initial_s`` s) gives each unit's pose; the residuals
+    from ``initial_s`` on are fed in chunks of ``chunk_s`` s. On an alarm the unit is re-calibrated
+    (``mle``, its link kept) from ``[t_change, t_change + recal_s]`` and watched again from
+    ``t_change + recal_s`` on, after a new warm-up.
+    """
+    from skincal.calib import calibrate
+    from skincal.calib.preprocess import JointInterpolator
+
+    t_start = float(dataset.joint_states.t[0])
+    t_end = float(dataset.joint_states.t[-1])
+    names = list(dataset.units if units is None else units)
+    if initial is None:
+        initial = calibrate(crop(dataset, t_start, t_start + initial_s), "mle", units=names)
+    run = MonitorRun(initial)
+    interpolator = JointInterpolator(dataset.joints)
+    monitor = MovedUnitMonitor(options, on_alarm=on_alarm)
+    for name in names:
+        unit = initial.units[name]
+        sigma = noise_std(crop(dataset, t_start, t_start + initial_s), name)
+        watch_from = t_start + initial_s
+        while watch_from < t_end:
+            t, r = normalised_residuals(dataset, name, unit, sigma, interpolator)
+            keep = t >= watch_from
+            t, r = t[keep], r[keep]
+            alarm = None
+            run.watched_s[name] = run.watched_s.get(name, 0.0) + (float(t[-1] - t[0]) if t.size else 0.0)
+            edges = np.searchsorted(t, np.arange(watch_from, t_end + chunk_s, chunk_s))
+            for a, b in zip(edges[:-1], edges[1:], strict=True):
+                if b > a:
+                    before = len(monitor.alarms)
+                    monitor.on_residuals(name, t[a:b], r[a:b])
+                    if len(monitor.alarms) > before:
+                        alarm = monitor.alarms[-1]
+                        break
+            run.thresholds[name] = monitor.unit(name).threshold or run.thresholds.get(name)
+            if alarm is None:
+                break
+            run.alarms.append(alarm)
+            run.watched_s[name] -= float(t[-1] - alarm.t_detected) if t.size else 0.0
+            ready = min(alarm.t_change + recal_s, t_end)
+            after = calibrate(crop(dataset, alarm.t_change, ready), "mle", units=[name], links={name: unit.pose.link})
+            event = alarm.event()
+            event.update(link=int(unit.pose.link), t_recalibrated_s=float(ready),
+                         T_link_su_before=unit.pose.T_link_su.tolist())  # fmt: skip
+            if name in after.units:
+                unit = after.units[name]
+                event["T_link_su_after"] = unit.pose.T_link_su.tolist()
+            run.events.append(event)
+            watch_from = ready
+        run.poses[name] = unit.pose
+    return run
+
+
+def monitor_online(
+    dataset: Dataset,
+    *,
+    options: MonitorOptions = MonitorOptions(),
+    online_options: Any = None,
+    chunk_s: float = 0.1,
+    on_alarm: Callable[[Alarm], None] | None = None,
+) -> MonitorRun:
+    """The monitor attached to the streaming calibrator, ``dataset`` replayed through it as fast as
+    possible (:func:`skincal.calib.online.replay`); the calibrator restarts a moved unit and records the
+    event itself (:meth:`~skincal.calib.online.monitor.MovedUnitMonitor.attach`)."""
+    from skincal.calib.online import OnlineCalibrator, OnlineOptions, replay
+
+    calibrator = OnlineCalibrator(
+        dataset.chain, dataset.units, dataset.gravity, online_options if online_options is not None else OnlineOptions()
+    )
+    monitor = MovedUnitMonitor(options, on_alarm=on_alarm).attach(calibrator)
+    replay(dataset, calibrator, chunk_s=chunk_s)
+    result = calibrator.result()
+    run = MonitorRun(None, alarms=list(monitor.alarms), events=[dict(e) for e in calibrator.events], result=result)
+    for name, unit in result.units.items():
+        run.poses[name] = unit.pose
+        run.thresholds[name] = monitor.unit(name).threshold
+    for event in run.events:
+        unit = result.units.get(event["unit"])
+        if unit is not None and "T_link_su_after" not in event:
+            event["T_link_su_after"] = unit.pose.T_link_su.tolist()
+    return run
+
+
+def pose_errors(T_est: Any, truth: SkinUnitPose) -> tuple[float, float]:
+    """Position (m) and rotation (deg) error of a ``(4, 4)`` pose against ``truth``."""
+    T = np.asarray(T_est, dtype=float)
+    dp = float(np.linalg.norm(T[:3, 3] - truth.p_link_su))
+    c = (np.trace(truth.R_link_su.T @ T[:3, :3]) - 1) / 2
+    return dp, float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+KNOCKS = (("5 mm", 0.005, 0.0), ("2 deg", 0.0, 2.0))
+"""The knocks of the issue's target: (label, translation m, rotation deg)."""
+
+
+def knock_case(
+    session, unit: str, translation_m: float, rotation_deg: float, t_knock: float, seed: int = 0, **monitor: Any
+) -> dict[str, Any]:
+    """One knocked session watched by :func:`monitor_batch`: the detection delay (wall and motion time
+    of the unit's link after the knock), the change-time error, both poses' errors against the truth
+    and the alarms of the other units."""
+    ds = knocked_dataset(session, unit, t_knock, translation_m, rotation_deg, seed)
+    run = monitor_batch(ds, **monitor)
+    truth = ds.truth_sensor[unit]
+    link = session.placements[unit].link
+    as_pose = lambda T: SkinUnitPose(link, np.asarray(T)[:3, :3], np.asarray(T)[:3, 3])  # noqa: E731
+    mine = [e for e in run.events if e["unit"] == unit and e["t_detected_s"] >= t_knock]
+    early = [e for e in run.events if e["unit"] == unit and e["t_detected_s"] < t_knock]
+    out: dict[str, Any] = {
+        "unit": unit, "link": link, "translation_m": translation_m, "rotation_deg": rotation_deg, "t_knock_s": t_knock,
+        "detected": bool(mine), "false_alarms_before_knock": len(early),
+        "other_units_alarms": sum(e["unit"] != unit for e in run.events),
+    }  # fmt: skip
+    if mine:
+        e = mine[0]
+        before = pose_errors(e["T_link_su_before"], as_pose(truth["knock_T_link_su_before"]))
+        after = (float("nan"), float("nan"))
+        if "T_link_su_after" in e:
+            after = pose_errors(e["T_link_su_after"], as_pose(truth["knock_T_link_su_after"]))
+        out.update(
+            delay_s=e["t_detected_s"] - t_knock,
+            delay_motion_s=motion_time(ds, link, t_knock, e["t_detected_s"]),
+            t_change_error_s=e["t_change_s"] - t_knock,
+            before_mm=1e3 * before[0], before_deg=before[1], after_mm=1e3 * after[0], after_deg=after[1],
+        )  # fmt: skip
+    return out
+
+
+def bench_monitor(
+    noises: Sequence[str] = ("realistic", "real"),
+    hours: float = 1.0,
+    kind: str = "teleop",
+    robot: str = "panda",
+    units: Sequence[str] | None = None,
+    knock_duration_s: float = 420.0,
+    t_knock: float = 300.0,
+    seed: int = 0,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """The issue's targets for a moved unit: per IMU preset, the false alarms over ``hours`` of normal
+    work (6 units, controller joint states) and, per knock of :data:`KNOCKS` and unit, the detection
+    delay and both poses' errors (:func:`knock_case`). Costs (wall time, peak memory) included."""
+    import resource
+    import time
+
+    say = progress or (lambda _text: None)
+    doc: dict[str, Any] = {"robot": robot, "kind": kind, "hours": hours, "seed": seed, "false_alarms": {}, "knocks": []}
+    for noise in noises:
+        say(f"{noise}: {hours:g} h of normal work")
+        start = time.perf_counter()
+        session = work_session(robot, noise, kind, 3600.0 * hours, seed, rate_hz=500.0)
+        ds = simulate_session(session, seed)
+        simulated = time.perf_counter()
+        run = monitor_batch(ds)
+        done = time.perf_counter()
+        doc["false_alarms"][noise] = {
+            "duration_s": float(ds.joint_states.t[-1] - ds.joint_states.t[0]),
+            "units": len(ds.units),
+            "watched_unit_s": float(sum(run.watched_s.values())),
+            "alarms": [{"unit": a.unit, "t_detected_s": a.t_detected, "statistic": a.statistic} for a in run.alarms],
+            "thresholds": {k: v for k, v in run.thresholds.items()},
+            "simulate_s": simulated - start,
+            "monitor_s": done - simulated,
+        }
+        del ds, run
+        session = work_session(robot, noise, kind, knock_duration_s, seed + 1)
+        for label, dm, ddeg in KNOCKS:
+            for unit in units or list(session.placements):
+                say(f"{noise}: {label} knock of {unit}")
+                case = knock_case(session, unit, dm, ddeg, t_knock, seed + 1)
+                doc["knocks"].append({"imu": noise, "knock": label, **case})
+    doc["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return doc
