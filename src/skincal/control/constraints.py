@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from skincal.kinematics.chain import SerialChain
+from skincal.kinematics.chain import SerialChain, cross
 from skincal.kinematics.transforms import FloatArray
 from skincal.perception.body import BodyProximity, RobotBody, body_proximity, point_jacobians
 
@@ -55,6 +55,13 @@ def approach_speed_bound(
     """
     w = (notice - critical) / np.arctanh(SATURATION) if width is None else width
     return v_max * np.tanh((np.asarray(distance, dtype=float) - critical) / w)
+
+
+def approach_speed_slope(gap: ArrayLike, v_max: float, width: float) -> FloatArray:
+    """``db/dd`` of :func:`approach_speed_bound` at ``gap = d - d_c`` (m) for ramp ``width`` ``w``: ``(v_max / w)
+    (1 - tanh^2(gap / w))``, 1/s."""
+    t = np.tanh(np.asarray(gap, dtype=float) / width)
+    return (v_max / width) * (1.0 - t * t)
 
 
 def ramp_width(critical: float, notice: float) -> float:
@@ -116,9 +123,9 @@ def cap_candidates(
     r = np.asarray(ranges, dtype=float).reshape(-1)
     s = np.minimum(np.asarray(spread, dtype=float).reshape(-1), r)
     helper = np.where((np.abs(a[:, :1]) < 0.9), [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    e1 = np.cross(a, helper)
+    e1 = cross(a, helper)
     e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-12)
-    e2 = np.cross(a, e1)
+    e2 = cross(a, e1)
     phi = 2 * np.pi * np.arange(n_rim) / max(n_rim, 1)
     e = np.cos(phi)[None, :, None] * e1[:, None] + np.sin(phi)[None, :, None] * e2[:, None]  # (K, R, 3)
     back = (r - np.sqrt(np.maximum(r**2 - s**2, 0.0)))[:, None, None] * a[:, None]

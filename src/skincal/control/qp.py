@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike
 from skincal.control.constraints import (
     FrameCache,
     approach_speed_bound,
+    approach_speed_slope,
     cap_candidates,
     joint_velocity_bounds,
     obstacle_geometry,
@@ -54,9 +55,9 @@ from skincal.control.constraints import (
     ramp_width,
 )
 from skincal.control.separation import (
+    ApproachSpeedTable,
     SeparationParams,
     SeparationTerms,
-    allowed_approach_speed,
     protective_separation,
 )
 from skincal.errors import ConfigError
@@ -215,6 +216,7 @@ class AvoidanceController:
         self._flange = chain.T_link_flange[:3, 3]
         self._frames = FrameCache(chain)
         self._width = ramp_width(config.critical, config.notice)
+        self._speeds = None if config.separation is None else ApproachSpeedTable(config.separation, self._ramp)
         self.qd_prev = np.zeros(chain.n_joints)
         """The last command (rad/s): the robot's speed for ``S_p`` when the step is given none."""
 
@@ -257,16 +259,16 @@ class AvoidanceController:
                 prox, G_all = obstacle_geometry(self.body, T, pts, cand)
                 v_obs = np.einsum("ki,ki->k", prox.normal, obs.velocities)  # > 0: the point moves away
                 var = np.einsum("ki,kij,kj->k", prox.normal, obs.cov, prox.normal)
-                v_now = np.zeros(len(pts)) if qd_now is None else G_all @ np.asarray(qd_now, dtype=float).reshape(n)
+                moving = qd_now is not None
+                v_now = G_all @ np.asarray(qd_now, dtype=float).reshape(n) if moving else np.zeros(len(pts))
                 sep_in = SeparationInputs(
                     G_all, v_now, -v_obs, cfg.separation.sigma_level * np.sqrt(np.maximum(var, 0.0))
                 )
                 terms = protective_separation(cfg.separation, sep_in.v_now, sep_in.v_h, sep_in.z_d)
                 crit = terms.total
                 dist = prox.distance
-                v_allowed = allowed_approach_speed(
-                    cfg.separation, dist, sep_in.v_now, sep_in.v_h, sep_in.z_d, self._ramp
-                )
+                assert self._speeds is not None
+                v_allowed = self._speeds(dist, sep_in.v_now if moving else None, sep_in.v_h, sep_in.z_d)
                 h_all = v_allowed + np.minimum(v_obs, 0.0)
             # A row with no lever on the robot (point at the base) and a non-negative bound is void.
             keep = (np.abs(G_all).max(axis=1) > 1e-9) | (h_all < 0)
@@ -276,9 +278,13 @@ class AvoidanceController:
             sep_in = None
         return QpProblem(P, c, G, h, lb, ub, x, dist, crit, terms, sep_in)
 
-    def _ramp(self, gap: FloatArray) -> FloatArray:
-        """The approach bound ``b`` at ``gap = d - S_p`` (m), m/s."""
-        return approach_speed_bound(gap, 0.0, self.config.notice, self.config.v_max, self._width)
+    def _ramp(self, gap: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """The approach bound ``b`` (m/s) at ``gap = d - S_p`` (m) and its slope ``db/dgap`` (1/s)."""
+        cfg = self.config
+        return (
+            approach_speed_bound(gap, 0.0, cfg.notice, cfg.v_max, self._width),
+            approach_speed_slope(gap, cfg.v_max, self._width),
+        )
 
     def solve(self, prob: QpProblem) -> tuple[FloatArray, bool, float, float]:
         """``(qd, feasible, violation, solve_time_s)`` of a problem, with the safe stop when infeasible."""

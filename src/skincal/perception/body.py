@@ -112,16 +112,29 @@ def body_proximity(body: RobotBody, T_base_link: FloatArray, points: ArrayLike) 
     T = np.asarray(T_base_link, dtype=float)
     T = T[None] if T.ndim == 3 else T
     x = np.asarray(points, dtype=float).reshape(-1, 3)
+    K = x.shape[0]
     a, b = body.segments(T[:1])
-    c, _ = closest_on_segments(x[:, None, :], a[0][None], b[0][None])  # (K, C, 3)
-    gap = x[:, None, :] - c
-    dist = np.linalg.norm(gap, axis=-1) - body.radius[None, :]
-    best = np.argmin(dist, axis=1) if dist.shape[1] else np.zeros(x.shape[0], dtype=int)
-    k = np.arange(x.shape[0])
-    g = gap[k, best]
+    a, ab = a[0], b[0] - a[0]  # (C, 3)
+    if a.shape[0] == 0:
+        best = np.zeros(K, dtype=int)
+        return BodyProximity(
+            np.full(K, np.inf), best, body.link[best], np.zeros((K, 3)), np.tile([0.0, 0.0, 1.0], (K, 1))
+        )
+    # :func:`closest_on_segments` on (C, K) arrays, after the dot product per component (long inner loops
+    # for the many points of the control loop; the same operations in the same order, so the same numbers)
+    denom = np.einsum("...i,...i->...", ab, ab)[:, None]
+    s = np.einsum("...i,...i->...", x[None, :, :] - a[:, None, :], ab[:, None, :]) / np.maximum(denom, _EPS)
+    s = np.clip(np.where(denom > _EPS, s, 0.0), 0.0, 1.0)  # (C, K)
+    gap = [x[:, j][None, :] - (a[:, j][:, None] + s * ab[:, j][:, None]) for j in range(3)]  # (C, K) each
+    dist = np.sqrt(gap[0] * gap[0] + gap[1] * gap[1] + gap[2] * gap[2]) - body.radius[:, None]
+    best = np.argmin(dist, axis=0)
+    k = np.arange(K)
+    g = np.stack([gj[best, k] for gj in gap], axis=1)
+    sb = s[best, k][:, None]
+    c = a[best] + sb * ab[best]
     norm = np.linalg.norm(g, axis=-1, keepdims=True)
     normal = np.where(norm > _EPS, g / np.maximum(norm, _EPS), np.array([0.0, 0.0, 1.0]))
-    return BodyProximity(dist[k, best], best, body.link[best], c[k, best], normal)
+    return BodyProximity(dist[best, k], best, body.link[best], c, normal)
 
 
 def segment_distance(a1: FloatArray, b1: FloatArray, a2: FloatArray, b2: FloatArray) -> FloatArray:
