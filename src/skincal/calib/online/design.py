@@ -26,9 +26,10 @@ sampled every :attr:`DesignOptions.dt` s), ``P`` a weak prior (std :attr:`Design
 and ``w_u = 1``, or :attr:`DesignOptions.reached_weight` for a unit whose std already reached its target.
 The gain is invariant to the parameters' units (a log det ratio), so rad and m mix freely.
 
-Units without a link or an estimate yet cannot be scored; while there are any, the motion is chosen
-to find them (:func:`next_motion`): the joint most of them name as ``best_joint``, else the joint not
-yet excited nearest the tip.
+Units without a link or an estimate yet cannot be scored, and a unit whose link is still undecided
+is scored on a guess; while there are any, the motion is chosen to find them (:func:`next_motion`):
+the joint most of them name as ``best_joint`` (the calibrator names the joint that tells the links
+apart), else the joint not yet excited nearest the tip; the D-optimal score picks among those.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ from skincal.errors import ConfigError, ProtocolError
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray
 from skincal.protocol import ProtocolConfig, Trajectory, build_trajectory, get_protocol
-from skincal.protocol.limits import excursion_envelopes, fit_to_limits, position_bounds
+from skincal.protocol.limits import excursion_envelopes, fit_to_limits, pose_box, position_bounds
 
 SEGMENT_PROTOCOL = "fast"
 """The protocol whose excitation (amplitude, frequency, duration, rests, move speed) a segment uses."""
@@ -141,6 +142,19 @@ def d_optimal_gain(information: FloatArray, added: FloatArray, prior: FloatArray
     return float(log1 - log0)
 
 
+def psd(M: FloatArray) -> FloatArray:
+    """``M`` made a valid information matrix: symmetrised, negative eigenvalues (round-off of an inverse or
+    a Schur complement) set to 0; a non-finite ``M`` (nothing known) is all zeros."""
+    M = np.asarray(M, dtype=float)
+    if not np.all(np.isfinite(M)):
+        return np.zeros_like(M)
+    M = 0.5 * (M + M.T)
+    lam, V = np.linalg.eigh(M)
+    if lam.min() >= 0:
+        return M
+    return (V * np.clip(lam, 0.0, None)) @ V.T
+
+
 def excitable(chain: SerialChain, config: ProtocolConfig, q: FloatArray) -> np.ndarray:
     """``(K, n)`` bool: joint ``j`` may be excited at configuration ``q[k]`` (``(K, n)`` or ``(n,)``): every
     joint within the margin-shrunk limits and joint ``j``'s excursion too (:func:`~skincal.protocol.limits.pose_box`
@@ -174,15 +188,15 @@ def gravity_features(chain: SerialChain, poses: FloatArray) -> FloatArray:
 def candidate_poses(
     chain: SerialChain, config: ProtocolConfig, visited: FloatArray, rng: np.random.Generator, options: DesignOptions
 ) -> FloatArray:
-    """``(K, n)`` new rest poses: uniform draws within the margin-shrunk limits, collision-free, the ``K``
-    farthest (greedy) from the visited poses ``(V, n)`` in gravity directions."""
+    """``(K, n)`` new rest poses: uniform draws within :func:`~skincal.protocol.limits.pose_box` (every
+    joint's excitation fits there), collision-free, the ``K`` farthest (greedy) from the visited poses
+    ``(V, n)`` in gravity directions."""
     from skincal.protocol.collision import CollisionModel
 
     if options.pose_candidates == 0:
         return np.zeros((0, chain.n_joints))
-    lower, upper = position_bounds(chain)
-    m = config.limit_margin
-    pool = rng.uniform(lower + m, upper - m, size=(options.pose_pool, chain.n_joints))
+    lo, hi = pose_box(chain, replace(config, excited_joints=None))
+    pool = rng.uniform(lo, hi, size=(options.pose_pool, chain.n_joints))
     pool = pool[CollisionModel(chain).free(pool)]
     if pool.shape[0] == 0:
         return pool
@@ -216,7 +230,7 @@ def motion_gain(
     trajectory: Trajectory,
     weights: Mapping[str, float],
     options: DesignOptions,
-    current: Mapping[str, tuple[int, FloatArray]] | None = None,
+    current: Mapping[str, tuple[int | None, FloatArray]] | None = None,
 ) -> float:
     """Weighted D-optimal gain (module docstring) of executing ``trajectory`` for the units in ``weights``."""
     t = np.arange(0.0, trajectory.duration, options.dt)
@@ -226,10 +240,24 @@ def motion_gain(
     for unit, w in weights.items():
         if w <= 0:
             continue
-        link, info = current[unit] if current is not None else calibrator.information(unit)
-        added = calibrator.pose_information_rate(unit, link, q, qd, qdd, options.dt)
-        gain += w * d_optimal_gain(info, added, prior)
+        link, info = current[unit] if current is not None else _information(calibrator, unit)
+        if link is None:
+            continue
+        try:
+            added = calibrator.pose_information_rate(unit, link, q, qd, qdd, options.dt)
+        except np.linalg.LinAlgError:  # a degenerate estimate: nothing to predict from
+            continue
+        gain += w * d_optimal_gain(info, psd(added), prior)
     return gain
+
+
+def _information(calibrator: Informed, unit: str) -> tuple[int | None, FloatArray]:
+    """The unit's link and current information (:func:`psd`); ``(None, 0)`` when its estimate is degenerate."""
+    try:
+        link, info = calibrator.information(unit)
+    except np.linalg.LinAlgError:
+        return None, np.zeros((6, 6))
+    return link, psd(info)
 
 
 def score_candidates(
@@ -240,20 +268,23 @@ def score_candidates(
     poses: FloatArray,
     options: DesignOptions = DesignOptions(),
     joints: Sequence[int] | None = None,
+    *,
+    here: bool = True,
 ) -> list[Candidate]:
-    """Every feasible candidate (here, and at each of ``poses`` ``(K, n)``; ``joints``: only these) scored,
-    best first. Candidates are built without the collision check (:func:`next_motion` checks the chosen)."""
+    """Every feasible candidate (here unless not ``here``, and at each of ``poses`` ``(K, n)``; ``joints``:
+    only these) scored, best first. Candidates are built without the collision check (:func:`next_motion`
+    checks the chosen)."""
     q_now = np.asarray(q_now, dtype=float)
     status = calibrator.status()
     weights = unit_weights(status, options.reached_weight)
-    current = {u: calibrator.information(u) for u in weights}
+    current = {u: _information(calibrator, u) for u in weights}
     sites = [q_now, *np.atleast_2d(poses)] if len(poses) else [q_now]
     ok = excitable(chain, config, np.array(sites))
     allowed = set(range(chain.n_joints) if joints is None else joints)
     out: list[Candidate] = []
     for k, pose in enumerate(sites):
         for j in range(chain.n_joints):
-            if not ok[k, j] or j not in allowed:
+            if not ok[k, j] or j not in allowed or (k == 0 and not here):
                 continue
             try:
                 traj = build_segment(chain, config, q_now, pose, j, check=False)
@@ -273,7 +304,7 @@ def next_motion(
     *,
     config: ProtocolConfig | None = None,
     visited: FloatArray | None = None,
-    excited: Sequence[int] = (),
+    moved: Sequence[int] = (),
     options: DesignOptions = DesignOptions(),
 ) -> Candidate:
     """The best next segment from ``q_now`` (module docstring), checked (limits, collision).
@@ -285,8 +316,14 @@ def next_motion(
         rng: draws the candidate poses.
         config: the segment protocol (default :func:`segment_config`).
         visited: ``(V, n)`` rest poses visited so far (gravity diversity; default ``q_now`` only).
-        excited: joints excited so far (to find units before they can be scored).
+        moved: 0-based joints that have moved so far (excited, or in a move between poses).
         options: :class:`DesignOptions`.
+
+    Finding the units first: a unit is *unfound* while it has no link or estimate, its link is
+    undecided, or it sits on link ``k < n`` while joint ``k + 1`` never moved (then every link from
+    ``k`` on explains its data alike). While some are, the candidates excite only the joints they call
+    for (:func:`finding_joints`), and while some joint never moved, only after a move to a new pose
+    (a move turns every joint at once); the D-optimal score picks among those.
 
     Raises :class:`ProtocolError` when no candidate passes the checks.
     """
@@ -294,33 +331,50 @@ def next_motion(
     q_now = np.asarray(q_now, dtype=float)
     visited = np.atleast_2d(q_now if visited is None else np.asarray(visited, dtype=float))
     status = calibrator.status()
-    unscored = [st for st in status.values() if getattr(st, "link", None) is None or getattr(st, "pose", None) is None]
+    moved_set = {int(j) for j in moved}
+    unfound = [st for st in status.values() if _unfound(st, moved_set, chain.n_joints)]
     joints: list[int] | None = None
     poses = candidate_poses(chain, config, visited, rng, options)
-    if unscored:
-        poses = poses[:0]  # find the units first: no moves, the joint that tells their links
-        joints = _finding_joints(unscored, excited, chain.n_joints)
-    candidates = score_candidates(calibrator, chain, config, q_now, poses, options, joints)
-    if not candidates and joints is not None:  # the finding joint cannot move here: anywhere
-        poses = candidate_poses(chain, config, visited, rng, options)
-        candidates = score_candidates(calibrator, chain, config, q_now, poses, options, joints)
-    for cand in candidates:
-        try:
-            traj = build_segment(chain, config, q_now, cand.pose, cand.joint, check=True)
-        except ProtocolError:
-            continue
-        return replace(cand, trajectory=traj)
+    here = True
+    if unfound:
+        joints = finding_joints(unfound, moved_set, chain.n_joints)
+        here = len(moved_set) == chain.n_joints or poses.shape[0] == 0
+    tries = [(joints, here)] + ([(None, True)] if joints is not None else [])
+    for only, at_hand in tries:  # what finds the units; else (it cannot run from here) anything
+        for cand in score_candidates(calibrator, chain, config, q_now, poses, options, only, here=at_hand):
+            try:
+                traj = build_segment(chain, config, q_now, cand.pose, cand.joint, check=True)
+            except ProtocolError:
+                continue
+            return replace(cand, trajectory=traj)
     raise ProtocolError(
         f"robot '{chain.name}': no next motion within the limits and collision-free from the current configuration"
     )
 
 
-def _finding_joints(unscored: Sequence[object], excited: Sequence[int], n: int) -> list[int]:
-    """The joints to try while units have no link or estimate: their most named ``best_joint``, else the
-    joints not yet excited, nearest the tip first, else all."""
-    votes = [int(j) for j in (getattr(st, "best_joint", None) for st in unscored) if j is not None and 0 <= j < n]
+def _unfound(st: object, moved: set[int], n: int) -> bool:
+    """See :func:`next_motion`."""
+    link = getattr(st, "link", None)
+    return (
+        link is None
+        or getattr(st, "pose", None) is None
+        or str(getattr(st, "missing", "")).startswith("link undecided")
+        or (link < n and link not in moved)
+    )
+
+
+def finding_joints(unfound: Sequence[object], moved: set[int], n: int) -> list[int]:
+    """The 0-based joints that find the ``unfound`` units: each unit's vote (joint ``k + 1`` for a unit
+    on link ``k`` whose next joint never moved, else its ``best_joint``), the most voted ones; without
+    votes the joints not yet moved (nearest the tip first), else all."""
+    votes = []
+    for st in unfound:
+        link = getattr(st, "link", None)
+        j = link if link is not None and link < n and link not in moved else getattr(st, "best_joint", None)
+        if j is not None and 0 <= int(j) < n:
+            votes.append(int(j))
     if votes:
         counts = np.bincount(votes, minlength=n)
         return [int(j) for j in np.flatnonzero(counts == counts.max())]
-    fresh = [j for j in range(n - 1, -1, -1) if j not in set(excited)]
+    fresh = [j for j in range(n - 1, -1, -1) if j not in moved]
     return fresh[:1] if fresh else list(range(n))
