@@ -306,3 +306,16 @@ def test_allowed_speed_is_never_above_the_fixed_point_and_close_to_it(stopping):
     inside = ref < 0
     assert inside.any()
     np.testing.assert_allclose(table[inside & design], ref[inside & design], atol=0.01)
+
+
+def test_step_benchmark_runs_feasible_problems_with_covariances():
+    """The benchmark's problem is the one it claims (no timing asserted here: benchmarks/bench_qp.py)."""
+    from skincal.workflows.bench_qp import benchmark_points, format_qp_benchmark, qp_step_benchmark
+
+    pts = benchmark_points(panda(), 30)
+    assert len(pts) == 30 and np.all(pts.spread > 0) and np.all(np.linalg.norm(pts.velocities, axis=1) > 0)
+    assert np.all(np.linalg.eigvalsh(pts.cov)[:, 0] > 0)  # every point with a proper covariance
+    res = qp_step_benchmark(n_points=30, repeats=3)
+    for mode in ("fixed", "separation"):
+        assert res[mode]["rows"] > 20 and res[mode]["feasible_fraction"] == 1.0
+    assert "separation / fixed" in format_qp_benchmark(res)
