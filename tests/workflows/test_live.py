@@ -193,3 +193,26 @@ def test_record_live_follows_the_received_stream_on_the_recording_clock(tmp_path
             assert abs(status.t_last - t_file[-1]) < 0.5  # host time of the recording, not device time
     truth = {u: p.link for u, p in fast_ds.truth.items()}
     assert {u: s.link for u, s in outcome.statuses.items()} == truth
+
+
+# -- the update-cost benchmark ----------------------------------------------------------------------
+
+
+def test_one_core_schedule_carries_the_backlog():
+    from skincal.workflows.bench_online import _schedule
+
+    ends, backlog = _schedule(np.array([0.1, 0.2, 0.3, 1.0]), np.array([0.05, 0.3, 0.01, 0.02]))
+    np.testing.assert_allclose(ends, [0.15, 0.5, 0.51, 1.02])  # chunk 3 waits for chunk 2; chunk 4 for its data
+    assert backlog == pytest.approx(0.3)
+
+
+def test_online_benchmark_figures_add_up(fast_ds):
+    from skincal.workflows.bench_online import online_report, run_online_benchmark
+
+    doc = run_online_benchmark(dataset=fast_ds)
+    assert doc["units"] == 6 and doc["units_in_result"] == 6 and doc["data_s"] == pytest.approx(77.5, abs=1.0)
+    assert doc["imu_samples"] == sum(len(s.t) for s in fast_ds.imu.values())
+    assert doc["cpu_s_per_data_s"] == pytest.approx(doc["cpu_s"] / doc["data_s"], rel=1e-2)
+    assert doc["latency_s"] >= doc["finish_cpu_s"] + doc["result_cpu_s"] - 1e-3
+    assert doc["status_cpu_s"] > 0 and doc["status_every_s"] == 0.5
+    assert any("CPU s per s of data" in line for line in online_report(doc))
