@@ -201,7 +201,7 @@ def run_scenario(
 
         still = float(protective_separation(separation, np.zeros(1), None, np.zeros(1)).total[0])
     task_time = t if not resume else np.zeros(S)
-    tau, rate, dr = 0.0, 1.0, dt / RAMP_S
+    lag, rate, dr = 0.0, 1.0, dt / RAMP_S  # tau = t - lag: exactly t while the clock never slowed
     log_q, log_qd, log_x = np.empty((S, n)), np.empty((S, n)), np.empty((S, 3))
     feasible = np.ones(S, dtype=bool)
     violation, min_dist = np.zeros(S), np.full(S, np.inf)
@@ -227,8 +227,8 @@ def run_scenario(
         t1 = time.perf_counter()
         pts = tracker.points(t[k])
         if resume:
-            task_time[k] = tau
-            xk, vk = task.at(tau)
+            task_time[k] = t[k] - lag
+            xk, vk = task.at(task_time[k])
             x_des[k], xd_des[k] = xk[0], rate * vk[0]
         res = ctl.step(q, x_des[k], xd_des[k], pts) if robot is None else ctl.step(q, x_des[k], xd_des[k], pts, qd)
         step_t[k] = time.perf_counter() - t1
@@ -247,7 +247,7 @@ def run_scenario(
         if resume:
             near = res.min_distance < margin[k] + resume_band
             rate = max(rate - dr, 0.0) if near else min(rate + dr, 1.0)
-            tau += rate * dt
+            lag += (1.0 - rate) * dt
         if robot is None:
             q = q + res.qd * dt
         else:
