@@ -216,3 +216,42 @@ def test_online_benchmark_figures_add_up(fast_ds):
     assert doc["latency_s"] >= doc["finish_cpu_s"] + doc["result_cpu_s"] - 1e-3
     assert doc["status_cpu_s"] > 0 and doc["status_every_s"] == 0.5
     assert any("CPU s per s of data" in line for line in online_report(doc))
+
+
+# -- the viewer's live mode -------------------------------------------------------------------------
+
+
+def test_live_viewer_draws_the_units_and_their_ellipsoids_converging(fast_ds):
+    import dataclasses
+
+    pytest.importorskip("viser")
+    from skincal.viz.model import ELLIPSOID_SIGMA
+    from skincal.viz.viewer import start_live_viewer, update_live
+
+    snaps: list[dict] = []
+    follow_dataset(fast_ds, speed=None, on_meter=lambda s, t, end: snaps.append(dict(s)))
+    first = next(s for s in snaps if all(u.pose is not None for u in s.values()))
+    last = snaps[-1]
+    v = start_live_viewer(fast_ds.robot)
+    try:
+        nodes = v.server.scene._handle_from_node_name
+        update_live(v, first, fast_ds.joints.q[0], "[x](javascript:alert(1)) *su1*")
+        early = {n: np.array(nodes[f"/robot/link{s.pose.link}/live_sigma_{n}"].scale) for n, s in first.items()}
+        update_live(v, last, fast_ds.joints.q[-1])
+        for name, status in last.items():
+            link = status.pose.link
+            assert f"/robot/link{link}/live_{name}/board" in nodes
+            semi = np.array(nodes[f"/robot/link{link}/live_sigma_{name}"].scale)
+            np.testing.assert_allclose(semi, np.maximum(ELLIPSOID_SIGMA * status.position_std_m, 2e-4), rtol=1e-6)
+            assert np.all(semi <= early[name] + 1e-12) and np.any(semi < early[name])  # converged
+        assert v.live == {n: s.pose.link for n, s in last.items()}
+        assert v.live_text.content.startswith("\\[x\\]\\(javascript:alert\\(1\\)\\) \\*su1\\*")
+        name, status = next(iter(last.items()))
+        other = 1 if status.pose.link != 1 else 2
+        moved = dataclasses.replace(status, pose=dataclasses.replace(status.pose, link=other))
+        update_live(v, {name: moved})  # the unit now believed on another link: drawn there only
+        assert f"/robot/link{other}/live_{name}/board" in nodes
+        assert f"/robot/link{status.pose.link}/live_{name}" not in nodes
+        assert f"/robot/link{status.pose.link}/live_sigma_{name}" not in nodes
+    finally:
+        v.close()

@@ -49,6 +49,14 @@ def view(
         help="folder holding ROS packages (or a package itself) for a URDF robot's package:// meshes; "
         "repeatable; searched before the URDF's folder and its parents, then ROS_PACKAGE_PATH",
     ),
+    follow: Path | None = typer.Option(
+        None, "--follow", help="live: replay this dataset (or ROS bag) into the online calibrator and show the units "
+        "and their uncertainty ellipsoids converging (no result file needed)"
+    ),
+    speed: float = typer.Option(1.0, "--speed", help="--follow: data seconds per wall second (0: as fast as possible)"),
+    target: str | None = typer.Option(
+        None, "--target", help="--follow: std to reach on every axis (default 0.3mm,0.05deg); the replay stops there"
+    ),
 ) -> None:
     """Show a calibration result on the robot in the browser (viser); with --scenario, play an avoidance run.
 
@@ -69,6 +77,12 @@ def view(
     host = host[1:-1] if host.startswith("[") and host.endswith("]") else host  # [::1] as in a URL
     check_bind(host, public)  # one rule with skincal record: loopback unless --public
     meshes = MeshResolver.from_options(None, package_path)  # (a --package-path that is no folder: refused now)
+    if follow is not None:
+        if result is not None or play is not None or truth is not None or scenario is not None:
+            raise ConfigError("--follow draws the online calibrator's estimates: give no result, --play, --truth or "
+                              "--scenario with it")  # fmt: skip
+        _view_follow(follow, robot, host, port, speed, target, duration, meshes)
+        return
     if scenario is not None:
         if play is not None or truth is not None:
             raise ConfigError("--scenario plays its own run: give no --play or --truth with it")
@@ -120,6 +134,61 @@ def view(
     if duration is not None:
         try:
             time.sleep(duration)
+        finally:
+            viewer.close()
+        return
+    serve_forever(viewer)
+
+
+def _view_follow(
+    source: Path, robot: str | None, host: str, port: int, speed: float, target_text: str | None,
+    duration: float | None, meshes,
+) -> None:  # fmt: skip
+    """``view --follow``: the live viewer fed by a replay into the online calibrator (the robot moves with the
+    replayed joints, the units converge), then served until Ctrl-C or ``--duration`` (counted from the start)."""
+    import math
+    import time
+
+    import numpy as np
+
+    from skincal.data.interp import interp_rows
+    from skincal.viz.meter import meter_line
+    from skincal.viz.viewer import serve_forever, start_live_viewer, update_live
+    from skincal.workflows.live import Target, data_span, follow_dataset, load_source, parse_target
+
+    target = parse_target(target_text) if target_text is not None else Target()
+    if not math.isfinite(speed) or speed < 0:
+        raise ConfigError(f"--speed {speed}: a finite number >= 0 (0: as fast as possible)")
+    ds = load_source(source, robot)
+    joints = ds.joint_states
+    t0, _ = data_span(ds)
+    start = time.monotonic()
+    viewer = start_live_viewer(ds.chain, host=host, port=port, q0=joints.q[0], meshes=meshes)
+    for note in viewer.notes:
+        err_console.print(f"note: {shown(note)}", highlight=False, soft_wrap=True)
+    console.print(f"skincal viewer: [bold]{shown(viewer.url)}[/]  (following {shown(source.name)}; Ctrl-C to stop)",
+                  highlight=False)  # fmt: skip
+    last = {"wall": -math.inf}
+
+    def on_meter(statuses, t_data: float, t_end: float | None) -> None:
+        now = time.monotonic()
+        if now - last["wall"] < 0.25:
+            return
+        last["wall"] = now
+        q = interp_rows(np.asarray([t0 + t_data]), joints.t, joints.q)[0]
+        update_live(viewer, statuses, q, meter_line(statuses, target.position_m, target.rotation_deg, t_data, t_end))
+
+    try:
+        outcome = follow_dataset(ds, target, speed=None if speed == 0 else speed, on_meter=on_meter)
+        line = meter_line(outcome.statuses, target.position_m, target.rotation_deg, outcome.t_data, outcome.t_end)
+        update_live(viewer, outcome.statuses, None, line)
+        console.print(line, markup=False, highlight=False, soft_wrap=True)
+    except BaseException:
+        viewer.close()
+        raise
+    if duration is not None:
+        try:
+            time.sleep(max(0.0, duration - (time.monotonic() - start)))
         finally:
             viewer.close()
         return

@@ -49,15 +49,17 @@ def cylinder_pose(capsule: Capsule) -> tuple[FloatArray, float]:
     return T, length
 
 
-def ellipsoid_semi_axes(position_std_m: ArrayLike | None) -> tuple[FloatArray, np.ndarray]:
+def ellipsoid_semi_axes(
+    position_std_m: ArrayLike | None, floor_m: float = ELLIPSOID_FLOOR_M
+) -> tuple[FloatArray, np.ndarray]:
     """Semi-axes ``(3,)`` (m, along the link axes) of a unit's uncertainty ellipsoid:
-    ``max(ELLIPSOID_SIGMA * std, ELLIPSOID_FLOOR_M)``, and a ``(3,)`` mask of unobservable axes
-    (std NaN) drawn at :data:`UNOBSERVABLE_SEMI_AXIS_M`. No std at all gives the floor."""
+    ``max(ELLIPSOID_SIGMA * std, floor_m)``, and a ``(3,)`` mask of unobservable axes
+    (std NaN or infinite) drawn at :data:`UNOBSERVABLE_SEMI_AXIS_M`. No std at all gives the floor."""
     if position_std_m is None:
-        return np.full(3, ELLIPSOID_FLOOR_M), np.zeros(3, dtype=bool)
+        return np.full(3, floor_m), np.zeros(3, dtype=bool)
     std = np.asarray(position_std_m, dtype=float)
     unknown = ~np.isfinite(std)
-    semi = np.maximum(ELLIPSOID_SIGMA * np.nan_to_num(std, nan=0.0), ELLIPSOID_FLOOR_M)
+    semi = np.maximum(ELLIPSOID_SIGMA * np.where(unknown, 0.0, std), floor_m)
     return np.where(unknown, UNOBSERVABLE_SEMI_AXIS_M, semi), unknown
 
 

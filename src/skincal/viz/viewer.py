@@ -14,6 +14,10 @@ Scene graph (names are viser paths; a child moves with its parent):
   :attr:`Viewer.notes` says why.
 * ``/play/rays``, ``/play/points``, ``/play/obstacles/*``: playback of a recording in the base
   frame: ToF rays and the obstacle points they see, computed with the *calibrated* poses.
+* ``/robot/link{i}/live_{unit}`` and ``/robot/link{i}/live_sigma_{unit}``: live mode
+  (:func:`start_live_viewer`, :func:`update_live`): each unit as the streaming calibrator sees it
+  now, on its best link so far, with its 3-sigma ellipsoid (green once the unit reached its target,
+  orange while a direction is undetermined), redrawn as the estimate converges.
 
 GUI: one slider per joint (deg), and with a recording a time slider and a play checkbox. viser is
 an optional dependency (``pip install skincal[viz]``); it is imported only when a viewer starts.
@@ -243,6 +247,10 @@ class Viewer:
     visuals: UrdfVisuals | None = None
     notes: list[str] = field(default_factory=list)
     """One-line notes for the user (why the robot is drawn as capsules)."""
+    live: dict[str, int] = field(default_factory=dict)
+    """Live mode: the link each unit is drawn on now (:func:`update_live`)."""
+    live_text: Any = None
+    """Live mode: the markdown handle of the status line."""
     _stop: threading.Event = field(default_factory=threading.Event)
     _quiet: bool = False
     _moving: threading.Lock = field(default_factory=threading.Lock)
@@ -462,6 +470,69 @@ def start_viewer(
         server.stop()
         raise
     return viewer
+
+
+def _markdown_literal(text: str) -> str:
+    """``text`` shown as is in a viser markdown element: every markdown and HTML sign backslash-escaped."""
+    return "".join("\\" + ch if ch in "\\`*_{}[]()<>#+-.!|~" else ch for ch in text)
+
+
+LIVE_REACHED_COLOR = (40, 190, 80)
+"""Live mode: a unit (and its ellipsoid) at its target."""
+LIVE_ELLIPSOID_FLOOR_M = 2e-4
+"""Live mode: smallest semi-axis drawn, m (below the result view's floor, so that the ellipsoids are
+seen shrinking to a 0.3 mm target)."""
+
+
+def start_live_viewer(
+    chain: SerialChain,
+    *,
+    host: str = "127.0.0.1",
+    port: int = 0,
+    q0: FloatArray | None = None,
+    meshes: MeshResolver | None = None,
+) -> Viewer:
+    """A viewer of ``chain`` without a result yet: the units appear and converge as :func:`update_live`
+    is given the streaming calibrator's status (``skincal view --follow``)."""
+    empty = CalibrationResult("online", chain.name, "", 0.0, {})
+    viewer = start_viewer(empty, chain, host=host, port=port, q0=q0, meshes=meshes)
+    viewer.live_text = viewer.server.gui.add_markdown("waiting for the first estimates")
+    return viewer
+
+
+def update_live(viewer: Viewer, statuses: Any, q: FloatArray | None = None, text: str | None = None) -> None:
+    """Draw each unit of ``statuses`` (unit name -> :class:`skincal.calib.online.UnitStatus`, read by
+    attribute) at its current estimate on its best link with its 3-sigma ellipsoid, remove a unit
+    drawn on another link before, move the robot to ``q`` ``(n,)`` rad and show ``text`` (plain text)
+    in the GUI. Units without a pose yet are not drawn."""
+    server = viewer.server
+    with server.atomic():
+        for name, status in statuses.items():
+            pose = status.pose
+            if pose is None or not 1 <= int(pose.link) <= viewer.chain.n_joints:
+                continue
+            link = int(pose.link)
+            before = viewer.live.get(name)
+            if before is not None and before != link:
+                for node in (f"/robot/link{before}/live_{name}", f"/robot/link{before}/live_sigma_{name}"):
+                    handle = server.scene._handle_from_node_name.get(node)  # noqa: SLF001 - viser keeps no public lookup
+                    if handle is not None:
+                        handle.remove()
+            viewer.live[name] = link
+            reached = bool(status.reached)
+            _add_unit(server, name, pose, LIVE_REACHED_COLOR if reached else ESTIMATE_COLOR, "live", 0.04, False)
+            semi, unknown = ellipsoid_semi_axes(status.position_std_m, LIVE_ELLIPSOID_FLOOR_M)
+            color = (230, 120, 30) if unknown.any() else LIVE_REACHED_COLOR if reached else ELLIPSOID_COLOR
+            server.scene.add_icosphere(
+                f"/robot/link{link}/live_sigma_{name}", radius=1.0, scale=tuple(semi), subdivisions=2, color=color,
+                opacity=0.3, position=pose.p_link_su, cast_shadow=False,
+            )  # fmt: skip
+    if text is not None and viewer.live_text is not None:
+        from skincal.names import printable
+
+        viewer.live_text.content = _markdown_literal(printable(text))
+    if q is not None:
+        viewer.set_joints(q)
 
 
 def _add_gui(viewer: Viewer, result: CalibrationResult, errors: dict[str, float], q0: FloatArray) -> None:

@@ -173,6 +173,14 @@ def load_source(path: str | Path, robot: str | None = None) -> Dataset:
     return ds
 
 
+def data_span(ds: Dataset) -> tuple[float, float]:
+    """First and last instant of ``ds``'s joint and IMU streams, s (the meter's data time is from the first)."""
+    joints = ds.require_joints("calibrate --follow")[1]
+    t0 = min([float(joints.t[0]), *(float(s.t[0]) for s in ds.imu.values() if len(s.t))])
+    t1 = max([float(joints.t[-1]), *(float(s.t[-1]) for s in ds.imu.values() if len(s.t))])
+    return t0, t1
+
+
 def follow_dataset(
     ds: Dataset,
     target: Target = Target(),
@@ -207,8 +215,7 @@ def follow_dataset(
             ds, imu={u: ds.imu[u] for u in names}, tof={u: s for u, s in ds.tof.items() if u in names}
         )
     )
-    t0 = min([float(joints.t[0]), *(float(s.t[0]) for s in follow.imu.values() if len(s.t))])
-    t1 = max([float(joints.t[-1]), *(float(s.t[-1]) for s in follow.imu.values() if len(s.t))])
+    t0, t1 = data_span(follow)
     cal = make_calibrator(chain, names, ds.gravity, target)
     state = {"t": t0, "reached": False, "asked": -math.inf}
 
