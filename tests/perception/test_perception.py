@@ -214,3 +214,16 @@ def test_free_space_of_other_cones_clears_stale_points_only_inside_them():
     fresh.update(0.0, Q0, {"a": r_a})
     fresh.update(0.05, Q0, {"b": np.nan})
     assert fresh.points(0.05).units == ("a",)
+
+
+def test_body_proximity_of_groups_is_the_nearest_of_each_group(rng):
+    chain = panda()
+    body = RobotBody.of(chain).inflated(0.02)
+    T = chain.link_frames(Q0)
+    x = rng.normal(size=(40 * 7, 3)) * 0.5
+    every = body_proximity(body, T, x)
+    nearest = body_proximity(body, T, x, group=7)
+    pick = np.argmin(every.distance.reshape(40, 7), axis=1) + 7 * np.arange(40)
+    for f in ("distance", "capsule", "link", "p_base_robot", "normal"):
+        np.testing.assert_array_equal(getattr(nearest, f), getattr(every, f)[pick])
+    assert not np.array_equal(pick, 7 * np.arange(40))  # not simply the first of each group

@@ -142,12 +142,7 @@ def obstacle_geometry(
     K = pts.shape[0]
     if candidates is not None:
         cand = np.asarray(candidates, dtype=float).reshape(K, -1, 3)
-        C = cand.shape[1]
-        prox_all = body_proximity(body, T_base_link, cand.reshape(-1, 3))
-        best = np.argmin(prox_all.distance.reshape(K, C), axis=1) + C * np.arange(K)
-        prox = BodyProximity(
-            *(getattr(prox_all, f)[best] for f in ("distance", "capsule", "link", "p_base_robot", "normal"))
-        )
+        prox = body_proximity(body, T_base_link, cand.reshape(-1, 3), group=cand.shape[1])
     else:
         prox = body_proximity(body, T_base_link, pts)
     J = point_jacobians(body.chain, T_base_link, prox.link, prox.p_base_robot)

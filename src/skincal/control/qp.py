@@ -25,13 +25,23 @@ own ``S_p,i = S_h + S_r + S_s + C + Z_d + Z_r`` computed at every step from
 
 * ``Z_d,i = sigma_level sqrt(n_i^T Cov_i n_i)``: the point's position covariance (``ObstaclePoints.cov``)
   along its normal;
-* ``v_r,i = n_i^T J_i qd_prev``: the robot point's speed toward the obstacle under the previous command
-  (or the measured joint velocity passed to :meth:`AvoidanceController.step`), for ``S_r``, ``S_s``, ``T_s``;
-* ``v_h,i = max(v_h, -n_i^T v_i)``: the design human speed, or the point's measured approach speed when
-  larger;
+* ``v_r,i = n_i^T J_i qd``: the robot point's speed toward the obstacle point under the command being
+  solved for, at least its present speed ``n_i^T J_i qd_now`` when the measured joint velocity is passed to
+  :meth:`AvoidanceController.step` (torque mode), for ``S_r``, ``S_s`` and ``T_s``;
+* ``v_h,i = max(v_h, a_i)``, ``a_i = max(-n_i^T v_i, 0)``: the design human speed, or the point's measured
+  approach speed when larger;
 
-and the bound keeps its shape, shifted: ``b(d) = v_max tanh((d - S_p) / w)`` with the fixed ramp width
-``w = (notice - critical) / atanh(0.99)``. Below ``S_p`` the bound is negative, so the robot backs
+and the row keeps the ramp's shape, shifted to ``S_p`` and taken at the robot's own speed: the gap may close
+at most at ``b(d - S_p(v_r))``, ``b(x) = v_max tanh(x / w)`` with the fixed ramp width
+``w = (notice - critical) / atanh(0.99)``,
+
+    n_i^T J_i qd + a_i <= b(d_i - S_p,i(max(n_i^T J_i qd, n_i^T J_i qd_now)))
+
+i.e. ``n_i^T J_i qd <= u_i*``, the fixed point of :func:`skincal.control.separation.allowed_approach_speed`
+(from a precomputed table, :class:`~skincal.control.separation.ApproachSpeedTable`, never above it). Using
+``S_p`` of the previous command instead (explicit) makes the margin chatter from step to step (robot fast ->
+large ``S_p`` -> retreat -> small ``S_p`` -> fast approach ...): measured 0.23 <-> 1.03 m on alternate steps.
+Below ``S_p`` the bound is negative, so the robot backs
 away. ``separation = None`` is the fixed critical distance, unchanged.
 """
 
@@ -269,7 +279,7 @@ class AvoidanceController:
                 dist = prox.distance
                 assert self._speeds is not None
                 v_allowed = self._speeds(dist, sep_in.v_now if moving else None, sep_in.v_h, sep_in.z_d)
-                h_all = v_allowed + np.minimum(v_obs, 0.0)
+                h_all = v_allowed  # the point's own approach is in it (the velocity-aware row)
             # A row with no lever on the robot (point at the base) and a non-negative bound is void.
             keep = (np.abs(G_all).max(axis=1) > 1e-9) | (h_all < 0)
             G, h = G_all[keep], h_all[keep]

@@ -103,11 +103,14 @@ class BodyProximity:
     normal: FloatArray
 
 
-def body_proximity(body: RobotBody, T_base_link: FloatArray, points: ArrayLike) -> BodyProximity:
+def body_proximity(body: RobotBody, T_base_link: FloatArray, points: ArrayLike, group: int = 1) -> BodyProximity:
     """Closest capsule and point of the robot at one configuration to each point ``(K, 3)`` (base frame, m).
 
     ``T_base_link``: ``(1, n + 1, 4, 4)`` or ``(n + 1, 4, 4)``. Distance ``d = |x - c| - r`` minimised
     over the capsules; the normal is ``(x - c) / |x - c|`` (any unit vector if ``x`` lies on the segment).
+    ``group > 1``: the points come in consecutive groups of that many (e.g. the possible places of one
+    reading, :func:`skincal.control.constraints.cap_candidates`) and the answer has one entry per group,
+    the point of the group nearest to the robot (the first of equals): ``K / group`` entries.
     """
     T = np.asarray(T_base_link, dtype=float)
     T = T[None] if T.ndim == 3 else T
@@ -116,9 +119,13 @@ def body_proximity(body: RobotBody, T_base_link: FloatArray, points: ArrayLike) 
     a, b = body.segments(T[:1])
     a, ab = a[0], b[0] - a[0]  # (C, 3)
     if a.shape[0] == 0:
-        best = np.zeros(K, dtype=int)
+        best = np.zeros(K // group, dtype=int)
         return BodyProximity(
-            np.full(K, np.inf), best, body.link[best], np.zeros((K, 3)), np.tile([0.0, 0.0, 1.0], (K, 1))
+            np.full(best.size, np.inf),
+            best,
+            body.link[best],
+            np.zeros((best.size, 3)),
+            np.tile([0.0, 0.0, 1.0], (best.size, 1)),
         )
     # :func:`closest_on_segments` on (C, K) arrays, after the dot product per component (long inner loops
     # for the many points of the control loop; the same operations in the same order, so the same numbers)
@@ -129,6 +136,9 @@ def body_proximity(body: RobotBody, T_base_link: FloatArray, points: ArrayLike) 
     dist = np.sqrt(gap[0] * gap[0] + gap[1] * gap[1] + gap[2] * gap[2]) - body.radius[:, None]
     best = np.argmin(dist, axis=0)
     k = np.arange(K)
+    if group > 1:  # the nearest point of each group, then only those
+        k = np.argmin(dist[best, k].reshape(-1, group), axis=1) + group * np.arange(K // group)
+        best = best[k]
     g = np.stack([gj[best, k] for gj in gap], axis=1)
     sb = s[best, k][:, None]
     c = a[best] + sb * ab[best]
