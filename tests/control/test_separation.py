@@ -79,6 +79,10 @@ def test_stopping_table_interpolates_and_extrapolates():
     assert again.reaction_time_s == 0.05
     p = SeparationParams.from_dict(PARAMS.to_dict())
     assert p.to_dict() == PARAMS.to_dict()
+    # configs with a table compare and hash by value (arrays inside)
+    assert again == cd and hash(again) == hash(cd) and again != TABLE
+    assert ControllerConfig(separation=p) == ControllerConfig(separation=PARAMS) != ControllerConfig()
+    assert hash(ControllerConfig(separation=p)) == hash(ControllerConfig(separation=PARAMS))
     assert SeparationParams.from_dict({"human_speed_mps": 2.0}).human_speed_mps == 2.0
 
 

@@ -67,7 +67,7 @@ def _number(where: str, value: Any, positive: bool = False) -> float:
     return float(value)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class StoppingModel:
     """How far and how long the robot takes to stop from a speed (stop category 2 from the controller's
     command).
@@ -102,6 +102,16 @@ class StoppingModel:
         k_t, k_d = np.diff(t) / np.diff(s), np.diff(d) / np.diff(s)
         object.__setattr__(self, "_coef", (t[:-1] - k_t * s[:-1], k_t, d[:-1] - k_d * s[:-1], k_d))
         object.__setattr__(self, "reaction_time_s", _number("stopping model: reaction_time_s", self.reaction_time_s))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, StoppingModel):
+            return NotImplemented
+        return self.reaction_time_s == other.reaction_time_s and all(
+            np.array_equal(getattr(self, f), getattr(other, f)) for f in ("speeds", "times", "distances")
+        )
+
+    def __hash__(self) -> int:
+        return hash((self.reaction_time_s, self.speeds.tobytes(), self.times.tobytes(), self.distances.tobytes()))
 
     def segments(self, v: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
         """``(v, c_t, k_t, c_d, k_d)``: speeds ``v`` clipped at 0 and the affine pieces of the table at them,
