@@ -41,8 +41,8 @@ i.e. ``n_i^T J_i qd <= u_i*``, the fixed point of :func:`skincal.control.separat
 (from a precomputed table, :class:`~skincal.control.separation.ApproachSpeedTable`, never above it). Using
 ``S_p`` of the previous command instead (explicit) makes the margin chatter from step to step (robot fast ->
 large ``S_p`` -> retreat -> small ``S_p`` -> fast approach ...): measured 0.23 <-> 1.03 m on alternate steps.
-Below ``S_p`` the bound is negative, so the robot backs
-away. ``separation = None`` is the fixed critical distance, unchanged.
+Below ``S_p`` the bound is negative, so the robot backs away. ``separation = None`` is the fixed critical
+distance, unchanged.
 """
 
 from __future__ import annotations
@@ -227,8 +227,6 @@ class AvoidanceController:
         self._frames = FrameCache(chain)
         self._width = ramp_width(config.critical, config.notice)
         self._speeds = None if config.separation is None else ApproachSpeedTable(config.separation, self._ramp)
-        self.qd_prev = np.zeros(chain.n_joints)
-        """The last command (rad/s): the robot's speed for ``S_p`` when the step is given none."""
 
     def problem(
         self,
@@ -241,7 +239,8 @@ class AvoidanceController:
         """Assemble the QP at joint angles ``q`` ``(n,)`` for reference ``x_des``, ``xd_des`` ``(3,)`` (m, m/s)
         and obstacle points: :class:`ObstaclePoints` (velocities, cone spread and covariances used) or
         still points ``(K, 3)`` exactly where given (base frame, m). ``qd_now`` ``(n,)``: the robot's
-        joint velocity for ``S_p`` (default: the last command, :attr:`qd_prev`)."""
+        measured joint velocity, rad/s, a floor for the speed in ``S_p`` (with ``separation``; default None:
+        the robot moves as commanded, an ideal velocity interface)."""
         cfg = self.config
         q = np.asarray(q, dtype=float).reshape(-1)
         n = self.chain.n_joints
@@ -336,10 +335,9 @@ class AvoidanceController:
         points: ArrayLike | ObstaclePoints,
         qd_now: ArrayLike | None = None,
     ) -> StepResult:
-        """Joint velocities for this step (see :meth:`problem`); the command becomes :attr:`qd_prev`."""
+        """Joint velocities for this step (see :meth:`problem`)."""
         prob = self.problem(q, x_des, xd_des, points, qd_now)
         qd, feasible, violation, elapsed = self.solve(prob)
-        self.qd_prev = qd
         d_min = float(prob.distance.min()) if prob.distance.size else float("inf")
         margin, clearance = float("nan"), float("inf")
         terms, critical = prob.terms, prob.critical
