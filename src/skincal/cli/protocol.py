@@ -39,9 +39,44 @@ def protocol_cmd(
         "every link frame) or uniform (the protocol's plain draw)",
     ),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
+    adaptive: bool = typer.Option(
+        False,
+        "--adaptive",
+        help="choose the motion segment by segment, each the next best motion for the "
+        "calibration so far (D-optimal information per second), until every unit reaches --target; each segment "
+        "is written beside --out as NAME_001.EXT, ... when chosen, the whole motion to --out at the end",
+    ),
+    simulate: bool = typer.Option(
+        False,
+        "--simulate",
+        help="--adaptive: a simulated robot executes the segments (with --noise, --placement, "
+        "--units, --joints); prints the true errors at the end",
+    ),
+    target: str = typer.Option("0.3mm,0.05deg", "--target", help="--adaptive: std to reach on every axis"),
+    result: Path | None = typer.Option(
+        None, "--result", help="--adaptive: the calibration result (.json; default NAME_result.json beside --out)"
+    ),
+    max_motion: float = typer.Option(300.0, "--max-motion", help="--adaptive: budget of robot motion, s"),
+    noise: str = typer.Option("realistic", "--noise", help="--simulate: IMU preset"),
+    placement: str = typer.Option("paper", "--placement", help="--simulate: unit placement (paper, random, ring)"),
+    units: int | None = typer.Option(None, "--units", help="--simulate: number of units (random placement)"),
+    joints: str = typer.Option("auto", "--joints", help="--simulate: joint-state preset (auto, ideal, controller)"),
+    port: int | None = typer.Option(
+        None,
+        "--port",
+        help="--adaptive on a real robot: UDP port of the skin and joint-state stream (0: any free port, printed)",
+    ),
+    bind: str = typer.Option(
+        "127.0.0.1", "--bind", help="--adaptive --port: address to bind (loopback unless --public)"
+    ),
+    public: bool = typer.Option(False, "--public", help="--adaptive --port: allow a non-loopback --bind"),
+    record_out: Path | None = typer.Option(
+        None, "--record", help="--adaptive --port: the recording written while the robot executes the segments (.h5)"
+    ),
 ) -> None:
     """Write the calibration motion for a robot: fitted into its position, velocity and acceleration
-    limits, static poses collision-free (self and floor z = 0 of the base) along the whole motion."""
+    limits, static poses collision-free (self and floor z = 0 of the base) along the whole motion.
+    With --adaptive, the motion is chosen segment by segment from the data (a live session, or --simulate)."""
     import math
     from dataclasses import replace
 
@@ -69,16 +104,41 @@ def protocol_cmd(
         raise ConfigError(f"{out} exists; a ROS 2 bag folder is never overwritten, even with --force (remove it)")
     check_output(out, force=force, inputs=() if robot in PRESETS else (Path(robot),))
     chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
+    if adaptive:
+        from skincal.cli.protocol_adaptive import run_adaptive
+
+        run_adaptive(chain, out, rate=rate, seed=seed, force=force, target=target, result=result,
+                     max_motion=max_motion, simulate=simulate, noise=noise, placement=placement, units=units,
+                     joints=joints, port=port, bind=bind, public=public, record_out=record_out,
+                     inputs=() if robot in PRESETS else (Path(robot),))  # fmt: skip
+        return
+    for given, name in ((simulate or None, "--simulate"), (result, "--result"), (port, "--port"),
+                        (record_out, "--record")):  # fmt: skip
+        if given is not None:
+            raise ConfigError(f"{name} applies to --adaptive only")
     config = replace(fit_to_limits(chain, get_protocol(protocol)), collision_check=True, pose_selection=poses)
-    traj = build_trajectory(chain, config, np.random.default_rng(seed))  # checked at config.rate_hz (1 kHz)
-    t = np.arange(int(np.floor(traj.duration * rate + 1e-9)) + 1) / rate
-    q, qd, qdd = traj.evaluate(t)
-    traj = replace(traj, t=t, q=q, qd=qd, qdd=qdd, config=replace(traj.config, rate_hz=float(rate)))
-    names = chain.joint_names or tuple(f"joint{i + 1}" for i in range(chain.n_joints))
-    export_trajectory(traj, out, joint_names=names)
+    traj = at_rate(build_trajectory(chain, config, np.random.default_rng(seed)), rate)  # checked at 1 kHz
+    t = traj.t
+    export_trajectory(traj, out, joint_names=joint_names(chain))
     seg = traj.segments
     console.print(printable(
         f"wrote {out}: protocol {config.name} for {chain.name}, {traj.duration:.1f} s, {t.size} points at "
         f"{rate:g} Hz, {traj.poses.shape[0]} poses, {len(seg)} segments"), highlight=False, markup=False)  # fmt: skip
     for note in config.notes:
         console.print(printable(f"  note: {note}"), highlight=False, markup=False)
+
+
+def at_rate(traj, rate: float):  # noqa: ANN001, ANN201  (a skincal.protocol.Trajectory)
+    """``traj`` sampled at ``rate`` Hz for the controller (the limits were checked at the protocol's 1 kHz)."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    t = np.arange(int(np.floor(traj.duration * rate + 1e-9)) + 1) / rate
+    q, qd, qdd = traj.evaluate(t)
+    return replace(traj, t=t, q=q, qd=qd, qdd=qdd, config=replace(traj.config, rate_hz=float(rate)))
+
+
+def joint_names(chain) -> tuple[str, ...]:  # noqa: ANN001
+    """The chain's joint names (``joint1``... when it has none)."""
+    return tuple(chain.joint_names or tuple(f"joint{i + 1}" for i in range(chain.n_joints)))

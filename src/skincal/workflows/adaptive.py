@@ -248,3 +248,92 @@ def run_simulated(
     assert sim.dataset is not None and sim.trajectory is not None
     errors = evaluate(result, sim.dataset) if result.units else {"units": {}}
     return SimulatedRun(loop, loop.motion_s, result, errors, sim.dataset, sim.trajectory)
+
+
+class LiveDesigner:
+    """The adaptive loop against a live stream (``skincal protocol --adaptive --port``), one :meth:`tick` per
+    meter tick of :func:`skincal.workflows.live.record_live`.
+
+    With no segment pending it chooses the next one from the robot's current configuration (the joint
+    stream's newest sample; the planned end of the previous segment when the robot is there) and sets
+    :attr:`pending` (the caller writes it for the robot; :attr:`index` is its 1-based number). A pending
+    segment counts as executed once ``duration`` s of data have arrived since it was chosen and the robot
+    rests within ``rest_tol_rad`` of its end pose; :meth:`tick` then returns its :class:`SegmentRecord`.
+    :attr:`done` is set when every unit reached the target or the motion budget is spent.
+    """
+
+    def __init__(
+        self,
+        chain: SerialChain,
+        rng: np.random.Generator,
+        *,
+        max_motion_s: float = MAX_MOTION_S,
+        options: DesignOptions = DesignOptions(),
+        rest_tol_rad: float = 5e-3,
+    ) -> None:
+        self.chain, self.rng, self.max_motion_s, self.options = chain, rng, float(max_motion_s), options
+        self.config = segment_config(chain)
+        self.rest_tol_rad = float(rest_tol_rad)
+        self.parts: list[Trajectory] = []
+        self.pending: Trajectory | None = None
+        self.pending_written = False
+        self.pending_text = ""
+        self.index = 0
+        self.motion_s = 0.0
+        self.done = False
+        self._cand: Candidate | None = None
+        self._sent_at = 0.0
+        self._visited: list[np.ndarray] = []
+        self._moved: set[int] = set()
+        self._records: list[SegmentRecord] = []
+
+    def trajectory(self) -> Trajectory | None:
+        """The executed segments as one motion (None before the first)."""
+        return concatenate_trajectories(self.parts) if self.parts else None
+
+    def _end(self, traj: Trajectory) -> np.ndarray:
+        return traj.evaluate([traj.duration])[0][0]
+
+    def tick(self, feed: Any) -> SegmentRecord | None:
+        """Advance with the live feed (:class:`skincal.workflows.live.LiveFeed`: its calibrator, statuses and
+        data time); the record of a segment just executed, else None."""
+        cal = feed.calibrator
+        if self.done or cal is None or cal.q_now is None:
+            return None
+        q_now = np.asarray(cal.q_now, dtype=float)
+        if self.pending is not None:
+            end = self._end(self.pending)
+            if feed.t_data - self._sent_at < self.pending.duration or np.max(np.abs(q_now - end)) > self.rest_tol_rad:
+                return None
+            cand = self._cand
+            assert cand is not None
+            start = self.pending.evaluate([0.0])[0][0]
+            self._moved.add(cand.joint)
+            if cand.moves:
+                self._moved.update(int(j) for j in np.flatnonzero(np.abs(end - start) > 1e-3))
+                self._visited.append(end)
+            self.parts.append(self.pending)
+            t0 = self.motion_s
+            self.motion_s += self.pending.duration
+            self.pending, self._cand = None, None
+            record = SegmentRecord(self.index, cand, t0, self.motion_s, dict(cal.status()))
+            self._records.append(record)
+            if all_reached(record.statuses) or self.motion_s >= self.max_motion_s:
+                self.done = True
+            return record
+        if all_reached(cal.status()) or self.motion_s >= self.max_motion_s:
+            self.done = True
+            return None
+        if self.parts and np.max(np.abs(q_now - self._end(self.parts[-1]))) <= self.rest_tol_rad:
+            q_now = self._end(self.parts[-1])  # the motion continues exactly from the planned end
+        elif self.parts:
+            self.parts = []  # the robot was moved elsewhere: the executed motion restarts here
+        if not self._visited:
+            self._visited.append(q_now)
+        cand = next_motion(probe(cal), self.chain, q_now, self.rng, config=self.config,
+                           visited=np.array(self._visited), moved=self._moved, options=self.options)  # fmt: skip
+        self._cand, self.pending, self.pending_written = cand, cand.trajectory, False
+        self.pending_text = cand.describe()
+        self.index += 1
+        self._sent_at = float(feed.t_data)
+        return None

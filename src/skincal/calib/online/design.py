@@ -21,8 +21,10 @@ Score (D-optimal, per second of motion)::
 with ``I_u`` the unit's current information on its pose parameters ``[rotation (3, rad), position
 (3, m)]`` (:meth:`OnlineCalibrator.information`), ``dI_u`` the information the candidate's motion would
 add at the unit's current estimate (:meth:`OnlineCalibrator.pose_information_rate` of the motion
-sampled every :attr:`DesignOptions.dt` s), ``P`` a weak prior (std :attr:`DesignOptions.prior_rotation_rad`,
-:attr:`DesignOptions.prior_position_m`) that keeps the log det finite before a direction is observed,
+sampled every :attr:`DesignOptions.dt` s, scaled to the IMU rate, and divided by the factor the
+calibrator inflates the unit's covariance by for correlated residuals, :func:`inflations`, as ``I_u``
+is), ``P`` a weak prior (std :attr:`DesignOptions.prior_rotation_rad`, :attr:`DesignOptions.prior_position_m`)
+that keeps the log det finite before a direction is observed,
 and ``w_u = 1``, or :attr:`DesignOptions.reached_weight` for a unit whose std already reached its target.
 The gain is invariant to the parameters' units (a log det ratio), so rad and m mix freely.
 
@@ -58,13 +60,16 @@ class DesignOptions:
         pose_candidates: new rest poses scored per decision (besides staying where the robot is).
         pose_pool: uniform draws the new poses are chosen from (gravity diversity).
         dt: step at which a candidate's motion is sampled for its information, s.
+        imu_rate_hz: the units' sample rate: the information of the motion sampled every ``dt`` is scaled
+            by ``dt * imu_rate_hz`` (information grows with the number of samples).
         reached_weight: weight of a unit whose std already reached the target (others weigh 1).
         prior_rotation_rad, prior_position_m: std of the weak prior regularising the log det.
     """
 
-    pose_candidates: int = 6
+    pose_candidates: int = 4
     pose_pool: int = 60
     dt: float = 0.02
+    imu_rate_hz: float = 100.0
     reached_weight: float = 0.1
     prior_rotation_rad: float = 1.0
     prior_position_m: float = 0.1
@@ -72,7 +77,7 @@ class DesignOptions:
     def __post_init__(self) -> None:
         if self.pose_candidates < 0 or self.pose_pool < self.pose_candidates:
             raise ConfigError("DesignOptions: need 0 <= pose_candidates <= pose_pool")
-        for name in ("dt", "prior_rotation_rad", "prior_position_m"):
+        for name in ("dt", "imu_rate_hz", "prior_rotation_rad", "prior_position_m"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) > 0):
                 raise ConfigError(f"DesignOptions.{name} must be positive, got {getattr(self, name)!r}")
         if not (0.0 <= self.reached_weight <= 1.0):
@@ -94,6 +99,8 @@ class Informed(Protocol):
     def pose_information_rate(
         self, unit: str, link: int, q: FloatArray, qd: FloatArray, qdd: FloatArray, dt: float
     ) -> FloatArray: ...
+
+    def result(self) -> object: ...
 
 
 @dataclass(frozen=True)
@@ -231,11 +238,16 @@ def motion_gain(
     weights: Mapping[str, float],
     options: DesignOptions,
     current: Mapping[str, tuple[int | None, FloatArray]] | None = None,
+    inflation: Mapping[str, float] | None = None,
 ) -> float:
-    """Weighted D-optimal gain (module docstring) of executing ``trajectory`` for the units in ``weights``."""
+    """Weighted D-optimal gain (module docstring) of executing ``trajectory`` for the units in ``weights``;
+    ``current``: each unit's ``(link, information)`` (default: asked now); ``inflation``: per unit, the
+    factor its calibrator inflates the covariance by for correlated residuals (default :func:`inflations`),
+    which divides the predicted information too (it applies to the new data as to the old)."""
     t = np.arange(0.0, trajectory.duration, options.dt)
     q, qd, qdd = trajectory.evaluate(t)
     prior = options.prior
+    factors = inflations(calibrator) if inflation is None else inflation
     gain = 0.0
     for unit, w in weights.items():
         if w <= 0:
@@ -247,8 +259,24 @@ def motion_gain(
             added = calibrator.pose_information_rate(unit, link, q, qd, qdd, options.dt)
         except np.linalg.LinAlgError:  # a degenerate estimate: nothing to predict from
             continue
-        gain += w * d_optimal_gain(info, psd(added), prior)
+        scale = options.dt * options.imu_rate_hz / max(factors.get(unit, 1.0), 1.0)
+        gain += w * d_optimal_gain(info, psd(added) * scale, prior)
     return gain
+
+
+def inflations(calibrator: Informed) -> dict[str, float]:
+    """Per unit, the calibrator's covariance inflation for correlated residuals (its result's
+    ``residual_correlation``; 1 when it has none)."""
+    try:
+        units = getattr(calibrator.result(), "units", {})
+    except np.linalg.LinAlgError:
+        return {}
+    out = {}
+    for name, unit in units.items():
+        value = getattr(unit, "extras", {}).get("residual_correlation")
+        if isinstance(value, (int, float)) and np.isfinite(value) and value > 0:
+            out[name] = float(value)
+    return out
 
 
 def _information(calibrator: Informed, unit: str) -> tuple[int | None, FloatArray]:
@@ -278,6 +306,7 @@ def score_candidates(
     status = calibrator.status()
     weights = unit_weights(status, options.reached_weight)
     current = {u: _information(calibrator, u) for u in weights}
+    factors = inflations(calibrator) if weights else {}
     sites = [q_now, *np.atleast_2d(poses)] if len(poses) else [q_now]
     ok = excitable(chain, config, np.array(sites))
     allowed = set(range(chain.n_joints) if joints is None else joints)
@@ -290,7 +319,7 @@ def score_candidates(
                 traj = build_segment(chain, config, q_now, pose, j, check=False)
             except ProtocolError:
                 continue
-            gain = motion_gain(calibrator, traj, weights, options, current) if weights else 0.0
+            gain = motion_gain(calibrator, traj, weights, options, current, factors) if weights else 0.0
             out.append(Candidate(pose, j, k > 0, traj.duration, gain, gain / traj.duration, traj))
     out.sort(key=lambda c: -c.score)
     return out

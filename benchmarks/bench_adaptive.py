@@ -1,0 +1,65 @@
+"""Adaptive motion vs the fixed ``fast`` protocol: robot motion time to 0.3 mm / 0.05 deg std (issue 16; run by hand).
+
+    python benchmarks/bench_adaptive.py --robots panda sawyer ur5e --seeds 0
+
+A thin script over :mod:`skincal.workflows.bench_adaptive`: per robot and seed, 6 units (paper
+placement), ``realistic`` IMUs and ``controller`` joint states, the streaming calibrator fed by the
+adaptive loop and by the whole ``fast`` protocol; prints the motion times and the true (worst-unit)
+errors, optionally JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+from skincal.workflows.bench_adaptive import run_case
+from skincal.workflows.live import parse_target
+from skincal.workflows.script import run_script
+
+
+def _f(x: float | None, fmt: str = ".1f") -> str:
+    return "-" if x is None else format(x, fmt)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", nargs="+", default=["panda", "sawyer", "ur5e"])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0])
+    parser.add_argument("--noise", default="realistic")
+    parser.add_argument("--target", default="0.3mm,0.05deg")
+    parser.add_argument("--max-motion", type=float, default=180.0, help="motion budget of the adaptive loop, s")
+    parser.add_argument("--json", type=Path, default=None, help="write the numbers here")
+    args = parser.parse_args()
+    target = parse_target(args.target)
+    console = Console(width=200)
+    rows = []
+    for robot in args.robots:
+        for seed in args.seeds:
+            rows.append(run_case(robot, seed, args.noise, target, args.max_motion))
+            console.print(f"{robot} seed {seed} done", highlight=False)
+    table = Table(title=f"motion time to {target.text()} std, 6 units, {args.noise} IMUs, controller joint states")
+    for col in ("robot", "seed", "adaptive [s]", "segments", "reached", "true err [mm / deg]", "links",
+                "fast [s]", "fast reaches at [s]", "fast err there", "fast err at end"):  # fmt: skip
+        table.add_column(col)
+    for r in rows:
+        table.add_row(
+            r.robot, str(r.seed), f"{r.adaptive_s:.1f}", str(r.adaptive_segments),
+            "yes" if r.adaptive_reached else "NO",
+            f"{r.adaptive_pos_mm:.3f} / {r.adaptive_rot_deg:.4f}", "ok" if r.adaptive_links_ok else "WRONG",
+            f"{r.fixed_s:.1f}", _f(r.fixed_reached_s),
+            "-" if r.fixed_reached_pos_mm is None else f"{r.fixed_reached_pos_mm:.3f} / {r.fixed_reached_rot_deg:.4f}",
+            f"{r.fixed_end_pos_mm:.3f} / {r.fixed_end_rot_deg:.4f}",
+        )  # fmt: skip
+    console.print(table)
+    if args.json is not None:
+        args.json.write_text(json.dumps([dataclasses.asdict(r) for r in rows], indent=2))
+
+
+if __name__ == "__main__":
+    raise SystemExit(run_script(main))
