@@ -53,8 +53,18 @@ MOVING_RPS2 = 0.2
 are two classes with their own noise level (a resting unit's residual is its sensor noise; a moving
 one's adds the errors of the joint-derived accelerations), so the Grams are kept per class."""
 REST, MOVING = 0, 1
+MIN_MOVING = 200
+"""Moving samples of the best link before its link is decided."""
+SATURATION_FLOOR = (1.5 * 9.80665, 2.0)
+"""A recurring largest reading is taken as the sensor's range only from 1.5 g (m/s^2) and 2 rad/s up:
+no accelerometer used on skin saturates below 2 g, nor a gyroscope below 250 deg/s."""
 LINK_CHI2_MARGIN = 25.0
-"""Two links are told apart when their costs (chi-square, correlation-inflated) differ by this much."""
+"""Two links are told apart when their costs (chi-square, correlation-inflated) differ by this much...
+"""
+LINK_RELATIVE_MARGIN = 0.05
+"""...and by this fraction of the best one's (the joint-derived model errors are not white noise: a
+few % of cost between two links is not evidence). A decision is final: the other links' statistics are
+then dropped, so it waits for clear evidence."""
 CORRELATION_MAX = 100.0
 """Largest variance inflation applied for autocorrelated residuals."""
 GATE_SIGMAS = 6.0
@@ -86,7 +96,7 @@ class OnlineOptions:
     """
 
     block_s: float = 1.0
-    margin_s: float = 0.15
+    margin_s: float = 0.5
     max_delay_s: float = 0.5
     grid_hz: float = 250.0
     history_s: float = 60.0
@@ -159,9 +169,8 @@ class _Unit:
     t_first: float = float("inf")
     dirty: bool = True
     solutions: dict[int, stats.Solution] = field(default_factory=dict)
-    sigmas: dict[int, FloatArray] = field(
-        default_factory=dict
-    )  # link -> [accel rest, accel moving, gyro rest, gyro moving]
+    # link (0: the common weights of undecided candidates) -> [accel rest, accel moving, gyro rest, gyro moving]
+    sigmas: dict[int, FloatArray] = field(default_factory=dict)
     decided: bool = False
     ar_num: float = 0.0
     ar_den: float = 0.0
@@ -231,14 +240,18 @@ class OnlineCalibrator:
     # ---------------------------------------------------------------- input
     def add_joint_states(self, t: ArrayLike, q: ArrayLike, qd: ArrayLike | None = None) -> None:
         """Joint states ``t`` ``(N,)`` s, ``q`` ``(N, n)`` rad, ``qd`` ``(N, n)`` rad/s (None: from ``q``)."""
+        n = self.chain.n_joints
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        q = np.asarray(q, dtype=float).reshape(t.size, -1)
-        if q.shape[1] != self.chain.n_joints:
+        q = np.asarray(q, dtype=float)
+        if t.ndim != 1 or q.shape != (t.size, n):
             raise ConfigError(
-                f"online calibrator: joint states have {q.shape[1]} joints, the robot {self.chain.n_joints}"
+                f"online calibrator: joint states need t (N,) and q (N, {n}) for the robot's {n} joints, "
+                f"got {t.shape} and {q.shape}"
             )
         ok = np.isfinite(t) & np.all(np.isfinite(q), axis=1)
-        qd_a = None if qd is None else np.asarray(qd, dtype=float).reshape(q.shape)
+        qd_a = None if qd is None else np.asarray(qd, dtype=float)
+        if qd_a is not None and qd_a.shape != q.shape:
+            raise ConfigError(f"online calibrator: qd must have the shape of q {q.shape}, got {qd_a.shape}")
         if qd_a is not None:
             ok &= np.all(np.isfinite(qd_a), axis=1)
         if not ok.all():
@@ -255,8 +268,13 @@ class OnlineCalibrator:
         if st is None:
             raise ConfigError(f"online calibrator: unknown unit {unit!r}")
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        a = np.asarray(accel, dtype=float).reshape(t.size, 3)
-        g = None if gyro is None else np.asarray(gyro, dtype=float).reshape(t.size, 3)
+        a = np.asarray(accel, dtype=float)
+        g = None if gyro is None else np.asarray(gyro, dtype=float)
+        if t.ndim != 1 or a.shape != (t.size, 3) or (g is not None and g.shape != (t.size, 3)):
+            raise ConfigError(
+                f"online calibrator: unit {unit!r} needs t (M,), accel and gyro (M, 3), got {t.shape}, {a.shape}"
+                + ("" if g is None else f", {g.shape}")
+            )
         if st.has_gyro is None:
             st.has_gyro = g is not None
         if not st.has_gyro:
@@ -377,7 +395,8 @@ class OnlineCalibrator:
             # derivatives along the whole grid (continuous across blocks)
             du = np.gradient(u, tg, axis=0) if tg.size > 1 else np.zeros_like(u)
             ddw = np.gradient(w, tg, axis=0) if tg.size > 1 else np.zeros_like(w)
-            self._grid_cat = (tg, u, K, w, dw, ok, speed, du, ddw)
+            dK = np.gradient(K, tg, axis=0) if tg.size > 1 else np.zeros_like(K)
+            self._grid_cat = (tg, u, K, w, dw, ok, speed, du, ddw, dK)
         return self._grid_cat
 
     def _take_pending(self, st: _Unit) -> tuple[FloatArray, FloatArray, FloatArray | None]:
@@ -441,8 +460,8 @@ class OnlineCalibrator:
 
     def _signals_at(self, grid: tuple[FloatArray, ...], s: FloatArray, links: Sequence[int]):
         """Link signals of ``links`` at instants ``s`` (M,) by linear interpolation on the grid:
-        u, K, w, dw_dt, du (each ``(L, M, ...)``), ok ``(M,)``."""
-        tg, u, K, w, _, ok, _, du, ddw = grid
+        u, K, w, dw_dt, du, dK_dt (each ``(L, M, ...)``), ok ``(M,)``."""
+        tg, u, K, w, _, ok, _, du, ddw, dK = grid
         i = np.clip(np.searchsorted(tg, s) - 1, 0, tg.size - 2)
         f = (s - tg[i]) / (tg[i + 1] - tg[i])
         idx = np.asarray(links) - 1
@@ -452,7 +471,7 @@ class OnlineCalibrator:
             ff = f.reshape((-1,) + (1,) * (x0.ndim - 1))
             return np.moveaxis((1 - ff) * x0 + ff * x1, 1, 0)
 
-        return lerp(u), lerp(K), lerp(w), lerp(ddw), lerp(du), ok[i] & ok[i + 1]
+        return lerp(u), lerp(K), lerp(w), lerp(ddw), lerp(du), lerp(dK), ok[i] & ok[i + 1]
 
     @staticmethod
     def _unsaturated(st: _Unit, a: FloatArray, g: FloatArray | None) -> np.ndarray:
@@ -462,13 +481,15 @@ class OnlineCalibrator:
         for i, x in enumerate((a, g)):
             if x is None or x.size == 0:
                 continue
+            if np.abs(x).max() < SATURATION_FLOOR[i] and st.peak_count[i] < 2:
+                continue  # a quantised reading at rest repeats its largest value too: not a range
             m = np.abs(x)
             top = float(m.max())
             if top > st.peak[i]:
                 st.peak[i], st.peak_count[i] = top, float((m == top).sum())
             else:
                 st.peak_count[i] += float((m == st.peak[i]).sum())
-            if st.peak_count[i] >= 2:
+            if st.peak_count[i] >= 2 and st.peak[i] >= SATURATION_FLOOR[i]:
                 keep &= np.all(m < st.peak[i], axis=1)
         st.saturated += int((~keep).sum())
         return keep
@@ -478,16 +499,16 @@ class OnlineCalibrator:
         unsat = self._unsaturated(st, a, g)
         if not unsat.all():
             s, a, g = s[unsat], a[unsat], None if g is None else g[unsat]
-        u, K, w, dw, du, ok = self._signals_at(grid, s, st.links)
+        u, K, w, dw, du, dK, ok = self._signals_at(grid, s, st.links)
         if not ok.all():
-            s, a, u, K, w, dw, du = s[ok], a[ok], u[:, ok], K[:, ok], w[:, ok], dw[:, ok], du[:, ok]
+            s, a, u, K, w, dw, du, dK = s[ok], a[ok], u[:, ok], K[:, ok], w[:, ok], dw[:, ok], du[:, ok], dK[:, ok]
             g = None if g is None else g[ok]
         if s.size == 0:
             return 0
         moving = (np.linalg.norm(w, axis=-1) > MOVING_RPS) | (np.linalg.norm(dw, axis=-1) > MOVING_RPS2)  # (L, M)
         sol = st.solutions.get(st.links[0]) if st.decided else None
         if sol is not None:
-            r = self._residuals(sol, a, u[0], K[0], du[0])
+            r = self._residuals(sol, a, u[0], K[0], du[0], dK[0])
             sig = st.sigmas[st.links[0]]
             rn = r / np.maximum(np.where(moving[0], sig[1], sig[0]), 1e-9)[:, None]
             reached = st.status is not None and st.status.reached
@@ -496,7 +517,8 @@ class OnlineCalibrator:
                 self.on_residuals(name, s, rn)
             st.outliers += int((~keep).sum())
             if not keep.all():
-                s, a, u, K, w, dw, du = s[keep], a[keep], u[:, keep], K[:, keep], w[:, keep], dw[:, keep], du[:, keep]
+                s, a, u, K, w, dw = s[keep], a[keep], u[:, keep], K[:, keep], w[:, keep], dw[:, keep]
+                du, dK = du[:, keep], dK[:, keep]
                 g, moving = None if g is None else g[keep], moving[:, keep]
                 rn = rn[keep]
             if rn.shape[0] > 1:
@@ -506,7 +528,7 @@ class OnlineCalibrator:
             return 0
         L, M = u.shape[0], s.size
         cls = np.stack([~moving, moving], axis=1)[..., None, None]  # (L, 2, M, 1, 1)
-        rows_a = stats.accel_rows(np.broadcast_to(a, (L, M, 3)), u, K, du)[:, None] * cls
+        rows_a = stats.accel_rows(np.broadcast_to(a, (L, M, 3)), u, K, du, dK)[:, None] * cls
         Za = stats.gram(rows_a)
         if g is not None:
             Zg = stats.gram(stats.gyro_rows(np.broadcast_to(g, (L, M, 3)), w, dw)[:, None] * cls)
@@ -526,11 +548,14 @@ class OnlineCalibrator:
         return int(M)
 
     @staticmethod
-    def _residuals(sol: stats.Solution, a: FloatArray, u: FloatArray, K: FloatArray, du: FloatArray) -> FloatArray:
+    def _residuals(
+        sol: stats.Solution, a: FloatArray, u: FloatArray, K: FloatArray, du: FloatArray, dK: FloatArray
+    ) -> FloatArray:
         """``(M, 3)`` residuals of equation (1) of :mod:`~skincal.calib.online.stats` at ``sol``, m/s^2."""
         G = sol.R @ np.linalg.inv(sol.A)
         h = G @ sol.b
-        return a @ G.T - h - np.einsum("mij,j->mi", K, sol.p) - du * sol.tau - u
+        Kp = np.einsum("mij,j->mi", K + sol.tau * dK, sol.p)
+        return a @ G.T - h - Kp - du * sol.tau - u
 
     # ---------------------------------------------------------------- estimates
     def _inflation(self, st: _Unit) -> float:
@@ -548,7 +573,8 @@ class OnlineCalibrator:
         sigma^2 I``), which biases ``G`` toward zero along axes with little signal (errors in
         variables: a unit axis that never sees gravity at rest would read a scale several % too
         large). The rest class's residual std is the sensor noise (nothing else is left at rest), so
-        ``n sigma_rest^2`` is removed from that block of both classes (bias-corrected least squares).
+        ``n sigma_rest^2`` is removed from that block of both classes (bias-corrected least squares),
+        once the unit's link is decided (a wrong candidate's rest residual is not the sensor's noise).
         """
 
         def corrected(Z: FloatArray, noise: float) -> FloatArray:
@@ -557,6 +583,10 @@ class OnlineCalibrator:
             Z[d, d] -= min(Z[9, 9] * noise**2, 0.5 * float(np.min(Z[d, d])))  # Z[9, 9]: the class's samples
             return Z
 
+        if not st.decided:  # a wrong candidate's rest residual is not the sensor noise: no correction yet
+            Za = st.Za[k, REST] / sig[0] ** 2 + st.Za[k, MOVING] / sig[1] ** 2
+            Zg = st.Zg[k, REST] / sig[2] ** 2 + st.Zg[k, MOVING] / sig[3] ** 2 if st.has_gyro else None
+            return Za, Zg
         Za = corrected(st.Za[k, REST], sig[0]) / sig[0] ** 2 + corrected(st.Za[k, MOVING], sig[0]) / sig[1] ** 2
         Zg = None
         if st.has_gyro:
@@ -589,27 +619,36 @@ class OnlineCalibrator:
         return out
 
     def _solve(self, st: _Unit) -> None:
+        """Solve every candidate link. Undecided, all candidates are weighted with the same noise
+        levels (those the best candidate fitted last time): a wrong link must not set its own weights,
+        or it could shrink one class's noise level until it fits that class alone. Decided, the one
+        link's fit sets its own levels."""
         if not st.dirty:
             return
         o = self.options
+        default = np.array([o.accel_sigma, o.accel_sigma, o.gyro_sigma, o.gyro_sigma])
+        common = st.sigmas.get(0, default)
         sols: dict[int, stats.Solution] = {}
         for k, link in enumerate(st.links):
             if st.Za[k, :, 9, 9].sum() < 10:
                 continue
             prev = st.solutions.get(link)
-            default = np.array([o.accel_sigma, o.accel_sigma, o.gyro_sigma, o.gyro_sigma])
-            sig = st.sigmas.get(link, default)
+            sig = st.sigmas.get(link, common) if st.decided else common
             Za, Zg = self._weighted(st, k, sig)
             sol = stats.solve(Za, Zg, 1.0, 1.0, R0=None if prev is None else prev.R)
             if sol is None:
                 continue
-            for _ in range(1 if prev is not None else 2):  # re-weight with the fit's own noise levels
-                sig = self._class_sigmas(st, k, sol, sig)
-                Za, Zg = self._weighted(st, k, sig)
-                sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R) or sol
-            st.sigmas[link] = sig
+            if st.decided:
+                for _ in range(1 if prev is not None else 2):  # re-weight with the fit's own noise levels
+                    sig = self._class_sigmas(st, k, sol, sig)
+                    Za, Zg = self._weighted(st, k, sig)
+                    sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R) or sol
+            st.sigmas[link] = sig if st.decided else self._class_sigmas(st, k, sol, common)
             sols[link] = sol
         st.solutions = sols
+        if sols and not st.decided:
+            best = min(sols, key=lambda link: self._cost(st, link, common))
+            st.sigmas[0] = st.sigmas[best]  # the weights of the next solve of every candidate
         st.dirty = False
 
     def _decide(self, st: _Unit) -> tuple[int | None, float, list[int]]:
@@ -619,15 +658,15 @@ class OnlineCalibrator:
         if len(st.solutions) == 1:
             (link,) = st.solutions
             return link, float("inf"), [link]
-        # every candidate on one chi-square scale: the smallest noise levels any candidate fitted
-        ref = np.min(np.stack([st.sigmas[k] for k in st.solutions]), axis=0)
+        # every candidate on one chi-square scale: the noise levels they were all weighted with
+        ref = st.sigmas.get(0, np.min(np.stack([st.sigmas[k] for k in st.solutions]), axis=0))
         costs = {k: self._cost(st, k, ref) for k in st.solutions}
         best_link = min(costs, key=costs.__getitem__)
         c0 = costs[best_link]
         kappa = self._inflation(st)
         others = sorted(v for k, v in costs.items() if k != best_link)
         margin = others[0] / c0 if c0 > 0 else float("inf")
-        ambiguous = [k for k, v in costs.items() if v - c0 < max(LINK_CHI2_MARGIN * kappa, 0.01 * c0)]
+        ambiguous = [k for k, v in costs.items() if v - c0 < max(LINK_CHI2_MARGIN * kappa, LINK_RELATIVE_MARGIN * c0)]
         return best_link, float(margin), sorted(ambiguous)
 
     def _cost(self, st: _Unit, link: int, sig: FloatArray) -> float:
@@ -659,7 +698,7 @@ class OnlineCalibrator:
         pos_std, rot_std = std[:3], np.degrees(std[3:])
         determined = bool(np.all(pos_std < UNDETERMINED_M) and np.all(rot_std < UNDETERMINED_DEG))
         undecided = len(ambiguous) > 1
-        if not undecided and not st.decided and len(st.links) > 1 and st.moving[k] > 50 and determined:
+        if not undecided and not st.decided and len(st.links) > 1 and st.moving[k] > MIN_MOVING and determined:
             self._keep_only(st, link)
             k = 0
         reached = bool(
@@ -700,21 +739,10 @@ class OnlineCalibrator:
         return {u: self._status(u) for u in self.units}
 
     # ---------------------------------------------------------------- design support
-    def _normal(self, sol: stats.Solution, Za: FloatArray, Zg: FloatArray | None, sig: FloatArray) -> FloatArray:
+    @staticmethod
+    def _normal(sol: stats.Solution, Za: FloatArray, Zg: FloatArray | None, sig: FloatArray) -> FloatArray:
         """Normal matrix ``(NP, NP)`` of the Grams ``Za``, ``Zg`` of moving samples at ``sol`` (no prior)."""
-        F = np.linalg.inv(sol.A)
-        gens = skew(np.eye(3))
-        JG = np.stack([(sol.R @ gk @ F).reshape(9) for gk in gens], axis=1)
-        Ja = np.zeros((stats.NA - 1, stats.NP))
-        Ja[:9, 0:3], Ja[:9, 3:12], Ja[9:12, 12:15], Ja[12:15, 15:18], Ja[15, 21] = (
-            JG, np.kron(sol.R, np.eye(3)), np.eye(3), np.eye(3), 1.0)  # fmt: skip
-        H = Ja.T @ Za[:-1, :-1] @ Ja / sig[1] ** 2
-        if Zg is not None:
-            JR = np.stack([(sol.R @ gk).reshape(9) for gk in gens], axis=1)
-            Jg = np.zeros((stats.NG - 1, stats.NP))
-            Jg[:9, 0:3], Jg[9:12, 18:21], Jg[12, 21] = JR, np.eye(3), 1.0
-            H = H + Jg.T @ Zg[:-1, :-1] @ Jg / sig[3] ** 2
-        return H
+        return stats.normal_matrix(sol.R, sol.state, Za / sig[1] ** 2, None if Zg is None else Zg / sig[3] ** 2)
 
     def information(self, unit: str) -> tuple[int | None, FloatArray]:
         """``(link, (6, 6))``: the current information about the pose ``[rotation (rad, unit axes),
@@ -757,9 +785,10 @@ class OnlineCalibrator:
         W = skew(w)
         K = skew(dw) + W @ W
         du = np.gradient(u, dt, axis=0) if u.shape[0] > 1 else np.zeros_like(u)
+        dK = np.gradient(K, dt, axis=0) if u.shape[0] > 1 else np.zeros_like(K)
         f = u + np.einsum("mij,j->mi", K, sol.p)
         a = (f @ sol.R) @ sol.A.T + sol.b
-        Za = stats.gram(stats.accel_rows(a, u, K, du))
+        Za = stats.gram(stats.accel_rows(a, u, K, du, dK))
         Zg = None
         if gyro:
             g = w @ sol.R + sol.gyro_bias
@@ -830,7 +859,7 @@ class OnlineCalibrator:
                 accel_bias_mps2=sol.b,
                 accel_bias_std_mps2=np.sqrt(np.clip(np.diag(cov_b), 0, None)),
                 accel_scale_misalignment=sol.A,
-                time_offset_s=float((st.offset or 0.0) + sol.tau),
+                time_offset_s=float((st.offset or 0.0) - sol.tau),  # stats: the samples saw s + tau
                 time_offset_std_s=float(np.sqrt(max(sol.cov[21, 21] * kappa, 0.0))),
                 gyro_bias_rps=sol.gyro_bias if st.has_gyro else None,
             )

@@ -3,18 +3,20 @@
 The accelerometer model of :mod:`skincal.calib.mle.model` (``a = A R^T v(s) + b`` with
 ``v = u + K p`` in link frame, ``R = R_link_su``) is rearranged to be *linear* in its unknowns::
 
-    G a - h - K p - du * tau = u,      G = R A^-1 ~ R (I + E),   h = G b                        (1)
+    G a - h - K p - du * tau - dK (tau p) = u,      G = R A^-1 ~ R (I + E),   h = G b          (1)
 
-(``du`` = du/ds: a small residual time offset ``tau`` of the unit's samples, linearised), and the
-gyroscope's ``g = R^T w + b_g`` likewise::
+(``du``, ``dK`` = d/ds: the samples measured the motion at ``s + tau``, a small residual offset after
+the coarse alignment, to first order; the unit's time offset is then the coarse one MINUS ``tau``),
+and the gyroscope's ``g = R^T w + b_g`` likewise::
 
     R g - c - dw * tau = w,            c = R b_g                                                (2)
 
 ``u``, ``K``, ``w`` are :func:`skincal.calib.mle.signals.link_signals` of the unit's link at its
 sample instants (link frame), ``a`` and ``g`` its readings (unit frame). Each sample adds one
 3-row block ``Phi x - y`` to a linear least-squares problem, so everything the data say about the
-unknowns is the Gram matrix ``Z = sum [Phi y]^T [Phi y]`` of each equation (17 x 17 for (1) with
-``x_a = [vec(G) (9, row-major), h, p, tau]``, 14 x 14 for (2) with ``x_g = [vec(R), c, tau]``):
+unknowns is the Gram matrix ``Z = sum [Phi y]^T [Phi y]`` of each equation (20 x 20 for (1) with
+``x_a = [vec(G) (9, row-major), h, p, tau, tau p]`` (the product ``tau p`` kept as 3 unknowns of
+its own, so the rows stay linear), 14 x 14 for (2) with ``x_g = [vec(R), c, tau]``):
 no re-linearisation is ever needed, because (1) and (2) are exact in ``G``, ``R`` and the offsets
 (only ``tau`` is first order). The pose then follows from minimising, over ``R`` in SO(3), ``E``,
 ``h``, ``p``, ``c``, ``tau``::
@@ -36,8 +38,8 @@ from scipy.spatial.transform import Rotation
 
 from skincal.kinematics.transforms import FloatArray, skew
 
-NA = 17
-"""Columns of the accelerometer Gram: ``[vec(G) 9, h 3, p 3, tau 1]`` and the right-hand side."""
+NA = 20
+"""Columns of the accelerometer Gram: ``[vec(G) 9, h 3, p 3, tau 1, tau p 3]`` and the right-hand side."""
 NG = 14
 """Columns of the gyroscope Gram: ``[vec(R) 9, c 3, tau 1]`` and the right-hand side."""
 NP = 22
@@ -49,16 +51,19 @@ TAU_PRIOR_S = 0.01
 _TH, _E, _H, _P, _C, _T = slice(0, 3), slice(3, 12), slice(12, 15), slice(15, 18), slice(18, 21), 21
 
 
-def accel_rows(a: FloatArray, u: FloatArray, K: FloatArray, du: FloatArray) -> FloatArray:
+def accel_rows(a: FloatArray, u: FloatArray, K: FloatArray, du: FloatArray, dK: FloatArray | None = None) -> FloatArray:
     """``(..., M, 3, NA)`` rows ``[Phi y]`` of equation (1) for readings ``a`` ``(..., M, 3)`` and link
-    signals ``u`` ``(..., M, 3)``, ``K`` ``(..., M, 3, 3)``, ``du`` ``(..., M, 3)`` (module docstring)."""
+    signals ``u`` ``(..., M, 3)``, ``K`` ``(..., M, 3, 3)``, their derivatives ``du`` ``(..., M, 3)`` and
+    ``dK`` ``(..., M, 3, 3)`` (None: zero) (module docstring)."""
     Z = np.zeros((*u.shape[:-1], 3, NA))
     for i in range(3):  # vec(G) row-major: (G a)_i = sum_j G_ij a_j
         Z[..., i, 3 * i : 3 * i + 3] = a
     Z[..., 9:12] = -np.eye(3)
     Z[..., 12:15] = -K
     Z[..., 15] = -du
-    Z[..., 16] = u
+    if dK is not None:
+        Z[..., 16:19] = -dK
+    Z[..., 19] = u
     return Z
 
 
@@ -103,6 +108,7 @@ class Solution:
         information: ``(NP, NP)`` the normal matrix (inverse of ``cov``).
         x_a, x_g: the linear unknowns of (1) ``(NA - 1,)`` and (2) ``(NG - 1,)`` at the solution (for
             :func:`residual_sum` of other Grams, e.g. per class of samples).
+        state: ``x`` of :func:`linearise` at the solution (with ``R``: for :func:`normal_matrix`).
     """
 
     R: FloatArray
@@ -119,6 +125,7 @@ class Solution:
     information: FloatArray
     x_a: FloatArray
     x_g: FloatArray
+    state: FloatArray
 
     def pose_covariance(self) -> FloatArray:
         """``(6, 6)`` covariance of ``(x, y, z, rx, ry, rz)`` in the LINK frame's axes (m^2, rad^2): the
@@ -155,6 +162,32 @@ def _nearest_rotation(M: FloatArray) -> FloatArray:
     return U @ D @ Vt
 
 
+def linearise(R: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The unknowns of (1) and (2) at ``R`` and ``x = [0 (3), E, h, p, c, tau]`` ``(NP,)`` and their
+    Jacobians with respect to ``delta`` (module docstring): ``x_a`` ``(NA - 1,)``, ``J_a``
+    ``(NA - 1, NP)``, ``x_g`` ``(NG - 1,)``, ``J_g`` ``(NG - 1, NP)``."""
+    F = np.eye(3) + x[_E].reshape(3, 3)
+    JG, JE, JR = _vec_jacobians(R, F)
+    Ja = np.zeros((NA - 1, NP))
+    Ja[:9, _TH], Ja[:9, _E], Ja[9:12, _H], Ja[12:15, _P], Ja[15, _T] = JG, JE, np.eye(3), np.eye(3), 1.0
+    Ja[16:19, _T], Ja[16:19, _P] = x[_P], x[_T] * np.eye(3)  # d(tau p)
+    xa = np.concatenate([(R @ F).reshape(9), x[_H], x[_P], [x[_T]], x[_T] * x[_P]])
+    Jg = np.zeros((NG - 1, NP))
+    Jg[:9, _TH], Jg[9:12, _C], Jg[12, _T] = JR, np.eye(3), 1.0
+    xg = np.concatenate([R.reshape(9), x[_C], [x[_T]]])
+    return xa, Ja, xg, Jg
+
+
+def normal_matrix(R: FloatArray, x: FloatArray, Za: FloatArray, Zg: FloatArray | None) -> FloatArray:
+    """``(NP, NP)`` Gauss-Newton normal matrix of the (already weighted) Grams ``Za``, ``Zg`` at ``R``,
+    ``x`` (:func:`linearise`; no prior)."""
+    _, Ja, _, Jg = linearise(R, x)
+    H = Ja.T @ Za[: NA - 1, : NA - 1] @ Ja
+    if Zg is not None:
+        H = H + Jg.T @ Zg[: NG - 1, : NG - 1] @ Jg
+    return H
+
+
 def solve(
     Za: FloatArray,
     Zg: FloatArray | None,
@@ -182,21 +215,12 @@ def solve(
     prior[_T] = 1.0 / TAU_PRIOR_S**2
     H = np.eye(NP)
     for it in range(iterations):
-        F = np.eye(3) + x[_E].reshape(3, 3)
-        G = R @ F
-        JG, JE, JR = _vec_jacobians(R, F)
-        # x_a = [vec(G), h, p, tau] as a linear function of delta around the current point
-        Ja = np.zeros((NA - 1, NP))
-        Ja[:9, _TH], Ja[:9, _E], Ja[9:12, _H], Ja[12:15, _P], Ja[15, _T] = JG, JE, np.eye(3), np.eye(3), 1.0
-        xa = np.concatenate([G.reshape(9), x[_H], x[_P], [x[_T]]])
+        xa, Ja, xg, Jg = linearise(R, x)
         ga = Za[: NA - 1, : NA - 1] @ xa - Za[: NA - 1, NA - 1]
         H = wa * Ja.T @ Za[: NA - 1, : NA - 1] @ Ja + np.diag(prior)
         grad = wa * Ja.T @ ga + prior * np.r_[np.zeros(3), x[3:]]
         if have_g:
             assert Zg is not None
-            Jg = np.zeros((NG - 1, NP))
-            Jg[:9, _TH], Jg[9:12, _C], Jg[12, _T] = JR, np.eye(3), 1.0
-            xg = np.concatenate([R.reshape(9), x[_C], [x[_T]]])
             gg = Zg[: NG - 1, : NG - 1] @ xg - Zg[: NG - 1, NG - 1]
             H = H + wg * Jg.T @ Zg[: NG - 1, : NG - 1] @ Jg
             grad = grad + wg * Jg.T @ gg
@@ -214,9 +238,8 @@ def solve(
             break
     F = np.eye(3) + x[_E].reshape(3, 3)
     G = R @ F
-    xa = np.concatenate([G.reshape(9), x[_H], x[_P], [x[_T]]])
+    xa, _, xg, _ = linearise(R, x)
     rss_a = residual_sum(Za, xa)
-    xg = np.concatenate([R.reshape(9), x[_C], [x[_T]]])
     rss_g = residual_sum(Zg, xg) if have_g and Zg is not None else 0.0
     try:
         cov = np.linalg.inv(H)
@@ -230,5 +253,5 @@ def solve(
     sg = float(np.sqrt(rss_g / max(3.0 * Zg[9, 9] - 13.0, 1.0))) if have_g and Zg is not None else float("nan")
     return Solution(
         R=R, p=x[_P].copy(), A=A, b=b, gyro_bias=gyro_bias, tau=float(x[_T]), cov=cov, sigma_a=sa, sigma_g=sg,
-        cost=rss_a * wa + rss_g * wg, rss_a=rss_a, information=H, x_a=xa, x_g=xg,
+        cost=rss_a * wa + rss_g * wg, rss_a=rss_a, information=H, x_a=xa, x_g=xg, state=x.copy(),
     )  # fmt: skip
