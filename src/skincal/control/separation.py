@@ -74,8 +74,8 @@ class StoppingModel:
 
     Attributes:
         speeds: ``(K,)`` speeds of the robot point, m/s, strictly ascending from 0.
-        times: ``(K,)`` stopping times ``T_s`` from each speed, s (0 at speed 0).
-        distances: ``(K,)`` stopping distances ``S_s`` from each speed, m (0 at speed 0).
+        times: ``(K,)`` stopping times ``T_s`` from each speed, s (usually 0 at speed 0).
+        distances: ``(K,)`` stopping distances ``S_s`` from each speed, m (usually 0 at speed 0).
         reaction_time_s: ``T_r``, s: sensing + filtering + control latency before braking starts.
 
     Between the table's speeds times and distances are interpolated linearly; beyond the last speed
