@@ -139,3 +139,110 @@ def test_a_candidate_outside_the_limits_is_never_chosen(low_units):
             assert cand.joint not in (1, 3)
         traj = cand.trajectory
         check_limits(chain, traj.t, traj.q, traj.qd, margin=config.limit_margin)
+
+
+# ------------------------------------------------------------------ the live designer
+
+
+def test_live_designer_proposes_waits_for_execution_and_records(tmp_path):
+    """Against a real LiveFeed whose calibrator a simulated robot feeds: a segment is proposed, nothing is
+    recorded until the robot executed it (data time and rest at its end pose), then it is recorded and the
+    next one continues exactly from its planned end."""
+    from skincal.workflows.adaptive import LiveDesigner
+    from skincal.workflows.live import LiveFeed
+
+    session = make_session("panda", "paper", None, "realistic", "fast", 4, joints="controller")
+    chain = session.chain
+    q0 = start_pose(chain, np.random.default_rng(9))
+    cal = make_calibrator(chain, list(session.placements), session.gravity, TARGET)
+    feed = LiveFeed(chain, TARGET, calibrator=cal)
+    sim = SimulatedRobot(session, q0, cal)
+    cal.add_joint_states([0.0, 0.01], np.stack([q0, q0]), np.zeros((2, chain.n_joints)))  # at rest before
+    designer = LiveDesigner(chain, np.random.default_rng(0), max_motion_s=60.0)
+    assert designer.tick(feed) is None and designer.pending is not None and designer.index == 1
+    first = designer.pending
+    np.testing.assert_allclose(first.evaluate([0.0])[0][0], q0, atol=1e-12)  # starts where the robot rests
+    assert designer.tick(feed) is None and designer.pending is first  # not executed yet: waits
+    sim.execute(first)
+    feed.t_data = sim.trajectory.duration
+    record = designer.tick(feed)
+    assert record is not None and record.index == 1 and designer.pending is None
+    assert record.t_end == pytest.approx(first.duration) and designer.motion_s == pytest.approx(first.duration)
+    assert designer.tick(feed) is None and designer.index == 2
+    second = designer.pending
+    np.testing.assert_allclose(second.evaluate([0.0])[0][0], first.evaluate([first.duration])[0][0], atol=1e-12)
+    sim.execute(second)
+    feed.t_data = sim.trajectory.duration
+    assert designer.tick(feed) is not None
+    whole = designer.trajectory()
+    assert whole.duration == pytest.approx(first.duration + second.duration)
+
+
+# ------------------------------------------------------------------ the command
+
+
+def _run(capsys, *args: str) -> tuple[int, str, str]:
+    from skincal.cli import main
+
+    code = main(["protocol", *args])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_cli_adaptive_simulate_writes_segments_motion_and_result(tmp_path, capsys):
+    from skincal.data.result import read_result
+    from skincal.protocol import read_trajectory_json
+
+    out = tmp_path / "motion.json"
+    code, text, err = _run(capsys, "--robot", "panda", "--adaptive", "--simulate", "--max-motion", "8",
+                           "--out", str(out), "--rate", "50")  # fmt: skip
+    assert code == 0, err
+    segments = sorted(tmp_path.glob("motion_[0-9][0-9][0-9].json"))
+    assert len(segments) >= 1
+    assert text.count("segment ") >= len(segments) and "motion_001.json" in text
+    assert "true errors (simulated truth)" in text
+    whole = read_trajectory_json(out)
+    parts = [read_trajectory_json(p) for p in segments]
+    assert whole.duration == pytest.approx(sum(p.duration for p in parts))
+    result = read_result(tmp_path / "motion_result.json")
+    assert result.method == "online"
+    # a second run refuses to clobber the motion, its segments or the result without --force
+    again = ["--robot", "panda", "--adaptive", "--simulate", "--max-motion", "8", "--out", str(out)]
+    code, _, err = _run(capsys, *again)
+    assert code == 2 and "exists" in err and "Traceback" not in err
+    code, _, err = _run(capsys, *again[:-2], "--out", str(tmp_path / "other.csv"), "--result",
+                        str(tmp_path / "motion_result.json"))  # fmt: skip
+    assert code == 2 and "motion_result.json exists" in err
+    code, _, err = _run(capsys, *again, "--force")
+    assert code == 0, err
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--adaptive"], "--simulate, or --port and --record"),
+        (["--adaptive", "--simulate", "--max-motion", "-1"], "--max-motion"),
+        (["--adaptive", "--simulate", "--max-motion", "nan"], "--max-motion"),
+        (["--adaptive", "--simulate", "--target", "0.3mm"], "--target"),
+        (["--adaptive", "--simulate", "--port", "0"], "--port is for a real robot"),
+        (["--adaptive", "--simulate", "--result", "r.yaml"], ".json"),
+        (["--simulate"], "applies to --adaptive only"),
+        (["--result", "r.json"], "applies to --adaptive only"),
+    ],
+)
+def test_cli_adaptive_bad_options_are_one_line_errors(tmp_path, capsys, monkeypatch, args, message):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = _run(capsys, "--robot", "panda", "--out", "motion.yaml", *args)
+    assert code == 2
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not any(tmp_path.iterdir())  # nothing written
+
+
+@pytest.mark.adversarial
+def test_cli_adaptive_refuses_an_earlier_runs_segments(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "motion_001.yaml").write_text("earlier")
+    code, _, err = _run(capsys, "--robot", "panda", "--out", "motion.yaml", "--adaptive", "--simulate")
+    assert code == 2 and "motion_001.yaml exists" in err
+    assert (tmp_path / "motion_001.yaml").read_text() == "earlier"
