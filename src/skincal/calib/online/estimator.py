@@ -30,6 +30,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -238,18 +239,18 @@ class OnlineCalibrator:
         self.cpu_s = 0.0
 
     # ---------------------------------------------------------------- input
-    def add_joint_states(self, t: ArrayLike, q: ArrayLike, qd: ArrayLike | None = None) -> None:
+    def add_joint_states(self, t_in: ArrayLike, q_in: ArrayLike, qd_in: ArrayLike | None = None) -> None:
         """Joint states ``t`` ``(N,)`` s, ``q`` ``(N, n)`` rad, ``qd`` ``(N, n)`` rad/s (None: from ``q``)."""
         n = self.chain.n_joints
-        t = np.atleast_1d(np.asarray(t, dtype=float))
-        q = np.asarray(q, dtype=float)
+        t = np.atleast_1d(np.asarray(t_in, dtype=float))
+        q = np.asarray(q_in, dtype=float)
         if t.ndim != 1 or q.shape != (t.size, n):
             raise ConfigError(
                 f"online calibrator: joint states need t (N,) and q (N, {n}) for the robot's {n} joints, "
                 f"got {t.shape} and {q.shape}"
             )
         ok = np.isfinite(t) & np.all(np.isfinite(q), axis=1)
-        qd_a = None if qd is None else np.asarray(qd, dtype=float)
+        qd_a = None if qd_in is None else np.asarray(qd_in, dtype=float)
         if qd_a is not None and qd_a.shape != q.shape:
             raise ConfigError(f"online calibrator: qd must have the shape of q {q.shape}, got {qd_a.shape}")
         if qd_a is not None:
@@ -262,12 +263,12 @@ class OnlineCalibrator:
             self._jqd.append(qd_a)
             self.q_now = q[np.argmax(t)].copy()
 
-    def add_imu(self, unit: str, t: ArrayLike, accel: ArrayLike, gyro: ArrayLike | None = None) -> None:
+    def add_imu(self, unit: str, t_in: ArrayLike, accel: ArrayLike, gyro: ArrayLike | None = None) -> None:
         """IMU samples of ``unit``: stamps ``(M,)`` s, ``accel`` ``(M, 3)`` m/s^2, ``gyro`` ``(M, 3)`` rad/s."""
         st = self._u.get(unit)
         if st is None:
             raise ConfigError(f"online calibrator: unknown unit {unit!r}")
-        t = np.atleast_1d(np.asarray(t, dtype=float))
+        t = np.atleast_1d(np.asarray(t_in, dtype=float))
         a = np.asarray(accel, dtype=float)
         g = None if gyro is None else np.asarray(gyro, dtype=float)
         if t.ndim != 1 or a.shape != (t.size, 3) or (g is not None and g.shape != (t.size, 3)):
@@ -882,13 +883,13 @@ class OnlineCalibrator:
                 pose=s.pose, observable=True, position_std_m=s.position_std_m, rotation_std_deg=s.rotation_std_deg,
                 warnings=tuple(warnings), extras=extras, imu=imu,
             )  # fmt: skip
-        extras: dict = {"late_samples": self.late, "cpu_s": self.cpu_s}
+        top: dict[str, Any] = {"late_samples": self.late, "cpu_s": self.cpu_s}
         if failed:
-            extras["failed_units"] = failed
+            top["failed_units"] = failed
         if self.events:
-            extras["events"] = list(self.events)
+            top["events"] = list(self.events)
         return CalibrationResult("online", self.chain.name, dataset_sha256, time.perf_counter() - self._t_start,
-                                 units, extras)  # fmt: skip
+                                 units, top)  # fmt: skip
 
 
 def _pose_block(H: FloatArray) -> FloatArray:

@@ -142,7 +142,7 @@ def _vec_jacobians(R: FloatArray, F: FloatArray) -> tuple[FloatArray, FloatArray
     gens = skew(np.eye(3))  # (3, 3, 3): [e_k]x
     JG = np.stack([(R @ gk @ F).reshape(9) for gk in gens], axis=1)
     JR = np.stack([(R @ gk).reshape(9) for gk in gens], axis=1)
-    JE = np.kron(R, np.eye(3))
+    JE = np.asarray(np.kron(R, np.eye(3)), dtype=np.float64)
     return JG, JE, JR
 
 
@@ -206,8 +206,8 @@ def solve(
         if start is not None and np.linalg.matrix_rank(Zg[:9, :9], tol=1e-9 * Zg[:9, :9].trace()) >= 9:
             R0 = _nearest_rotation(start[:9].reshape(3, 3))
         else:
-            sa = _linear_start(Za, NA - 1)
-            R0 = np.eye(3) if sa is None else _nearest_rotation(sa[:9].reshape(3, 3))
+            start_a = _linear_start(Za, NA - 1)
+            R0 = np.eye(3) if start_a is None else _nearest_rotation(start_a[:9].reshape(3, 3))
     R, x = np.array(R0, dtype=float), np.zeros(NP)  # x holds E, h, p, c, tau (dtheta always 0 at the current R)
     wa, wg = 1.0 / sigma_a**2, (1.0 / sigma_g**2 if have_g else 0.0)
     prior = np.zeros(NP)
