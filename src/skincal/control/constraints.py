@@ -127,10 +127,15 @@ def cap_candidates(
     e1 /= np.maximum(np.linalg.norm(e1, axis=1, keepdims=True), 1e-12)
     e2 = cross(a, e1)
     phi = 2 * np.pi * np.arange(n_rim) / max(n_rim, 1)
-    e = np.cos(phi)[None, :, None] * e1[:, None] + np.sin(phi)[None, :, None] * e2[:, None]  # (K, R, 3)
-    back = (r - np.sqrt(np.maximum(r**2 - s**2, 0.0)))[:, None, None] * a[:, None]
-    rim = p[:, None] + s[:, None, None] * e - back
-    return np.concatenate([p[:, None], rim], axis=1)
+    # element-wise on (R, 3K) rows (long inner loops): rim = p + s (cos e1 + sin e2) - (r - sqrt(r^2 - s^2)) a
+    K = p.shape[0]
+    e = np.cos(phi)[:, None] * e1.reshape(1, -1) + np.sin(phi)[:, None] * e2.reshape(1, -1)
+    back = (np.repeat(r - np.sqrt(np.maximum(r**2 - s**2, 0.0)), 3) * a.reshape(-1))[None, :]
+    rim = p.reshape(1, -1) + np.repeat(s, 3)[None, :] * e - back
+    out = np.empty((K, 1 + n_rim, 3))
+    out[:, 0] = p
+    out[:, 1:] = rim.reshape(n_rim, K, 3).transpose(1, 0, 2)
+    return out
 
 
 def obstacle_geometry(

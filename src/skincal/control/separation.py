@@ -229,8 +229,7 @@ class SeparationParams:
 
 @dataclass(frozen=True)
 class SeparationTerms:
-    """The terms of ``S_p`` per obstacle point, each ``(K,)``, m (module docstring; read-only arrays, the
-    constant terms broadcast)."""
+    """The terms of ``S_p`` per obstacle point, each ``(K,)``, m (module docstring)."""
 
     S_h: FloatArray
     S_r: FloatArray
@@ -248,6 +247,12 @@ class SeparationTerms:
         """Point ``i``'s terms and ``S_p`` as floats (for logs and reports)."""
         out = {k: float(getattr(self, k)[i]) for k in ("S_h", "S_r", "S_s", "C", "Z_d", "Z_r")}
         return out | {"S_p": float(self.total[i])}
+
+
+def _per_point(value: ArrayLike, K: int) -> FloatArray:
+    """``(K,)`` float array of a number or ``(K,)`` values (a copy; ``np.broadcast_to`` is slow for small K)."""
+    arr = np.array(value, dtype=float).reshape(-1)
+    return arr if arr.size == K else np.full(K, arr[0]) if arr.size == 1 else arr.reshape(K)
 
 
 def _human_speed(params: SeparationParams, measured: ArrayLike | None, K: int) -> FloatArray:
@@ -283,9 +288,9 @@ def protective_separation(
         S_h=v_h * (T_r + (c_t + k_t * v_r)),
         S_r=v_r * T_r,
         S_s=c_d + k_d * v_r,
-        C=np.broadcast_to(params.intrusion_m, (K,)),
-        Z_d=np.broadcast_to(np.asarray(z_d, dtype=float).reshape(-1), (K,)),
-        Z_r=np.broadcast_to(params.robot_position_uncertainty_m, (K,)),
+        C=np.full(K, params.intrusion_m),
+        Z_d=_per_point(z_d, K),
+        Z_r=np.full(K, params.robot_position_uncertainty_m),
     )
 
 
@@ -339,7 +344,7 @@ def _fixed_point(
 ) -> FloatArray:
     """:func:`allowed_approach_speed` with ``v_h`` and ``a`` ``(K,)`` given apart."""
     K = d.size
-    v0 = np.maximum(np.broadcast_to(np.asarray(robot_speed_now, dtype=float).reshape(-1), (K,)), 0.0)
+    v0 = np.maximum(_per_point(robot_speed_now, K), 0.0)
     const = params.intrusion_m + np.asarray(z_d, dtype=float).reshape(-1) + params.robot_position_uncertainty_m
     stop = params.stopping
     T_r = stop.reaction_time_s
@@ -430,7 +435,7 @@ class ApproachSpeedTable:
         p = self.params
         d = np.asarray(distance, dtype=float).reshape(-1)
         K = d.size
-        z = np.broadcast_to(np.asarray(z_d, dtype=float).reshape(-1), (K,))
+        z = _per_point(z_d, K)
         e = d - (p.intrusion_m + p.robot_position_uncertainty_m + z)
         v_h = _human_speed(p, human_speed_toward, K)
         i = np.minimum((e / self.de).astype(int), self.e.size - 1)  # floor (e >= 0 where used)

@@ -130,7 +130,8 @@ def body_proximity(body: RobotBody, T_base_link: FloatArray, points: ArrayLike, 
     # :func:`closest_on_segments` on (C, K) arrays, after the dot product per component (long inner loops
     # for the many points of the control loop; the same operations in the same order, so the same numbers)
     denom = np.einsum("...i,...i->...", ab, ab)[:, None]
-    s = np.einsum("...i,...i->...", x[None, :, :] - a[:, None, :], ab[:, None, :]) / np.maximum(denom, _EPS)
+    x_a = (x.reshape(1, -1) - np.tile(a, (1, K))).reshape(-1, K, 3)  # x - a, (C, K, 3), by long rows
+    s = np.einsum("...i,...i->...", x_a, ab[:, None, :]) / np.maximum(denom, _EPS)
     s = np.clip(np.where(denom > _EPS, s, 0.0), 0.0, 1.0)  # (C, K)
     gap = [x[:, j][None, :] - (a[:, j][:, None] + s * ab[:, j][:, None]) for j in range(3)]  # (C, K) each
     dist = np.sqrt(gap[0] * gap[0] + gap[1] * gap[1] + gap[2] * gap[2]) - body.radius[:, None]
