@@ -95,3 +95,98 @@ def test_crop_keeps_the_input(session):
     assert np.all((part.imu["su1"].t >= 10.0) & (part.imu["su1"].t <= 20.0))
     with pytest.raises(ConfigError, match="fewer than two joint samples"):
         crop(ds, 1e6, 2e6)
+
+
+# ---------------------------------------------------------------- the events in the dataset and the result
+@pytest.fixture(scope="module")
+def small(session):
+    return simulate_session(replace(session, placements={"su1": session.placements["su1"]}), 0)
+
+
+def _event(ds, **over):
+    T = ds.truth["su1"].T_link_su
+    moved = T.copy()
+    moved[:3, 3] += [0.005, 0.0, 0.0]
+    event = {"unit": "su1", "t_change_s": 12.5, "t_detected_s": 13.0, "link": ds.truth["su1"].link,
+             "T_link_su_before": T, "T_link_su_after": moved, "statistic": 14.2, "threshold": 10.0}  # fmt: skip
+    event.update(over)
+    return event
+
+
+def test_events_round_trip_in_dataset_and_result(small, tmp_path):
+    from skincal.data.hdf5 import read_dataset, write_dataset
+    from skincal.data.result import CalibrationResult, UnitResult, read_result, write_result
+    from skincal.workflows.monitoring import with_events
+
+    event = _event(small)
+    write_dataset(replace(small, events=(event,)), tmp_path / "a.h5")
+    (back,) = read_dataset(tmp_path / "a.h5").events
+    assert back["unit"] == "su1" and back["link"] == event["link"] and back["t_change_s"] == 12.5
+    np.testing.assert_array_equal(back["T_link_su_after"], event["T_link_su_after"])
+    write_dataset(small, tmp_path / "old.h5")  # no events: as every older file
+    assert read_dataset(tmp_path / "old.h5").events == ()
+
+    result = CalibrationResult("mle", "panda", "", 0.1, {"su1": UnitResult(pose=small.truth["su1"])})
+    recorded = with_events(result, [event])
+    assert result.extras == {} and "moved_at_s" not in result.units["su1"].extras  # the input is kept
+    write_result(recorded, tmp_path / "r.json")
+    again = read_result(tmp_path / "r.json")
+    (ev,) = again.extras["events"]
+    assert ev["unit"] == "su1" and ev["t_detected_s"] == 13.0
+    np.testing.assert_allclose(ev["T_link_su_before"], event["T_link_su_before"], atol=1e-15)
+    np.testing.assert_array_equal(again.units["su1"].extras["moved_at_s"], [12.5])
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize(
+    ("over", "message"),
+    [
+        (dict(unit="su9"), "not a unit of this file"),
+        (dict(t_change_s=14.0), "is after t_detected_s"),
+        (dict(T_link_su_after=np.diag([1.0, 1.0, 2.0, 1.0])), "not a rigid transform"),
+        (dict(t_detected_s=float("inf")), "must be finite"),
+        (dict(link=-2), "link must be an integer"),
+    ],
+)
+def test_bad_events_are_refused_in_both_files(small, tmp_path, over, message):
+    import h5py
+
+    from skincal.data.hdf5 import read_dataset, write_dataset
+    from skincal.data.result import CalibrationResult, UnitResult, result_from_dict, result_to_dict, write_result
+    from skincal.errors import DatasetError
+    from skincal.workflows.monitoring import with_events
+
+    with pytest.raises(DatasetError, match=message):
+        write_dataset(replace(small, events=(_event(small, **over),)), tmp_path / "w.h5")
+    assert not (tmp_path / "w.h5").exists()
+    # a file written by someone else with the bad event: refused on read, one line naming it
+    write_dataset(replace(small, events=(_event(small),)), tmp_path / "a.h5")
+    with h5py.File(tmp_path / "a.h5", "r+") as f:
+        for key, value in over.items():
+            f["events/0"].attrs[key] = value
+    with pytest.raises(DatasetError, match=f"/events/0.*{message}") as info:
+        read_dataset(tmp_path / "a.h5")
+    assert "\n" not in str(info.value)
+    result = CalibrationResult("mle", "panda", "", 0.1, {"su1": UnitResult(pose=small.truth["su1"])})
+    with pytest.raises(DatasetError, match=message):
+        write_result(with_events(result, [_event(small, **over)]), tmp_path / "r.json")
+    assert not (tmp_path / "r.json").exists()
+    # a result document written by someone else with the bad event: refused on read
+    doc = result_to_dict(with_events(result, [_event(small)]))
+    doc["events"][0].update({k: np.asarray(v).tolist() for k, v in over.items()})
+    with pytest.raises(DatasetError, match=message):
+        result_from_dict(doc, "r.json")
+
+
+@pytest.mark.adversarial
+def test_events_group_with_a_stray_member_is_refused(small, tmp_path):
+    import h5py
+
+    from skincal.data.hdf5 import read_dataset, write_dataset
+    from skincal.errors import DatasetError
+
+    write_dataset(replace(small, events=(_event(small),)), tmp_path / "a.h5")
+    with h5py.File(tmp_path / "a.h5", "r+") as f:
+        f["events"].create_group("x")
+    with pytest.raises(DatasetError, match="/events must hold groups 0, 1, ... in order"):
+        read_dataset(tmp_path / "a.h5")

@@ -19,6 +19,8 @@ Layout (optional parts in brackets)::
     [/segments/t_start, t_end (S,) s, kind int8, pose int32, joint int32]
     [/truth/<unit> attrs link, position (3,), quaternion_wxyz (4,) and/or body (str), T_body_su (4, 4),
                    [accel_bias, accel_scale, accel_misalignment, time_offset_s, ...]]
+    [/events/<k>   attrs unit (str), t_change_s, t_detected_s (s), [link], [T_link_su_before, T_link_su_after
+                   (4, 4)], [statistic, threshold, t_recalibrated_s]: moved-unit events, k = 0, 1, ...]
 
 Reading opens the file read-only, checks the structure, builds a :class:`Dataset` and runs
 :func:`~skincal.data.validate.validate_dataset`; writing validates first, then writes atomically.
@@ -52,6 +54,7 @@ import numpy as np
 from skincal.data.atomic import atomic_path
 from skincal.data.dataset import BodyPose, Dataset, ImuStream, JointStates, Segments, TofStream
 from skincal.data.jsonio import regular_file
+from skincal.data.result import check_events
 from skincal.data.validate import TRUTH_BODY_ATTRS, check_unit_name, shown, validate_dataset
 from skincal.errors import ConfigError, DatasetError
 from skincal.errors import first_line as _first_line
@@ -465,6 +468,36 @@ class _Reader:
                 sensor[unit] = extra
         return poses, sensor, bodies
 
+    def events(self, units: list[str]) -> tuple[dict[str, Any], ...]:
+        """Moved-unit events (``/events/<k>``, k = 0, 1, ... in order; absent: none), each checked by
+        :func:`~skincal.data.result.check_event`, its unit one of ``units``."""
+        grp = self.group("/events", required=False)
+        if grp is None:
+            return ()
+        names = list(grp.keys())
+        if names != [str(k) for k in range(len(names))]:
+            raise self.fail("/events", f"must hold groups 0, 1, ... in order, got {shown(names[:5])}")
+        out = []
+        for name in names:
+            base = f"/events/{name}"
+            node = self.group(base)
+            event: dict[str, Any] = {}
+            for key in node.attrs:
+                value = self.attr(base, key)
+                text = isinstance(value, bytes | np.bytes_ | str)
+                if text or (isinstance(value, np.ndarray) and value.dtype.kind in "OSU"):
+                    event[key] = self.str_attr(base, key)
+                else:
+                    arr = np.asarray(value)
+                    if arr.dtype.kind not in "fiu":
+                        raise self.fail(self.attr_field(base, key), f"must be a number or text, got {arr.dtype}")
+                    event[key] = arr.astype(np.float64) if arr.shape else arr.item()
+            try:
+                out.append(check_events([event], base, units=units)[0])
+            except DatasetError as exc:
+                raise self.fail(base, f"is not a valid event: {exc}") from None
+        return tuple(out)
+
     def link_pose(self, base: str) -> SkinUnitPose:
         """A unit's true pose on a link of the robot (attrs ``link``, ``position``, ``quaternion_wxyz``)."""
         link = int(self.num_attr(base, "link", (), integer=True))
@@ -558,6 +591,7 @@ def _build(r: _Reader, lazy: bool) -> Dataset:
         tof = r.tof()
         segments = r.segments()
         truth, truth_sensor, truth_body = r.truth()
+        events = r.events(list(imu))
     except DatasetError:
         raise
     except _H5PY_ERRORS as exc:
@@ -573,6 +607,7 @@ def _build(r: _Reader, lazy: bool) -> Dataset:
         description=description,
         truth_sensor=truth_sensor,
         truth_body=truth_body,
+        events=events,
     )
     validate_dataset(ds, source=source)
     return ds
@@ -678,6 +713,15 @@ def _write(f: h5py.File, ds: Dataset) -> None:
                 g.attrs["T_body_su"] = np.asarray(body.T_body_su, dtype=np.float64)
             for key, value in ds.truth_sensor.get(unit, {}).items():
                 g.attrs[key] = np.asarray(value, dtype=np.float64)
+
+    if ds.events:
+        events = f.create_group("events", track_order=True)
+        for k, event in enumerate(check_events(list(ds.events), "events", units=set(ds.imu))):
+            g = events.create_group(str(k))
+            for key, value in event.items():
+                g.attrs[key] = value if isinstance(value, str) else np.asarray(value, dtype=np.float64)
+            if "link" in event:
+                g.attrs["link"] = np.int64(event["link"])
 
 
 def write_dataset(dataset: Dataset, path: str | Path) -> None:

@@ -30,6 +30,11 @@ entry with a ``null`` ``position_m`` or ``quaternion_wxyz`` must have ``observab
 returned in ``extras["failed_units"]`` (name -> its warnings joined with ``"; "``), not in
 ``CalibrationResult.units``, so every unit in ``units`` has a pose.
 
+Moved units (``docs/interfaces.md``): a top-level ``events`` list (each event checked by
+:func:`check_event`: ``unit``, ``t_change_s``, ``t_detected_s``, the poses before and after ...) and a
+per-unit ``moved_at_s`` list are optional; they are checked on write and read, and read back into
+``extras`` (the events' poses as ``(4, 4)`` arrays).
+
 Relative results (``skincal.calib.imu_only``): a top-level ``reference`` names a unit of ``units``; every
 pose is then ``T_ref_su`` in that unit's frame and ``link`` may be 0 (:data:`REFERENCE_LINK`), which
 means exactly that; without ``reference``, link 0 is refused as before.
@@ -69,6 +74,87 @@ _QUAT_NORM_TOL = 1e-3
 MAX_POSITION_M = 1e3
 """Largest accepted position component, m: a skin unit sits on a robot link, and numbers like
 ``1e308`` overflow every distance computed from them."""
+EVENTS = "events"
+"""Top-level field: the moved-unit events of the session, a list of objects (:func:`check_event`)."""
+MOVED_AT = "moved_at_s"
+"""Per-unit field: the change times of the unit's moved-unit events, s (a list of numbers)."""
+EVENT_TIMES = ("t_change_s", "t_detected_s")
+EVENT_POSES = ("T_link_su_before", "T_link_su_after")
+EVENT_NUMBERS = ("statistic", "threshold", "t_recalibrated_s")
+_RIGID_TOL = 1e-6
+
+
+def check_event(event: Any, where: str) -> dict[str, Any]:
+    """A moved-unit event checked and normalised (``docs/interfaces.md``, moved-unit events): ``unit`` a
+    valid unit name, ``t_change_s <= t_detected_s`` finite (s), optional ``link`` (integer >= 0),
+    ``T_link_su_before`` / ``T_link_su_after`` (rigid ``(4, 4)``, returned as float arrays),
+    ``statistic``, ``threshold``, ``t_recalibrated_s`` (finite numbers); further keys with string or
+    number values are kept. ``where`` starts the one-line :class:`DatasetError`."""
+    if not isinstance(event, Mapping):
+        raise DatasetError(f"{where} must be an object, got {_short(event)}")
+    unit = event.get("unit")
+    problem = name_problem(unit) if isinstance(unit, str) else "is not a string"
+    if problem is not None:
+        raise DatasetError(f"{where}.unit {_short(unit)} is not a valid unit name: it {problem}")
+    out: dict[str, Any] = {"unit": unit}
+    for key in EVENT_TIMES + EVENT_NUMBERS:
+        value = event.get(key)
+        if value is None and key not in EVENT_TIMES:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+            raise DatasetError(f"{where}.{key} must be a number, got {_short(value)}")
+        if not math.isfinite(float(value)):
+            raise DatasetError(f"{where}.{key} must be finite, got {value}")
+        out[key] = float(value)
+    if out["t_change_s"] > out["t_detected_s"]:
+        raise DatasetError(f"{where}: t_change_s {out['t_change_s']} is after t_detected_s {out['t_detected_s']}")
+    if event.get("link") is not None:
+        link = event["link"]
+        if isinstance(link, bool) or not isinstance(link, int | np.integer | float) or link != int(link) or link < 0:
+            raise DatasetError(f"{where}.link must be an integer >= 0, got {_short(link)}")
+        out["link"] = int(link)
+    for key in EVENT_POSES:
+        if event.get(key) is None:
+            continue
+        try:
+            T = np.array(event[key], dtype=float)
+        except (TypeError, ValueError):
+            raise DatasetError(f"{where}.{key} must be a (4, 4) array of numbers") from None
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise DatasetError(f"{where}.{key} must be a finite (4, 4) array, got shape {T.shape}")
+        R = T[:3, :3]
+        rigid = np.allclose(T[3], [0, 0, 0, 1]) and np.allclose(R.T @ R, np.eye(3), atol=_RIGID_TOL)
+        if not rigid or np.linalg.det(R) < 0 or np.abs(T[:3, 3]).max() > MAX_POSITION_M:
+            raise DatasetError(f"{where}.{key} is not a rigid transform of a unit on a link")
+        out[key] = T
+    for key, value in event.items():
+        if key in out or key in ("link", *EVENT_POSES) or value is None:
+            continue
+        if not isinstance(key, str) or not (isinstance(value, str) or (
+            isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool))):  # fmt: skip
+            raise DatasetError(f"{where}.{key} must be a string or a number, got {_short(value)}")
+        out[key] = value
+    return out
+
+
+def check_events(events: Any, where: str, units: Any = None) -> list[dict[str, Any]]:
+    """A list of moved-unit events, each :func:`check_event`; with ``units``, each event's unit must be one."""
+    if not isinstance(events, list | tuple):
+        raise DatasetError(f"{where} must be a list of events, got {_short(events)}")
+    out = [check_event(e, f"{where}[{i}]") for i, e in enumerate(events)]
+    if units is not None:
+        for i, e in enumerate(out):
+            if e["unit"] not in units:
+                raise DatasetError(f"{where}[{i}].unit '{e['unit']}' is not a unit of this file")
+    return out
+
+
+def _check_moved_at(value: Any, where: str) -> None:
+    items = value.tolist() if isinstance(value, np.ndarray) else value
+    if not isinstance(items, list) or not all(
+        isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in items
+    ):
+        raise DatasetError(f"{where}.{MOVED_AT} must be a list of finite numbers (s), got {_short(value)}")
 
 
 @dataclass(frozen=True)
@@ -389,6 +475,8 @@ def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[
     clash = sorted(set(result.extras) & set(_TOP_KEYS))
     if clash:
         raise DatasetError(f"{source}: extras may not redefine contract field(s) {', '.join(clash)}")
+    if EVENTS in result.extras:  # before the JSON conversion turns a non-finite time into null
+        check_events(result.extras[EVENTS], f"{source}: {EVENTS}")
     doc.update(_to_json(result.extras, source, "extras"))
     units: dict[str, Any] = {}
     for name, unit in result.units.items():
@@ -431,7 +519,19 @@ def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[
                 }
     doc["units"] = units
     _Checker(source).document(doc)
+    _check_event_fields(doc, source)
     return doc
+
+
+def _check_event_fields(doc: dict[str, Any], source: str) -> list[dict[str, Any]] | None:
+    """The moved-unit fields of a result document: top-level ``events`` (units of the document) and
+    per-unit ``moved_at_s``; returns the normalised events (None without any)."""
+    for name, entry in doc["units"].items():
+        if MOVED_AT in entry:
+            _check_moved_at(entry[MOVED_AT], f"{source}: units.{name}")
+    if EVENTS not in doc:
+        return None
+    return check_events(doc[EVENTS], f"{source}: {EVENTS}", units=set(doc["units"]))
 
 
 def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
@@ -457,6 +557,9 @@ def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
             **stds,
         )
     extras = {k: _from_json(v) for k, v in doc.items() if k not in _TOP_KEYS}
+    events = _check_event_fields(doc, source)
+    if events is not None:
+        extras[EVENTS] = events
     if unposed:
         listed = extras.get(FAILED_UNITS, {})
         if not isinstance(listed, dict):

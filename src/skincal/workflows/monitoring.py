@@ -151,7 +151,7 @@ class MonitorRun:
         poses: the final pose of every unit (after re-calibration for a moved one).
         thresholds: per unit, the CUSUM threshold of its last warm-up (None: never left warm-up).
         watched_s: per unit, the time span watched (after the warm-up), s.
-        result: the final calibration (online runs), else None.
+        result: the final calibration with the events recorded (:func:`with_events`).
     """
 
     initial: CalibrationResult | None
@@ -192,6 +192,7 @@ def monitor_batch(
     run = MonitorRun(initial)
     interpolator = JointInterpolator(dataset.joints)
     monitor = MovedUnitMonitor(options, on_alarm=on_alarm)
+    final: dict[str, UnitResult] = {}
     for name in names:
         unit = initial.units[name]
         sigma = noise_std(crop(dataset, t_start, t_start + initial_s), name)
@@ -226,7 +227,22 @@ def monitor_batch(
             run.events.append(event)
             watch_from = ready
         run.poses[name] = unit.pose
+        final[name] = unit
+    run.result = with_events(replace(initial, units={**initial.units, **final}), run.events)
     return run
+
+
+def with_events(result: CalibrationResult, events: Sequence[dict[str, Any]]) -> CalibrationResult:
+    """``result`` with the moved-unit events recorded (``docs/interfaces.md``): the top-level ``events`` and
+    each moved unit's ``moved_at_s`` (the input is not modified)."""
+    from skincal.data.result import EVENTS, MOVED_AT
+
+    units = dict(result.units)
+    for name in {e["unit"] for e in events}:
+        if name in units:
+            moved = [float(e["t_change_s"]) for e in events if e["unit"] == name]
+            units[name] = replace(units[name], extras={**units[name].extras, MOVED_AT: moved})
+    return replace(result, units=units, extras={**result.extras, EVENTS: [dict(e) for e in events]})
 
 
 def monitor_online(
@@ -248,7 +264,7 @@ def monitor_online(
     monitor = MovedUnitMonitor(options, on_alarm=on_alarm).attach(calibrator)
     replay(dataset, calibrator, chunk_s=chunk_s)
     result = calibrator.result()
-    run = MonitorRun(None, alarms=list(monitor.alarms), events=[dict(e) for e in calibrator.events], result=result)
+    run = MonitorRun(None, alarms=list(monitor.alarms), events=[dict(e) for e in calibrator.events])
     for name, unit in result.units.items():
         run.poses[name] = unit.pose
         run.thresholds[name] = monitor.unit(name).threshold
@@ -256,6 +272,7 @@ def monitor_online(
         unit = result.units.get(event["unit"])
         if unit is not None and "T_link_su_after" not in event:
             event["T_link_su_after"] = unit.pose.T_link_su.tolist()
+    run.result = with_events(result, run.events)
     return run
 
 
