@@ -47,6 +47,7 @@ distance, unchanged.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass
 
@@ -205,6 +206,18 @@ class SeparationInputs:
     z_d: FloatArray
 
 
+@functools.lru_cache(maxsize=8)
+def _speed_table(params: SeparationParams, v_max: float, width: float) -> ApproachSpeedTable:
+    """The allowed-speed table of a separation model and ramp (built once, 0.1-0.2 s, shared by controllers)."""
+
+    def ramp(gap: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """The approach bound ``b`` (m/s) at ``gap = d - S_p`` (m) and its slope ``db/dgap`` (1/s)."""
+        b = approach_speed_bound(gap, 0.0, float("inf"), v_max, width)  # (notice unused: the width is given)
+        return b, approach_speed_slope(gap, v_max, width)
+
+    return ApproachSpeedTable(params, ramp)
+
+
 class AvoidanceController:
     """Cartesian flange tracking with obstacle approach-velocity constraints (see the module docstring)."""
 
@@ -226,7 +239,7 @@ class AvoidanceController:
         self._flange = chain.T_link_flange[:3, 3]
         self._frames = FrameCache(chain)
         self._width = ramp_width(config.critical, config.notice)
-        self._speeds = None if config.separation is None else ApproachSpeedTable(config.separation, self._ramp)
+        self._speeds = None if config.separation is None else _speed_table(config.separation, config.v_max, self._width)
 
     def problem(
         self,
@@ -286,14 +299,6 @@ class AvoidanceController:
             G, h, dist, crit, terms = np.zeros((0, n)), np.zeros(0), np.zeros(0), np.zeros(0), None
             sep_in = None
         return QpProblem(P, c, G, h, lb, ub, x, dist, crit, terms, sep_in)
-
-    def _ramp(self, gap: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """The approach bound ``b`` (m/s) at ``gap = d - S_p`` (m) and its slope ``db/dgap`` (1/s)."""
-        cfg = self.config
-        return (
-            approach_speed_bound(gap, 0.0, cfg.notice, cfg.v_max, self._width),
-            approach_speed_slope(gap, cfg.v_max, self._width),
-        )
 
     def solve(self, prob: QpProblem) -> tuple[FloatArray, bool, float, float]:
         """``(qd, feasible, violation, solve_time_s)`` of a problem, with the safe stop when infeasible."""
