@@ -45,15 +45,17 @@ def main() -> None:
             console.print(f"{robot} seed {seed} done", highlight=False)
     table = Table(title=f"motion time to {target.text()} std, 6 units, {args.noise} IMUs, controller joint states")
     for col in ("robot", "seed", "adaptive [s]", "segments", "reached", "true err [mm / deg]", "links",
-                "fast [s]", "fast reaches at [s]", "fast err there", "fast err at end"):  # fmt: skip
+                "true err in target at [s]", "fast [s]", "fast std at target [s]", "fast err there",
+                "fast true err in target at [s]", "fast err at end"):  # fmt: skip
         table.add_column(col)
     for r in rows:
         table.add_row(
             r.robot, str(r.seed), f"{r.adaptive_s:.1f}", str(r.adaptive_segments),
             "yes" if r.adaptive_reached else "NO",
             f"{r.adaptive_pos_mm:.3f} / {r.adaptive_rot_deg:.4f}", "ok" if r.adaptive_links_ok else "WRONG",
-            f"{r.fixed_s:.1f}", _f(r.fixed_reached_s),
+            _f(r.adaptive_true_s), f"{r.fixed_s:.1f}", _f(r.fixed_reached_s),
             "-" if r.fixed_reached_pos_mm is None else f"{r.fixed_reached_pos_mm:.3f} / {r.fixed_reached_rot_deg:.4f}",
+            _f(r.fixed_true_s),
             f"{r.fixed_end_pos_mm:.3f} / {r.fixed_end_rot_deg:.4f}",
         )  # fmt: skip
     console.print(table)

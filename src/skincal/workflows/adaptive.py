@@ -49,6 +49,8 @@ class SegmentRecord:
         candidate: what was chosen (its trajectory starts at 0).
         t_start, t_end: its place in the whole motion, s.
         statuses: every unit's status once its data was absorbed.
+        true_errors: in simulation with ``track_truth``, the estimate's errors against the truth then
+            (:func:`skincal.calib.metrics.evaluate`).
     """
 
     index: int
@@ -56,6 +58,7 @@ class SegmentRecord:
     t_start: float
     t_end: float
     statuses: Mapping[str, UnitStatus]
+    true_errors: dict[str, Any] | None = None
 
     def worst(self) -> tuple[float, float]:
         """Largest position std (mm) and rotation std (deg) over the units (inf: not determined)."""
@@ -97,17 +100,19 @@ def adaptive_loop(
     options: DesignOptions = DesignOptions(),
     on_segment: SegmentCallback | None = None,
     settled: Callable[[OnlineCalibrator], OnlineCalibrator] = probe,
+    record_hook: Callable[[SegmentRecord], SegmentRecord] | None = None,
 ) -> LoopOutcome:
     """Choose, execute and absorb segments until every unit reached its target or ``max_motion_s``.
 
     ``execute(segment)`` makes the robot run ``segment`` (time from 0, starting at the robot's current
     configuration) and feeds its data to ``calibrator``; ``settled(calibrator)`` gives the calibrator
-    to judge and design from once the robot rests (default :func:`probe`). The robot is assumed at
-    ``q_start`` (rest) before the first segment.
+    to judge and design from once the robot rests (default :func:`probe`); ``record_hook(record)`` may
+    complete each segment's record before it is kept and given to ``on_segment``. The robot is assumed
+    at ``q_start`` (rest) before the first segment.
     """
     if not (np.isfinite(max_motion_s) and max_motion_s > 0):
         raise ConfigError(f"the motion budget must be a positive number of seconds, got {max_motion_s}")
-    config = segment_config(chain)
+    config = segment_config(chain, excite_s=options.excite_s)
     q_now = np.asarray(q_start, dtype=float)
     visited = [q_now]
     moved: set[int] = set()
@@ -127,6 +132,8 @@ def adaptive_loop(
         q_now = q_end
         judge = settled(calibrator)
         record = SegmentRecord(len(out.segments) + 1, cand, t0, out.motion_s, judge.status())
+        if record_hook is not None:
+            record = record_hook(record)
         out.segments.append(record)
         if on_segment is not None:
             on_segment(record)
@@ -228,10 +235,12 @@ def run_simulated(
     max_motion_s: float = MAX_MOTION_S,
     options: DesignOptions = DesignOptions(),
     on_segment: SegmentCallback | None = None,
+    track_truth: bool = False,
 ) -> SimulatedRun:
     """The adaptive loop on a simulated session (module docstring); session as
     :func:`skincal.workflows.session.make_session` (its protocol replaced by the loop's segments);
-    ``seed`` also seeds the start pose and the candidate draws."""
+    ``seed`` also seeds the start pose and the candidate draws. ``track_truth``: each segment's record
+    (given to ``on_segment`` and kept in the outcome) carries the estimate's true errors then."""
     from skincal.calib.metrics import evaluate
     from skincal.workflows.session import make_session
 
@@ -241,8 +250,21 @@ def run_simulated(
     q0 = start_pose(chain, rng)
     cal = make_calibrator(chain, list(session.placements), session.gravity, target)
     sim = SimulatedRobot(session, q0, cal)
+    settled: dict[str, OnlineCalibrator] = {}
+
+    def settle(c: OnlineCalibrator) -> OnlineCalibrator:
+        settled["now"] = probe(c)
+        return settled["now"]
+
+    def with_truth(record: SegmentRecord) -> SegmentRecord:
+        if not track_truth:
+            return record
+        done = settled["now"].result()
+        assert sim.dataset is not None
+        return replace(record, true_errors=evaluate(done, sim.dataset) if done.units else {"units": {}})
+
     loop = adaptive_loop(cal, chain, q0, sim.execute, rng, max_motion_s=max_motion_s, options=options,
-                         on_segment=on_segment)  # fmt: skip
+                         settled=settle, on_segment=on_segment, record_hook=with_truth)  # fmt: skip
     cal.finish()
     result = cal.result()
     assert sim.dataset is not None and sim.trajectory is not None
@@ -272,7 +294,7 @@ class LiveDesigner:
         rest_tol_rad: float = 5e-3,
     ) -> None:
         self.chain, self.rng, self.max_motion_s, self.options = chain, rng, float(max_motion_s), options
-        self.config = segment_config(chain)
+        self.config = segment_config(chain, excite_s=options.excite_s)
         self.rest_tol_rad = float(rest_tol_rad)
         self.parts: list[Trajectory] = []
         self.pending: Trajectory | None = None
@@ -303,7 +325,8 @@ class LiveDesigner:
         q_now = np.asarray(cal.q_now, dtype=float)
         if self.pending is not None:
             end = self._end(self.pending)
-            if feed.t_data - self._sent_at < self.pending.duration or np.max(np.abs(q_now - end)) > self.rest_tol_rad:
+            late = feed.t_data - self._sent_at < self.pending.duration - 1e-6
+            if late or np.max(np.abs(q_now - end)) > self.rest_tol_rad:
                 return None
             cand = self._cand
             assert cand is not None
