@@ -1,7 +1,7 @@
-"""A unit that moved is noticed (issue 16): ``python benchmarks/bench_monitor.py [--hours 1] [--imu realistic
---imu real] [--kind teleop] [--json out.json]``: false alarms over simulated hours of normal work and
-detection delays and pose errors of 5 mm / 2 deg knocks (a thin script over
-:func:`skincal.workflows.monitoring.bench_monitor`)."""
+"""A unit that moved is noticed (issue 16): ``python benchmarks/bench_monitor.py [--hours 1]
+[--imu realistic --imu real] [--kind teleop] [--online-unit su4] [--json out.json]``: false alarms over
+simulated hours of normal work and detection delays and pose errors of 5 mm / 2 deg knocks (a thin script
+over :func:`skincal.workflows.monitoring.bench_monitor`)."""
 
 from __future__ import annotations
 
@@ -23,13 +23,19 @@ def main() -> None:
     ap.add_argument("--kind", default="teleop", help="work cycle: teleop or pick-place")
     ap.add_argument("--robot", default="panda")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--online-unit",
+        action="append",
+        default=None,
+        help="unit also knocked with the streaming calibrator (repeat; default su4)",
+    )
     ap.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
     args = ap.parse_args()
     console = Console()
     with console.status("benchmarking the moved-unit monitor...") as status:
         doc = bench_monitor(
             noises=tuple(args.imu or ("realistic", "real")), hours=args.hours, kind=args.kind, robot=args.robot,
-            seed=args.seed, progress=status.update,
+            seed=args.seed, online_units=tuple(args.online_unit or ("su4",)), progress=status.update,
         )  # fmt: skip
     console.print_json(json.dumps(doc, default=float))
     if args.json is not None:
