@@ -190,7 +190,7 @@ def test_record_live_follows_the_received_stream_on_the_recording_clock(tmp_path
         for unit, status in outcome.statuses.items():
             t_file = f[f"imu/{unit}/t"][...]
             assert 0.5 * t_file.size <= status.samples <= t_file.size
-            assert abs(status.t_last - t_file[-1]) < 0.5  # host time of the recording, not device time
+            assert abs(status.t_last - t_file[-1]) < 1.5  # host time of the recording (device time: 500 s off)
     truth = {u: p.link for u, p in fast_ds.truth.items()}
     assert {u: s.link for u, s in outcome.statuses.items()} == truth
 
