@@ -188,7 +188,7 @@ def _calibrate_follow(
     ds = load_source(source, robot)
     digest = "" if is_bag(source) and source.is_dir() else sha256_file(source)
     title = f"follow {source.name}"
-    last = {"wall": -math.inf}
+    last: dict = {"wall": -math.inf}
     period = 0.25 if console.is_terminal else 1.0
 
     def show(statuses, t_data: float, t_end: float | None, force_draw: bool = False) -> None:
@@ -199,8 +199,10 @@ def _calibrate_follow(
         if live is not None:
             live.update(meter_table(statuses, target.position_m, target.rotation_deg, t_data, t_end, title))
         else:
-            console.print(meter_line(statuses, target.position_m, target.rotation_deg, t_data, t_end),
-                          markup=False, highlight=False, soft_wrap=True)  # fmt: skip
+            line = meter_line(statuses, target.position_m, target.rotation_deg, t_data, t_end)
+            if line != last.get("line"):
+                last["line"] = line
+                console.print(line, markup=False, highlight=False, soft_wrap=True)
 
     live = Live(console=console, refresh_per_second=4, transient=False) if console.is_terminal else None
     if live is not None:
