@@ -133,6 +133,14 @@ BAD = [
     ({"people": [{"name": "h", "shape": "sphere", "radius": 0.05}]}, "people[0].waypoints", "at least one"),
     (_person(waypoints=[{"p": [1, 0, 0]}] * 100000), "people[0].waypoints", "at most 256"),
     ({"people": [_person()["people"][0]] * 1000}, "people", "at most 16"),
+    (
+        {
+            "people": [_person(name=f"p{i}")["people"][0] for i in range(9)],
+            "obstacles": [{"name": f"o{i}", "shape": "sphere", "radius": 0.1, "p": [1, 1, 1]} for i in range(9)],
+        },
+        "obstacles",
+        "at most 16 in all",
+    ),
     (_person(waypoints=[{"p": [1, 0]}]), "people[0].waypoints[0].p", "3 numbers"),
     (_person(waypoints=[{"p": [1e300, 0, 0]}]), "people[0].waypoints[0].p", "within"),
     (_person(waypoints=[{"p": [1, 0, 0]}, {"p": [1, 0, 0]}]), "people[0].waypoints", "zero length"),

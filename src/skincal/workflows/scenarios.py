@@ -79,7 +79,8 @@ Q_START = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
 
 MAX_OBJECTS = 16
 MAX_WAYPOINTS = 256
-MAX_DURATION = 600.0
+MAX_DURATION = 300.0
+"""Longest run, s (the loop keeps every obstacle's position at every 1 ms step: 16 x 300 s is 115 MB)."""
 MAX_COORD = 100.0
 MAX_SPEED = 10.0
 MAX_SIZE = 5.0
@@ -577,6 +578,8 @@ def parse_scenario(
         t_leave = max(t_leave, t_end)
     static = [_static(_Fields(source, f"obstacles[{i}]", item, _OBSTACLE), chain, q0, points)
               for i, item in enumerate(f.items("obstacles", MAX_OBJECTS))]  # fmt: skip
+    if len(people) + len(static) > MAX_OBJECTS:
+        f.fail(f"{len(people)} people and {len(static)} obstacles: at most {MAX_OBJECTS} in all", "obstacles")
     names = [o.name for o in people + static]
     if len(set(names)) != len(names):
         f.fail(f"names must be unique, got {', '.join(printable(n)[:40] for n in names)}", "people")
