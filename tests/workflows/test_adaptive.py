@@ -246,3 +246,92 @@ def test_cli_adaptive_refuses_an_earlier_runs_segments(tmp_path, capsys, monkeyp
     code, _, err = _run(capsys, "--robot", "panda", "--out", "motion.yaml", "--adaptive", "--simulate")
     assert code == 2 and "motion_001.yaml exists" in err
     assert (tmp_path / "motion_001.yaml").read_text() == "earlier"
+
+
+# ------------------------------------------------------------------ the live loop, end to end over UDP
+
+
+def _window(ds, t_from: float, t_to: float):
+    """The samples of ``ds`` stamped in ``[t_from, t_to)`` as a dataset (what the robot sends meanwhile)."""
+    import dataclasses
+
+    from skincal.data.dataset import ImuStream, JointStates
+
+    j = ds.joints
+    sel = (j.t >= t_from) & (j.t < t_to)
+    joints = JointStates(t=j.t[sel], q=j.q[sel], qd=j.qd[sel], qdd=None if j.qdd is None else j.qdd[sel])
+    imu = {}
+    for unit, s in ds.imu.items():
+        k = (s.t >= t_from) & (s.t < t_to)
+        imu[unit] = ImuStream(t=s.t[k], accel=s.accel[k], gyro=None if s.gyro is None else s.gyro[k])
+    return dataclasses.replace(ds, joints=joints, imu=imu, tof={}, segments=None)
+
+
+def test_cli_adaptive_live_closes_the_loop_over_udp(tmp_path):
+    """``skincal protocol --adaptive --port`` with a real UDP stream on loopback: a simulated robot streams
+    its rest until the command writes segment 1, executes that file (read back from its JSON) and streams
+    the motion (the real emulator); the command sees it executed, reports it, and proposes segment 2 from
+    where segment 1 ended; stopped with SIGINT, it writes the executed motion, the result and the recording."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from skincal.data.result import read_result
+    from skincal.hw.emulator import SkinEmulator
+    from skincal.protocol import build_trajectory, read_trajectory_json
+
+    cli = [sys.executable, "-c", "import sys; from skincal.cli import main; sys.exit(main(sys.argv[1:]))"]
+    out, rec, res = tmp_path / "motion.json", tmp_path / "rec.h5", tmp_path / "result.json"
+    proc = subprocess.Popen([*cli, "protocol", "--robot", "panda", "--adaptive", "--port", "0", "--record", str(rec),
+                             "--out", str(out), "--result", str(res), "--max-motion", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        line = proc.stdout.readline()
+        assert "listening on" in line, proc.stderr.read() if proc.poll() is not None else line
+        port = int(line.strip().rsplit(":", 1)[1])
+        session = make_session("panda", "paper", None, "realistic", "fast", 6, joints="controller")
+        chain = session.chain
+        step = session.joint_model.encoder_resolution_rad
+        q = np.round(start_pose(chain, np.random.default_rng(4)) / step) * step  # on an encoder step: read exactly
+        robot = SimulatedRobot(session, q)
+        rest = lambda s: build_trajectory(  # noqa: E731
+            chain,
+            replace(segment_config(chain), excited_joints=(), rest_duration=s, static_duration=0.0),
+            poses=q[None],
+        )
+
+        def stream(part) -> None:
+            t_from = sum(p.duration for p in robot.parts)
+            robot.execute(part)
+            emu = SkinEmulator(_window(robot.dataset, t_from, robot.trajectory.duration), port,
+                               rng=np.random.default_rng(len(robot.parts)))  # fmt: skip
+            emu.run(max_wall_s=60)
+
+        first, second = tmp_path / "motion_001.json", tmp_path / "motion_002.json"
+        deadline = time.monotonic() + 90
+        stream(rest(3.0))
+        while not first.exists() and proc.poll() is None and time.monotonic() < deadline:
+            stream(rest(1.0))  # the robot rests and keeps streaming while it waits
+        time.sleep(0.2)
+        segment = read_trajectory_json(first)
+        np.testing.assert_allclose(segment.evaluate([0.0])[0][0], q, atol=1e-12)  # starts where the robot rests
+        stream(segment)
+        q = segment.evaluate([segment.duration])[0][0]
+        while not second.exists() and proc.poll() is None and time.monotonic() < deadline:
+            stream(rest(1.0))
+        assert second.exists()
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, stderr
+    assert "segment 1: " in stdout and "units at target" in stdout and "segment 2: " in stdout, stdout
+    nxt = read_trajectory_json(second)
+    np.testing.assert_allclose(nxt.evaluate([0.0])[0][0], q, atol=1e-12)  # continues from segment 1's end
+    whole = read_trajectory_json(out)
+    assert whole.duration == pytest.approx(segment.duration, abs=1e-6)  # the executed motion: segment 1
+    result = read_result(res)
+    assert result.method == "online" and set(result.units) <= {f"su{k}" for k in range(1, 7)}
+    assert rec.exists()

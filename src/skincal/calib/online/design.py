@@ -329,7 +329,7 @@ def score_candidates(
                 continue
             gain = motion_gain(calibrator, traj, weights, options, current, factors) if weights else 0.0
             out.append(Candidate(pose, j, k > 0, traj.duration, gain, gain / traj.duration, traj))
-    out.sort(key=lambda c: -c.score)
+    out.sort(key=lambda c: (-c.score, c.duration))  # equal scores (nothing to gain yet): the shortest first
     return out
 
 
