@@ -54,6 +54,21 @@ MOVING_RPS2 = 0.2
 are two classes with their own noise level (a resting unit's residual is its sensor noise; a moving
 one's adds the errors of the joint-derived accelerations), so the Grams are kept per class."""
 REST, MOVING = 0, 1
+ALIGN_SHARPNESS = 0.1
+"""A unit's clock is aligned once the cross-correlation peak stands out by this much (correlation units)...
+"""
+ALIGN_WAIT_FRACTION = 0.8
+"""...or once its pending stream spans this fraction of the history (then with a warning in the result)."""
+REALIGN_S = 0.004
+"""A decided unit whose residual time offset ``tau`` exceeds this (s) is re-aligned (``offset - tau``) and
+its statistics restarted: the first-order offset model holds for a few ms only."""
+ALIGN_RETRY_S = 2.0
+"""A unit not yet aligned tries again after this much more of its stream, s."""
+MAX_REALIGN = 3
+"""Re-alignments allowed per unit."""
+SCALE_STD_LIMIT = 0.005
+"""The accelerometer's scale/misalignment is estimated only when each of its 9 elements is determined to
+this std (else held at the identity: a weakly determined scale absorbs what the pose should explain)."""
 MIN_MOVING = 200
 """Moving samples of the best link before its link is decided."""
 SATURATION_FLOOR = (1.5 * 9.80665, 2.0)
@@ -67,6 +82,10 @@ LINK_RELATIVE_MARGIN = 0.05
 few % of cost between two links is not evidence). A decision is final: the other links' statistics are
 then dropped, so it waits for clear evidence."""
 CORRELATION_MAX = 100.0
+WINDOW_SAMPLES = 100
+"""Samples per window of the correlation inflation (1 s at 100 Hz)."""
+MIN_WINDOWS = 5
+"""Windows before the inflation is applied."""
 """Largest variance inflation applied for autocorrelated residuals."""
 GATE_SIGMAS = 6.0
 """Once a unit's link is decided, samples whose residual exceeds this many std are not absorbed."""
@@ -83,6 +102,10 @@ class OnlineOptions:
         block_s: the joint stream is conditioned and absorbed in blocks of this length, s.
         margin_s: joint data each side of a block used to condition it (edge effects of the
             acceleration filter), s.
+        lookback_s: joint data before a block used to condition it: the conditioning's decisions (stamps
+            back on their grid, accelerations from positions or velocities, the noise levels) are made
+            on this much of the stream, not on one short block, so that they do not change from block
+            to block, s.
         max_delay_s: joint states may arrive out of order up to this late; a block is processed
             when the joint stream has reached its end plus ``margin_s + max_delay_s``.
         grid_hz: rate of the link-signal grid the units' samples are interpolated on, Hz.
@@ -98,10 +121,11 @@ class OnlineOptions:
 
     block_s: float = 1.0
     margin_s: float = 0.5
+    lookback_s: float = 10.0
     max_delay_s: float = 0.5
     grid_hz: float = 250.0
     history_s: float = 60.0
-    align_s: float = 6.0
+    align_s: float = 10.0
     target_position_m: float = 3e-4
     target_rotation_deg: float = 0.05
     links: tuple[int, ...] | None = None
@@ -114,7 +138,7 @@ class OnlineOptions:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ConfigError(f"online calibrator: {name} must be a positive number, got {v}")
-        for name in ("margin_s", "max_delay_s"):
+        for name in ("margin_s", "max_delay_s", "lookback_s"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ConfigError(f"online calibrator: {name} must be a non-negative number, got {v}")
@@ -173,8 +197,10 @@ class _Unit:
     # link (0: the common weights of undecided candidates) -> [accel rest, accel moving, gyro rest, gyro moving]
     sigmas: dict[int, FloatArray] = field(default_factory=dict)
     decided: bool = False
-    ar_num: float = 0.0
-    ar_den: float = 0.0
+    win_sum: FloatArray = field(default_factory=lambda: np.zeros(3))  # normalised residuals of the open window
+    win_n: int = 0
+    win_stat: float = 0.0  # sum over closed windows of n |mean|^2 (3 per window for white residuals)
+    win_count: int = 0
     outliers: int = 0
     status: UnitStatus | None = None
     best_joint_t: float = float("-inf")
@@ -183,6 +209,10 @@ class _Unit:
     peak_count: FloatArray = field(default_factory=lambda: np.zeros(2))  # how often exactly that value came
     saturated: int = 0
     t_solved: float = float("-inf")
+    align_tried: float = float("-inf")
+    raw: deque = field(default_factory=deque)  # absorbed (stamps, accel, gyro) within the history, for _realign
+    realigned: int = 0
+    scale_estimated: bool = False
 
 
 class OnlineCalibrator:
@@ -350,7 +380,7 @@ class OnlineCalibrator:
             self._condition_block(t, q, qd, T0, T1)
             self._frontier = T1
         # forget joint states no later block needs
-        keep = t >= self._frontier - o.margin_s - 1e-9
+        keep = t >= self._frontier - max(o.margin_s, o.lookback_s) - 1e-9
         if not keep.all():
             self._joints = (t[keep], q[keep], qd[keep])
         horizon = self._frontier - o.history_s
@@ -360,7 +390,7 @@ class OnlineCalibrator:
 
     def _condition_block(self, t: FloatArray, q: FloatArray, qd: FloatArray, T0: float, T1: float) -> None:
         o = self.options
-        sel = (t >= T0 - o.margin_s - 1e-9) & (t <= T1 + o.margin_s + 1e-9)
+        sel = (t >= T0 - max(o.margin_s, o.lookback_s) - 1e-9) & (t <= T1 + o.margin_s + 1e-9)
         if sel.sum() < 8:
             return
         interp = JointInterpolator(JointStates(t=t[sel], q=q[sel], qd=qd[sel]))
@@ -420,6 +450,9 @@ class OnlineCalibrator:
             return  # no motion to align on yet
         profile = motion_profile(tg[lo:hi], ang, speed[lo:hi])
         search = coarse_time_offset(profile, t[inside], a[inside], None if g is None else g[inside])
+        span = t[inside][-1] - t[inside][0]
+        if search.sharpness < ALIGN_SHARPNESS and span < ALIGN_WAIT_FRACTION * o.history_s:
+            return  # the peak is not distinct yet: wait for more motion (the samples stay pending)
         st.offset, st.offset_sharpness = float(search.offset_s), float(search.sharpness)
 
     def _absorb_unit(self, name: str, final: bool = False) -> int:
@@ -430,7 +463,9 @@ class OnlineCalibrator:
         t, a, g = self._take_pending(st)
         st.pending_t, st.pending_a, st.pending_g = [], [], []
         if st.offset is None:
-            self._align(name, st, grid, t, a, g)
+            if final or t[-1] - st.align_tried >= ALIGN_RETRY_S:
+                st.align_tried = float(t[-1])
+                self._align(name, st, grid, t, a, g)
             if st.offset is None:
                 if final:
                     self._align_anyway(st)
@@ -447,7 +482,28 @@ class OnlineCalibrator:
             self._keep(st, t[~ready & ~late], a[~ready & ~late], None if g is None else g[~ready & ~late], tg[0])
         if not ready.any():
             return 0
+        st.raw.append((t[ready], a[ready], None if g is None else g[ready]))
+        while st.raw and st.raw[0][0][-1] - st.offset < tg[0]:
+            st.raw.popleft()  # its part of the grid is gone: it could not be absorbed again
         return self._absorb(name, st, grid, s[ready], a[ready], None if g is None else g[ready])
+
+    def _realign(self, st: _Unit, tau: float) -> None:
+        """Move the unit's offset by the residual ``tau`` (s) and absorb its kept raw samples again from scratch."""
+        assert st.offset is not None
+        st.offset -= tau
+        st.realigned += 1
+        raw = list(st.raw)
+        st.raw = deque()
+        L = len(st.links)
+        st.Za, st.Zg, st.moving = np.zeros_like(st.Za), np.zeros_like(st.Zg), np.zeros(L)
+        st.chunks = deque()
+        st.solutions, st.status, st.dirty = {}, None, True
+        st.win_sum, st.win_n, st.win_stat, st.win_count = np.zeros(3), 0, 0.0, 0
+        st.t_last, st.t_first = float("-inf"), float("inf")
+        for t, a, g in raw[::-1]:
+            st.pending_t.insert(0, t)
+            st.pending_a.insert(0, a)
+            st.pending_g.insert(0, g)
 
     def _align_anyway(self, st: _Unit) -> None:
         st.offset, st.offset_sharpness = 0.0, 0.0
@@ -522,9 +578,7 @@ class OnlineCalibrator:
                 du, dK = du[:, keep], dK[:, keep]
                 g, moving = None if g is None else g[keep], moving[:, keep]
                 rn = rn[keep]
-            if rn.shape[0] > 1:
-                st.ar_num += float(np.sum(rn[1:] * rn[:-1]))
-                st.ar_den += float(np.sum(rn[:-1] ** 2))
+            self._window_means(st, rn)
         if s.size == 0:
             return 0
         L, M = u.shape[0], s.size
@@ -559,11 +613,28 @@ class OnlineCalibrator:
         return a @ G.T - h - Kp - du * sol.tau - u
 
     # ---------------------------------------------------------------- estimates
+    @staticmethod
+    def _window_means(st: _Unit, rn: FloatArray) -> None:
+        """Add normalised residuals ``rn`` ``(M, 3)`` to the unit's windows of :data:`WINDOW_SAMPLES`."""
+        i = 0
+        while i < rn.shape[0]:
+            take = min(WINDOW_SAMPLES - st.win_n, rn.shape[0] - i)
+            st.win_sum += rn[i : i + take].sum(axis=0)
+            st.win_n += take
+            i += take
+            if st.win_n >= WINDOW_SAMPLES:
+                st.win_stat += float(st.win_sum @ st.win_sum) / st.win_n
+                st.win_count += 1
+                st.win_sum, st.win_n = np.zeros(3), 0
+
     def _inflation(self, st: _Unit) -> float:
-        if st.ar_den <= 0:
+        """Variance inflation for correlated residuals: the variance of the residuals' means over windows
+        of :data:`WINDOW_SAMPLES` consecutive samples against white noise's (``n |mean|^2`` averages 3
+        for white residuals of unit variance). It covers every correlation shorter than a window, incl.
+        the slow errors of joint-derived accelerations, which a lag-1 autocorrelation misses."""
+        if st.win_count < MIN_WINDOWS:
             return 1.0
-        rho = float(np.clip(st.ar_num / st.ar_den, 0.0, 0.98))
-        return float(min((1 + rho) / (1 - rho), CORRELATION_MAX))
+        return float(np.clip(st.win_stat / (3.0 * st.win_count), 1.0, CORRELATION_MAX))
 
     def _weighted(self, st: _Unit, k: int, sig: FloatArray) -> tuple[FloatArray, FloatArray | None]:
         """Candidate ``k``'s Grams with each class weighted by its noise level (so ``solve`` runs with 1, 1),
@@ -644,6 +715,10 @@ class OnlineCalibrator:
                     sig = self._class_sigmas(st, k, sol, sig)
                     Za, Zg = self._weighted(st, k, sig)
                     sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R) or sol
+                # like mle: the scale/misalignment is kept only where the data determine every element of it
+                st.scale_estimated = bool(np.sqrt(np.diag(sol.cov)[3:12]).max() <= SCALE_STD_LIMIT)
+                if not st.scale_estimated:
+                    sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R, scale_prior=stats.SCALE_FIXED) or sol
             st.sigmas[link] = sig if st.decided else self._class_sigmas(st, k, sol, common)
             sols[link] = sol
         st.solutions = sols
@@ -699,6 +774,14 @@ class OnlineCalibrator:
         pos_std, rot_std = std[:3], np.degrees(std[3:])
         determined = bool(np.all(pos_std < UNDETERMINED_M) and np.all(rot_std < UNDETERMINED_DEG))
         undecided = len(ambiguous) > 1
+        tau_std = float(np.sqrt(max(sol.cov[21, 21], 0.0)))
+        if (
+            determined and not undecided and abs(sol.tau) > REALIGN_S and tau_std < 0.25 * abs(sol.tau)
+            and st.realigned < MAX_REALIGN
+        ):  # fmt: skip
+            self._realign(st, sol.tau)
+            why = f"re-aligning its clock by {1e3 * sol.tau:+.1f} ms"
+            return UnitStatus(name, None, float("nan"), None, inf3, inf3, 0, 0, why, None, False, st.t_last, True)
         if not undecided and not st.decided and len(st.links) > 1 and st.moving[k] > MIN_MOVING and determined:
             self._keep_only(st, link)
             k = 0
@@ -829,7 +912,7 @@ class OnlineCalibrator:
             st.Za += Za
             st.Zg += Zg
             st.moving += mv
-        st.ar_num = st.ar_den = 0.0
+        st.win_sum, st.win_n, st.win_stat, st.win_count = np.zeros(3), 0, 0.0, 0
         st.solutions, st.status, st.dirty = {}, None, True
         st.best_joint, st.best_joint_t = None, float("-inf")
 
@@ -865,7 +948,7 @@ class OnlineCalibrator:
                 gyro_bias_rps=sol.gyro_bias if st.has_gyro else None,
             )
             warnings: list[str] = []
-            if np.isfinite(st.offset_sharpness) and st.offset_sharpness < 0.05:
+            if np.isfinite(st.offset_sharpness) and st.offset_sharpness < ALIGN_SHARPNESS:
                 warnings.append("time offset uncertain (no motion to align the unit's clock on)")
             extras = {
                 "link_name": self.chain.link_names[s.link] if self.chain.link_names else f"link{s.link}",
@@ -877,6 +960,8 @@ class OnlineCalibrator:
                 "residual_correlation": kappa,
                 "outliers": st.outliers,
                 "saturated_samples": st.saturated,
+                "realigned": st.realigned,
+                "scale_estimated": st.scale_estimated,
                 "pose_covariance": cov,
             }
             units[name] = UnitResult(

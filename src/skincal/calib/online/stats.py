@@ -46,6 +46,8 @@ NP = 22
 """Gauss-Newton unknowns: ``[dtheta 3, dE 9, h 3, p 3, c 3, tau 1]``."""
 SCALE_PRIOR = 0.02
 """Prior std of each element of ``E`` (the accelerometer's scale/misalignment relative to 1)."""
+SCALE_FIXED = 1e-6
+"""``scale_prior`` that holds ``E`` at zero (scale/misalignment not estimated)."""
 TAU_PRIOR_S = 0.01
 """Prior std of the residual time offset after the coarse alignment, s."""
 _TH, _E, _H, _P, _C, _T = slice(0, 3), slice(3, 12), slice(12, 15), slice(15, 18), slice(18, 21), 21
@@ -196,10 +198,13 @@ def solve(
     *,
     R0: FloatArray | None = None,
     iterations: int = 12,
+    scale_prior: float = SCALE_PRIOR,
 ) -> Solution | None:
     """Gauss-Newton minimiser of ``C`` (module docstring) from the Grams ``Za`` ``(NA, NA)`` and ``Zg``
     ``(NG, NG)`` (None: no gyroscope) with noise levels ``sigma_a`` (m/s^2), ``sigma_g`` (rad/s); ``R0``
-    a start rotation (default: the linear solution). None when the data determine nothing yet."""
+    a start rotation (default: the linear solution); ``scale_prior`` the prior std of each element of ``E``
+    (tiny: the accelerometer's scale/misalignment held at the identity). None when the data determine
+    nothing yet."""
     have_g = Zg is not None and Zg[0, 0] > 0
     if R0 is None:
         start = _linear_start(Zg, NG - 1) if have_g else None
@@ -211,7 +216,7 @@ def solve(
     R, x = np.array(R0, dtype=float), np.zeros(NP)  # x holds E, h, p, c, tau (dtheta always 0 at the current R)
     wa, wg = 1.0 / sigma_a**2, (1.0 / sigma_g**2 if have_g else 0.0)
     prior = np.zeros(NP)
-    prior[_E] = 1.0 / SCALE_PRIOR**2
+    prior[_E] = 1.0 / scale_prior**2
     prior[_T] = 1.0 / TAU_PRIOR_S**2
     H = np.eye(NP)
     for it in range(iterations):
