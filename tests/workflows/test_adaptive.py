@@ -88,19 +88,20 @@ def test_unit_errors_are_drawn_once_for_all_segments():
 
 @pytest.fixture(scope="module")
 def low_units():
-    """A calibrator fed two segments of a robot whose units sit on links 2-4 only (joints 5-7 move none)."""
+    """A calibrator fed ~23 s of a robot whose units sit on links 2-4 only (joints 5-7 move none): joints 1-4
+    excited at two poses, a move between them (every joint turns, so the links are decided)."""
     session = make_session("panda", "random", None, "realistic", "fast", 5, joints="controller", links=[2, 3, 4])
     chain = session.chain
-    q0 = start_pose(chain, np.random.default_rng(2))
+    rng = np.random.default_rng(2)
+    q0, q1 = start_pose(chain, rng), start_pose(chain, rng)
     cal = make_calibrator(chain, list(session.placements), session.gravity, TARGET)
     sim = SimulatedRobot(session, q0, cal)
-    config = segment_config(chain)
-    q = q0
-    for j in (1, 3, 2, 1, 0, 3):
-        assert excitable(chain, config, q)[0, j]
-        sim.execute(build_segment(chain, config, q, q, j))
+    config = segment_config(chain, excite_s=2.0)
+    for a, b, j in ((q0, q0, 1), (q0, q0, 3), (q0, q1, 2), (q1, q1, 1), (q1, q1, 0), (q1, q1, 3), (q1, q1, 2)):
+        assert excitable(chain, config, b)[0, j]
+        sim.execute(build_segment(chain, config, a, b, j))
     cal.finish()
-    return chain, cal, q, config
+    return chain, cal, q1, config
 
 
 def test_gain_of_a_joint_that_moves_no_unit_is_zero(low_units):
