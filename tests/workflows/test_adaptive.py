@@ -230,6 +230,10 @@ def test_cli_adaptive_simulate_writes_segments_motion_and_result(tmp_path, capsy
         (["--adaptive", "--simulate", "--result", "r.yaml"], ".json"),
         (["--simulate"], "applies to --adaptive only"),
         (["--result", "r.json"], "applies to --adaptive only"),
+        (["--noise", "real"], "applies to --adaptive only"),
+        (["--max-motion", "10"], "applies to --adaptive only"),
+        (["--adaptive", "--port", "0", "--record", "r.h5", "--units", "3"], "applies to --simulate only"),
+        (["--adaptive", "--port", "0", "--record", "r.h5", "--bind", "0.0.0.0"], "--public"),
     ],
 )
 def test_cli_adaptive_bad_options_are_one_line_errors(tmp_path, capsys, monkeypatch, args, message):

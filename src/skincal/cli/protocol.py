@@ -113,7 +113,11 @@ def protocol_cmd(
                      inputs=() if robot in PRESETS else (Path(robot),))  # fmt: skip
         return
     for given, name in ((simulate or None, "--simulate"), (result, "--result"), (port, "--port"),
-                        (record_out, "--record")):  # fmt: skip
+                        (record_out, "--record"), (target != "0.3mm,0.05deg" or None, "--target"),
+                        (max_motion != 300.0 or None, "--max-motion"), (noise != "realistic" or None, "--noise"),
+                        (placement != "paper" or None, "--placement"), (units, "--units"),
+                        (joints != "auto" or None, "--joints"), (public or None, "--public"),
+                        (bind != "127.0.0.1" or None, "--bind")):  # fmt: skip
         if given is not None:
             raise ConfigError(f"{name} applies to --adaptive only")
     config = replace(fit_to_limits(chain, get_protocol(protocol)), collision_check=True, pose_selection=poses)

@@ -62,6 +62,10 @@ def run_adaptive(chain, out: Path, *, rate: float, seed: int, force: bool, targe
         return
     if port is None or record_out is None:
         raise ConfigError("--adaptive needs --simulate, or --port and --record for a real robot's stream")
+    for given, name in ((noise != "realistic" or None, "--noise"), (placement != "paper" or None, "--placement"),
+                        (units, "--units"), (joints != "auto" or None, "--joints")):  # fmt: skip
+        if given is not None:
+            raise ConfigError(f"{name} applies to --simulate only")
     _live(chain, out, result, rate=rate, seed=seed, goal=goal, max_motion=max_motion, port=port, bind=bind,
           public=public, record_out=record_out, force=force)  # fmt: skip
 
