@@ -340,3 +340,20 @@ def test_cli_adaptive_live_closes_the_loop_over_udp(tmp_path):
     result = read_result(res)
     assert result.method == "online" and set(result.units) <= {f"su{k}" for k in range(1, 7)}
     assert rec.exists()
+
+
+def test_benchmark_reads_the_worst_unit_and_the_first_time_within_target():
+    from skincal.workflows.bench_adaptive import first_within, worst
+
+    def errors(pos, rot, right=True):
+        return {"units": {"a": {"position_error_mm": 0.1, "rotation_error_deg": 0.01, "link_true": 2,
+                                "link_estimated": 2},
+                          "b": {"position_error_mm": pos, "rotation_error_deg": rot, "link_true": 3,
+                                "link_estimated": 3 if right else 4}}}  # fmt: skip
+
+    assert worst(errors(0.5, 0.02)) == (0.5, 0.02, True)
+    assert worst({"units": {}}) == (float("inf"), float("inf"), False)
+    history = [(5.0, errors(0.5, 0.01)), (9.0, errors(0.2, 0.01, right=False)), (12.0, errors(0.29, 0.06)),
+               (15.0, errors(0.29, 0.04)), (20.0, errors(0.1, 0.01))]  # fmt: skip
+    assert first_within(history, TARGET) == 15.0
+    assert first_within(history[:4], Target(1e-4, 0.05)) is None
