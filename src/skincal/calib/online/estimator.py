@@ -66,7 +66,7 @@ ALIGN_RETRY_S = 2.0
 """A unit not yet aligned tries again after this much more of its stream, s."""
 MAX_REALIGN = 3
 """Re-alignments allowed per unit."""
-SCALE_STD_LIMIT = 0.005
+SCALE_STD_LIMIT = 0.01
 """The accelerometer's scale/misalignment is estimated only when each of its 9 elements is determined to
 this std (else held at the identity: a weakly determined scale absorbs what the pose should explain)."""
 MIN_MOVING = 200
@@ -123,7 +123,7 @@ class OnlineOptions:
     margin_s: float = 0.5
     lookback_s: float = 10.0
     max_delay_s: float = 0.5
-    grid_hz: float = 250.0
+    grid_hz: float = 125.0
     history_s: float = 60.0
     align_s: float = 10.0
     target_position_m: float = 3e-4
@@ -412,7 +412,8 @@ class OnlineCalibrator:
         K = skew(dw) + W @ W
         ok = interp.reliable(tg)
         speed = np.cumsum(np.abs(qdg), axis=1)
-        self._grid.append((tg, u, K, w, dw, ok, speed))
+        ug = -np.einsum("gnji,j->gni", R, self.gravity)  # gravity's part of u, link frame
+        self._grid.append((tg, u, K, w, dw, ok, speed, ug))
         self._grid_cat = None
 
     def _grid_arrays(self) -> tuple[FloatArray, ...] | None:
@@ -422,12 +423,12 @@ class OnlineCalibrator:
             parts = list(zip(*self._grid, strict=True))
             tg = np.concatenate(parts[0])
             u, K, w, dw = (np.concatenate(p) for p in parts[1:5])
-            ok, speed = np.concatenate(parts[5]), np.concatenate(parts[6])
+            ok, speed, ug = np.concatenate(parts[5]), np.concatenate(parts[6]), np.concatenate(parts[7])
             # derivatives along the whole grid (continuous across blocks)
             du = np.gradient(u, tg, axis=0) if tg.size > 1 else np.zeros_like(u)
             ddw = np.gradient(w, tg, axis=0) if tg.size > 1 else np.zeros_like(w)
             dK = np.gradient(K, tg, axis=0) if tg.size > 1 else np.zeros_like(K)
-            self._grid_cat = (tg, u, K, w, dw, ok, speed, du, ddw, dK)
+            self._grid_cat = (tg, u, K, w, dw, ok, speed, du, ddw, dK, ug)
         return self._grid_cat
 
     def _take_pending(self, st: _Unit) -> tuple[FloatArray, FloatArray, FloatArray | None]:
@@ -516,19 +517,35 @@ class OnlineCalibrator:
             st.pending_g.append(g)
 
     def _signals_at(self, grid: tuple[FloatArray, ...], s: FloatArray, links: Sequence[int]):
-        """Link signals of ``links`` at instants ``s`` (M,) by linear interpolation on the grid:
-        u, K, w, dw_dt, du, dK_dt (each ``(L, M, ...)``), ok ``(M,)``."""
-        tg, u, K, w, _, ok, _, du, ddw, dK = grid
+        """Link signals of ``links`` at instants ``s`` (M,) from the grid, as ``mle``'s signal table does:
+        cubic Hermite for ``u``, ``K`` and ``w`` with their derivatives (``w``'s exact from the
+        kinematics, ``u``'s and ``K``'s by central differences), linear for the derivatives. Returns
+        u, K, w, dw_dt, du_dt, dK_dt, u_g (each ``(L, M, ...)``) and ok ``(M,)``."""
+        tg, u, K, w, dw, ok, _, du, _, dK, ug = grid
         i = np.clip(np.searchsorted(tg, s) - 1, 0, tg.size - 2)
-        f = (s - tg[i]) / (tg[i + 1] - tg[i])
+        h = tg[i + 1] - tg[i]
+        f = (s - tg[i]) / h
         idx = np.asarray(links) - 1
+
+        def shaped(c: FloatArray, ndim: int) -> FloatArray:
+            return c.reshape((-1,) + (1,) * (ndim - 1))
 
         def lerp(x: FloatArray) -> FloatArray:
             x0, x1 = x[i][:, idx], x[i + 1][:, idx]  # (M, L, ...)
-            ff = f.reshape((-1,) + (1,) * (x0.ndim - 1))
+            ff = shaped(f, x0.ndim)
             return np.moveaxis((1 - ff) * x0 + ff * x1, 1, 0)
 
-        return lerp(u), lerp(K), lerp(w), lerp(ddw), lerp(du), lerp(dK), ok[i] & ok[i + 1]
+        f2, f3 = f * f, f * f * f
+        h00, h10, h01, h11 = 2 * f3 - 3 * f2 + 1, (f3 - 2 * f2 + f) * h, -2 * f3 + 3 * f2, (f3 - f2) * h
+
+        def hermite(x: FloatArray, dx: FloatArray) -> FloatArray:
+            x0, x1, d0, d1 = x[i][:, idx], x[i + 1][:, idx], dx[i][:, idx], dx[i + 1][:, idx]
+            n = x0.ndim
+            y = shaped(h00, n) * x0 + shaped(h10, n) * d0 + shaped(h01, n) * x1 + shaped(h11, n) * d1
+            return np.moveaxis(y, 1, 0)
+
+        sig = (hermite(u, du), hermite(K, dK), hermite(w, dw), lerp(dw), lerp(du), lerp(dK), lerp(ug))
+        return (*sig, ok[i] & ok[i + 1])
 
     @staticmethod
     def _unsaturated(st: _Unit, a: FloatArray, g: FloatArray | None) -> np.ndarray:
@@ -556,16 +573,17 @@ class OnlineCalibrator:
         unsat = self._unsaturated(st, a, g)
         if not unsat.all():
             s, a, g = s[unsat], a[unsat], None if g is None else g[unsat]
-        u, K, w, dw, du, dK, ok = self._signals_at(grid, s, st.links)
+        u, K, w, dw, du, dK, ug, ok = self._signals_at(grid, s, st.links)
         if not ok.all():
             s, a, u, K, w, dw, du, dK = s[ok], a[ok], u[:, ok], K[:, ok], w[:, ok], dw[:, ok], du[:, ok], dK[:, ok]
+            ug = ug[:, ok]
             g = None if g is None else g[ok]
         if s.size == 0:
             return 0
         moving = (np.linalg.norm(w, axis=-1) > MOVING_RPS) | (np.linalg.norm(dw, axis=-1) > MOVING_RPS2)  # (L, M)
         sol = st.solutions.get(st.links[0]) if st.decided else None
         if sol is not None:
-            r = self._residuals(sol, a, u[0], K[0], du[0], dK[0])
+            r = self._residuals(sol, a, u[0], K[0], du[0], dK[0], ug[0])
             sig = st.sigmas[st.links[0]]
             rn = r / np.maximum(np.where(moving[0], sig[1], sig[0]), 1e-9)[:, None]
             reached = st.status is not None and st.status.reached
@@ -575,7 +593,7 @@ class OnlineCalibrator:
             st.outliers += int((~keep).sum())
             if not keep.all():
                 s, a, u, K, w, dw = s[keep], a[keep], u[:, keep], K[:, keep], w[:, keep], dw[:, keep]
-                du, dK = du[:, keep], dK[:, keep]
+                du, dK, ug = du[:, keep], dK[:, keep], ug[:, keep]
                 g, moving = None if g is None else g[keep], moving[:, keep]
                 rn = rn[keep]
             self._window_means(st, rn)
@@ -583,7 +601,7 @@ class OnlineCalibrator:
             return 0
         L, M = u.shape[0], s.size
         cls = np.stack([~moving, moving], axis=1)[..., None, None]  # (L, 2, M, 1, 1)
-        rows_a = stats.accel_rows(np.broadcast_to(a, (L, M, 3)), u, K, du, dK)[:, None] * cls
+        rows_a = stats.accel_rows(np.broadcast_to(a, (L, M, 3)), u, K, du, dK, ug)[:, None] * cls
         Za = stats.gram(rows_a)
         if g is not None:
             Zg = stats.gram(stats.gyro_rows(np.broadcast_to(g, (L, M, 3)), w, dw)[:, None] * cls)
@@ -604,13 +622,19 @@ class OnlineCalibrator:
 
     @staticmethod
     def _residuals(
-        sol: stats.Solution, a: FloatArray, u: FloatArray, K: FloatArray, du: FloatArray, dK: FloatArray
+        sol: stats.Solution,
+        a: FloatArray,
+        u: FloatArray,
+        K: FloatArray,
+        du: FloatArray,
+        dK: FloatArray,
+        ug: FloatArray,
     ) -> FloatArray:
         """``(M, 3)`` residuals of equation (1) of :mod:`~skincal.calib.online.stats` at ``sol``, m/s^2."""
         G = sol.R @ np.linalg.inv(sol.A)
         h = G @ sol.b
-        Kp = np.einsum("mij,j->mi", K + sol.tau * dK, sol.p)
-        return a @ G.T - h - Kp - du * sol.tau - u
+        Kp = np.einsum("mij,j->mi", (1.0 + sol.gravity_scale) * K + sol.tau * dK, sol.p)
+        return a @ G.T - h - Kp - du * sol.tau - sol.gravity_scale * (u - ug) - u
 
     # ---------------------------------------------------------------- estimates
     @staticmethod
@@ -870,9 +894,10 @@ class OnlineCalibrator:
         K = skew(dw) + W @ W
         du = np.gradient(u, dt, axis=0) if u.shape[0] > 1 else np.zeros_like(u)
         dK = np.gradient(K, dt, axis=0) if u.shape[0] > 1 else np.zeros_like(K)
-        f = u + np.einsum("mij,j->mi", K, sol.p)
+        ug = -np.einsum("mji,j->mi", R, self.gravity)
+        f = ug + (1.0 + sol.gravity_scale) * (u - ug + np.einsum("mij,j->mi", K, sol.p))
         a = (f @ sol.R) @ sol.A.T + sol.b
-        Za = stats.gram(stats.accel_rows(a, u, K, du, dK))
+        Za = stats.gram(stats.accel_rows(a, u, K, du, dK, ug))
         Zg = None
         if gyro:
             g = w @ sol.R + sol.gyro_bias
@@ -946,6 +971,8 @@ class OnlineCalibrator:
                 time_offset_s=float((st.offset or 0.0) - sol.tau),  # stats: the samples saw s + tau
                 time_offset_std_s=float(np.sqrt(max(sol.cov[21, 21] * kappa, 0.0))),
                 gyro_bias_rps=sol.gyro_bias if st.has_gyro else None,
+                gravity_mps2=float(np.linalg.norm(self.gravity) / (1.0 + sol.gravity_scale)),
+                gravity_std_mps2=float(np.linalg.norm(self.gravity) * np.sqrt(max(sol.cov[22, 22] * kappa, 0.0))),
             )
             warnings: list[str] = []
             if np.isfinite(st.offset_sharpness) and st.offset_sharpness < ALIGN_SHARPNESS:

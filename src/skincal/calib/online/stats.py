@@ -3,19 +3,23 @@
 The accelerometer model of :mod:`skincal.calib.mle.model` (``a = A R^T v(s) + b`` with
 ``v = u + K p`` in link frame, ``R = R_link_su``) is rearranged to be *linear* in its unknowns::
 
-    G a - h - K p - du * tau - dK (tau p) = u,      G = R A^-1 ~ R (I + E),   h = G b          (1)
+    G a - h - K p - du * tau - dK (tau p) - k (u - u_g) - K (k p) = u,    G = R A^-1 ~ R (I + E),  h = G b   (1)
 
 (``du``, ``dK`` = d/ds: the samples measured the motion at ``s + tau``, a small residual offset after
-the coarse alignment, to first order; the unit's time offset is then the coarse one MINUS ``tau``),
-and the gyroscope's ``g = R^T w + b_g`` likewise::
+the coarse alignment, to first order; the unit's time offset is then the coarse one MINUS ``tau``;
+``u_g = -R_base_link^T g`` the part of ``u`` due to gravity and ``k`` the relative error of the
+motion's accelerations against gravity (``v = u_g + (1 + k) (u - u_g + K p)``: the IMU's own
+filtering of the motion or a gravity that is not the dataset's, which the accelerometer's scale
+cannot absorb because it scales both; ``mle``'s gravity scale is ``-k`` to first order; ``k p`` is
+kept as 3 unknowns of its own like ``tau p``), and the gyroscope's ``g = R^T w + b_g`` likewise::
 
     R g - c - dw * tau = w,            c = R b_g                                                (2)
 
 ``u``, ``K``, ``w`` are :func:`skincal.calib.mle.signals.link_signals` of the unit's link at its
 sample instants (link frame), ``a`` and ``g`` its readings (unit frame). Each sample adds one
 3-row block ``Phi x - y`` to a linear least-squares problem, so everything the data say about the
-unknowns is the Gram matrix ``Z = sum [Phi y]^T [Phi y]`` of each equation (20 x 20 for (1) with
-``x_a = [vec(G) (9, row-major), h, p, tau, tau p]`` (the product ``tau p`` kept as 3 unknowns of
+unknowns is the Gram matrix ``Z = sum [Phi y]^T [Phi y]`` of each equation (24 x 24 for (1) with
+``x_a = [vec(G) (9, row-major), h, p, tau, tau p, k, k p]`` (the product ``tau p`` kept as 3 unknowns of
 its own, so the rows stay linear), 14 x 14 for (2) with ``x_g = [vec(R), c, tau]``):
 no re-linearisation is ever needed, because (1) and (2) are exact in ``G``, ``R`` and the offsets
 (only ``tau`` is first order). The pose then follows from minimising, over ``R`` in SO(3), ``E``,
@@ -24,7 +28,7 @@ no re-linearisation is ever needed, because (1) and (2) are exact in ``G``, ``R`
     C = J_a(vec(R (I + E)), h, p, tau) / sigma_a^2 + J_g(vec(R), c, tau) / sigma_g^2 + |E|^2 / sigma_E^2
 
 with ``J(x) = [x; -1]^T Z [x; -1]`` the residual sum of squares: a Gauss-Newton over
-``delta = [dtheta (3, R <- R Exp(dtheta)), dE (9), dh, dp, dc, dtau]`` (:func:`solve`), started from
+``delta = [dtheta (3, R <- R Exp(dtheta)), dE (9), dh, dp, dc, dtau, dk]`` (:func:`solve`), started from
 the unconstrained linear solution of (2) (or of (1) without a gyroscope). The covariance is the
 inverse of its normal matrix; ``sigma_a``, ``sigma_g`` are the residual std of the fit.
 """
@@ -38,25 +42,37 @@ from scipy.spatial.transform import Rotation
 
 from skincal.kinematics.transforms import FloatArray, skew
 
-NA = 20
-"""Columns of the accelerometer Gram: ``[vec(G) 9, h 3, p 3, tau 1, tau p 3]`` and the right-hand side."""
+NA = 24
+"""Columns of the accelerometer Gram: ``[vec(G) 9, h 3, p 3, tau 1, tau p 3, k 1, k p 3]`` and the right-hand
+side."""
 NG = 14
 """Columns of the gyroscope Gram: ``[vec(R) 9, c 3, tau 1]`` and the right-hand side."""
-NP = 22
-"""Gauss-Newton unknowns: ``[dtheta 3, dE 9, h 3, p 3, c 3, tau 1]``."""
+NP = 23
+"""Gauss-Newton unknowns: ``[dtheta 3, dE 9, h 3, p 3, c 3, tau 1, k 1]``."""
 SCALE_PRIOR = 0.02
 """Prior std of each element of ``E`` (the accelerometer's scale/misalignment relative to 1)."""
 SCALE_FIXED = 1e-6
 """``scale_prior`` that holds ``E`` at zero (scale/misalignment not estimated)."""
 TAU_PRIOR_S = 0.01
 """Prior std of the residual time offset after the coarse alignment, s."""
-_TH, _E, _H, _P, _C, _T = slice(0, 3), slice(3, 12), slice(12, 15), slice(15, 18), slice(18, 21), 21
+_TH, _E, _H, _P, _C, _T, _K = slice(0, 3), slice(3, 12), slice(12, 15), slice(15, 18), slice(18, 21), 21, 22
+GRAVITY_PRIOR = 0.002
+"""Prior std of ``k``, the motion's accelerations' relative error against gravity (``mle``: 0.2 % for the
+spread of the local gravity; here wider, as the IMU's own filtering of the motion shows as ``k`` too)."""
 
 
-def accel_rows(a: FloatArray, u: FloatArray, K: FloatArray, du: FloatArray, dK: FloatArray | None = None) -> FloatArray:
+def accel_rows(
+    a: FloatArray,
+    u: FloatArray,
+    K: FloatArray,
+    du: FloatArray,
+    dK: FloatArray | None = None,
+    ug: FloatArray | None = None,
+) -> FloatArray:
     """``(..., M, 3, NA)`` rows ``[Phi y]`` of equation (1) for readings ``a`` ``(..., M, 3)`` and link
     signals ``u`` ``(..., M, 3)``, ``K`` ``(..., M, 3, 3)``, their derivatives ``du`` ``(..., M, 3)`` and
-    ``dK`` ``(..., M, 3, 3)`` (None: zero) (module docstring)."""
+    ``dK`` ``(..., M, 3, 3)`` and the gravity part ``ug`` ``(..., M, 3)`` of ``u`` (None: zero) (module
+    docstring)."""
     Z = np.zeros((*u.shape[:-1], 3, NA))
     for i in range(3):  # vec(G) row-major: (G a)_i = sum_j G_ij a_j
         Z[..., i, 3 * i : 3 * i + 3] = a
@@ -65,7 +81,10 @@ def accel_rows(a: FloatArray, u: FloatArray, K: FloatArray, du: FloatArray, dK: 
     Z[..., 15] = -du
     if dK is not None:
         Z[..., 16:19] = -dK
-    Z[..., 19] = u
+    if ug is not None:
+        Z[..., 19] = ug - u
+        Z[..., 20:23] = -K
+    Z[..., 23] = u
     return Z
 
 
@@ -119,6 +138,7 @@ class Solution:
     b: FloatArray
     gyro_bias: FloatArray
     tau: float
+    gravity_scale: float
     cov: FloatArray
     sigma_a: float
     sigma_g: float
@@ -165,7 +185,7 @@ def _nearest_rotation(M: FloatArray) -> FloatArray:
 
 
 def linearise(R: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The unknowns of (1) and (2) at ``R`` and ``x = [0 (3), E, h, p, c, tau]`` ``(NP,)`` and their
+    """The unknowns of (1) and (2) at ``R`` and ``x = [0 (3), E, h, p, c, tau, k]`` ``(NP,)`` and their
     Jacobians with respect to ``delta`` (module docstring): ``x_a`` ``(NA - 1,)``, ``J_a``
     ``(NA - 1, NP)``, ``x_g`` ``(NG - 1,)``, ``J_g`` ``(NG - 1, NP)``."""
     F = np.eye(3) + x[_E].reshape(3, 3)
@@ -173,7 +193,9 @@ def linearise(R: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, Flo
     Ja = np.zeros((NA - 1, NP))
     Ja[:9, _TH], Ja[:9, _E], Ja[9:12, _H], Ja[12:15, _P], Ja[15, _T] = JG, JE, np.eye(3), np.eye(3), 1.0
     Ja[16:19, _T], Ja[16:19, _P] = x[_P], x[_T] * np.eye(3)  # d(tau p)
-    xa = np.concatenate([(R @ F).reshape(9), x[_H], x[_P], [x[_T]], x[_T] * x[_P]])
+    Ja[19, _K] = 1.0
+    Ja[20:23, _K], Ja[20:23, _P] = x[_P], x[_K] * np.eye(3)  # d(k p)
+    xa = np.concatenate([(R @ F).reshape(9), x[_H], x[_P], [x[_T]], x[_T] * x[_P], [x[_K]], x[_K] * x[_P]])
     Jg = np.zeros((NG - 1, NP))
     Jg[:9, _TH], Jg[9:12, _C], Jg[12, _T] = JR, np.eye(3), 1.0
     xg = np.concatenate([R.reshape(9), x[_C], [x[_T]]])
@@ -218,6 +240,7 @@ def solve(
     prior = np.zeros(NP)
     prior[_E] = 1.0 / scale_prior**2
     prior[_T] = 1.0 / TAU_PRIOR_S**2
+    prior[_K] = 1.0 / GRAVITY_PRIOR**2
     H = np.eye(NP)
     for it in range(iterations):
         xa, Ja, xg, Jg = linearise(R, x)
@@ -257,6 +280,7 @@ def solve(
     sa = float(np.sqrt(rss_a / max(3.0 * Za[9, 9] - 16.0, 1.0)))
     sg = float(np.sqrt(rss_g / max(3.0 * Zg[9, 9] - 13.0, 1.0))) if have_g and Zg is not None else float("nan")
     return Solution(
-        R=R, p=x[_P].copy(), A=A, b=b, gyro_bias=gyro_bias, tau=float(x[_T]), cov=cov, sigma_a=sa, sigma_g=sg,
+        R=R, p=x[_P].copy(), A=A, b=b, gyro_bias=gyro_bias, tau=float(x[_T]), gravity_scale=float(x[_K]),
+        cov=cov, sigma_a=sa, sigma_g=sg,
         cost=rss_a * wa + rss_g * wg, rss_a=rss_a, information=H, x_a=xa, x_g=xg, state=x.copy(),
     )  # fmt: skip
