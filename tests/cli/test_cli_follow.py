@@ -85,16 +85,16 @@ def _run_in_pty(argv: list[str], cwd: Path, interrupt_when: bytes | None = None,
 
 def test_follow_in_a_real_terminal_shows_the_meter_and_stops_at_its_target(data, tmp_path):
     out = tmp_path / "online.json"
-    code, text = _run_in_pty(["calibrate", str(data), "--follow", "--speed", "20", "--target", "0.3mm,0.05deg",
+    code, text = _run_in_pty(["calibrate", str(data), "--follow", "--speed", "20", "--target", "1mm,0.05deg",
                               "-o", str(out)], tmp_path)  # fmt: skip
     assert code == 0, text[-3000:]
     assert "\x1b[" in text  # a terminal: rich drew (and redrew) the live table
-    assert "pos std mm" in text and "rot std deg" in text and "units at target (0.3 mm, 0.05 deg)" in text
+    assert "pos std mm" in text and "rot std deg" in text and "units at target (1 mm, 0.05 deg)" in text
     assert MARKUP_UNIT in text  # shown as stored, not taken as markup
     m = _REACHED.search(text)
     assert m is not None, text[-3000:]
     t_stop, t_end = float(m.group(1)), float(m.group(2))
-    print(f"\nterminal session: target 0.3 mm / 0.05 deg reached after {t_stop:.1f} s of {t_end:.1f} s of data")
+    print(f"\nterminal session: target 1 mm / 0.05 deg reached after {t_stop:.1f} s of {t_end:.1f} s of data")
     assert t_stop < t_end - 5.0  # stopped by itself, well before the data's end
     result = read_result(out)
     assert result.method == "online" and MARKUP_UNIT in result.units and len(result.units) == 6
@@ -103,7 +103,7 @@ def test_follow_in_a_real_terminal_shows_the_meter_and_stops_at_its_target(data,
 
 def test_follow_in_a_pipe_prints_a_line_per_second_and_refuses_to_clobber(data, tmp_path):
     out = tmp_path / "online.json"
-    argv = [*_CLI, "calibrate", str(data), "--follow", "--speed", "40", "-o", str(out)]
+    argv = [*_CLI, "calibrate", str(data), "--follow", "--speed", "40", "--target", "1mm,0.05deg", "-o", str(out)]
     proc = subprocess.run(argv, capture_output=True, text=True, timeout=120, env=_env())
     assert proc.returncode == 0, proc.stderr
     assert "\x1b" not in proc.stdout  # not a terminal: plain lines
