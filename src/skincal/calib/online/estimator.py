@@ -220,8 +220,9 @@ class OnlineCalibrator:
 
     ``units``: names of the units to follow (others are refused). ``gravity``: ``(3,)`` base frame,
     m/s^2. ``on_residuals(unit, t, r)`` (set by a change monitor): called per absorbed chunk of a
-    unit whose estimate reached its target, with the chunk's instants ``(M,)`` and accelerometer
-    residuals ``(M, 3)`` divided by the unit's residual std, at the current estimate.
+    unit whose estimate has settled (:func:`_settled`: decided, std within 1 mm / 0.2 deg), with the
+    chunk's instants ``(M,)`` and accelerometer residuals ``(M, 3)`` divided by the unit's residual
+    std (of its class: resting or moving), at the current estimate.
     """
 
     def __init__(
@@ -586,9 +587,9 @@ class OnlineCalibrator:
             r = self._residuals(sol, a, u[0], K[0], du[0], dK[0], ug[0])
             sig = st.sigmas[st.links[0]]
             rn = r / np.maximum(np.where(moving[0], sig[1], sig[0]), 1e-9)[:, None]
-            reached = st.status is not None and st.status.reached
-            keep = np.linalg.norm(rn, axis=1) <= GATE_SIGMAS * np.sqrt(3.0) if reached else np.ones(s.size, bool)
-            if self.on_residuals is not None and reached:
+            settled = st.status is not None and _settled(st.status)
+            keep = np.linalg.norm(rn, axis=1) <= GATE_SIGMAS * np.sqrt(3.0) if settled else np.ones(s.size, bool)
+            if self.on_residuals is not None and settled:
                 self.on_residuals(name, s, rn)
             st.outliers += int((~keep).sum())
             if not keep.all():
@@ -1002,6 +1003,22 @@ class OnlineCalibrator:
             top["events"] = list(self.events)
         return CalibrationResult("online", self.chain.name, dataset_sha256, time.perf_counter() - self._t_start,
                                  units, top)  # fmt: skip
+
+
+SETTLED_POSITION_M = 1e-3
+SETTLED_ROTATION_DEG = 0.2
+"""Std (every axis) from which a unit's estimate is stable enough to gate outliers and to be watched
+for a move (looser than a calibration target: a unit that never reaches 0.3 mm is still watched)."""
+
+
+def _settled(status: UnitStatus) -> bool:
+    """The unit's link is decided and its pose known to :data:`SETTLED_POSITION_M` / :data:`SETTLED_ROTATION_DEG`."""
+    return bool(
+        status.pose is not None
+        and not status.missing
+        and np.all(status.position_std_m <= SETTLED_POSITION_M)
+        and np.all(status.rotation_std_deg <= SETTLED_ROTATION_DEG)
+    )
 
 
 def _pose_block(H: FloatArray) -> FloatArray:
