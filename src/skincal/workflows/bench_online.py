@@ -180,3 +180,75 @@ def online_report(doc: dict[str, Any]) -> list[str]:
         lines.append(f"replayed at real speed: result {rt['latency_s']:.3f} s (wall) after the last sample; "
                      f"{rt['cpu_s_per_data_s']:.3f} CPU s per s of data")  # fmt: skip
     return lines
+
+
+def stream_vs_batch(
+    seeds: tuple[int, ...] = (0, 1, 2), robot: str = "panda", work_s: float = 120.0, progress: Progress | None = None
+) -> dict[str, Any]:
+    """Accuracy of the streaming calibrator against the batch ``mle`` on the same simulated data (issue 16:
+    the final online estimate within 10 % of the batch error): per case (the ``fast`` protocol and a
+    ``work_s`` s pick-and-place work cycle, ``realistic`` IMUs and controller joint states, six paper
+    units, each seed), the mean position (mm) and rotation (deg) errors of both, the links right, and
+    the RMS over units and axes of error / reported std (1 is honest)."""
+    from skincal.calib import calibrate
+    from skincal.calib.online import OnlineCalibrator, replay
+    from skincal.kinematics.transforms import rotation_angle
+    from skincal.workflows.monitoring import simulate_session, work_session
+    from skincal.workflows.session import simulate_dataset
+
+    def errors(result, ds) -> dict[str, float]:
+        pos, rot, z, links = [], [], [], 0
+        for u, truth in ds.truth.items():
+            r = result.units.get(u)
+            if r is None or r.pose.link != truth.link:
+                continue
+            links += 1
+            dp = r.pose.p_link_su - truth.p_link_su
+            pos.append(1e3 * float(np.linalg.norm(dp)))
+            rot.append(float(np.degrees(rotation_angle(r.pose.R_link_su, truth.R_link_su))))
+            if r.position_std_m is not None:
+                z.extend((dp / np.asarray(r.position_std_m)).tolist())
+        return {
+            "position_mm": float(np.mean(pos)) if pos else float("nan"),
+            "rotation_deg": float(np.mean(rot)) if rot else float("nan"),
+            "links": links,
+            "units": len(ds.truth),
+            "rms_error_over_std": float(np.sqrt(np.mean(np.square(z)))) if z else float("nan"),
+        }
+
+    cases: list[dict[str, Any]] = []
+    for seed in seeds:
+        for kind in ("fast", "pick-place"):
+            if progress is not None:
+                progress(f"{kind}, seed {seed}")
+            if kind == "fast":
+                ds = simulate_dataset(robot, "paper", noise="realistic", protocol="fast", seed=seed)
+            else:
+                ds = simulate_session(work_session(robot, "realistic", "pick-place", work_s, seed=seed), seed)
+            cal = OnlineCalibrator(ds.robot, list(ds.imu), ds.gravity)
+            replay(ds, cal)
+            cases.append({"case": kind, "seed": seed, "online": errors(cal.result(), ds),
+                          "mle": errors(calibrate(ds, "mle"), ds)})  # fmt: skip
+    return {"robot": robot, "cases": cases}
+
+
+def stream_vs_batch_report(doc: dict[str, Any]) -> list[str]:
+    """Lines of :func:`stream_vs_batch`'s figures, and the per-case means."""
+    lines = [f"streaming vs batch mle on {doc['robot']} (simulated; realistic IMUs, controller joint states)"]
+    for c in doc["cases"]:
+        o, m = c["online"], c["mle"]
+        lines.append(
+            f"  {c['case']:10s} seed {c['seed']}: online {o['position_mm']:.3f} mm / {o['rotation_deg']:.4f} deg "
+            f"(links {o['links']}/{o['units']}, err/std {o['rms_error_over_std']:.2f}); "
+            f"mle {m['position_mm']:.3f} mm / {m['rotation_deg']:.4f} deg "
+            f"(links {m['links']}/{m['units']}, err/std {m['rms_error_over_std']:.2f})"
+        )
+    for kind in sorted({c["case"] for c in doc["cases"]}):
+        sel = [c for c in doc["cases"] if c["case"] == kind]
+        op = np.mean([c["online"]["position_mm"] for c in sel])
+        mp = np.mean([c["mle"]["position_mm"] for c in sel])
+        orr = np.mean([c["online"]["rotation_deg"] for c in sel])
+        mr = np.mean([c["mle"]["rotation_deg"] for c in sel])
+        lines.append(f"  {kind}: mean online/mle position {op / mp:.2f}x ({op:.3f} / {mp:.3f} mm), "
+                     f"rotation {orr / mr:.2f}x ({orr:.4f} / {mr:.4f} deg)")  # fmt: skip
+    return lines

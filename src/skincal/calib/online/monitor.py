@@ -179,11 +179,11 @@ class UnitMonitor:
         self.null, self.cusum, self._warm, self._reset_t, self._since = None, 0.0, [], None, []
         self._t0, self._t_last, self._sum, self._n = None, None, np.zeros(3), 0
 
-    def feed(self, t: ArrayLike, r: ArrayLike) -> Alarm | None:
+    def feed(self, t_in: ArrayLike, r_in: ArrayLike) -> Alarm | None:
         """Absorb residuals ``r`` ``(M, 3)`` (noise units) at ``t`` ``(M,)`` s, in time order; the first
         alarm raised, or None. Samples after an alarm in the same call are dropped (the unit restarts)."""
-        t = np.asarray(t, dtype=float).reshape(-1)
-        r = np.asarray(r, dtype=float)
+        t = np.asarray(t_in, dtype=float).reshape(-1)
+        r = np.asarray(r_in, dtype=float)
         if r.shape != (t.size, 3):
             raise DatasetError(
                 f"monitor: residuals of unit '{self.unit}' must be (M, 3) with M = {t.size}, got {r.shape}"
