@@ -3,6 +3,13 @@
 Usage: ``python benchmarks/bench_avoid.py [--scenarios arm,hand,walk,fast] [--placement ring|paper]
 [--seeds 0,1] [--quick] [--json out.json] [--plots docs]``
 
+Issue 17 (ISO/TS 15066 separation, any robot, dynamics): ``python benchmarks/bench_avoid.py --iso
+[--robots panda,ur5e,iiwa14] [--scenarios ...] [--modes kinematic,torque] [--beliefs mle,degraded]
+[--duration S] [--quick] [--json out.json] [--plots folder]`` (:func:`skincal.workflows.bench_avoid.run_iso_benchmark`:
+every shipped scenario at its ISO 13855 speed, S_p from the covariance and the measured stopping model,
+the task clock that waits; contacts, min(clearance - S_p), time lost; the controller step with 100 points
+with covariances).
+
 A thin script over :mod:`skincal.workflows.bench_avoid` (what runs: the beliefs ``truth``, ``mle``,
 ``degraded``, ``blind`` per scenario). Prints min clearance, contacts, max tracking error, recovery time
 after the person left, QP solve time (median, p95) and whole-loop time per 1 ms step, and the time of one
@@ -15,7 +22,7 @@ import argparse
 import json
 
 from skincal.kinematics import panda
-from skincal.workflows.bench_avoid import beliefs, qp_step_time, run_avoid_benchmark
+from skincal.workflows.bench_avoid import ISO_ROBOTS, beliefs, qp_step_time, run_avoid_benchmark, run_iso_benchmark
 from skincal.workflows.script import run_script
 
 
@@ -27,7 +34,14 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="fast calibration protocol for the mle poses")
     ap.add_argument("--json", default=None)
     ap.add_argument("--plots", default=None, help="folder for docs/avoid_<scenario>.png (mle poses, first seed)")
+    ap.add_argument("--iso", action="store_true", help="the issue-17 matrix (ISO/TS 15066 separation, any robot)")
+    ap.add_argument("--robots", default=",".join(ISO_ROBOTS))
+    ap.add_argument("--modes", default="kinematic,torque")
+    ap.add_argument("--beliefs", default="mle,degraded", help="mle, degraded, truth, blind")
+    ap.add_argument("--duration", type=float, default=None, help="shorten every run to this, s")
     args = ap.parse_args()
+    if args.iso:
+        return iso(args)
 
     step = qp_step_time(panda())
     print(
@@ -57,6 +71,62 @@ def main() -> None:
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"step": step, "runs": rows}, fh, indent=2)
+
+
+def iso(args) -> None:
+    import time
+
+    from skincal.control.separation import SeparationParams
+    from skincal.kinematics import panda
+    from skincal.workflows.avoidance import stopping_model
+
+    step = qp_step_time(
+        panda(), n_points=100, repeats=1000, separation=SeparationParams(stopping=stopping_model(panda()))
+    )
+    print(
+        f"controller step, 7 DoF, {step['points']} points with covariances (S_p per point): "
+        f"{step['step_median_ms']:.3f} ms median ({step['step_p95_ms']:.3f} p95); "
+        f"QP solve {step['qp_median_ms']:.3f} ms median",
+        flush=True,
+    )
+    labels = ["degraded 5cm/5deg" if b == "degraded" else b for b in args.beliefs.split(",")]
+    print(
+        f"{'robot':7} {'scenario':8} {'v_h':>4} {'poses':18} {'mode':9} {'contacts':>8} {'clear[m]':>8} "
+        f"{'min(d-Sp)':>9} {'<Sp':>5} {'Sp@min':>6} {'Sp max':>6} {'Z_d':>6} {'stop[s]':>7} {'near[s]':>7} "
+        f"{'lost[s]':>7} {'loop med/p95[ms]':>17}",
+        flush=True,
+    )
+
+    def show(row, log) -> None:
+        zd = (row["margin_terms"] or {}).get("Z_d")
+        f = lambda v, w=6: f"{v:{w}.3f}" if v is not None else f"{'-':>{w}}"  # noqa: E731
+        print(
+            f"{row['robot']:7} {row['scenario']:8} {row['v_h']:4.1f} {row['poses']:18} {row['mode']:9} "
+            f"{row['contacts']:8d} {f(row['min_clearance_m'], 8)} {f(row['min_clearance_minus_sp_m'], 9)} "
+            f"{row['steps_below_sp']:5d} {f(row['margin_m'])} {f(row['margin_max_m'])} {f(zd)} "
+            f"{row['protective_stop_s']:7.2f} {row['near_time_s']:7.2f} {f(row['task_time_lost_s'], 7)} "
+            f"{row['loop_median_ms']:8.3f}/{row['loop_p95_ms']:.3f}",
+            flush=True,
+        )
+        if args.plots and row["poses"] == "mle":
+            from skincal.perception.body import RobotBody
+            from skincal.workflows.avoid_plot import plot_run
+
+            name = f"{args.plots}/avoid_iso_{row['robot']}_{row['scenario']}_{row['mode']}.png"
+            plot_run(log, name, body=RobotBody.of(log_chain[row["robot"]]))
+
+    from skincal.kinematics import get_robot
+
+    robots = args.robots.split(",")
+    log_chain = {r: get_robot(r) for r in robots}
+    scenarios = args.scenarios.split(",") if args.scenarios != "arm,hand,walk,fast" else None
+    t0 = time.process_time()
+    rows = run_iso_benchmark(robots, scenarios, args.modes.split(","), labels, args.quick, args.duration, on_run=show)
+    print(f"{len(rows)} runs, {time.process_time() - t0:.0f} s CPU", flush=True)
+    if args.json:
+        from skincal.data.atomic import write_bytes_atomic
+
+        write_bytes_atomic(args.json, json.dumps({"step": step, "runs": rows}, indent=2).encode())
 
 
 if __name__ == "__main__":
