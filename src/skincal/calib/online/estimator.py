@@ -741,7 +741,7 @@ class OnlineCalibrator:
                     Za, Zg = self._weighted(st, k, sig)
                     sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R) or sol
                 # like mle: the scale/misalignment is kept only where the data determine every element of it
-                st.scale_estimated = bool(np.sqrt(np.diag(sol.cov)[3:12]).max() <= SCALE_STD_LIMIT)
+                st.scale_estimated = bool(np.sqrt(np.clip(np.diag(sol.cov)[3:12], 0.0, None)).max() <= SCALE_STD_LIMIT)
                 if not st.scale_estimated:
                     sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R, scale_prior=stats.SCALE_FIXED) or sol
             st.sigmas[link] = sig if st.decided else self._class_sigmas(st, k, sol, common)
