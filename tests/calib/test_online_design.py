@@ -141,3 +141,16 @@ def test_d_optimal_gain_matches_brute_force_log_det():
 def test_d_optimal_gain_refuses_a_singular_information():
     with pytest.raises(ConfigError, match="positive definite"):
         d_optimal_gain(np.zeros((6, 6)), np.eye(6))
+
+
+def test_realized_gain_is_the_log_det_change_of_units_on_the_same_link():
+    from skincal.calib.online.design import realized_gain
+
+    rng = np.random.default_rng(11)
+    A, B = rng.normal(size=(6, 8)), rng.normal(size=(6, 3))
+    before = {"a": (3, A @ A.T), "b": (2, np.eye(6)), "c": (4, np.eye(6))}
+    after = {"a": (3, A @ A.T + B @ B.T), "b": (5, 4 * np.eye(6))}  # b changed its link, c is gone
+    prior = DesignOptions().prior
+    brute = np.log(np.linalg.det(A @ A.T + B @ B.T + prior)) - np.log(np.linalg.det(A @ A.T + prior))
+    weights = {"a": 0.5, "b": 1.0, "c": 1.0}
+    assert realized_gain(before, after, weights) == pytest.approx(0.5 * brute, rel=1e-9)

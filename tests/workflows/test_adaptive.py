@@ -28,7 +28,7 @@ TARGET = Target(3e-4, 0.05)
 @pytest.fixture(scope="module")
 def loop_run():
     records = []
-    run = run_simulated("panda", "paper", None, "realistic", seed=0, max_motion_s=120.0, on_segment=records.append)
+    run = run_simulated("sawyer", "paper", None, "realistic", seed=0, max_motion_s=120.0, on_segment=records.append)
     return run, records
 
 
@@ -58,7 +58,7 @@ def test_every_chosen_segment_stays_within_the_limits(loop_run):
     run, records = loop_run
     from skincal.kinematics import get_robot
 
-    chain = get_robot("panda")
+    chain = get_robot("sawyer")
     config = segment_config(chain)
     for r in records:
         traj = r.candidate.trajectory

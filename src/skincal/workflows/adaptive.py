@@ -29,7 +29,16 @@ from typing import Any
 import numpy as np
 
 from skincal.calib.online import OnlineCalibrator, UnitStatus
-from skincal.calib.online.design import Candidate, DesignOptions, next_motion, segment_config
+from skincal.calib.online.design import (
+    Candidate,
+    DesignOptions,
+    calibrator_target,
+    information_now,
+    next_motion,
+    realized_gain,
+    segment_config,
+    unit_weights,
+)
 from skincal.data.dataset import Dataset
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
@@ -118,9 +127,13 @@ def adaptive_loop(
     moved: set[int] = set()
     out = LoopOutcome()
     judge = settled(calibrator)
+    discount: dict[int, float] = {}
     while not all_reached(judge.status()) and out.motion_s < max_motion_s:
         cand = next_motion(judge, chain, q_now, rng, config=config, visited=np.array(visited), moved=moved,
-                           options=options)  # fmt: skip
+                           options=options, discount=discount)  # fmt: skip
+        weights = unit_weights(judge.status(), options.reached_weight,
+                               calibrator_target(judge) if options.by_distance else None)  # fmt: skip
+        before = information_now(judge)
         execute(cand.trajectory)
         t0 = out.motion_s
         out.motion_s += cand.trajectory.duration
@@ -129,8 +142,12 @@ def adaptive_loop(
         if cand.moves:
             moved.update(int(j) for j in np.flatnonzero(np.abs(q_end - q_now) > 1e-3))
             visited.append(q_end)
+            discount = {}
         q_now = q_end
         judge = settled(calibrator)
+        if not cand.moves and cand.gain > 0:  # what exciting this joint here again is worth
+            ratio = realized_gain(before, information_now(judge), weights, options) / cand.gain
+            discount[cand.joint] = float(np.clip(ratio, 0.05, 1.0))
         record = SegmentRecord(len(out.segments) + 1, cand, t0, out.motion_s, judge.status())
         if record_hook is not None:
             record = record_hook(record)

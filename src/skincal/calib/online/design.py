@@ -66,6 +66,7 @@ class DesignOptions:
         imu_rate_hz: the units' sample rate: the information of the motion sampled every ``dt`` is scaled
             by ``dt * imu_rate_hz`` (information grows with the number of samples).
         reached_weight: weight of a unit whose std already reached the target (others weigh 1).
+        by_distance: a unit not at the target weighs by how far it is from it (:func:`unit_weights`).
         prior_rotation_rad, prior_position_m: std of the weak prior regularising the log det.
     """
 
@@ -75,6 +76,7 @@ class DesignOptions:
     dt: float = 0.02
     imu_rate_hz: float = 100.0
     reached_weight: float = 0.1
+    by_distance: bool = True
     prior_rotation_rad: float = 1.0
     prior_position_m: float = 0.1
 
@@ -230,14 +232,39 @@ def candidate_poses(
     return pool[chosen]
 
 
-def unit_weights(status: Mapping[str, object], reached_weight: float) -> dict[str, float]:
-    """Per scorable unit (a link and an estimate), its weight: 1, or ``reached_weight`` once at target."""
+def unit_weights(
+    status: Mapping[str, object], reached_weight: float, target: tuple[float, float] | None = None
+) -> dict[str, float]:
+    """Per scorable unit (a link and an estimate), its weight: ``reached_weight`` once at target, else 1,
+    or with ``target`` (position m, rotation deg) how far it is from it: ``log`` of its largest std over
+    the target (position or rotation axis), within ``[FAR_WEIGHT_MIN, FAR_WEIGHT_MAX]`` (an undetermined
+    axis counts as the maximum), so that the motion goes where the remaining std is."""
     out: dict[str, float] = {}
     for name, st in status.items():
         if getattr(st, "link", None) is None or getattr(st, "pose", None) is None:
             continue
-        out[name] = reached_weight if getattr(st, "reached", False) else 1.0
+        if getattr(st, "reached", False):
+            out[name] = reached_weight
+        elif target is None:
+            out[name] = 1.0
+        else:
+            pos = float(np.max(getattr(st, "position_std_m", np.inf))) / target[0]
+            rot = float(np.max(getattr(st, "rotation_std_deg", np.inf))) / target[1]
+            far = np.log(max(pos, rot)) if np.isfinite(max(pos, rot)) else FAR_WEIGHT_MAX
+            out[name] = float(np.clip(far, FAR_WEIGHT_MIN, FAR_WEIGHT_MAX))
     return out
+
+
+FAR_WEIGHT_MIN = 0.25
+FAR_WEIGHT_MAX = 3.0
+"""Bounds of a unit's weight by its distance from the target (:func:`unit_weights`)."""
+
+
+def calibrator_target(calibrator: Informed) -> tuple[float, float] | None:
+    """The calibrator's target (position m, rotation deg) when it tells it (its ``options``)."""
+    options = getattr(calibrator, "options", None)
+    p, r = getattr(options, "target_position_m", None), getattr(options, "target_rotation_deg", None)
+    return (float(p), float(r)) if isinstance(p, (int, float)) and isinstance(r, (int, float)) else None
 
 
 def motion_gain(
@@ -287,6 +314,28 @@ def inflations(calibrator: Informed) -> dict[str, float]:
     return out
 
 
+def information_now(calibrator: Informed) -> dict[str, tuple[int | None, FloatArray]]:
+    """Every scorable unit's ``(link, information)`` now (:func:`psd`)."""
+    return {u: _information(calibrator, u) for u in unit_weights(calibrator.status(), 1.0)}
+
+
+def realized_gain(
+    before: Mapping[str, tuple[int | None, FloatArray]],
+    after: Mapping[str, tuple[int | None, FloatArray]],
+    weights: Mapping[str, float],
+    options: DesignOptions = DesignOptions(),
+) -> float:
+    """The weighted D-optimal gain the data actually gave between two :func:`information_now` (units
+    scorable in both, on the same link; the prior of the prediction)."""
+    gain = 0.0
+    for unit, w in weights.items():
+        if unit not in before or unit not in after or before[unit][0] != after[unit][0]:
+            continue
+        a, b = before[unit][1] + options.prior, after[unit][1] + options.prior
+        gain += w * float(np.linalg.slogdet(b)[1] - np.linalg.slogdet(a)[1])
+    return gain
+
+
 def _information(calibrator: Informed, unit: str) -> tuple[int | None, FloatArray]:
     """The unit's link and current information (:func:`psd`); ``(None, 0)`` when its estimate is degenerate."""
     try:
@@ -306,13 +355,17 @@ def score_candidates(
     joints: Sequence[int] | None = None,
     *,
     here: bool = True,
+    discount: Mapping[int, float] | None = None,
 ) -> list[Candidate]:
     """Every feasible candidate (here unless not ``here``, and at each of ``poses`` ``(K, n)``; ``joints``:
     only these) scored, best first. Candidates are built without the collision check (:func:`next_motion`
-    checks the chosen)."""
+    checks the chosen). ``discount``: per joint, a factor on the score of exciting it again here (see
+    :func:`next_motion`)."""
     q_now = np.asarray(q_now, dtype=float)
     status = calibrator.status()
-    weights = unit_weights(status, options.reached_weight)
+    weights = unit_weights(
+        status, options.reached_weight, calibrator_target(calibrator) if options.by_distance else None
+    )
     current = {u: _information(calibrator, u) for u in weights}
     factors = inflations(calibrator) if weights else {}
     sites = [q_now, *np.atleast_2d(poses)] if len(poses) else [q_now]
@@ -328,7 +381,8 @@ def score_candidates(
             except ProtocolError:
                 continue
             gain = motion_gain(calibrator, traj, weights, options, current, factors) if weights else 0.0
-            out.append(Candidate(pose, j, k > 0, traj.duration, gain, gain / traj.duration, traj))
+            score = gain / traj.duration * ((discount or {}).get(j, 1.0) if k == 0 else 1.0)
+            out.append(Candidate(pose, j, k > 0, traj.duration, gain, score, traj))
     out.sort(key=lambda c: (-c.score, c.duration))  # equal scores (nothing to gain yet): the shortest first
     return out
 
@@ -343,6 +397,7 @@ def next_motion(
     visited: FloatArray | None = None,
     moved: Sequence[int] = (),
     options: DesignOptions = DesignOptions(),
+    discount: Mapping[int, float] | None = None,
 ) -> Candidate:
     """The best next segment from ``q_now`` (module docstring), checked (limits, collision).
 
@@ -355,6 +410,10 @@ def next_motion(
         visited: ``(V, n)`` rest poses visited so far (gravity diversity; default ``q_now`` only).
         moved: 0-based joints that have moved so far (excited, or in a move between poses).
         options: :class:`DesignOptions`.
+        discount: per joint, the factor on the score of exciting it again at the current pose: what the
+            last such excitation realised over what was predicted (:func:`realized_gain`), so that a
+            motion whose information the calibrator does not turn into a smaller std is not repeated
+            forever (the loop resets it after a move).
 
     Finding the units first: a unit is *unfound* while it has no link or estimate, its link is
     undecided, or it sits on link ``k < n`` while joint ``k + 1`` never moved (then every link from
@@ -378,7 +437,8 @@ def next_motion(
         here = len(moved_set) == chain.n_joints or poses.shape[0] == 0
     tries = [(joints, here)] + ([(None, True)] if joints is not None else [])
     for only, at_hand in tries:  # what finds the units; else (it cannot run from here) anything
-        for cand in score_candidates(calibrator, chain, config, q_now, poses, options, only, here=at_hand):
+        for cand in score_candidates(calibrator, chain, config, q_now, poses, options, only, here=at_hand,
+                                     discount=discount):  # fmt: skip
             try:
                 traj = build_segment(chain, config, q_now, cand.pose, cand.joint, check=True)
             except ProtocolError:
