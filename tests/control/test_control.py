@@ -170,3 +170,99 @@ def test_velocity_aware_row_bounds_the_closing_speed_finite_differences():
     robot_rate = (sampled_distance(body, Q0 + h * res.qd, p_obs) - d0) / h
     assert robot_rate > 0.5 - b - 2e-3  # the robot itself retreats
     assert (sampled_distance(body, Q0 + h * still.qd, p_obs) - d0) / h < 0  # a still point lets it approach
+
+
+def _max_retreat_rate(g: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> float:
+    """The fastest a row ``g qd`` can go negative inside the box ``lb <= qd <= ub``: ``-min g qd``, m/s."""
+    return float(-np.sum(np.minimum(g * lb, g * ub)))
+
+
+def test_still_point_inside_the_margin_the_arm_retreats_at_the_limits_pace():
+    """Issue 17: a point inside the critical distance that the arm cannot leave as fast as the ramp asks
+    (joint speeds scaled to 30 %): the command backs away at the joint limits' pace (0.31 m/s), not as little
+    as it can (the former stop: 0.065 m/s)."""
+    chain = panda()
+    cfg = ControllerConfig(velocity_scale=0.3)
+    ctl = AvoidanceController(chain, cfg)
+    _, _, p_obs, x = _toward_obstacle_problem(0.05)
+    prob = ctl.problem(Q0, x, np.zeros(3), p_obs[None])
+    res = ctl.step(Q0, x, np.zeros(3), p_obs[None])
+    assert not res.feasible and res.violation > 0
+    fastest = _max_retreat_rate(prob.G[0], prob.lb, prob.ub)
+    assert -prob.h[0] > fastest  # (infeasible: the ramp asks for more than the limits give)
+    body = RobotBody.of(chain).inflated(cfg.padding)
+    h = 1e-5
+    rate = (sampled_distance(body, Q0 + h * res.qd, p_obs) - sampled_distance(body, Q0, p_obs)) / h
+    assert rate == pytest.approx(fastest, rel=1e-3)  # the gap opens as fast as the limits allow
+    assert res.violation == pytest.approx(-prob.h[0] - fastest, rel=1e-4)
+    assert np.all(res.qd >= prob.lb - 1e-9) and np.all(res.qd <= prob.ub + 1e-9)
+
+
+def test_pinch_escapes_along_the_free_direction():
+    """Two points either side of the forearm (+-y), both a little above it: no command keeps both rows, and
+    the arm moves down, out from between them: both gaps open (the former stop stood almost still)."""
+    chain, ctl, p_obs, x = _toward_obstacle_problem(0.03)
+    a, b = ctl.body.segments(chain.link_frames(Q0))
+    k = int(np.argmax(np.where(ctl.body.link == 4, np.linalg.norm(b[0] - a[0], axis=1), 0.0)))
+    mid = 0.5 * (a[0, k] + b[0, k])
+    r = ctl.body.radius[0] + 0.03
+    tilt = np.radians(15.0)
+    pts = np.array([mid + r * np.array([0.0, s * np.cos(tilt), np.sin(tilt)]) for s in (1.0, -1.0)])
+    res = ctl.step(Q0, x, np.zeros(3), pts)
+    assert not res.feasible
+    prob = ctl.problem(Q0, x, np.zeros(3), pts)
+    assert res.violation < np.max(-prob.h) - 0.05  # clearly less than standing still
+    body = RobotBody.of(chain).inflated(CFG.padding)
+    h = 1e-5
+    for p in pts:
+        rate = (sampled_distance(body, Q0 + h * res.qd, p) - sampled_distance(body, Q0, p)) / h
+        assert rate > 0.05  # both gaps open
+    assert np.linalg.norm(res.qd) > 0.5
+
+
+def test_exact_pinch_stands_still_because_every_motion_violates_more(rng):
+    """Exactly opposite points: any motion along the normal opens one gap and closes the other; the least
+    squared violation is to stand still in that direction (and nowhere else to go: the stillest command),
+    and no command in the box does better (random samples)."""
+    chain, ctl, p_obs, x = _toward_obstacle_problem(0.03)
+    mirror = p_obs - 2 * np.array([0.0, 1.0, 0.0]) * (ctl.body.radius[0] + 0.03)
+    pts = np.array([p_obs, mirror])
+    prob = ctl.problem(Q0, x, np.zeros(3), pts)
+    res = ctl.step(Q0, x, np.zeros(3), pts)
+    assert not res.feasible
+    np.testing.assert_allclose(prob.G @ res.qd, 0.0, atol=1e-6)
+    np.testing.assert_allclose(res.qd, 0.0, atol=1e-5)
+
+    def cost(qd):
+        return float(np.sum(np.maximum(prob.G @ qd - prob.h, 0.0) ** 2))
+
+    samples = rng.uniform(prob.lb, prob.ub, size=(2000, prob.lb.size))
+    assert cost(res.qd) <= min(cost(s) for s in samples) + 1e-9
+
+
+def test_least_violation_beats_every_sampled_command(rng):
+    """Random infeasible problems (1-6 still points inside the margin around the arm): the retreat's squared
+    violation is at most that of standing still and of any of 500 random commands within the limits."""
+    chain = panda()
+    ctl = AvoidanceController(chain, CFG)
+    x = chain.flange_pose(Q0)[0, :3, 3]
+    a, b = ctl.body.segments(chain.link_frames(Q0))
+    checked = 0
+    for _ in range(40):
+        k = rng.integers(2, a.shape[1])
+        c = a[0, k] + rng.uniform() * (b[0, k] - a[0, k])
+        pts = c + rng.normal(size=(rng.integers(1, 7), 3)) * 0.12
+        prob = ctl.problem(Q0, x, np.zeros(3), pts)
+        res = ctl.step(Q0, x, np.zeros(3), pts)
+        if res.feasible:
+            continue
+        checked += 1
+
+        def cost(qd, prob=prob):
+            return float(np.sum(np.maximum(prob.G @ qd - prob.h, 0.0) ** 2))
+
+        samples = rng.uniform(prob.lb, prob.ub, size=(500, prob.lb.size))
+        best = min(cost(np.zeros_like(res.qd)), min(cost(s) for s in samples))
+        assert cost(res.qd) <= best * (1 + 1e-6) + 1e-9
+        assert np.all(res.qd >= prob.lb - 1e-9) and np.all(res.qd <= prob.ub + 1e-9)
+    assert checked >= 10

@@ -13,11 +13,22 @@ and an optional weak posture velocity ``qd_post = K_post (q_post - q)`` inside t
 (``K_post = 0`` gives exactly the paper's objective). Solved with :func:`qpsolvers.solve_qp`
 (DAQP by default).
 
-Infeasible QP (e.g. obstacles closer than the critical distance on opposite sides of a link): the
-controller never relaxes the obstacle rows silently. It solves the *least-violating safe stop*
-``min 1/2 (eps |qd|^2 + |s|^2)  s.t.  G qd - s <= h, s >= 0, lb <= qd <= ub`` (as still as possible
-while violating the rows by the least total amount) and flags the step ``feasible = False`` with
-the violation ``max s`` (m/s).
+Infeasible QP (a person inside the critical distance or ``S_p`` coming faster than the arm can back away,
+or obstacles on opposite sides of a link): the controller never relaxes the obstacle rows silently. It
+commands the *least-violating retreat*, lexicographically: first the smallest violation of the rows, then,
+among the commands that reach it, the stillest,
+
+    min 1/2 (eps |qd|^2 + |s|^2)  s.t.  G qd - s <= h, s >= 0, lb <= qd <= ub,   eps = 1e-6
+
+(``eps`` only breaks ties: with it tiny the squared violation is the least possible up to ``O(eps)``), and
+flags the step ``feasible = False`` with the violation ``max s`` (m/s). A row that asks to back away faster
+than the joint limits allow is thus driven at the limits' pace away from its point (a still point inside
+the margin: the arm retreats as fast as it can, not as little as it can); two points pinching a link make
+the arm escape along any direction that opens both gaps (their normals not exactly opposite); the arm
+stands still only where every motion violates more (exactly opposite points, a point by the base it has
+no lever on). The former stop (``eps = 1``: as still as possible, the violation traded against motion 1:1)
+held the arm where a person arrived (issue 17: ``elbow``, ``lower``, ``pinch``). A feasible QP is solved as
+before, bit for bit.
 
 Protective separation (``ControllerConfig.separation`` set, ISO/TS 15066 speed and separation
 monitoring, :mod:`skincal.control.separation`): the critical distance of each obstacle row is the point's
@@ -77,7 +88,8 @@ from skincal.kinematics.transforms import FloatArray
 from skincal.perception.body import RobotBody
 from skincal.perception.points import ObstaclePoints
 
-_STOP_EPS = 1.0
+_STOP_EPS = 1e-6
+"""Weight of stillness against the squared row violation in the least-violating retreat (module docstring)."""
 _FEAS_TOL = 1e-6
 
 
@@ -143,7 +155,7 @@ class StepResult:
 
     Attributes:
         qd: ``(n,)`` commanded joint velocities, rad/s.
-        feasible: False when the QP had no solution and the least-violating stop was commanded.
+        feasible: False when the QP had no solution and the least-violating retreat was commanded.
         violation: largest obstacle-row violation of ``qd``, m/s (0 when feasible).
         solve_time_s: time inside the QP solver call(s), s.
         n_obstacles: number of obstacle rows.
@@ -301,7 +313,7 @@ class AvoidanceController:
         return QpProblem(P, c, G, h, lb, ub, x, dist, crit, terms, sep_in)
 
     def solve(self, prob: QpProblem) -> tuple[FloatArray, bool, float, float]:
-        """``(qd, feasible, violation, solve_time_s)`` of a problem, with the safe stop when infeasible."""
+        """``(qd, feasible, violation, solve_time_s)`` of a problem; the least-violating retreat when infeasible."""
         import qpsolvers
 
         G = prob.G if prob.G.shape[0] else None
