@@ -135,18 +135,10 @@ def torque_model(
 
 def _joint_configurations(chain: SerialChain, count: int, seed: int) -> FloatArray:
     """``count`` configurations uniform within the joint ranges (+-pi for a continuous joint)."""
-    n = chain.n_joints
-    lo = (
-        np.full(n, -np.pi)
-        if chain.joint_lower is None
-        else np.where(np.isfinite(chain.joint_lower), chain.joint_lower, -np.pi)
-    )
-    hi = (
-        np.full(n, np.pi)
-        if chain.joint_upper is None
-        else np.where(np.isfinite(chain.joint_upper), chain.joint_upper, np.pi)
-    )
-    return np.random.default_rng(seed).uniform(lo, hi, size=(count, n))
+    from skincal.protocol.limits import position_bounds
+
+    lo, hi = position_bounds(chain)
+    return np.random.default_rng(seed).uniform(lo, hi, size=(count, chain.n_joints))
 
 
 def feasible_acceleration(

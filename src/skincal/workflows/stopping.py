@@ -131,17 +131,10 @@ WORST_PER_SPEED = 2
 def default_configurations(chain: SerialChain, count: int = DEFAULT_CONFIGURATIONS, seed: int = 0) -> FloatArray:
     """``count`` configurations ``(count, n)`` uniform in the central 60 % of the joint ranges (+-pi for
     a continuous joint), so a stop from full speed stays clear of the limits."""
+    from skincal.protocol.limits import position_bounds
+
     n = chain.n_joints
-    lo = (
-        np.full(n, -np.pi)
-        if chain.joint_lower is None
-        else np.where(np.isfinite(chain.joint_lower), chain.joint_lower, -np.pi)
-    )
-    hi = (
-        np.full(n, np.pi)
-        if chain.joint_upper is None
-        else np.where(np.isfinite(chain.joint_upper), chain.joint_upper, np.pi)
-    )
+    lo, hi = position_bounds(chain)
     mid, half = (lo + hi) / 2, 0.3 * (hi - lo)
     return np.random.default_rng(seed).uniform(mid - half, mid + half, size=(count, n))
 
