@@ -326,3 +326,34 @@ def test_step_benchmark_runs_feasible_problems_with_covariances():
     for mode in ("fixed", "separation"):
         assert res[mode]["rows"] > 20 and res[mode]["feasible_fraction"] == 1.0
     assert "separation / fixed" in format_qp_benchmark(res)
+
+
+def test_separation_speed_keeps_a_tracking_transient_out_of_the_margin():
+    """Torque mode: S_p takes the command the robot tracks, the measured speed counted up to the tracking
+    tolerance from it. Tracking (within tolerance): the measured speed itself. A 1.2 m/s transient toward the
+    point while the arm is commanded away: the margin stays that of the command plus the tolerance (the raw
+    measured speed, as the loop passed it before, makes it jump by about half a metre)."""
+    from skincal.control.separation import TRACKING_TOLERANCE_RADPS, separation_speed
+
+    cmd = np.array([0.5, -0.2, 0.0, 1.0, 0.0, 0.0, -0.3])
+    near = cmd + np.array([0.05, -0.08, 0.0, 0.02, -0.1, 0.0, 0.09])
+    np.testing.assert_array_equal(separation_speed(near, cmd), near)
+    far = cmd + np.array([2.0, -3.0, 0.0, 0.0, 0.0, 0.5, 0.0])
+    tol = TRACKING_TOLERANCE_RADPS
+    np.testing.assert_allclose(separation_speed(far, cmd), cmd + [tol, -tol, 0, 0, 0, tol, 0], atol=1e-15)
+    np.testing.assert_array_equal(far, cmd + np.array([2.0, -3.0, 0.0, 0.0, 0.0, 0.5, 0.0]))  # inputs untouched
+
+    chain = panda()
+    ctl = AvoidanceController(chain, ControllerConfig(separation=PARAMS))
+    p = forearm_point(ctl, 0.6)
+    x = chain.flange_pose(Q0)[0, :3, 3]
+    g = ctl.problem(Q0, x, np.zeros(3), p[None], qd_now=np.zeros(7)).G[0]
+    u = g / np.dot(g, g)
+    away = -0.2 * u  # commanded: away from the point at 0.2 m/s
+    measured = 1.2 * u  # the arm still moving toward it at 1.2 m/s (a transient)
+    raw = ctl.step(Q0, x, np.zeros(3), p[None], qd_now=measured)
+    cut = ctl.step(Q0, x, np.zeros(3), p[None], qd_now=separation_speed(measured, away))
+    v_cut = float(g @ separation_speed(measured, away))
+    assert v_cut <= float(g @ away) + np.abs(g).sum() * tol + 1e-12
+    assert cut.margin == pytest.approx(float(protective_separation(PARAMS, [v_cut], [0.0], [0.0]).total[0]))
+    assert raw.margin > cut.margin + 0.4

@@ -17,7 +17,10 @@ Per step ``k`` (``t = k dt``, ``dt = 1 ms``):
 4. ``mode="kinematic"`` (default): the robot integrates the commanded velocity, ``q <- q + qd dt`` (an
    ideal velocity interface, as a Panda under joint-velocity control at 1 kHz); ``mode="torque"``: the
    command is tracked with joint torques by :class:`skincal.sim.dynamics.TorqueRobot` in the same MuJoCo
-   model (gravity and inertia from the model, torques clipped at the effort limits).
+   model (gravity and inertia from the model, torques clipped at the effort limits); the robot speed in
+   ``S_p`` is then the previous command, moved toward the measured joint velocity by at most a tracking
+   tolerance (:func:`skincal.control.separation.separation_speed`: a tracking transient does not make
+   ``S_p`` jump).
 
 **Retreat and resume** (``resume=True``): the reference runs on a task clock ``tau`` instead of ``t``.
 While the nearest perceived point is within the protective separation ``S_p`` of the step plus
@@ -38,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from skincal.control.qp import AvoidanceController, ControllerConfig
+from skincal.control.separation import separation_speed
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.geometry import DEFAULT_LINK_RADIUS
@@ -167,7 +171,7 @@ def run_scenario(
     t = dt * np.arange(S)
     n = chain.n_joints
     q = scenario.q0.astype(float).copy()
-    robot, qd = None, np.zeros(n)
+    robot, qd, qd_cmd = None, np.zeros(n), np.zeros(n)
     if mode == "torque":
         from skincal.sim.dynamics import TorqueConfig, TorqueRobot
 
@@ -230,7 +234,11 @@ def run_scenario(
             task_time[k] = t[k] - lag
             xk, vk = task.at(task_time[k])
             x_des[k], xd_des[k] = xk[0], rate * vk[0]
-        res = ctl.step(q, x_des[k], xd_des[k], pts) if robot is None else ctl.step(q, x_des[k], xd_des[k], pts, qd)
+        if robot is None:
+            res = ctl.step(q, x_des[k], xd_des[k], pts)
+        else:  # S_p from the command tracked, the measured speed counted up to a tracking tolerance from it
+            res = ctl.step(q, x_des[k], xd_des[k], pts, separation_speed(qd, qd_cmd))
+            qd_cmd = res.qd
         step_t[k] = time.perf_counter() - t1
         log_q[k], log_qd[k], log_x[k] = q, res.qd, res.x
         feasible[k], violation[k], n_obs[k] = res.feasible, res.violation, res.n_obstacles
