@@ -260,12 +260,15 @@ class AvoidanceController:
         xd_des: ArrayLike,
         points: ArrayLike | ObstaclePoints,
         qd_now: ArrayLike | None = None,
+        *,
+        _terms: bool = True,
     ) -> QpProblem:
         """Assemble the QP at joint angles ``q`` ``(n,)`` for reference ``x_des``, ``xd_des`` ``(3,)`` (m, m/s)
         and obstacle points: :class:`ObstaclePoints` (velocities, cone spread and covariances used) or
         still points ``(K, 3)`` exactly where given (base frame, m). ``qd_now`` ``(n,)``: the robot's
         measured joint velocity, rad/s, a floor for the speed in ``S_p`` (with ``separation``; default None:
-        the robot moves as commanded, an ideal velocity interface)."""
+        the robot moves as commanded, an ideal velocity interface). (``_terms=False``: with ``separation``,
+        ``critical`` and ``terms`` are left None; :meth:`step` computes them at the command's speed.)"""
         cfg = self.config
         q = np.asarray(q, dtype=float).reshape(-1)
         n = self.chain.n_joints
@@ -298,8 +301,11 @@ class AvoidanceController:
                 sep_in = SeparationInputs(
                     G_all, v_now, -v_obs, cfg.separation.sigma_level * np.sqrt(np.maximum(var, 0.0))
                 )
-                terms = protective_separation(cfg.separation, sep_in.v_now, sep_in.v_h, sep_in.z_d)
-                crit = terms.total
+                if _terms:
+                    terms = protective_separation(cfg.separation, sep_in.v_now, sep_in.v_h, sep_in.z_d)
+                    crit = terms.total
+                else:
+                    terms, crit = None, None
                 dist = prox.distance
                 assert self._speeds is not None
                 v_allowed = self._speeds(dist, sep_in.v_now if moving else None, sep_in.v_h, sep_in.z_d)
@@ -353,7 +359,7 @@ class AvoidanceController:
         qd_now: ArrayLike | None = None,
     ) -> StepResult:
         """Joint velocities for this step (see :meth:`problem`)."""
-        prob = self.problem(q, x_des, xd_des, points, qd_now)
+        prob = self.problem(q, x_des, xd_des, points, qd_now, _terms=False)
         qd, feasible, violation, elapsed = self.solve(prob)
         d_min = float(prob.distance.min()) if prob.distance.size else float("inf")
         margin, clearance = float("nan"), float("inf")
