@@ -108,6 +108,11 @@ def calibrate(
         None, "--robot", help="--follow of a ROS bag: robot preset, .urdf or chain file (default: the bag's "
         "/robot_description, else panda)"
     ),
+    watch: bool = typer.Option(
+        False, "--watch", help="--follow: keep following to the data's end and watch every calibrated unit: one "
+        "that moved on its link is flagged, re-calibrated from the data after the change and recorded in the "
+        "result's events"
+    ),
 ) -> None:
     """Calibrate the skin units of a dataset (or of many: a fleet) and write the result JSON."""
     from rich.progress import Progress
@@ -125,9 +130,9 @@ def calibrate(
         if method != "mle" or option or links is not None or use_truth_links or use_dataset_qdd:
             raise ConfigError("--follow uses the online calibrator: --method, --option, --links, --use-truth-links "
                               "and --use-dataset-qdd do not apply")  # fmt: skip
-        _calibrate_follow(datasets[0], out, speed, target, robot, unit, force)
+        _calibrate_follow(datasets[0], out, speed, target, robot, unit, force, watch)
         return
-    for given, name in ((speed, "--speed"), (target, "--target"), (robot, "--robot")):
+    for given, name in ((speed, "--speed"), (target, "--target"), (robot, "--robot"), (watch or None, "--watch")):
         if given is not None:
             raise ConfigError(f"{name} applies to --follow only")
     if reference is not None:
@@ -163,7 +168,7 @@ def calibrate(
 
 def _calibrate_follow(
     source: Path, out: Path, speed: float | None, target_text: str | None, robot: str | None,
-    unit: list[str] | None, force: bool,
+    unit: list[str] | None, force: bool, watch: bool = False,
 ) -> None:  # fmt: skip
     """``--follow``: replay ``source`` (a dataset or a ROS bag) into the online calibrator at ``speed``
     with the live meter (a rich table on a terminal, a line per second otherwise), stop at the target
@@ -208,14 +213,23 @@ def _calibrate_follow(
     if live is not None:
         live.start()
     try:
+        def moved(event: dict) -> None:
+            console.print(f"[yellow]moved[/]: unit {shown(str(event.get('unit')))} changed at "
+                          f"{float(event.get('t_change_s', math.nan)):.1f} s (flagged at "
+                          f"{float(event.get('t_detected_s', math.nan)):.1f} s); re-calibrating it from the data "
+                          "after the change", highlight=False)  # fmt: skip
+
         outcome = follow_dataset(ds, target, speed=None if speed == 0 else speed, units=list(unit) if unit else None,
-                                 on_meter=show, dataset_sha256=digest)  # fmt: skip
+                                 on_meter=show, dataset_sha256=digest, watch=watch, on_event=moved)  # fmt: skip
         show(outcome.statuses, outcome.t_data, outcome.t_end, force_draw=True)
     finally:
         if live is not None:
             live.stop()
     write_result(outcome.result, out)
-    if outcome.reached:
+    if watch:
+        events = outcome.result.extras.get("events", [])
+        console.print(f"watched to the data's end: {len(events)} unit move(s) recorded in the result", highlight=False)
+    elif outcome.reached:
         console.print(f"target {target.text()} reached by every unit after {outcome.t_data:.1f} s of data "
                       f"(of {outcome.t_end:.1f} s)", highlight=False)  # fmt: skip
     else:

@@ -192,10 +192,15 @@ def follow_dataset(
     stop_at_target: bool = True,
     dataset_sha256: str = "",
     status_every_s: float = STATUS_EVERY_S,
+    watch: bool = False,
+    on_event: Callable[[dict], None] | None = None,
 ) -> LiveOutcome:
     """Replay ``ds`` into a streaming calibrator (at ``speed`` data seconds per wall second, ``None``: as
     fast as possible) until every unit reaches ``target`` (``stop_at_target``) or the data end;
-    ``on_meter`` and the stop test every ``status_every_s`` of data. Ctrl-C propagates (nothing is
+    ``on_meter`` and the stop test every ``status_every_s`` of data. ``watch``: a moved-unit monitor
+    (:class:`skincal.calib.online.monitor.MovedUnitMonitor`) watches every settled unit to the data's
+    end (no stop at the target); a unit that moved is re-calibrated from the data after the change,
+    the event goes to the result's ``events`` and to ``on_event``. Ctrl-C propagates (nothing is
     written here)."""
     from skincal.calib.online import replay
 
@@ -217,6 +222,13 @@ def follow_dataset(
     )
     t0, t1 = data_span(follow)
     cal = make_calibrator(chain, names, ds.gravity, target)
+    if watch:
+        from skincal.calib.online.monitor import MovedUnitMonitor
+
+        monitor = MovedUnitMonitor().attach(cal)
+        if on_event is not None:
+            monitor.on_alarm = lambda _alarm: on_event(dict(cal.events[-1])) if cal.events else None
+        stop_at_target = False
     state = {"t": t0, "reached": False, "asked": -math.inf}
 
     def on_chunk(t: float) -> bool:

@@ -29,7 +29,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -40,7 +40,7 @@ from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.timing import coarse_time_offset, motion_profile
 from skincal.data.dataset import Dataset, JointStates
 from skincal.data.imu_calibration import ImuCalibration
-from skincal.data.result import CalibrationResult, UnitResult
+from skincal.data.result import EVENTS, MOVED_AT, CalibrationResult, UnitResult
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray, skew
@@ -1000,9 +1000,25 @@ class OnlineCalibrator:
         if failed:
             top["failed_units"] = failed
         if self.events:
-            top["events"] = list(self.events)
+            top[EVENTS] = self._events_now(units)
+            for name in {e["unit"] for e in self.events} & set(units):
+                moved = [float(e["t_change_s"]) for e in self.events if e["unit"] == name]
+                units[name] = replace(units[name], extras={**units[name].extras, MOVED_AT: moved})
         return CalibrationResult("online", self.chain.name, dataset_sha256, time.perf_counter() - self._t_start,
                                  units, top)  # fmt: skip
+
+    def _events_now(self, units: Mapping[str, UnitResult]) -> list[dict]:
+        """The recorded events, each unit's last one completed with the pose re-calibrated since
+        (``T_link_su_after``, and ``t_recalibrated_s``: the end of the data it is estimated from) when
+        that unit has a determined pose now."""
+        out = [dict(e) for e in self.events]
+        for i, e in enumerate(out):
+            name = e["unit"]
+            later = any(f["unit"] == name for f in out[i + 1 :])
+            if name in units and not later:
+                e["T_link_su_after"] = np.asarray(units[name].pose.T_link_su, dtype=float).tolist()
+                e["t_recalibrated_s"] = float(self._u[name].t_last)
+        return out
 
 
 SETTLED_POSITION_M = 1e-3
