@@ -255,13 +255,13 @@ def _robot_trajectory_for(chain, protocol):
 def test_diverse_poses_spread_gravity_more_than_uniform():
     """The diverse selection: gravity directions in the link frames are farther apart (smallest
     pairwise distance over the poses) than with a uniform draw of as many poses."""
-    from skincal.protocol.limits import _gravity_features, sample_static_poses
+    from skincal.protocol.limits import gravity_features, sample_static_poses
 
     chain = get_robot("panda")
     config = replace(fit_to_limits(chain, get_protocol("fast")), pose_selection="diverse", collision_check=True)
 
     def spread(poses):
-        f = _gravity_features(chain, poses)
+        f = gravity_features(chain, poses)
         d = np.linalg.norm(f[:, None] - f[None], axis=-1)
         return d[np.triu_indices(len(f), 1)].min()
 

@@ -244,7 +244,7 @@ class _PoseChecker:
         return bool(self.model.free(quintic_move_samples(q_from, q_to, T, self.step)).all())
 
 
-def _gravity_features(chain: SerialChain, poses: FloatArray) -> FloatArray:
+def gravity_features(chain: SerialChain, poses: FloatArray) -> FloatArray:
     """Gravity direction in every link frame 1..n, flattened ``(K, 3 n)``."""
     R = chain.link_frames(poses)[:, 1:, :3, :3]
     return np.einsum("kiab,a->kib", R, np.array([0.0, 0.0, -1.0])).reshape(poses.shape[0], -1)
@@ -319,7 +319,7 @@ def _diverse_poses(
         raise _no_pose(chain, config, 0)
     chosen = [0]
     while len(chosen) < P:
-        feat = _gravity_features(chain, pool)
+        feat = gravity_features(chain, pool)
         dist = np.min(np.sum((feat[:, None, :] - feat[chosen][None]) ** 2, axis=2), axis=1)
         dist[chosen] = -np.inf
         reachable = (

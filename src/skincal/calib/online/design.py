@@ -195,13 +195,6 @@ def build_segment(
     return build_trajectory(chain, seg, poses=np.asarray(pose, dtype=float)[None], start=start)
 
 
-def gravity_features(chain: SerialChain, poses: FloatArray) -> FloatArray:
-    """Gravity direction in every link frame ``1..n``, flattened ``(K, 3 n)`` (as the diverse pose draw)."""
-    from skincal.protocol.limits import _gravity_features
-
-    return _gravity_features(chain, np.atleast_2d(np.asarray(poses, dtype=float)))
-
-
 def candidate_poses(
     chain: SerialChain, config: ProtocolConfig, visited: FloatArray, rng: np.random.Generator, options: DesignOptions
 ) -> FloatArray:
@@ -217,8 +210,10 @@ def candidate_poses(
     pool = pool[CollisionModel(chain).free(pool)]
     if pool.shape[0] == 0:
         return pool
-    feat = gravity_features(chain, pool)
-    ref = gravity_features(chain, visited) if len(visited) else np.zeros((0, feat.shape[1]))
+    from skincal.protocol.limits import gravity_features
+
+    feat = gravity_features(chain, np.atleast_2d(np.asarray(pool, dtype=float)))
+    ref = gravity_features(chain, np.atleast_2d(visited)) if len(visited) else np.zeros((0, feat.shape[1]))
     dist = np.full(pool.shape[0], np.inf)
     for r in ref:
         dist = np.minimum(dist, np.sum((feat - r) ** 2, axis=1))
