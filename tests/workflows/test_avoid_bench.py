@@ -27,7 +27,12 @@ def test_iso_matrix_rows_and_the_degraded_margin_grows():
         assert r["robot"] == "ur5e" and r["v_h"] == 1.6 and r["mode"] == "kinematic" and r["units"] == 43
         assert r["task_time_lost_s"] is not None and r["margin_terms"] is not None
     assert bad["degraded_std"] == "2.9 cm / 2.9 deg per axis" and truth["degraded_std"] == ""
-    # the degradation's covariance widens Z_d and so S_p (the margin grows)
-    assert bad["margin_max_m"] > truth["margin_max_m"] + 0.03
+
+    # the degradation's covariance widens Z_d and so S_p (the margin grows) at the same robot speed (the speed
+    # terms differ: the degraded run retreats from what it misplaces, and a retreating robot's S_h is smaller)
+    def still_part(r):
+        return sum(r["margin_terms"][k] for k in ("C", "Z_d", "Z_r"))
+
+    assert still_part(bad) > still_part(truth) + 0.03 and bad["margin_max_m"] > truth["margin_max_m"]
     assert bad["margin_terms"]["Z_d"] > 0.05 > truth["margin_terms"]["Z_d"]
     assert np.isclose(truth["S_p_still_m"], bad["S_p_still_m"])  # the same still-robot S_p before any point
