@@ -72,7 +72,7 @@ class RunLog:
         q: ``(S, n)`` joint angles at each instant (before the step), rad.
         qd: ``(S, n)`` commanded joint velocities, rad/s.
         x, x_des: ``(S, 3)`` flange position and reference, base frame, m.
-        feasible: ``(S,)`` the QP had a solution (else the safe stop was commanded).
+        feasible: ``(S,)`` the QP had a solution (else the least-violating retreat was commanded).
         violation: ``(S,)`` obstacle-row violation of the command, m/s.
         n_obstacles: ``(S,)`` obstacle rows in the QP.
         min_distance: ``(S,)`` smallest perceived distance to the padded robot, m (inf: none).
