@@ -257,21 +257,22 @@ TRACKING_TOLERANCE_RADPS = 0.1
 def separation_speed(
     measured: ArrayLike, commanded: ArrayLike, tolerance: float = TRACKING_TOLERANCE_RADPS
 ) -> FloatArray:
-    """The joint velocity ``(n,)`` rad/s whose robot-point speeds enter ``S_p`` in torque mode: the command the
-    robot tracks, raised or lowered toward the measured velocity by at most ``tolerance`` per joint,
+    """The joint velocity ``(n,)`` rad/s whose robot-point speeds enter ``S_p`` in torque mode (a floor under the
+    command being solved for): the measured velocity, as far as the previous command accounts for it, per joint
 
-        qd_sp = qd_cmd + clip(qd_meas - qd_cmd, -tolerance, +tolerance).
+        qd_sp = clip(qd_meas, min(qd_cmd, 0) - tolerance, max(qd_cmd, 0) + tolerance).
 
-    While the robot tracks its command (the usual case) this is the measured velocity itself, so a real speed
-    that the command has not caught up with still counts up to the tolerance; a transient of the tracking layer
-    (the arm lagging a retreat command reversed at the joint limits, or pushed) does not make ``S_p`` jump: fed
-    the raw measured speed, ``S_p`` of the Panda in ``pinch`` (torque mode) reached 0.93 m from a 1.2 m/s
-    transient while the arm was commanded away at 0.2 m/s, and the larger margin asked for a harder retreat,
-    which widened the transient (simulated). The stopping model that turns the speed into ``S_s`` is
-    measured as a stop from the commanded speed (:mod:`skincal.workflows.stopping`)."""
+    While the robot tracks its command (the usual case) this is the measured velocity itself. A speed the
+    command does not account for, a transient of the tracking layer (the arm still moving one way after a
+    retreat command the other way, or pushed), counts up to ``tolerance`` only: fed the raw measured speed,
+    ``S_p`` of the Panda in ``pinch`` (torque mode) reached 0.93 m from a 1.2 m/s transient while the arm was
+    commanded away at 0.2 m/s, and the larger margin asked for a harder retreat, which widened the transient
+    (simulated). Never above the measured speed either (a command the arm has not followed yet is not its
+    speed): the previous command itself as the floor makes ``S_p`` alternate from step to step, as an explicit
+    ``S_p`` of the previous command does (:func:`allowed_approach_speed`)."""
     cmd = np.asarray(commanded, dtype=float).reshape(-1)
-    lag = np.asarray(measured, dtype=float).reshape(-1) - cmd
-    return cmd + np.clip(lag, -tolerance, tolerance)
+    meas = np.asarray(measured, dtype=float).reshape(-1)
+    return np.clip(meas, np.minimum(cmd, 0.0) - tolerance, np.maximum(cmd, 0.0) + tolerance)
 
 
 def _per_point(value: ArrayLike, K: int) -> FloatArray:

@@ -18,9 +18,9 @@ Per step ``k`` (``t = k dt``, ``dt = 1 ms``):
    ideal velocity interface, as a Panda under joint-velocity control at 1 kHz); ``mode="torque"``: the
    command is tracked with joint torques by :class:`skincal.sim.dynamics.TorqueRobot` in the same MuJoCo
    model (gravity and inertia from the model, torques clipped at the effort limits); the robot speed in
-   ``S_p`` is then the previous command, moved toward the measured joint velocity by at most a tracking
-   tolerance (:func:`skincal.control.separation.separation_speed`: a tracking transient does not make
-   ``S_p`` jump).
+   ``S_p`` is then the measured joint velocity as far as the previous command accounts for it, plus a
+   tracking tolerance (:func:`skincal.control.separation.separation_speed`: a tracking transient does not
+   make ``S_p`` jump).
 
 **Retreat and resume** (``resume=True``): the reference runs on a task clock ``tau`` instead of ``t``.
 While the nearest perceived point is within the protective separation ``S_p`` of the step plus
@@ -236,7 +236,7 @@ def run_scenario(
             x_des[k], xd_des[k] = xk[0], rate * vk[0]
         if robot is None:
             res = ctl.step(q, x_des[k], xd_des[k], pts)
-        else:  # S_p from the command tracked, the measured speed counted up to a tracking tolerance from it
+        else:  # S_p from the measured speed, as far as the command tracked accounts for it
             res = ctl.step(q, x_des[k], xd_des[k], pts, separation_speed(qd, qd_cmd))
             qd_cmd = res.qd
         step_t[k] = time.perf_counter() - t1
