@@ -69,6 +69,10 @@ MAX_REALIGN = 3
 SCALE_STD_LIMIT = 0.01
 """The accelerometer's scale/misalignment is estimated only when each of its 9 elements is determined to
 this std (else held at the identity: a weakly determined scale absorbs what the pose should explain)."""
+JOINT_ACTIVE_RPS = 0.1
+JOINT_ACTIVE_MIN_S = 1.0
+"""A joint counts as moved once it has turned faster than ``JOINT_ACTIVE_RPS`` (rad/s) for
+``JOINT_ACTIVE_MIN_S`` (s) in all; two candidate links are told apart only after a joint between them moved."""
 MIN_MOVING = 200
 """Moving samples of the best link before its link is decided."""
 SATURATION_FLOOR = (1.5 * 9.80665, 2.0)
@@ -264,6 +268,8 @@ class OnlineCalibrator:
         self._grid_cat: tuple[FloatArray, ...] | None = None
         self.q_now: FloatArray | None = None
         self.late = 0
+        self.joint_active_s = np.zeros(chain.n_joints)
+        """Seconds each joint has turned faster than :data:`JOINT_ACTIVE_RPS` so far."""
         self.on_residuals: Callable[[str, FloatArray, FloatArray], None] | None = None
         self.events: list[dict] = []
         self._t_start = time.perf_counter()
@@ -413,6 +419,7 @@ class OnlineCalibrator:
         K = skew(dw) + W @ W
         ok = interp.reliable(tg)
         speed = np.cumsum(np.abs(qdg), axis=1)
+        self.joint_active_s += (np.abs(qdg) > JOINT_ACTIVE_RPS).sum(axis=0) * dt
         ug = -np.einsum("gnji,j->gni", R, self.gravity)  # gravity's part of u, link frame
         self._grid.append((tg, u, K, w, dw, ok, speed, ug))
         self._grid_cat = None
@@ -768,6 +775,14 @@ class OnlineCalibrator:
         others = sorted(v for k, v in costs.items() if k != best_link)
         margin = others[0] / c0 if c0 > 0 else float("inf")
         ambiguous = [k for k, v in costs.items() if v - c0 < max(LINK_CHI2_MARGIN * kappa, LINK_RELATIVE_MARGIN * c0)]
+        # links joined by joints that have not moved yet are one rigid body: their costs differ only by the
+        # noise of those joints' derived accelerations, which is no evidence
+        active = self.joint_active_s >= JOINT_ACTIVE_MIN_S
+        for k in costs:
+            lo, hi = min(k, best_link), max(k, best_link)
+            if k not in ambiguous and not active[lo:hi].any():  # joints lo+1..hi (0-based lo..hi-1)
+                ambiguous.append(k)
+        ambiguous.sort()
         return best_link, float(margin), sorted(ambiguous)
 
     def _cost(self, st: _Unit, link: int, sig: FloatArray) -> float:
