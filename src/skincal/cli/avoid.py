@@ -113,6 +113,6 @@ def avoid(
         lines.append("  S_p parts there: " + ", ".join(f"{k} {v:.3f}" for k, v in m.margin_terms.items()) + " m")
     if reference is not None:
         lines.append(f"  task time lost {m.task_time_lost_s:.2f} s against the run without a person")
-    console.print("\n".join(lines), highlight=False)
+    console.print("\n".join(lines), markup=False, highlight=False)  # names and descriptions come from the file
     for p in written:
-        console.print(f"  wrote {p}", highlight=False)
+        console.print(f"  wrote {printable(p)}", markup=False, highlight=False)

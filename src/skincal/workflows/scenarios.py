@@ -81,6 +81,9 @@ MAX_OBJECTS = 16
 MAX_WAYPOINTS = 256
 MAX_DURATION = 300.0
 """Longest run, s (the loop keeps every obstacle's position at every 1 ms step: 16 x 300 s is 115 MB)."""
+MIN_DURATION = 0.02
+"""Shortest run, s: one period of the simulated ToF (a shorter run never reads the skin; below one 1 ms
+control step it has no step at all)."""
 MAX_COORD = 100.0
 MAX_SPEED = 10.0
 MAX_SIZE = 5.0
@@ -583,10 +586,10 @@ def parse_scenario(
     names = [o.name for o in people + static]
     if len(set(names)) != len(names):
         f.fail(f"names must be unique, got {', '.join(printable(n)[:40] for n in names)}", "people")
-    T = f.number("duration", t_leave + after if people else 5.0, 0.0, MAX_DURATION, open_lo=True)
+    T = f.number("duration", t_leave + after if people else 5.0, MIN_DURATION, MAX_DURATION)
     if duration is not None:
-        if not (np.isfinite(duration) and 0 < duration <= MAX_DURATION):
-            raise ConfigError(f"scenario duration must be in (0, {MAX_DURATION:g}] s, got {duration}")
+        if not (np.isfinite(duration) and MIN_DURATION <= duration <= MAX_DURATION):
+            raise ConfigError(f"scenario duration must be in [{MIN_DURATION:g}, {MAX_DURATION:g}] s, got {duration}")
         T = float(duration)
     if T > MAX_DURATION:
         f.fail(f"the run would last {T:.1f} s (at most {MAX_DURATION:g} s)", "duration")
