@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import math
 import signal
 import threading
 from pathlib import Path
@@ -72,8 +73,8 @@ def record(
     max_unit_samples = MAX_UNIT_SAMPLES if max_unit_samples is None else max_unit_samples
     check_bind(bind, public, "--bind", "receive from beyond this machine")
     chain = get_robot(robot) if robot else None
-    if flush_every <= 0:
-        raise ConfigError(f"--flush-every {flush_every} s must be > 0")
+    if not (math.isfinite(flush_every) and flush_every > 0):  # NaN would never flush
+        raise ConfigError(f"--flush-every {flush_every} s must be a finite number > 0")
     if max_units < 1 or max_unit_samples < 1:
         raise ConfigError(f"--max-units {max_units} and --max-unit-samples {max_unit_samples} must be >= 1")
     if live:
@@ -110,7 +111,10 @@ def _print_summary(summary, stats, chain) -> None:  # noqa: ANN001  (types from 
     console.print(f"wrote {summary.path}: {sum(summary.samples.values())} samples in {len(summary.samples)} "
                   f"streams; lost {lost} packets, malformed {stats.malformed_total}, stale {stale}, refused "
                   f"{stats.refused}, ignored {summary.ignored_samples} samples", highlight=False)
-    if "joints" not in summary.samples:
+    if not any(summary.samples.values()):
+        console.print("note: nothing was received: the recording holds no samples (is the sender running and sending "
+                      "to this port?)", highlight=False)
+    elif "joints" not in summary.samples:
         console.print("note: no joint-state stream: an IMU-only dataset (calibrate it with --reference UNIT)",
                       highlight=False)
     elif chain is None:

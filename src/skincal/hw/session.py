@@ -47,7 +47,7 @@ async def record(
     (:class:`SkinReceiver`), ``max_unit_samples`` the samples kept per group (:class:`Recorder`).
     Returns the recording summary and the final receiver counters.
     """
-    if duration_s is not None and duration_s <= 0:
+    if duration_s is not None and not duration_s > 0:  # NaN too: it would stop at once
         raise ConfigError(f"record: duration {duration_s} s must be > 0")
     stop = stop or asyncio.Event()
     if Path(path).exists() and not overwrite:  # fail before binding, and bind before creating the file
