@@ -170,8 +170,13 @@ def _view_follow(
                   highlight=False)  # fmt: skip
     last = {"wall": -math.inf}
 
+    class _DurationOver(Exception):
+        """``--duration`` ran out during the replay (it counts from the start, replay included)."""
+
     def on_meter(statuses, t_data: float, t_end: float | None) -> None:
         now = time.monotonic()
+        if duration is not None and now - start >= duration:
+            raise _DurationOver
         if now - last["wall"] < 0.25:
             return
         last["wall"] = now
@@ -183,6 +188,10 @@ def _view_follow(
         line = meter_line(outcome.statuses, target.position_m, target.rotation_deg, outcome.t_data, outcome.t_end)
         update_live(viewer, outcome.statuses, None, line)
         console.print(line, markup=False, highlight=False, soft_wrap=True)
+    except _DurationOver:
+        viewer.close()
+        console.print(f"--duration {duration:g} s over during the replay: stopped", highlight=False)
+        return
     except BaseException:
         viewer.close()
         raise
