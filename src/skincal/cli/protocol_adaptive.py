@@ -53,10 +53,14 @@ def run_adaptive(chain, out: Path, *, rate: float, seed: int, force: bool, targe
     if earlier and (not force or out.suffix == ""):
         raise ConfigError(f"{earlier[0]} exists (a segment of an earlier run): remove it"
                           + ("" if out.suffix == "" else " or pass --force"))  # fmt: skip
+    for path in earlier:
+        if not Path(path).is_file() or Path(path).is_symlink():
+            raise ConfigError(f"{path} exists and is not a segment file (a folder or a link): remove it")
     if simulate:
         for given, name in ((port, "--port"), (record_out, "--record")):
             if given is not None:
                 raise ConfigError(f"{name} is for a real robot; --simulate simulates it")
+        _remove_segments(earlier)
         _simulated(chain, out, result, rate=rate, seed=seed, goal=goal, max_motion=max_motion, noise=noise,
                    placement=placement, units=units, joints=joints)  # fmt: skip
         return
@@ -67,7 +71,14 @@ def run_adaptive(chain, out: Path, *, rate: float, seed: int, force: bool, targe
         if given is not None:
             raise ConfigError(f"{name} applies to --simulate only")
     _live(chain, out, result, rate=rate, seed=seed, goal=goal, max_motion=max_motion, port=port, bind=bind,
-          public=public, record_out=record_out, force=force)  # fmt: skip
+          public=public, record_out=record_out, force=force, earlier=earlier)  # fmt: skip
+
+
+def _remove_segments(earlier: list[str]) -> None:
+    """``--force``: the segment files of an earlier run go before this run writes its own, so that no stale
+    segment (a higher number than this run reaches) is left beside the new ones for the robot to execute."""
+    for path in earlier:
+        Path(path).unlink(missing_ok=True)
 
 
 def _write_segment(chain, out: Path, k: int, segment, rate: float) -> Path:  # noqa: ANN001
@@ -82,8 +93,10 @@ def _write_segment(chain, out: Path, k: int, segment, rate: float) -> Path:  # n
 def _segment_line(record, path: Path) -> str:  # noqa: ANN001
     pos, rot = record.worst()
     done = sum(1 for s in record.statuses.values() if s.reached)
+    worst = (f"worst std {pos:.3f} mm / {rot:.4f} deg" if math.isfinite(pos) and math.isfinite(rot)
+             else "worst std undetermined")  # fmt: skip
     return (f"segment {record.index}: {record.candidate.describe()} -> {path.name}; motion {record.t_end:.1f} s; "
-            f"worst std {pos:.3f} mm / {rot:.4f} deg; {done}/{len(record.statuses)} units at target")  # fmt: skip
+            f"{worst}; {done}/{len(record.statuses)} units at target")  # fmt: skip
 
 
 def _finish(chain, out: Path, result_path: Path, trajectory, result, reached: bool, motion_s: float, n: int,  # noqa: ANN001
@@ -117,13 +130,16 @@ def _simulated(chain, out: Path, result_path: Path, *, rate: float, seed: int, g
                         on_segment=on_segment)  # fmt: skip
     _finish(chain, out, result_path, run.trajectory, run.result, run.loop.reached, run.motion_s,
             len(run.loop.segments), rate, goal)  # fmt: skip
+    if not run.errors.get("units"):
+        _say("true errors (simulated truth): no unit calibrated")
+        return
     pos, rot, links = worst(run.errors)
     _say(f"true errors (simulated truth): worst unit {pos:.3f} mm / {rot:.4f} deg; "
          f"links {'all right' if links else 'NOT all right'}")  # fmt: skip
 
 
 def _live(chain, out: Path, result_path: Path, *, rate: float, seed: int, goal, max_motion: float, port: int,  # noqa: ANN001
-          bind: str, public: bool, record_out: Path, force: bool) -> None:  # fmt: skip
+          bind: str, public: bool, record_out: Path, force: bool, earlier: list[str]) -> None:  # fmt: skip
     import asyncio
     import signal
 
@@ -138,6 +154,7 @@ def _live(chain, out: Path, result_path: Path, *, rate: float, seed: int, goal, 
     check_output(record_out, force=force)
     if record_out.resolve() in (out.resolve(), result_path.resolve()):
         raise ConfigError(f"--record {record_out} is another output; give another file")
+    _remove_segments(earlier)
     designer = LiveDesigner(chain, np.random.default_rng([int(seed), 16]), max_motion_s=max_motion)
 
     def on_meter(feed, stats, recorder, receiver) -> None:  # noqa: ANN001
