@@ -126,3 +126,15 @@ def test_adaptive_force_refuses_a_folder_named_like_a_segment(tmp_path: Path) ->
                                  "--max-motion", "0.001", "--force"], tmp_path))  # fmt: skip
     assert "m_001.json" in line
     assert (tmp_path / "m_001.json").is_dir()
+
+
+@pytest.mark.adversarial
+def test_avoid_clips_a_long_description(tmp_path: Path) -> None:
+    """A scenario description of any length (a 16 MB one was printed whole) is shown clipped to one line."""
+    old = 'description: "desc [bold]z[/bold] [link=http:x]q"'
+    text = SCENARIO_WITH_MARKUP.replace(old, f"description: {'x' * 5000}")
+    (tmp_path / "long.yaml").write_text(text)
+    proc = _run(["avoid", "--scenario", "long.yaml"], tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    shown = proc.stdout.replace("\n", "")  # rich wraps the long line in a pipe
+    assert "x" * 197 + "..." in shown and "x" * 198 not in shown, shown[:300]

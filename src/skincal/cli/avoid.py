@@ -10,6 +10,12 @@ import typer
 from skincal.cli.app import app, console
 
 ROBOT_HELP = "robot preset (panda, iiwa14, ur5e, ...), a .urdf file, or a DH chain file"
+DESCRIPTION_SHOWN = 200
+"""Characters of a scenario's description printed (the file may hold megabytes of it)."""
+
+
+def _clip(text: str, limit: int = DESCRIPTION_SHOWN) -> str:
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 @app.command()
@@ -99,7 +105,7 @@ def avoid(
         return
     m = metrics
     lines = [
-        f"scenario {printable(m.scenario)} ({printable(sc.description)}) on {printable(chain.name)}, {task}, "
+        f"scenario {printable(m.scenario)} ({_clip(printable(sc.description))}) on {printable(chain.name)}, {task}, "
         f"{mode}, margin {margin}, poses: {printable(label)}",
         f"  min clearance {m.min_clearance_m:.3f} m, contacts {m.contacts}, infeasible steps {m.infeasible_steps}",
         f"  min(clearance - S_p) {m.min_clearance_minus_sp_m:.3f} m (S_p {m.margin_m:.3f} m there, largest "
