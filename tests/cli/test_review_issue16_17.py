@@ -138,3 +138,11 @@ def test_avoid_clips_a_long_description(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     shown = proc.stdout.replace("\n", "")  # rich wraps the long line in a pipe
     assert "x" * 197 + "..." in shown and "x" * 198 not in shown, shown[:300]
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize("degrade", ["1e308,5", "0.05,1e308"])
+def test_avoid_refuses_an_absurd_degradation_on_one_line(tmp_path: Path, degrade: str) -> None:
+    """``--degrade 1e308,5`` printed a numpy overflow warning (3 lines on stderr) before the error."""
+    line = _one_line_error(_run(["avoid", "--degrade", degrade, "--duration", "0.05"], tmp_path))
+    assert "at most" in line

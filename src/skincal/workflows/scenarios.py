@@ -649,6 +649,8 @@ def degrade_poses(poses: dict, position_m: float, angle_deg: float, rng: np.rand
 
     if position_m < 0 or angle_deg < 0:
         raise ConfigError(f"degradation must be non-negative, got {position_m} m, {angle_deg} deg")
+    if position_m > MAX_SIZE or angle_deg > 180.0:  # 1e308 m overflowed to a non-finite pose (exit 2, 3 lines)
+        raise ConfigError(f"degradation must be at most {MAX_SIZE:g} m, 180 deg, got {position_m} m, {angle_deg} deg")
     out = {}
     for name, pose in poses.items():
         d = rng.normal(size=3)
