@@ -273,3 +273,21 @@ def test_everyday_motion_is_used_and_its_std_is_honest():
         assert err <= 4 * np.linalg.norm(st.position_std_m), (u, err, st.position_std_m)
         below_mm += err < 1e-3
     assert below_mm >= 4
+
+
+def test_a_clock_realignment_is_absorbed_before_the_status_is_given(realistic):
+    """A unit whose clock offset is off by 6 ms (beyond the first-order model) is re-aligned inside
+    ``status()`` and its kept samples absorbed again at once: the status (and a result written then)
+    has the pose, not a transient 'no estimate'."""
+    ds = realistic
+    cal = OnlineCalibrator(ds.robot, ["su3"], ds.gravity)
+    replay(ds, cal)
+    st = cal._u["su3"]
+    good = st.offset
+    st.offset -= 0.006
+    cal._realign(st, 0.0)  # the last minute absorbed again with the wrong offset
+    cal._absorb_unit("su3")
+    status = cal.status()["su3"]
+    assert status.pose is not None and status.missing == "" and st.realigned >= 1
+    assert abs(st.offset - good) < 1e-3
+    assert _errors(status.pose, ds.truth["su3"])[0] < 1.0

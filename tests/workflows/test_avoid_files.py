@@ -193,3 +193,17 @@ def test_hostile_files_through_the_guarded_loader(tmp_path):
         get_scenario("nowhere", chain)
     with pytest.raises(ConfigError, match="--speed"):
         get_scenario("hand", chain, speed=float("nan"))
+
+
+@pytest.mark.adversarial
+def test_a_huge_scenario_file_is_refused_before_parsing(tmp_path):
+    """A YAML parser needs minutes for tens of MB: a scenario file over 1 MiB is refused in one line."""
+    from skincal.errors import ConfigError
+    from skincal.kinematics import panda
+    from skincal.workflows.scenarios import load_scenario
+
+    path = tmp_path / "big.yaml"
+    path.write_text("name: big\ndescription: " + "x" * (1 << 20) + "\n")
+    with pytest.raises(ConfigError) as err:
+        load_scenario(path, panda())
+    assert "\n" not in str(err.value) and "big.yaml" in str(err.value)

@@ -77,6 +77,8 @@ from skincal.sim.scene import Obstacle, Primitive, Scene, TimeTable, human
 Q_START = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
 """Start configuration of the Panda, rad (flange about 0.47 m in front of the base, 0.52 m high)."""
 
+MAX_FILE_BYTES = 1 << 20
+"""Largest scenario file, bytes (16 people x 256 waypoints fit in 0.3 MB; a YAML parser needs ~100 s for 16 MB)."""
 MAX_OBJECTS = 16
 MAX_WAYPOINTS = 256
 MAX_DURATION = 300.0
@@ -608,11 +610,11 @@ def load_scenario(
     q0: ArrayLike | None = None,
 ) -> Scenario:
     """Read a scenario file (YAML or JSON, through the guarded :mod:`skincal.data.jsonio` readers)."""
-    from skincal.data.jsonio import load_json, load_yaml
+    from skincal.data.jsonio import parse_json, parse_yaml, read_text
 
     path = Path(path)
-    load = load_json if path.suffix.lower() == ".json" else load_yaml
-    spec = load(path, "scenario file", ConfigError)
+    parse = parse_json if path.suffix.lower() == ".json" else parse_yaml
+    spec = parse(read_text(path, "scenario file", ConfigError, max_bytes=MAX_FILE_BYTES), str(path), ConfigError)
     return parse_scenario(spec, str(path), chain, default_name=path.stem, speed=speed, duration=duration, task=task,
                           q0=q0)  # fmt: skip
 

@@ -820,8 +820,8 @@ class OnlineCalibrator:
             and st.realigned < MAX_REALIGN
         ):  # fmt: skip
             self._realign(st, sol.tau)
-            why = f"re-aligning its clock by {1e3 * sol.tau:+.1f} ms"
-            return UnitStatus(name, None, float("nan"), None, inf3, inf3, 0, 0, why, None, False, st.t_last, True)
+            self._absorb_unit(name)  # the kept samples again, at once: the status (and a result) never shows the gap
+            return self._status(name)
         if not undecided and not st.decided and len(st.links) > 1 and st.moving[k] > MIN_MOVING and determined:
             self._keep_only(st, link)
             k = 0
