@@ -251,9 +251,13 @@ def test_record_live_needs_a_robot_and_a_sound_target(tmp_path):
 
 def test_view_follow_serves_the_live_viewer_and_refuses_a_result(data, tmp_path):
     pytest.importorskip("viser")
-    proc = subprocess.run([*_CLI, "view", "--follow", str(data), "--speed", "0", "--duration", "0.5"],
-                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    # --duration counts from the start, the replay included: long enough for the replay to reach its target
+    proc = subprocess.run([*_CLI, "view", "--follow", str(data), "--speed", "0", "--target", "1mm,0.05deg",
+                           "--duration", "15"], capture_output=True, text=True, timeout=120)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "skincal viewer: http://127.0.0.1:" in proc.stdout and "units at target" in proc.stdout
+    short = subprocess.run([*_CLI, "view", "--follow", str(data), "--speed", "0", "--duration", "0.5"],
+                           capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert short.returncode == 0 and "--duration 0.5 s over during the replay: stopped" in short.stdout
     bad = subprocess.run([*_CLI, "view", str(data), "--follow", str(data)], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and bad.stderr.startswith("error:") and "--follow" in bad.stderr
