@@ -338,7 +338,7 @@ class OnlineCalibrator:
             n += got
             st = self._u[u]
             if got and st.t_last - st.t_solved >= self.options.solve_every_s:
-                self._status(u)  # keeps the link decision, the gate and the residual statistics current
+                self._status(u, advise=False)  # keeps the link decision, the gate and the residual statistics current
                 st.t_solved = st.t_last
         self.cpu_s += time.process_time() - c0
         return n
@@ -794,7 +794,7 @@ class OnlineCalibrator:
             cost += sum(stats.residual_sum(st.Zg[k, c], sol.x_g) / sig[2 + c] ** 2 for c in (REST, MOVING))
         return float(cost)
 
-    def _status(self, name: str) -> UnitStatus:
+    def _status(self, name: str, advise: bool = True) -> UnitStatus:
         st = self._u[name]
         o = self.options
         inf3 = np.full(3, np.inf)
@@ -821,7 +821,7 @@ class OnlineCalibrator:
         ):  # fmt: skip
             self._realign(st, sol.tau)
             self._absorb_unit(name)  # the kept samples again, at once: the status (and a result) never shows the gap
-            return self._status(name)
+            return self._status(name, advise)
         if not undecided and not st.decided and len(st.links) > 1 and st.moving[k] > MIN_MOVING and determined:
             self._keep_only(st, link)
             k = 0
@@ -840,7 +840,10 @@ class OnlineCalibrator:
             rot_std = np.where(rot_std < UNDETERMINED_DEG, rot_std, np.inf)
         best_joint = None
         if not reached:
-            best_joint = (max(ambiguous) - 1) if undecided else self._best_joint(name, st, link, sol)
+            if undecided:
+                best_joint = max(ambiguous) - 1
+            elif advise:  # the joint to move next (a design computation a result does not need)
+                best_joint = self._best_joint(name, st, link, sol)
         pose = SkinUnitPose(link, sol.R, sol.p)
         status = UnitStatus(name, link, margin, pose, pos_std, rot_std, int(st.Za[k, :, 9, 9].sum()), int(st.moving[k]),
                             missing, best_joint, reached, st.t_last, True)  # fmt: skip
@@ -968,7 +971,7 @@ class OnlineCalibrator:
         units: dict[str, UnitResult] = {}
         failed: dict[str, str] = {}
         for name in self.units:
-            s = self._status(name)
+            s = self._status(name, advise=False)
             st = self._u[name]
             if s.pose is None or s.link is None or s.missing:
                 failed[name] = s.missing or "no estimate"
