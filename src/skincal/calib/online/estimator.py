@@ -477,9 +477,9 @@ class OnlineCalibrator:
                 self._align(name, st, grid, t, a, g)
             if st.offset is None:
                 if final:
-                    self._align_anyway(st)
+                    st.offset, st.offset_sharpness = 0.0, 0.0  # no motion to align on: the stamps as they are
                 else:
-                    self._keep(st, t, a, g, float(grid[0][0]))
+                    self._keep(st, t, a, g)
                     return 0
         assert st.offset is not None
         s = t - st.offset
@@ -488,7 +488,7 @@ class OnlineCalibrator:
         self.late += int(late.sum())
         ready = (s >= tg[0]) & (s <= tg[-1])
         if not final:
-            self._keep(st, t[~ready & ~late], a[~ready & ~late], None if g is None else g[~ready & ~late], tg[0])
+            self._keep(st, t[~ready & ~late], a[~ready & ~late], None if g is None else g[~ready & ~late])
         if not ready.any():
             return 0
         st.raw.append((t[ready], a[ready], None if g is None else g[ready]))
@@ -514,11 +514,8 @@ class OnlineCalibrator:
             st.pending_a.insert(0, a)
             st.pending_g.insert(0, g)
 
-    def _align_anyway(self, st: _Unit) -> None:
-        st.offset, st.offset_sharpness = 0.0, 0.0
-
     @staticmethod
-    def _keep(st: _Unit, t: FloatArray, a: FloatArray, g: FloatArray | None, t_min: float) -> None:
+    def _keep(st: _Unit, t: FloatArray, a: FloatArray, g: FloatArray | None) -> None:
         if t.size:
             st.pending_t.append(t)
             st.pending_a.append(a)
@@ -804,7 +801,8 @@ class OnlineCalibrator:
             why = "no samples yet" if not np.isfinite(st.t_last) and st.offset is not None else (
                 "waiting for motion to align its clock" if st.offset is None else "too few samples"
             )  # fmt: skip
-            return UnitStatus(name, None, float("nan"), None, inf3, inf3, 0, 0, why, self._first_joint(), False,
+            # best joint 0: the first joint moves every link (nothing is known yet)
+            return UnitStatus(name, None, float("nan"), None, inf3, inf3, 0, 0, why, 0, False,
                               st.t_last, st.offset is not None)  # fmt: skip
         sol = st.solutions[link]
         k = st.links.index(link)
@@ -849,9 +847,6 @@ class OnlineCalibrator:
                             missing, best_joint, reached, st.t_last, True)  # fmt: skip
         st.status = status
         return status
-
-    def _first_joint(self) -> int | None:
-        return 0
 
     def _keep_only(self, st: _Unit, link: int) -> None:
         k = st.links.index(link)
