@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from skincal.calib.mle.model import predict_specific_force
+from skincal.calib.model import predict_specific_force
 from skincal.calib.online import OnlineCalibrator, OnlineOptions, replay, stats
 from skincal.errors import ConfigError
 from skincal.kinematics.transforms import skew

@@ -33,8 +33,7 @@ import numpy as np
 from skincal.calib.api import MethodSpec, UnitProblem, register
 from skincal.calib.closed_form import position_and_bias, static_rotation_and_bias, wahba
 from skincal.calib.links import discover_link
-from skincal.calib.mle.model import predict_specific_force
-from skincal.calib.mle.signals import SignalTable, UnitData, arrange_unit_data
+from skincal.calib.mle.arrange import UnitData, arrange_unit_data
 from skincal.calib.mle.solver import (
     SCALE_FULL,
     SCALE_NONE,
@@ -47,8 +46,10 @@ from skincal.calib.mle.solver import (
     solve,
     sym_from_e,
 )
+from skincal.calib.model import predict_specific_force
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.rest import JointRest, joint_rest
+from skincal.calib.signals import SignalTable
 from skincal.calib.timing import (
     ClockSteps,
     MotionProfile,

@@ -7,7 +7,7 @@ Measurement model (unit frame ``su``, link frame ``n``; ``R = R_link_su``, ``p =
     physical instant of the sample stamped t_i:  s_i = t_i - tau - d (t_i - t_c)
 
 ``u``, ``K``, ``w`` (link-frame specific force of the origin, rigid-body matrix, angular velocity)
-come from :mod:`skincal.calib.mle.signals`; at rest ``K = 0``, ``w = 0``. Parameters:
+come from :mod:`skincal.calib.signals`; at rest ``K = 0``, ``w = 0``. Parameters:
 
 * ``b`` accelerometer bias; ``c`` its drift rate (m/s^2 per s, optional); ``b_g`` gyroscope bias;
 * ``A = I + E``: ``E`` symmetric (6) when only the accelerometer is used (an antisymmetric part
@@ -42,7 +42,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from skincal.calib.mle.model import accelerometer, link_specific_force
+from skincal.calib.model import accelerometer, link_specific_force
 from skincal.kinematics.transforms import FloatArray, skew
 
 PRIOR_STD = {"e": 0.05, "d": 1e-3, "c": 1e-3, "k": 0.002}
@@ -209,7 +209,7 @@ def _accel_rows(
     sl = blocks.slices()
     R, A = state.R, state.A
     S = len(rows.static_u)
-    # static rows are pure gravity: u_s = u_g, K = 0 (the model: skincal.calib.mle.model)
+    # static rows are pure gravity: u_s = u_g, K = 0 (the model: skincal.calib.model)
     v = link_specific_force(rows.static_u, None, state.p, gravity_scale=state.k)
     if lin is not None:
         dtau = (state.tau - lin.tau_k) + (state.d - lin.d_k) * rows.moving_t  # s_k - s per sample

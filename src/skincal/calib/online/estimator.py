@@ -37,13 +37,14 @@ from numpy.typing import ArrayLike
 
 from skincal.calib.online import stats
 from skincal.calib.preprocess import JointInterpolator
+from skincal.calib.signals import frame_signals, hermite
 from skincal.calib.timing import coarse_time_offset, motion_profile
 from skincal.data.dataset import Dataset, JointStates
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.result import EVENTS, MOVED_AT, CalibrationResult, UnitResult
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
-from skincal.kinematics.transforms import FloatArray, skew
+from skincal.kinematics.transforms import FloatArray
 from skincal.names import name_problem
 from skincal.skin.pose import SkinUnitPose
 
@@ -181,6 +182,26 @@ class UnitStatus:
     aligned: bool
 
 
+@dataclass(frozen=True)
+class _Grid:
+    """The link signals of every link on the streaming calibrator's uniform grid.
+
+    Attributes:
+        t: ``(G,)`` grid instants on the joint clock, s.
+        y: ``(G, n, 18)`` per link ``[u (3), K (9, row-major), w (3), u_g (3)]``
+            (:func:`~skincal.calib.signals.frame_signals`, link frame).
+        dy: ``(G, n, 18)`` their time derivatives (per block: only ``dw`` ``(G, n, 3)``, exact).
+        ok: ``(G,)`` the joint accelerations are reliable there.
+        speed: ``(G, n)`` ``sum_{j <= k} |qd_j|``, rad/s (the clock search without a gyroscope).
+    """
+
+    t: FloatArray
+    y: FloatArray
+    dy: FloatArray
+    ok: np.ndarray
+    speed: FloatArray
+
+
 @dataclass
 class _Unit:
     links: list[int]
@@ -264,8 +285,8 @@ class OnlineCalibrator:
         self._jqd: list[FloatArray | None] = []
         self._joints: tuple[FloatArray, FloatArray, FloatArray] | None = None
         self._frontier: float | None = None  # end of the processed joint blocks
-        self._grid: list[tuple[FloatArray, ...]] = []  # per block: t, u, K, w, du, dw, ok, speed (all links)
-        self._grid_cat: tuple[FloatArray, ...] | None = None
+        self._grid: list[_Grid] = []  # per block, every link
+        self._grid_cat: _Grid | None = None
         self.q_now: FloatArray | None = None
         self.late = 0
         self.joint_active_s = np.zeros(chain.n_joints)
@@ -391,7 +412,7 @@ class OnlineCalibrator:
         if not keep.all():
             self._joints = (t[keep], q[keep], qd[keep])
         horizon = self._frontier - o.history_s
-        while self._grid and self._grid[0][0][-1] < horizon:
+        while self._grid and self._grid[0].t[-1] < horizon:
             self._grid.pop(0)
             self._grid_cat = None
 
@@ -409,34 +430,25 @@ class OnlineCalibrator:
         if tg.size < 2:
             return
         qg, qdg, qddg = interp(tg)
-        motion = self.chain.link_motion(qg, qdg, qddg)
-        R = motion.T_base_link[:, 1:, :3, :3]  # (G, n, 3, 3) links 1..n
-        Rt = np.swapaxes(R, -1, -2)
-        u = np.einsum("gnij,gnj->gni", Rt, motion.a_origin[:, 1:] - self.gravity)
-        w = np.einsum("gnij,gnj->gni", Rt, motion.omega[:, 1:])
-        dw = np.einsum("gnij,gnj->gni", Rt, motion.omega_dot[:, 1:])
-        W = skew(w)
-        K = skew(dw) + W @ W
-        ok = interp.reliable(tg)
-        speed = np.cumsum(np.abs(qdg), axis=1)
+        u, K, w, dw, ug = frame_signals(self.chain.link_motion(qg, qdg, qddg), self.gravity)  # (G, n, ...) links 1..n
+        y = np.concatenate([u, K.reshape(*K.shape[:2], 9), w, ug], axis=2)
         self.joint_active_s += (np.abs(qdg) > JOINT_ACTIVE_RPS).sum(axis=0) * dt
-        ug = -np.einsum("gnji,j->gni", R, self.gravity)  # gravity's part of u, link frame
-        self._grid.append((tg, u, K, w, dw, ok, speed, ug))
+        self._grid.append(_Grid(tg, y, dw, interp.reliable(tg), np.cumsum(np.abs(qdg), axis=1)))
         self._grid_cat = None
 
-    def _grid_arrays(self) -> tuple[FloatArray, ...] | None:
+    def _grid_arrays(self) -> _Grid | None:
+        """The kept grid blocks as one :class:`_Grid` whose ``dy`` holds the time derivatives of the
+        table (central differences along the whole grid, continuous across blocks; ``w``'s exact)."""
         if not self._grid:
             return None
         if self._grid_cat is None:
-            parts = list(zip(*self._grid, strict=True))
-            tg = np.concatenate(parts[0])
-            u, K, w, dw = (np.concatenate(p) for p in parts[1:5])
-            ok, speed, ug = np.concatenate(parts[5]), np.concatenate(parts[6]), np.concatenate(parts[7])
-            # derivatives along the whole grid (continuous across blocks)
-            du = np.gradient(u, tg, axis=0) if tg.size > 1 else np.zeros_like(u)
-            ddw = np.gradient(w, tg, axis=0) if tg.size > 1 else np.zeros_like(w)
-            dK = np.gradient(K, tg, axis=0) if tg.size > 1 else np.zeros_like(K)
-            self._grid_cat = (tg, u, K, w, dw, ok, speed, du, ddw, dK, ug)
+            tg = np.concatenate([b.t for b in self._grid])
+            y = np.concatenate([b.y for b in self._grid])
+            dy = np.gradient(y, tg, axis=0) if tg.size > 1 else np.zeros_like(y)
+            dy[..., 12:15] = np.concatenate([b.dy for b in self._grid])  # dw/ds from the kinematics
+            self._grid_cat = _Grid(
+                tg, y, dy, np.concatenate([b.ok for b in self._grid]), np.concatenate([b.speed for b in self._grid])
+            )
         return self._grid_cat
 
     def _take_pending(self, st: _Unit) -> tuple[FloatArray, FloatArray, FloatArray | None]:
@@ -446,9 +458,9 @@ class OnlineCalibrator:
         order = np.argsort(t, kind="stable")
         return t[order], a[order], None if g is None else g[order]
 
-    def _align(self, name: str, st: _Unit, grid: tuple[FloatArray, ...], t: FloatArray, a: FloatArray,
+    def _align(self, name: str, st: _Unit, grid: _Grid, t: FloatArray, a: FloatArray,
                g: FloatArray | None) -> None:  # fmt: skip
-        tg, w, speed = grid[0], grid[3], grid[6]
+        tg, w, speed = grid.t, grid.y[..., 12:15], grid.speed
         o = self.options
         inside = (t >= tg[0]) & (t <= tg[-1])
         if inside.sum() < 20 or t[inside][-1] - t[inside][0] < o.align_s:
@@ -483,7 +495,7 @@ class OnlineCalibrator:
                     return 0
         assert st.offset is not None
         s = t - st.offset
-        tg = grid[0]
+        tg = grid.t
         late = s < tg[0]
         self.late += int(late.sum())
         ready = (s >= tg[0]) & (s <= tg[-1])
@@ -521,36 +533,20 @@ class OnlineCalibrator:
             st.pending_a.append(a)
             st.pending_g.append(g)
 
-    def _signals_at(self, grid: tuple[FloatArray, ...], s: FloatArray, links: Sequence[int]):
-        """Link signals of ``links`` at instants ``s`` (M,) from the grid, as ``mle``'s signal table does:
-        cubic Hermite for ``u``, ``K`` and ``w`` with their derivatives (``w``'s exact from the
-        kinematics, ``u``'s and ``K``'s by central differences), linear for the derivatives. Returns
-        u, K, w, dw_dt, du_dt, dK_dt, u_g (each ``(L, M, ...)``) and ok ``(M,)``."""
-        tg, u, K, w, dw, ok, _, du, _, dK, ug = grid
-        i = np.clip(np.searchsorted(tg, s) - 1, 0, tg.size - 2)
-        h = tg[i + 1] - tg[i]
-        f = (s - tg[i]) / h
-        idx = np.asarray(links) - 1
-
-        def shaped(c: FloatArray, ndim: int) -> FloatArray:
-            return c.reshape((-1,) + (1,) * (ndim - 1))
-
-        def lerp(x: FloatArray) -> FloatArray:
-            x0, x1 = x[i][:, idx], x[i + 1][:, idx]  # (M, L, ...)
-            ff = shaped(f, x0.ndim)
-            return np.moveaxis((1 - ff) * x0 + ff * x1, 1, 0)
-
-        f2, f3 = f * f, f * f * f
-        h00, h10, h01, h11 = 2 * f3 - 3 * f2 + 1, (f3 - 2 * f2 + f) * h, -2 * f3 + 3 * f2, (f3 - f2) * h
-
-        def hermite(x: FloatArray, dx: FloatArray) -> FloatArray:
-            x0, x1, d0, d1 = x[i][:, idx], x[i + 1][:, idx], dx[i][:, idx], dx[i + 1][:, idx]
-            n = x0.ndim
-            y = shaped(h00, n) * x0 + shaped(h10, n) * d0 + shaped(h01, n) * x1 + shaped(h11, n) * d1
-            return np.moveaxis(y, 1, 0)
-
-        sig = (hermite(u, du), hermite(K, dK), hermite(w, dw), lerp(dw), lerp(du), lerp(dK), lerp(ug))
-        return (*sig, ok[i] & ok[i + 1])
+    @staticmethod
+    def _signals_at(grid: _Grid, s: FloatArray, links: Sequence[int]):
+        """Link signals of ``links`` at instants ``s`` (M,) from the grid, as ``mle``'s signal table does
+        (:func:`~skincal.calib.signals.hermite`: cubic Hermite for the values with their derivatives,
+        linear for the derivatives). Returns u, K, w, dw_dt, du_dt, dK_dt, u_g (each ``(L, M, ...)``)
+        and ok ``(M,)``."""
+        y, dy, i = hermite(grid.t, grid.y, grid.dy, s, np.asarray(links) - 1)  # (M, L, 18)
+        y, dy = np.moveaxis(y, 1, 0), np.moveaxis(dy, 1, 0)
+        L, M = y.shape[:2]
+        sig = (
+            y[..., :3], y[..., 3:12].reshape(L, M, 3, 3), y[..., 12:15], dy[..., 12:15],
+            dy[..., :3], dy[..., 3:12].reshape(L, M, 3, 3), y[..., 15:18],
+        )  # fmt: skip
+        return (*sig, grid.ok[i] & grid.ok[i + 1])
 
     @staticmethod
     def _unsaturated(st: _Unit, a: FloatArray, g: FloatArray | None) -> np.ndarray:
@@ -573,7 +569,7 @@ class OnlineCalibrator:
         st.saturated += int((~keep).sum())
         return keep
 
-    def _absorb(self, name: str, st: _Unit, grid: tuple[FloatArray, ...], s: FloatArray, a: FloatArray,
+    def _absorb(self, name: str, st: _Unit, grid: _Grid, s: FloatArray, a: FloatArray,
                 g: FloatArray | None) -> int:  # fmt: skip
         unsat = self._unsaturated(st, a, g)
         if not unsat.all():
@@ -898,17 +894,9 @@ class OnlineCalibrator:
     def _design_normal(
         self, sol: stats.Solution, sig: FloatArray, link: int, q, qd, qdd, dt: float, gyro: bool
     ) -> FloatArray:
-        motion = self.chain.link_motion(q, qd, qdd, upto=link)
-        R = motion.T_base_link[:, link, :3, :3]
-        Rt = np.swapaxes(R, 1, 2)
-        u = np.einsum("mij,mj->mi", Rt, motion.a_origin[:, link] - self.gravity)
-        w = np.einsum("mij,mj->mi", Rt, motion.omega[:, link])
-        dw = np.einsum("mij,mj->mi", Rt, motion.omega_dot[:, link])
-        W = skew(w)
-        K = skew(dw) + W @ W
+        u, K, w, dw, ug = frame_signals(self.chain.link_motion(q, qd, qdd, upto=link), self.gravity, link)
         du = np.gradient(u, dt, axis=0) if u.shape[0] > 1 else np.zeros_like(u)
         dK = np.gradient(K, dt, axis=0) if u.shape[0] > 1 else np.zeros_like(K)
-        ug = -np.einsum("mji,j->mi", R, self.gravity)
         f = ug + (1.0 + sol.gravity_scale) * (u - ug + np.einsum("mij,j->mi", K, sol.p))
         a = (f @ sol.R) @ sol.A.T + sol.b
         Za = stats.gram(stats.accel_rows(a, u, K, du, dK, ug))

@@ -1,6 +1,6 @@
 """Sufficient statistics of the streaming calibrator and the pose solve from them.
 
-The accelerometer model of :mod:`skincal.calib.mle.model` (``a = A R^T v(s) + b`` with
+The accelerometer model of :mod:`skincal.calib.model` (``a = A R^T v(s) + b`` with
 ``v = u + K p`` in link frame, ``R = R_link_su``) is rearranged to be *linear* in its unknowns::
 
     G a - h - K p - du * tau - dK (tau p) - k (u - u_g) - K (k p) = u,    G = R A^-1 ~ R (I + E),  h = G b   (1)
@@ -15,7 +15,7 @@ kept as 3 unknowns of its own like ``tau p``), and the gyroscope's ``g = R^T w +
 
     R g - c - dw * tau = w,            c = R b_g                                                (2)
 
-``u``, ``K``, ``w`` are :func:`skincal.calib.mle.signals.link_signals` of the unit's link at its
+``u``, ``K``, ``w`` are :func:`skincal.calib.signals.link_signals` of the unit's link at its
 sample instants (link frame), ``a`` and ``g`` its readings (unit frame). Each sample adds one
 3-row block ``Phi x - y`` to a linear least-squares problem, so everything the data say about the
 unknowns is the Gram matrix ``Z = sum [Phi y]^T [Phi y]`` of each equation (24 x 24 for (1) with
