@@ -55,14 +55,21 @@ def test_residual_sum_is_the_sum_of_squared_residuals():
     rng = np.random.default_rng(2)
     a, u = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
     K, du, dK = rng.normal(size=(50, 3, 3)), rng.normal(size=(50, 3)), rng.normal(size=(50, 3, 3))
-    ug = rng.normal(size=(50, 3))
-    Z = stats.gram(stats.accel_rows(a, u, K, du, dK, ug))
-    G, h, p, tau, k = rng.normal(size=(3, 3)), rng.normal(size=3), rng.normal(size=3), 0.01, 0.003
-    # v = u_g + (1 + k) (u - u_g + K p), each signal evaluated at s + tau (first order)
-    model = ug + (1 + k) * (u - ug + np.einsum("mij,j->mi", K, p)) + tau * (du + np.einsum("mij,j->mi", dK, p))
+    ug, elapsed = rng.normal(size=(50, 3)), rng.uniform(0.0, 300.0, size=50)
+    Z = stats.gram(stats.accel_rows(a, u, K, du, dK, ug, elapsed))
+    G, h, p, tau, k, d = rng.normal(size=(3, 3)), rng.normal(size=3), rng.normal(size=3), 0.01, 0.003, 2e-5
+    # v = u_g + (1 + k) (u - u_g + K p), each signal evaluated at s + T, T = tau + d (s - t_ref) (first order)
+    T = (tau + d * elapsed)[:, None]
+    model = ug + (1 + k) * (u - ug + np.einsum("mij,j->mi", K, p)) + T * (du + np.einsum("mij,j->mi", dK, p))
     direct = np.sum((a @ G.T - h - model) ** 2)
-    x = np.concatenate([G.reshape(9), h, p, [tau], tau * p, [k], k * p])
+    x = np.concatenate([G.reshape(9), h, p, [tau], tau * p, [k], k * p, [d], d * p])
     assert stats.residual_sum(Z, x) == pytest.approx(direct, rel=1e-10)
+    # the gyroscope's equation (2): R g - c - dw T = w
+    g, w, dw = rng.normal(size=(50, 3)), rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
+    R, c = rng.normal(size=(3, 3)), rng.normal(size=3)
+    Zg = stats.gram(stats.gyro_rows(g, w, dw, elapsed))
+    direct_g = np.sum((g @ R.T - c - dw * T - w) ** 2)
+    assert stats.residual_sum(Zg, np.concatenate([R.reshape(9), c, [tau], [d]])) == pytest.approx(direct_g, rel=1e-10)
 
 
 def test_covariance_matches_monte_carlo():
@@ -285,7 +292,7 @@ def test_a_clock_realignment_is_absorbed_before_the_status_is_given(realistic):
     st = cal._u["su3"]
     good = st.offset
     st.offset -= 0.006
-    cal._realign(st, 0.0)  # the last minute absorbed again with the wrong offset
+    cal._realign(st, 0.0, 0.0)  # the last minute absorbed again with the wrong offset
     cal._absorb_unit("su3")
     status = cal.status()["su3"]
     assert status.pose is not None and status.missing == "" and st.realigned >= 1

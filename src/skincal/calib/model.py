@@ -23,19 +23,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from skincal.calib.timing import find_clock_steps
+from skincal.calib.timing import find_clock_steps, motion_instants
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.kinematics.transforms import FloatArray
 from skincal.skin.pose import SkinUnitPose
-
-
-def motion_instants(t: FloatArray, time_offset_s: float, drift: float = 0.0, t_ref: float = 0.0) -> FloatArray:
-    """``(M,)`` instants ``s = t - tau - d (t - t_ref)`` (s) at which samples stamped ``t`` measured the
-    motion (``drift`` dimensionless: 1e-6 per ppm)."""
-    t = np.asarray(t, dtype=float)
-    if drift:
-        return t - drift * (t - t_ref) - time_offset_s
-    return t - time_offset_s
 
 
 def link_specific_force(

@@ -38,7 +38,14 @@ from numpy.typing import ArrayLike
 from skincal.calib.online import stats
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.signals import frame_signals, hermite
-from skincal.calib.timing import coarse_time_offset, motion_profile
+from skincal.calib.timing import (
+    ClockSteps,
+    coarse_time_offset,
+    compose_clock,
+    find_clock_steps,
+    motion_instants,
+    motion_profile,
+)
 from skincal.data.dataset import Dataset, JointStates
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.result import EVENTS, MOVED_AT, CalibrationResult, UnitResult
@@ -61,12 +68,17 @@ ALIGN_SHARPNESS = 0.1
 ALIGN_WAIT_FRACTION = 0.8
 """...or once its pending stream spans this fraction of the history (then with a warning in the result)."""
 REALIGN_S = 0.004
-"""A decided unit whose residual time offset ``tau`` exceeds this (s) is re-aligned (``offset - tau``) and
-its statistics restarted: the first-order offset model holds for a few ms only."""
+"""A decided unit whose residual clock error (offset and drift, at either end of its data) exceeds this (s)
+is re-aligned (its clock mapping composed with the residual, :func:`~skincal.calib.timing.compose_clock`)
+and its statistics restarted: the first-order clock model holds for a few ms only."""
 ALIGN_RETRY_S = 2.0
 """A unit not yet aligned tries again after this much more of its stream, s."""
-MAX_REALIGN = 3
+MAX_REALIGN = 6
 """Re-alignments allowed per unit."""
+DRIFT_UNDETERMINED_PPM = 100.0
+"""A residual clock drift whose std exceeds this (ppm) is not determined yet: the result says so."""
+DRIFT_NOTE_SIGMAS, DRIFT_NOTE_PPM = 4.0, 20.0
+"""A drift beyond this many std and ppm is named in the result (``mle``'s rule)."""
 SCALE_STD_LIMIT = 0.01
 """The accelerometer's scale/misalignment is estimated only when each of its 9 elements is determined to
 this std (else held at the identity: a weakly determined scale absorbs what the pose should explain)."""
@@ -238,6 +250,11 @@ class _Unit:
     raw: deque = field(default_factory=deque)  # absorbed (stamps, accel, gyro) within the history, for _realign
     realigned: int = 0
     scale_estimated: bool = False
+    # the clock mapping s = t' - offset - drift (t' - t_ref), t' the stamps less their re-sync steps
+    drift: float = 0.0
+    t_ref: float = 0.0
+    steps: ClockSteps | None = None
+    t_seen: float = float("-inf")  # newest stamp searched for re-sync steps
 
 
 class OnlineCalibrator:
@@ -475,6 +492,9 @@ class OnlineCalibrator:
         if search.sharpness < ALIGN_SHARPNESS and span < ALIGN_WAIT_FRACTION * o.history_s:
             return  # the peak is not distinct yet: wait for more motion (the samples stay pending)
         st.offset, st.offset_sharpness = float(search.offset_s), float(search.sharpness)
+        st.t_ref = float(t[inside][0])
+        st.steps = find_clock_steps(t)
+        st.t_seen = float(t[-1])
 
     def _absorb_unit(self, name: str, final: bool = False) -> int:
         st = self._u[name]
@@ -494,7 +514,7 @@ class OnlineCalibrator:
                     self._keep(st, t, a, g)
                     return 0
         assert st.offset is not None
-        s = t - st.offset
+        s = self._instants(st, t)
         tg = grid.t
         late = s < tg[0]
         self.late += int(late.sum())
@@ -504,16 +524,33 @@ class OnlineCalibrator:
         if not ready.any():
             return 0
         st.raw.append((t[ready], a[ready], None if g is None else g[ready]))
-        while st.raw and st.raw[0][0][-1] - st.offset < tg[0]:
+        while st.raw and self._instants(st, st.raw[0][0][-1:])[0] < tg[0]:
             st.raw.popleft()  # its part of the grid is gone: it could not be absorbed again
         return self._absorb(name, st, grid, s[ready], a[ready], None if g is None else g[ready])
 
-    def _realign(self, st: _Unit, tau: float) -> None:
-        """Move the unit's offset by the residual ``tau`` (s) and absorb its kept raw samples again from scratch."""
+    @staticmethod
+    def _instants(st: _Unit, t: FloatArray) -> FloatArray:
+        """Joint-clock instants of the unit's stamps ``t`` under its clock mapping (:mod:`skincal.calib.timing`:
+        re-sync steps removed, then offset and drift); newer stamps are searched for re-sync steps first."""
         assert st.offset is not None
-        st.offset -= tau
+        if st.steps is not None:
+            new = t > st.t_seen
+            if new.any():
+                st.steps = st.steps.extend(st.t_seen, t[new])
+                st.t_seen = float(t[new][-1])
+            t = st.steps.correct(t)
+        return motion_instants(t, st.offset, st.drift, st.t_ref)
+
+    def _realign(self, st: _Unit, tau: float, drift: float) -> None:
+        """Compose the unit's clock mapping with the residual offset ``tau`` (s) and drift and absorb its kept
+        raw samples again from scratch."""
+        assert st.offset is not None
+        st.offset, st.drift = compose_clock(st.offset, st.drift, tau, drift)
         st.realigned += 1
         raw = list(st.raw)
+        if st.steps is None and raw:  # re-sync steps seen since the alignment
+            st.steps = find_clock_steps(np.concatenate([r[0] for r in raw]))
+            st.t_seen = float(raw[-1][0][-1])
         st.raw = deque()
         L = len(st.links)
         st.Za, st.Zg, st.moving = np.zeros_like(st.Za), np.zeros_like(st.Zg), np.zeros(L)
@@ -584,7 +621,7 @@ class OnlineCalibrator:
         moving = (np.linalg.norm(w, axis=-1) > MOVING_RPS) | (np.linalg.norm(dw, axis=-1) > MOVING_RPS2)  # (L, M)
         sol = st.solutions.get(st.links[0]) if st.decided else None
         if sol is not None:
-            r = self._residuals(sol, a, u[0], K[0], du[0], dK[0], ug[0])
+            r = self._residuals(sol, a, u[0], K[0], du[0], dK[0], ug[0], s - st.t_ref)
             sig = st.sigmas[st.links[0]]
             rn = r / np.maximum(np.where(moving[0], sig[1], sig[0]), 1e-9)[:, None]
             settled = st.status is not None and _settled(st.status)
@@ -602,10 +639,11 @@ class OnlineCalibrator:
             return 0
         L, M = u.shape[0], s.size
         cls = np.stack([~moving, moving], axis=1)[..., None, None]  # (L, 2, M, 1, 1)
-        rows_a = stats.accel_rows(np.broadcast_to(a, (L, M, 3)), u, K, du, dK, ug)[:, None] * cls
+        elapsed = s - st.t_ref
+        rows_a = stats.accel_rows(np.broadcast_to(a, (L, M, 3)), u, K, du, dK, ug, elapsed)[:, None] * cls
         Za = stats.gram(rows_a)
         if g is not None:
-            Zg = stats.gram(stats.gyro_rows(np.broadcast_to(g, (L, M, 3)), w, dw)[:, None] * cls)
+            Zg = stats.gram(stats.gyro_rows(np.broadcast_to(g, (L, M, 3)), w, dw, elapsed)[:, None] * cls)
         else:
             Zg = np.zeros_like(st.Zg)
         n_moving = moving.sum(axis=1).astype(float)
@@ -630,12 +668,15 @@ class OnlineCalibrator:
         du: FloatArray,
         dK: FloatArray,
         ug: FloatArray,
+        elapsed: FloatArray,
     ) -> FloatArray:
-        """``(M, 3)`` residuals of equation (1) of :mod:`~skincal.calib.online.stats` at ``sol``, m/s^2."""
+        """``(M, 3)`` residuals of equation (1) of :mod:`~skincal.calib.online.stats` at ``sol``, m/s^2
+        (``elapsed`` ``(M,)`` = ``s - t_ref``, s)."""
         G = sol.R @ np.linalg.inv(sol.A)
         h = G @ sol.b
-        Kp = np.einsum("mij,j->mi", (1.0 + sol.gravity_scale) * K + sol.tau * dK, sol.p)
-        return a @ G.T - h - Kp - du * sol.tau - sol.gravity_scale * (u - ug) - u
+        T = (sol.tau + sol.drift * elapsed)[:, None]  # residual clock error per sample, s
+        Kp = np.einsum("mij,j->mi", (1.0 + sol.gravity_scale) * K, sol.p) + T * np.einsum("mij,j->mi", dK, sol.p)
+        return a @ G.T - h - Kp - du * T - sol.gravity_scale * (u - ug) - u
 
     # ---------------------------------------------------------------- estimates
     @staticmethod
@@ -808,12 +849,8 @@ class OnlineCalibrator:
         pos_std, rot_std = std[:3], np.degrees(std[3:])
         determined = bool(np.all(pos_std < UNDETERMINED_M) and np.all(rot_std < UNDETERMINED_DEG))
         undecided = len(ambiguous) > 1
-        tau_std = float(np.sqrt(max(sol.cov[21, 21], 0.0)))
-        if (
-            determined and not undecided and abs(sol.tau) > REALIGN_S and tau_std < 0.25 * abs(sol.tau)
-            and st.realigned < MAX_REALIGN
-        ):  # fmt: skip
-            self._realign(st, sol.tau)
+        if determined and not undecided and st.realigned < MAX_REALIGN and self._clock_off(st, sol):
+            self._realign(st, sol.tau, sol.drift)
             self._absorb_unit(name)  # the kept samples again, at once: the status (and a result) never shows the gap
             return self._status(name, advise)
         if not undecided and not st.decided and len(st.links) > 1 and st.moving[k] > MIN_MOVING and determined:
@@ -843,6 +880,19 @@ class OnlineCalibrator:
                             missing, best_joint, reached, st.t_last, True)  # fmt: skip
         st.status = status
         return status
+
+    @staticmethod
+    def _clock_off(st: _Unit, sol: stats.Solution) -> bool:
+        """The residual clock error ``tau + d (s - t_ref)`` at either end of the unit's data exceeds
+        :data:`REALIGN_S` and is determined (its std below a quarter of it)."""
+        i = [stats.TAU, stats.DRIFT]
+        C = sol.cov[np.ix_(i, i)]
+        for s in (st.t_first, st.t_last):
+            e = np.array([1.0, s - st.t_ref])
+            T = sol.tau + sol.drift * e[1]
+            if abs(T) > REALIGN_S and np.sqrt(max(float(e @ C @ e), 0.0)) < 0.25 * abs(T):
+                return True
+        return False
 
     def _keep_only(self, st: _Unit, link: int) -> None:
         k = st.links.index(link)
@@ -966,12 +1016,21 @@ class OnlineCalibrator:
             G = sol.R @ np.linalg.inv(sol.A)
             Ginv = np.linalg.inv(G)
             cov_b = Ginv @ sol.cov[idx_b, idx_b] @ Ginv.T * kappa
+            # the clock: the mapping composed with the residual (stats: the samples saw s + tau + d (s - t_ref))
+            offset, drift = compose_clock(st.offset or 0.0, st.drift, sol.tau, sol.drift)
+            drift_std_ppm = 1e6 * float(np.sqrt(max(sol.cov[stats.DRIFT, stats.DRIFT] * kappa, 0.0)))
             imu = ImuCalibration(
                 accel_bias_mps2=sol.b,
                 accel_bias_std_mps2=np.sqrt(np.clip(np.diag(cov_b), 0, None)),
                 accel_scale_misalignment=sol.A,
-                time_offset_s=float((st.offset or 0.0) - sol.tau),  # stats: the samples saw s + tau
-                time_offset_std_s=float(np.sqrt(max(sol.cov[21, 21] * kappa, 0.0))),
+                time_offset_s=offset,
+                time_offset_std_s=float(np.sqrt(max(sol.cov[stats.TAU, stats.TAU] * kappa, 0.0))),
+                time_reference_s=st.t_ref,
+                clock_drift_ppm=1e6 * drift + (st.steps.drift_ppm if st.steps is not None else 0.0),
+                clock_drift_std_ppm=drift_std_ppm,
+                clock_resync_steps=None if st.steps is None else st.steps.n_steps,
+                clock_resync_period_s=None if st.steps is None else st.steps.period_s,
+                clock_resync_step_s=None if st.steps is None else st.steps.mean_step_s,
                 gyro_bias_rps=sol.gyro_bias if st.has_gyro else None,
                 gravity_mps2=float(np.linalg.norm(self.gravity) / (1.0 + sol.gravity_scale)),
                 gravity_std_mps2=float(np.linalg.norm(self.gravity) * np.sqrt(max(sol.cov[22, 22] * kappa, 0.0))),
@@ -979,6 +1038,16 @@ class OnlineCalibrator:
             warnings: list[str] = []
             if np.isfinite(st.offset_sharpness) and st.offset_sharpness < ALIGN_SHARPNESS:
                 warnings.append("time offset uncertain (no motion to align the unit's clock on)")
+            notes: list[str] = []
+            if drift_std_ppm > DRIFT_UNDETERMINED_PPM:
+                notes.append(
+                    f"clock drift not determined yet (std {drift_std_ppm:.0f} ppm over {st.t_last - st.t_first:.0f} s"
+                    " of data): the time offset holds near the data's start"
+                )
+            elif abs(drift) * 1e6 > max(DRIFT_NOTE_SIGMAS * drift_std_ppm, DRIFT_NOTE_PPM):
+                notes.append(
+                    f"clock drifts: {drift * 1e6:+.0f} ppm relative to the robot's clock (estimated and corrected)"
+                )
             extras = {
                 "link_name": self.chain.link_names[s.link] if self.chain.link_names else f"link{s.link}",
                 "link_margin": s.link_margin if np.isfinite(s.link_margin) else None,
@@ -993,6 +1062,8 @@ class OnlineCalibrator:
                 "scale_estimated": st.scale_estimated,
                 "pose_covariance": cov,
             }
+            if notes:
+                extras["notes"] = notes
             units[name] = UnitResult(
                 pose=s.pose, observable=True, position_std_m=s.position_std_m, rotation_std_deg=s.rotation_std_deg,
                 warnings=tuple(warnings), extras=extras, imu=imu,
