@@ -9,7 +9,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from skincal.calib import calibrate_relative, compare_with_joint_result
-from skincal.calib.imu_only import _symmetric, coarse_offset, common_rests, fit_accel_ellipsoid, still_mask
+from skincal.calib.imu_only import _symmetric, coarse_offset, common_rests, fit_accel_ellipsoid
+from skincal.calib.rest import imu_still_mask as still_mask
 from skincal.cli import main
 from skincal.data.hdf5 import write_dataset
 from skincal.data.result import CalibrationResult, UnitResult, read_result, result_from_dict, result_to_dict

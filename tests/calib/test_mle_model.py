@@ -19,8 +19,8 @@ from skincal.calib.api import METHODS, calibrate_unit
 from skincal.calib.mle import method as mle
 from skincal.calib.mle.solver import State, _accel_rows
 from skincal.calib.model import link_specific_force, predict_specific_force
-from skincal.calib.timing import motion_instants
 from skincal.calib.preprocess import JointInterpolator
+from skincal.calib.timing import motion_instants
 from skincal.data.result import CalibrationResult, read_result, write_result
 from skincal.kinematics import panda
 from skincal.protocol import ProtocolConfig, build_trajectory

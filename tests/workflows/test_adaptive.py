@@ -1,5 +1,5 @@
 """The adaptive loop in simulation (skincal.workflows.adaptive) and the next best motion on a real
-streaming calibrator fed by a simulated robot (skincal.calib.online.design)."""
+streaming calibrator fed by a simulated robot (skincal.protocol.design)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from skincal.calib.online.design import (
+from skincal.protocol.design import (
     DesignOptions,
     build_segment,
     excitable,

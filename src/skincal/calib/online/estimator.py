@@ -35,8 +35,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from skincal.calib import rest
 from skincal.calib.online import stats
 from skincal.calib.preprocess import JointInterpolator
+from skincal.calib.rest import link_moving
 from skincal.calib.signals import frame_signals, hermite
 from skincal.calib.timing import (
     ClockSteps,
@@ -55,13 +57,10 @@ from skincal.kinematics.transforms import FloatArray
 from skincal.names import name_problem
 from skincal.skin.pose import SkinUnitPose
 
-MOVING_RPS = 0.02
-"""A sample whose link turns faster than this (rad/s)..."""
-MOVING_RPS2 = 0.2
-"""...or accelerates its rotation faster than this (rad/s^2) counts as moving. Rest and moving samples
-are two classes with their own noise level (a resting unit's residual is its sensor noise; a moving
-one's adds the errors of the joint-derived accelerations), so the Grams are kept per class."""
 REST, MOVING = 0, 1
+"""Rest and moving samples are two classes with their own noise level (a resting unit's residual is its sensor
+noise; a moving one's adds the errors of the joint-derived accelerations), so the Grams are kept per class
+(:func:`~skincal.calib.rest.link_moving`)."""
 ALIGN_SHARPNESS = 0.1
 """A unit's clock is aligned once the cross-correlation peak stands out by this much (correlation units)...
 """
@@ -484,7 +483,7 @@ class OnlineCalibrator:
             return
         lo, hi = np.searchsorted(tg, [t[inside][0], t[inside][-1]])
         ang = np.linalg.norm(w[lo:hi], axis=2)
-        if ang.shape[0] < 20 or float(ang.max()) < 5 * MOVING_RPS:
+        if ang.shape[0] < 20 or float(ang.max()) < 5 * rest.MOVING_RPS:
             return  # no motion to align on yet
         profile = motion_profile(tg[lo:hi], ang, speed[lo:hi])
         search = coarse_time_offset(profile, t[inside], a[inside], None if g is None else g[inside])
@@ -618,7 +617,7 @@ class OnlineCalibrator:
             g = None if g is None else g[ok]
         if s.size == 0:
             return 0
-        moving = (np.linalg.norm(w, axis=-1) > MOVING_RPS) | (np.linalg.norm(dw, axis=-1) > MOVING_RPS2)  # (L, M)
+        moving = link_moving(w, dw)  # (L, M)
         sol = st.solutions.get(st.links[0]) if st.decided else None
         if sol is not None:
             r = self._residuals(sol, a, u[0], K[0], du[0], dK[0], ug[0], s - st.t_ref)
@@ -1048,7 +1047,7 @@ class OnlineCalibrator:
                 notes.append(
                     f"clock drifts: {drift * 1e6:+.0f} ppm relative to the robot's clock (estimated and corrected)"
                 )
-            extras = {
+            extras: dict[str, Any] = {
                 "link_name": self.chain.link_names[s.link] if self.chain.link_names else f"link{s.link}",
                 "link_margin": s.link_margin if np.isfinite(s.link_margin) else None,
                 "samples": s.samples,
