@@ -353,7 +353,8 @@ def draw_imu_errors(model: ImuModel, rng: np.random.Generator) -> ImuErrors:
     if model.gyro_scale_std > 0 or model.gyro_misalignment_std > 0:
         gyro_scale = 1.0 + rng.normal(0.0, model.gyro_scale_std, 3)
         off = rng.normal(0.0, model.gyro_misalignment_std, (3, 3))
-        gyro_mis = np.eye(3) + off - np.diag(np.diag(off))
+        np.fill_diagonal(off, 0.0)
+        gyro_mis = np.eye(3) + off
     return ImuErrors(bias, scale, np.eye(3) + upper + upper.T, gyro_bias, latency, gyro_scale, gyro_mis)
 
 

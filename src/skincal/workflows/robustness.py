@@ -20,10 +20,10 @@ brisk +-2 g, stuck axis, bias drift, knock, gravity). Placements, trajectories a
 the same for every fault of a ``(robot, seed)`` (paired comparison); the unit with the stuck axis
 and the knocked unit are two different units drawn from the seed.
 
-The faults of real recordings (issue 24; no mean target yet): ``report14`` joint states, ``host``
-and ``host-gaps`` unit clocks, gyroscope scale and misalignment, the three unit mistakes of
-:func:`skincal.sim.faults.misstate_units` and ``real-recording`` (``real-consumer`` IMUs with
-``report14`` joints and ``host-gaps`` clocks).
+The faults of real recordings (issue 24): ``report14`` joint states, ``host`` and ``host-gaps``
+unit clocks (the clock cells' 1 mm target), gyroscope scale and misalignment, the three unit
+mistakes of :func:`skincal.sim.faults.misstate_units` and ``real-recording`` (``real-consumer`` IMUs
+with ``report14`` joints and ``host-gaps`` clocks); those but the clock cells have no mean target yet.
 
 **Truth.** Each unit's simulated pose; for the knocked unit the pose before the knock, held for
 2/3 of the session (:func:`skincal.sim.faults.splice_knock`).
@@ -202,8 +202,10 @@ def _faults() -> dict[str, Fault]:
         ),
         Fault("joints-report14", "joints report14: 13.6 Hz host-stamped reports, 8 % lost, central-difference qd",
               joints="report14"),
-        Fault("clock-host", "clock host: host-stamped, 80-100 ms lag, spacing 2.5-17.5 ms", clock="host"),
-        Fault("clock-gaps", "clock host-gaps: host with 0.3-0.7 s gaps, a clock step after each", clock="host-gaps"),
+        Fault("clock-host", "clock host: host-stamped, 80-100 ms lag, spacing 2.5-17.5 ms", clock="host",
+              target_mean_mm=1.0),
+        Fault("clock-gaps", "clock host-gaps: host with 0.3-0.7 s gaps, a clock step after each", clock="host-gaps",
+              target_mean_mm=1.0),
         Fault("gyro-scale", "gyroscope scale 4.5 % std and 1 % misalignment per axis",
               imu_options=(("gyro_scale_std", 0.045), ("gyro_misalignment_std", 0.01))),
         Fault("units-gyro-deg", "gyroscope in deg/s stored as rad/s (x 57.3)", unit_mistake="gyro-deg"),
