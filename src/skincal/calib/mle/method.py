@@ -120,6 +120,8 @@ class MleOptions:
         gravity: estimate the gravity scale (needs ``scale``).
         gyro: use the gyroscope when the unit has one.
         detect_move: look for a unit that moved on its link during the session.
+        consistency: calibrate independent parts of the recording too and inflate the std where they
+            disagree beyond it (:mod:`skincal.calib.consistency`).
     """
 
     scale: bool = True
@@ -129,6 +131,7 @@ class MleOptions:
     gravity: bool = True
     gyro: bool = True
     detect_move: bool = True
+    consistency: bool = True
 
 
 @dataclass(frozen=True)
