@@ -52,6 +52,7 @@ def test_honest_simulated_std_are_not_inflated(honest):
         c = unit.extras["consistency"]
         assert c["inflation_position"] == 1.0 and c["inflation_rotation"] == 1.0, (name, c)
         assert not c["failed"]
+        assert not any("gyroscope scale" in w for w in unit.warnings), unit.warnings
         chi2 += c["chi2_position"] + c["chi2_rotation"]
         dof += c["dof_position"] + c["dof_rotation"]
     assert dof == 12 * len(result.units)
@@ -71,3 +72,5 @@ def test_an_unmodelled_gyroscope_scale_is_caught():
     assert len(caught) >= 4, caught
     for name in caught:
         assert any("independent parts of the recording disagree" in w for w in result.units[name].warnings)
+    for name, unit in result.units.items():  # and the gyroscope itself is named (calib.gyro): never silent
+        assert any("gyroscope scale off the robot's rotation rate" in w for w in unit.warnings), (name, unit.warnings)
