@@ -2,7 +2,7 @@
 
     python benchmarks/bench_adaptive.py --robots panda sawyer ur5e --seeds 0
 
-A thin script over :mod:`skincal.workflows.bench_adaptive`: per robot and seed, 6 units (paper
+A thin script over :mod:`skincal.bench.adaptive`: per robot and seed, 6 units (paper
 placement), ``realistic`` IMUs and ``controller`` joint states, the streaming calibrator fed by the
 adaptive loop and by the whole ``fast`` protocol; prints the motion times and the true (worst-unit)
 errors, optionally JSON.
@@ -18,9 +18,9 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from skincal.workflows.bench_adaptive import run_case
+from skincal.bench.adaptive import run_case
+from skincal.bench.script import run_script
 from skincal.workflows.live import parse_target
-from skincal.workflows.script import run_script
 
 
 def _f(x: float | None, fmt: str = ".1f") -> str:

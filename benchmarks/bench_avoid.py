@@ -5,12 +5,12 @@ Usage: ``python benchmarks/bench_avoid.py [--scenarios arm,hand,walk,fast] [--pl
 
 Issue 17 (ISO/TS 15066 separation, any robot, dynamics): ``python benchmarks/bench_avoid.py --iso
 [--robots panda,ur5e,iiwa14] [--scenarios ...] [--modes kinematic,torque] [--beliefs mle,degraded]
-[--duration S] [--quick] [--json out.json] [--plots folder]`` (:func:`skincal.workflows.bench_avoid.run_iso_benchmark`:
+[--duration S] [--quick] [--json out.json] [--plots folder]`` (:func:`skincal.bench.avoid.run_iso_benchmark`:
 every shipped scenario at its ISO 13855 speed, S_p from the covariance and the measured stopping model,
 the task clock that waits; contacts, min(clearance - S_p), time lost; the controller step with 100 points
 with covariances).
 
-A thin script over :mod:`skincal.workflows.bench_avoid` (what runs: the beliefs ``truth``, ``mle``,
+A thin script over :mod:`skincal.bench.avoid` (what runs: the beliefs ``truth``, ``mle``,
 ``degraded``, ``blind`` per scenario). Prints min clearance, contacts, max tracking error, recovery time
 after the person left, QP solve time (median, p95) and whole-loop time per 1 ms step, and the time of one
 controller step with 7 DoF and 10 obstacle points (the issue's target: <= 1 ms median).
@@ -21,9 +21,9 @@ from __future__ import annotations
 import argparse
 import json
 
+from skincal.bench.avoid import ISO_ROBOTS, beliefs, qp_step_time, run_avoid_benchmark, run_iso_benchmark
+from skincal.bench.script import run_script
 from skincal.kinematics import panda
-from skincal.workflows.bench_avoid import ISO_ROBOTS, beliefs, qp_step_time, run_avoid_benchmark, run_iso_benchmark
-from skincal.workflows.script import run_script
 
 
 def main() -> None:
@@ -78,11 +78,10 @@ def iso(args) -> None:
 
     from skincal.control.separation import SeparationParams
     from skincal.kinematics import panda
-    from skincal.workflows.avoidance import stopping_model
+    from skincal.workflows.experiment import StoppingModels
 
-    step = qp_step_time(
-        panda(), n_points=100, repeats=1000, separation=SeparationParams(stopping=stopping_model(panda()))
-    )
+    stopping = StoppingModels()  # each robot's stopping model measured once for the whole run
+    step = qp_step_time(panda(), n_points=100, repeats=1000, separation=SeparationParams(stopping=stopping(panda())))
     print(
         f"controller step, 7 DoF, {step['points']} points with covariances (S_p per point): "
         f"{step['step_median_ms']:.3f} ms median ({step['step_p95_ms']:.3f} p95); "
@@ -121,7 +120,9 @@ def iso(args) -> None:
     log_chain = {r: get_robot(r) for r in robots}
     scenarios = args.scenarios.split(",") if args.scenarios != "arm,hand,walk,fast" else None
     t0 = time.process_time()
-    rows = run_iso_benchmark(robots, scenarios, args.modes.split(","), labels, args.quick, args.duration, on_run=show)
+    rows = run_iso_benchmark(
+        robots, scenarios, args.modes.split(","), labels, args.quick, args.duration, on_run=show, stopping=stopping
+    )
     print(f"{len(rows)} runs, {time.process_time() - t0:.0f} s CPU", flush=True)
     if args.json:
         from skincal.data.atomic import write_bytes_atomic

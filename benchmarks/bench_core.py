@@ -1,6 +1,6 @@
 """FK and simulation throughput at 1, 10 and 100 units: ``python benchmarks/bench_core.py [--robot panda]
 [--json out.json]`` (the figures of ``skincal benchmark core``; a thin script over
-:mod:`skincal.workflows.bench_core`)."""
+:mod:`skincal.bench.core`)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ from pathlib import Path
 
 from rich.console import Console
 
+from skincal.bench.core import core_report, run_core_benchmark
+from skincal.bench.script import run_script
 from skincal.data.atomic import write_bytes_atomic
-from skincal.workflows.bench_core import core_report, run_core_benchmark
-from skincal.workflows.script import run_script
 
 
 def main() -> None:

@@ -1,6 +1,6 @@
 """The default calibrator's targets: ``python benchmarks/bench_mle.py [--runs 20] [--quick] [--no-om]
 [--json out.json]`` (the figures of ``skincal benchmark mle``; a thin script over
-:mod:`skincal.workflows.bench_mle`)."""
+:mod:`skincal.bench.mle`)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ from pathlib import Path
 
 from rich.console import Console
 
+from skincal.bench.mle import run_mle_benchmark
+from skincal.bench.script import run_script
 from skincal.data.atomic import write_bytes_atomic
-from skincal.workflows.bench_mle import run_mle_benchmark
-from skincal.workflows.script import run_script
 
 
 def main() -> None:

@@ -11,9 +11,9 @@ from pathlib import Path
 
 from rich.console import Console
 
+from skincal.bench.script import run_script
 from skincal.data.atomic import write_bytes_atomic
 from skincal.workflows.monitoring import bench_monitor
-from skincal.workflows.script import run_script
 
 
 def main() -> None:

@@ -1,6 +1,6 @@
 """Update cost of the streaming calibrator: ``python benchmarks/bench_online.py [--units 100] [--real-time]
 [--json out.json]`` (100 units at 100 Hz, joint states at 1 kHz, one core; a thin script over
-:mod:`skincal.workflows.bench_online`)."""
+:mod:`skincal.bench.online`)."""
 
 from __future__ import annotations
 
@@ -15,9 +15,9 @@ from pathlib import Path  # noqa: E402
 
 from rich.console import Console  # noqa: E402
 
+from skincal.bench.online import online_report, run_online_benchmark, stream_vs_batch, stream_vs_batch_report  # noqa: E402
+from skincal.bench.script import run_script  # noqa: E402
 from skincal.data.atomic import write_bytes_atomic  # noqa: E402
-from skincal.workflows.bench_online import online_report, run_online_benchmark, stream_vs_batch, stream_vs_batch_report  # noqa: E402
-from skincal.workflows.script import run_script  # noqa: E402
 
 
 def main() -> None:

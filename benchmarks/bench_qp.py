@@ -3,7 +3,7 @@
 
 Usage: ``python benchmarks/bench_qp.py [--points 100] [--repeats 2000] [--json out.json [--force]]``
 
-A thin script over :mod:`skincal.workflows.bench_qp` (what is measured and how). Prints median/p95 of the
+A thin script over :mod:`skincal.bench.qp` (what is measured and how). Prints median/p95 of the
 step's CPU time (``time.process_time``) and wall time, and of the QP solve, per mode, and the ratio.
 """
 
@@ -12,9 +12,9 @@ from __future__ import annotations
 import argparse
 import json
 
+from skincal.bench.qp import format_qp_benchmark, qp_step_benchmark
+from skincal.bench.script import run_script
 from skincal.data.atomic import check_output, write_bytes_atomic
-from skincal.workflows.bench_qp import format_qp_benchmark, qp_step_benchmark
-from skincal.workflows.script import run_script
 
 
 def main() -> None:

@@ -2,7 +2,7 @@
 
     python benchmarks/bench_rosbag.py --seeds 0 1 2 --joint-rate 200 --ros 2 --storage mcap
 
-A thin script over :mod:`skincal.workflows.bench_rosbag` (what is run, per seed); prints per-seed
+A thin script over :mod:`skincal.bench.rosbag` (what is run, per seed); prints per-seed
 errors, timings and the ratio of the mean errors (bag / HDF5), and optionally writes JSON.
 """
 
@@ -16,8 +16,8 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from skincal.workflows.bench_rosbag import run_seed, summarise
-from skincal.workflows.script import run_script
+from skincal.bench.rosbag import run_seed, summarise
+from skincal.bench.script import run_script
 
 
 def main() -> None:

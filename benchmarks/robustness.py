@@ -1,5 +1,5 @@
 """The calibrator under faults of real robots and IMUs (the figures of ``skincal benchmark robustness``; a
-thin script over :mod:`skincal.workflows.robustness`).
+thin script over :mod:`skincal.bench.robustness`).
 
 Usage: ``python benchmarks/robustness.py [--quick] [--robots panda,sawyer,ur5e] [--backends analytic,mujoco]
 [--faults knock,gravity] [--seeds 5] [--protocol paper-sim] [--seed 0] [--workers 2] [--dask tcp://host:8786]
@@ -14,9 +14,9 @@ from pathlib import Path
 
 from rich.console import Console
 
+from skincal.bench import robustness as rb
+from skincal.bench.script import run_script
 from skincal.data.atomic import check_output, write_bytes_atomic
-from skincal.workflows import robustness as rb
-from skincal.workflows.script import run_script
 
 
 def main() -> None:

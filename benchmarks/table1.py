@@ -1,5 +1,5 @@
 """Reproduce the paper's Table I (the figures of ``skincal benchmark table1``; a thin script over
-:mod:`skincal.workflows.table1`).
+:mod:`skincal.bench.table1`).
 
 Usage: ``python benchmarks/table1.py [--quick] [--runs 10] [--sets 4] [--methods om,om-joint,mmm,mm]
 [--workers 2] [--dask tcp://host:8786] [--seed 0] [--json table1.json]``
@@ -13,9 +13,9 @@ from pathlib import Path
 
 from rich.console import Console
 
+from skincal.bench import table1 as t1
+from skincal.bench.script import run_script
 from skincal.data.atomic import write_bytes_atomic
-from skincal.workflows import table1 as t1
-from skincal.workflows.script import run_script
 
 
 def main() -> None:

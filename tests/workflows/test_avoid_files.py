@@ -10,16 +10,9 @@ import pytest
 
 from skincal.errors import ConfigError
 from skincal.kinematics import get_robot, panda
-from skincal.workflows.scenarios import (
-    Q_START,
-    PickPlace,
-    get_scenario,
-    load_scenario,
-    parse_scenario,
-    robot_points,
-    shipped_scenarios,
-    start_configuration,
-)
+from skincal.kinematics.points import Q_START, robot_points, start_configuration
+from skincal.protocol.flange import PickPlace
+from skincal.sim.scenarios import get_scenario, load_scenario, parse_scenario, shipped_scenarios
 
 # The legacy (issue 7) scenario geometry on the Panda, as the former Python definitions had it
 SU6 = (np.array([0.466, -0.22, 0.686]), np.array([0.408, -0.898, 0.164]))
@@ -200,7 +193,7 @@ def test_a_huge_scenario_file_is_refused_before_parsing(tmp_path):
     """A YAML parser needs minutes for tens of MB: a scenario file over 1 MiB is refused in one line."""
     from skincal.errors import ConfigError
     from skincal.kinematics import panda
-    from skincal.workflows.scenarios import load_scenario
+    from skincal.sim.scenarios import load_scenario
 
     path = tmp_path / "big.yaml"
     path.write_text("name: big\ndescription: " + "x" * (1 << 20) + "\n")

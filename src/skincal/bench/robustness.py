@@ -41,10 +41,12 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from skincal.bench.harness import DASK, WORKERS, Opt, RunInfo
 from skincal.errors import ConfigError
 from skincal.skin.clock import ClockModel, get_clock_model
 
@@ -591,25 +593,13 @@ def run_benchmark(
     dask: Any = None,
     progress: Callable[[dict[str, Any]], None] | None = None,
 ) -> dict[str, Any]:
-    """Run every job (:func:`run`) and summarise.
+    """Run every job and summarise (:func:`~skincal.bench.harness.run_harness`).
 
     Returns ``{"config", "cells", "records", "wall_time_s", "workers", "dask"}`` (the ``--out`` document).
     """
-    import time
+    from skincal.bench.harness import run_harness
 
-    if workers < 1:
-        raise ConfigError(f"--workers must be at least 1, got {workers}")
-    start = time.perf_counter()
-    records = run(config, workers=workers, dask=dask, progress=progress)
-    wall = time.perf_counter() - start
-    return {
-        "config": config_dict(config),
-        "cells": summarise(config, records),
-        "records": records,
-        "wall_time_s": wall,
-        "workers": None if dask else workers,
-        "dask": dask,
-    }
+    return run_harness(HARNESS, config, workers=workers, dask=dask, progress=progress)[0]
 
 
 def _num(x: float | None, digits: int) -> str:
@@ -671,3 +661,53 @@ def report(config: RobustnessConfig, doc: Mapping[str, Any]) -> list[Any]:
         f"wall ({where(doc['workers'] or 1, doc['dask'])})"
     )
     return [robustness_table(config, cells), LEGEND, line]
+
+
+OPTIONS = (
+    Opt("robots", str | None, None, "comma-separated robots (default panda,sawyer,ur5e)"),
+    Opt("backends", str | None, None,
+        "comma-separated backends: analytic, mujoco (kinematic), mujoco-dynamic (default analytic,mujoco)"),
+    Opt("faults", str | None, None, "comma-separated faults (default all of them; see --list)"),
+    Opt("seeds", int | None, None, "random placements of 6 units per cell (default 5; quick 1)"),
+    Opt("quick", bool, False, "1 seed and the short fast protocol"),
+    Opt("protocol", str | None, None, "protocol preset (default paper-sim; quick fast)"),
+    Opt("seed", int, 0, "first placement seed"),
+    WORKERS,
+    DASK,
+    Opt("out", Path | None, None, "write every cell and job record here (JSON)"),
+    Opt("force", bool, False, "overwrite --out if it exists"),
+    Opt("list_faults", bool, False, "list the faults and exit", flag="--list", switch=False),
+)  # fmt: skip
+"""The options of ``skincal benchmark robustness`` and ``benchmarks/robustness.py``."""
+
+
+class RobustnessHarness:
+    """The robustness benchmark as a :class:`~skincal.bench.harness.Harness`."""
+
+    options = OPTIONS
+    jobs = staticmethod(jobs)
+    run_job = staticmethod(run_job)
+
+    def config(self, values: Mapping[str, Any]) -> RobustnessConfig:
+        """:func:`config_from_options` of the parsed options."""
+        v = values
+        return config_from_options(v["robots"], v["backends"], v["faults"], v["seeds"], v["quick"], v["protocol"],
+                                   v["seed"])  # fmt: skip
+
+    def summary(self, config: RobustnessConfig, records: list[dict[str, Any]], run: RunInfo) -> dict[str, Any]:
+        """The ``--out`` document: ``{"config", "cells", "records", "wall_time_s", "workers", "dask"}``."""
+        return {
+            "config": config_dict(config),
+            "cells": summarise(config, records),
+            "records": records,
+            "wall_time_s": run.wall_time_s,
+            "workers": None if run.dask else run.workers,
+            "dask": run.dask,
+        }
+
+    def report(self, config: RobustnessConfig, doc: Mapping[str, Any], run: RunInfo) -> list[Any]:
+        """:func:`report`."""
+        return report(config, doc)
+
+
+HARNESS = RobustnessHarness()
