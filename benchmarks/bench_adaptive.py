@@ -10,15 +10,15 @@ errors, optionally JSON.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
-from pathlib import Path
 
 from rich.console import Console
 from rich.table import Table
 
+from skincal.bench import adaptive as adaptive_options
 from skincal.bench.adaptive import run_case
+from skincal.bench.harness import parse_args
 from skincal.bench.script import run_script
 from skincal.workflows.live import parse_target
 
@@ -28,20 +28,7 @@ def _f(x: float | None, fmt: str = ".1f") -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--robots", nargs="+", default=["panda", "sawyer", "ur5e"])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0])
-    parser.add_argument("--noise", default="realistic")
-    parser.add_argument("--target", default="0.3mm,0.05deg")
-    parser.add_argument("--max-motion", type=float, default=180.0, help="motion budget of the adaptive loop, s")
-    parser.add_argument(
-        "--std-factor",
-        type=float,
-        default=1.0,
-        help="the adaptive loop runs to this times the target std (true errors: the target)",
-    )
-    parser.add_argument("--json", type=Path, default=None, help="write the numbers here")
-    args = parser.parse_args()
+    args = parse_args(__doc__.splitlines()[0], adaptive_options.OPTIONS)
     target = parse_target(args.target)
     console = Console(width=200)
     rows = []

@@ -18,28 +18,17 @@ controller step with 7 DoF and 10 obstacle points (the issue's target: <= 1 ms m
 
 from __future__ import annotations
 
-import argparse
 import json
 
-from skincal.bench.avoid import ISO_ROBOTS, beliefs, qp_step_time, run_avoid_benchmark, run_iso_benchmark
+from skincal.bench import avoid as avoid_options
+from skincal.bench.avoid import beliefs, qp_step_time, run_avoid_benchmark, run_iso_benchmark
+from skincal.bench.harness import parse_args
 from skincal.bench.script import run_script
 from skincal.kinematics import panda
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenarios", default="arm,hand,walk,fast")
-    ap.add_argument("--placement", default="ring", choices=["ring", "paper"], help="the simulated skin")
-    ap.add_argument("--seeds", default="0", help="sensor-noise seeds, comma separated (each run once)")
-    ap.add_argument("--quick", action="store_true", help="fast calibration protocol for the mle poses")
-    ap.add_argument("--json", default=None)
-    ap.add_argument("--plots", default=None, help="folder for docs/avoid_<scenario>.png (mle poses, first seed)")
-    ap.add_argument("--iso", action="store_true", help="the issue-17 matrix (ISO/TS 15066 separation, any robot)")
-    ap.add_argument("--robots", default=",".join(ISO_ROBOTS))
-    ap.add_argument("--modes", default="kinematic,torque")
-    ap.add_argument("--beliefs", default="mle,degraded", help="mle, degraded, truth, blind")
-    ap.add_argument("--duration", type=float, default=None, help="shorten every run to this, s")
-    args = ap.parse_args()
+    args = parse_args(__doc__.splitlines()[0], avoid_options.OPTIONS)
     if args.iso:
         return iso(args)
 

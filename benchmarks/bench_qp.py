@@ -9,21 +9,17 @@ step's CPU time (``time.process_time``) and wall time, and of the QP solve, per 
 
 from __future__ import annotations
 
-import argparse
 import json
 
+from skincal.bench import qp as qp_options
+from skincal.bench.harness import parse_args
 from skincal.bench.qp import format_qp_benchmark, qp_step_benchmark
 from skincal.bench.script import run_script
 from skincal.data.atomic import check_output, write_bytes_atomic
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--points", type=int, default=100)
-    ap.add_argument("--repeats", type=int, default=2000)
-    ap.add_argument("--json", default=None, help="also write the figures here")
-    ap.add_argument("--force", action="store_true", help="overwrite an existing --json file")
-    args = ap.parse_args()
+    args = parse_args(__doc__.splitlines()[0], qp_options.OPTIONS)
     if args.json:
         check_output(args.json, force=args.force)
     res = qp_step_benchmark(args.points, args.repeats)

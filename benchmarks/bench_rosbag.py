@@ -8,7 +8,6 @@ errors, timings and the ratio of the mean errors (bag / HDF5), and optionally wr
 
 from __future__ import annotations
 
-import argparse
 import json
 import tempfile
 from pathlib import Path
@@ -16,20 +15,14 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
+from skincal.bench import rosbag as rosbag_options
+from skincal.bench.harness import parse_args
 from skincal.bench.rosbag import run_seed, summarise
 from skincal.bench.script import run_script
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--joint-rate", type=float, default=200.0, help="joint state rate, Hz")
-    parser.add_argument("--protocol", default="paper-sim")
-    parser.add_argument("--noise", default="realistic")
-    parser.add_argument("--ros", type=int, choices=(1, 2), default=2)
-    parser.add_argument("--storage", choices=("sqlite3", "mcap"), default="mcap")
-    parser.add_argument("--json", type=Path, default=None, help="write the numbers here")
-    args = parser.parse_args()
+    args = parse_args(__doc__.splitlines()[0], rosbag_options.OPTIONS)
     console = Console(width=170)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from skincal.bench.harness import Opt
 from skincal.control import AvoidanceController, ControllerConfig
 from skincal.control.iso_metrics import AvoidMetrics
 from skincal.kinematics import panda
@@ -244,3 +245,19 @@ def _std_text(label: str) -> str:
         return ""
     pos, ang = DEGRADE
     return f"{100 * pos / np.sqrt(3):.1f} cm / {ang / np.sqrt(3):.1f} deg per axis"
+
+
+OPTIONS = (
+    Opt("scenarios", str, "arm,hand,walk,fast"),
+    Opt("placement", str, "ring", "the simulated skin", choices=("ring", "paper")),
+    Opt("seeds", str, "0", "sensor-noise seeds, comma separated (each run once)"),
+    Opt("quick", bool, False, "fast calibration protocol for the mle poses", switch=False),
+    Opt("json", str | None, None),
+    Opt("plots", str | None, None, "folder for docs/avoid_<scenario>.png (mle poses, first seed)"),
+    Opt("iso", bool, False, "the issue-17 matrix (ISO/TS 15066 separation, any robot)", switch=False),
+    Opt("robots", str, ",".join(ISO_ROBOTS)),
+    Opt("modes", str, "kinematic,torque"),
+    Opt("beliefs", str, "mle,degraded", "mle, degraded, truth, blind"),
+    Opt("duration", float | None, None, "shorten every run to this, s"),
+)
+"""The options of ``benchmarks/bench_avoid.py``."""

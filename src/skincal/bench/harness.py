@@ -46,6 +46,7 @@ class Opt:
         flag: the command-line name (default ``--`` and ``name`` with ``-`` for ``_``).
         switch: a bool as ``--x/--no-x`` (True) or ``--x`` alone (False).
         repeat: may be given several times, the values collected in a list.
+        many: takes one or more values after the flag (``--seeds 0 1 2``), a list.
         choices: the allowed values (argparse checks them; typer shows them in the help).
     """
 
@@ -56,7 +57,8 @@ class Opt:
     flag: str | None = None
     switch: bool = True
     repeat: bool = False
-    choices: tuple[str, ...] | None = None
+    many: bool = False
+    choices: tuple[Any, ...] | None = None
 
     @property
     def cli_flag(self) -> str:
@@ -87,12 +89,21 @@ def add_arguments(parser: argparse.ArgumentParser, options: Sequence[Opt]) -> ar
         else:
             if o.repeat:
                 kw["action"] = "append"
+            if o.many:
+                kw["nargs"] = "+"
             if base in (int, float, Path):
                 kw["type"] = base
             if o.choices:
                 kw["choices"] = list(o.choices)
         parser.add_argument(o.cli_flag, **kw)
     return parser
+
+
+def parse_args(
+    description: str, options: Sequence[Opt], argv: Sequence[str] | None = None
+) -> argparse.Namespace:
+    """Parse ``argv`` (default ``sys.argv[1:]``) with ``options`` (a script's ``main``)."""
+    return add_arguments(argparse.ArgumentParser(description=description), options).parse_args(argv)
 
 
 def values(args: argparse.Namespace, options: Sequence[Opt]) -> dict[str, Any]:
@@ -102,8 +113,7 @@ def values(args: argparse.Namespace, options: Sequence[Opt]) -> dict[str, Any]:
 
 def parse(description: str, options: Sequence[Opt], argv: Sequence[str] | None = None) -> dict[str, Any]:
     """Parse ``argv`` (default ``sys.argv[1:]``) with ``options``: the values of :func:`values`."""
-    parser = add_arguments(argparse.ArgumentParser(description=description), options)
-    return values(parser.parse_args(argv), options)
+    return values(parse_args(description, options, argv), options)
 
 
 def _typer_parameter(o: Opt) -> inspect.Parameter:
@@ -114,9 +124,9 @@ def _typer_parameter(o: Opt) -> inspect.Parameter:
         decl = f"{flag}/--no-{flag[2:]}" if o.switch else flag
     else:
         decl = o.cli_flag
-    annotation = list[o.base_type] | None if o.repeat else o.type
+    annotation = list[o.base_type] | None if o.repeat else list[o.base_type] if o.many else o.type
     help_text = o.help
-    if o.choices and help_text is not None and not all(c in help_text for c in o.choices):
+    if o.choices and help_text is not None and not all(str(c) in help_text for c in o.choices):
         help_text = f"{help_text} ({', '.join(o.choices)})"
     default = typer.Option(o.default, decl, help=help_text)
     return inspect.Parameter(o.name, inspect.Parameter.KEYWORD_ONLY, default=default, annotation=annotation)

@@ -12,14 +12,12 @@ calibration of the reported std (RMS of error / std per axis).
 
 from __future__ import annotations
 
-import time
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from skincal.calib.imu_only import calibrate_relative
 from skincal.data.dataset import Dataset
 from skincal.data.result import CalibrationResult
 from skincal.errors import ConfigError
