@@ -124,7 +124,8 @@ def _typer_parameter(o: Opt) -> inspect.Parameter:
         decl = f"{flag}/--no-{flag[2:]}" if o.switch else flag
     else:
         decl = o.cli_flag
-    annotation = list[o.base_type] | None if o.repeat else list[o.base_type] if o.many else o.type
+    values_of = types.GenericAlias(list, (o.base_type,))  # list[the option's type]
+    annotation = values_of | None if o.repeat else values_of if o.many else o.type
     help_text = o.help
     if o.choices and help_text is not None and not all(str(c) in help_text for c in o.choices):
         help_text = f"{help_text} ({', '.join(o.choices)})"

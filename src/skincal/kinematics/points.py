@@ -49,9 +49,8 @@ def robot_points(chain: SerialChain, q: ArrayLike) -> dict[str, FloatArray]:
     c = chain.joint_axes(T[None])[0][0]
     shoulder = c[min(1, n - 1)]
     wrist = c[max(n - 2, 0)]
-    cand = [T[cp.link, :3, :3] @ p + T[cp.link, :3, 3] for cp in link_capsules(chain) for p in (cp.p0, cp.p1)]
-    cand += list(c)
-    cand = np.array(cand)
+    ends = [T[cp.link, :3, :3] @ p + T[cp.link, :3, 3] for cp in link_capsules(chain) for p in (cp.p0, cp.p1)]
+    cand = np.array(ends + list(c))
     axis = wrist - shoulder
     L = float(np.linalg.norm(axis))
     if L > 1e-9:

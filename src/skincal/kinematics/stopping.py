@@ -91,10 +91,10 @@ class StoppingModel:
     def segments(self, v: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
         """``(v, c_t, k_t, c_d, k_d)``: speeds ``v`` clipped at 0 and the affine pieces of the table at them,
         ``T_s = c_t + k_t v``, ``S_s = c_d + k_d v`` (the segment holding ``v``; the last one beyond it)."""
-        v = np.maximum(np.asarray(v, dtype=float), 0.0)
-        j = np.clip(np.searchsorted(self.speeds, v, side="right") - 1, 0, self.speeds.size - 2)
+        speed = np.maximum(np.asarray(v, dtype=float), 0.0)
+        j = np.clip(np.searchsorted(self.speeds, speed, side="right") - 1, 0, self.speeds.size - 2)
         c_t, k_t, c_d, k_d = self._coef  # type: ignore[attr-defined]
-        return v, c_t[j], k_t[j], c_d[j], k_d[j]
+        return speed, c_t[j], k_t[j], c_d[j], k_d[j]
 
     def stopping_time(self, v: ArrayLike) -> FloatArray:
         """``T_s`` (s) from speeds ``v`` m/s (any shape; negative speeds count as 0)."""
