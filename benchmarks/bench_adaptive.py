@@ -16,7 +16,7 @@ import json
 from rich.console import Console
 from rich.table import Table
 
-from skincal.bench import adaptive as adaptive_options
+from skincal.bench import options
 from skincal.bench.adaptive import run_case
 from skincal.bench.harness import parse_args
 from skincal.bench.script import run_script
@@ -28,7 +28,7 @@ def _f(x: float | None, fmt: str = ".1f") -> str:
 
 
 def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], adaptive_options.OPTIONS)
+    args = parse_args(__doc__.splitlines()[0], options.ADAPTIVE)
     target = parse_target(args.target)
     console = Console(width=200)
     rows = []

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import json
 
-from skincal.bench import avoid as avoid_options
+from skincal.bench import options
 from skincal.bench.avoid import beliefs, qp_step_time, run_avoid_benchmark, run_iso_benchmark
 from skincal.bench.harness import parse_args
 from skincal.bench.script import run_script
@@ -28,7 +28,7 @@ from skincal.kinematics import panda
 
 
 def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], avoid_options.OPTIONS)
+    args = parse_args(__doc__.splitlines()[0], options.AVOID)
     if args.iso:
         return iso(args)
 

@@ -8,7 +8,7 @@ import json
 
 from rich.console import Console
 
-from skincal.bench import core as core_options
+from skincal.bench import options
 from skincal.bench.core import core_report, run_core_benchmark
 from skincal.bench.harness import parse_args
 from skincal.bench.script import run_script
@@ -16,7 +16,7 @@ from skincal.data.atomic import write_bytes_atomic
 
 
 def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], core_options.OPTIONS)
+    args = parse_args(__doc__.splitlines()[0], options.CORE)
     console = Console()
     doc = run_core_benchmark(args.robot)
     for part in core_report(doc):

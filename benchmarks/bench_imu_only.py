@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import json
 
-from skincal.bench import handheld as handheld_options
+from skincal.bench import options
 from skincal.bench.handheld import bench_relative
 from skincal.bench.harness import parse_args
 
 
 def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], handheld_options.OPTIONS)
+    args = parse_args(__doc__.splitlines()[0], options.HANDHELD)
     doc = bench_relative(
         args.runs, args.duration, args.spacing, args.imu, args.clock, scale_free=args.scale_free, holds=args.holds
     )

@@ -8,7 +8,7 @@ import json
 
 from rich.console import Console
 
-from skincal.bench import mle as mle_options
+from skincal.bench import options
 from skincal.bench.harness import parse_args
 from skincal.bench.mle import run_mle_benchmark
 from skincal.bench.script import run_script
@@ -16,7 +16,7 @@ from skincal.data.atomic import write_bytes_atomic
 
 
 def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], mle_options.OPTIONS)
+    args = parse_args(__doc__.splitlines()[0], options.MLE)
     console = Console()
     with console.status("benchmarking mle...") as status:
         doc = run_mle_benchmark(runs=args.runs, quick=args.quick, with_om=args.om, progress=status.update)

@@ -9,7 +9,7 @@ import json
 
 from rich.console import Console
 
-from skincal.bench import monitor as monitor_options
+from skincal.bench import options
 from skincal.bench.harness import parse_args
 from skincal.bench.monitor import bench_monitor
 from skincal.bench.script import run_script
@@ -17,7 +17,7 @@ from skincal.data.atomic import write_bytes_atomic
 
 
 def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], monitor_options.OPTIONS)
+    args = parse_args(__doc__.splitlines()[0], options.MONITOR)
     console = Console()
     with console.status("benchmarking the moved-unit monitor...") as status:
         doc = bench_monitor(

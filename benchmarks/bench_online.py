@@ -13,7 +13,7 @@ import json  # noqa: E402
 
 from rich.console import Console  # noqa: E402
 
-from skincal.bench import online as online_options  # noqa: E402
+from skincal.bench import options  # noqa: E402
 from skincal.bench.harness import parse_args  # noqa: E402
 from skincal.bench.online import online_report, run_online_benchmark, stream_vs_batch, stream_vs_batch_report  # noqa: E402
 from skincal.bench.script import run_script  # noqa: E402
@@ -21,7 +21,7 @@ from skincal.data.atomic import write_bytes_atomic  # noqa: E402
 
 
 def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], online_options.OPTIONS)
+    args = parse_args(__doc__.splitlines()[0], options.ONLINE)
     console = Console()
     if args.accuracy:
         doc = stream_vs_batch(robot=args.robot, progress=lambda m: console.print(m, style="dim", highlight=False))

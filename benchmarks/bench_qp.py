@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 
-from skincal.bench import qp as qp_options
+from skincal.bench import options
 from skincal.bench.harness import parse_args
 from skincal.bench.qp import format_qp_benchmark, qp_step_benchmark
 from skincal.bench.script import run_script
@@ -19,7 +19,7 @@ from skincal.data.atomic import check_output, write_bytes_atomic
 
 
 def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], qp_options.OPTIONS)
+    args = parse_args(__doc__.splitlines()[0], options.QP)
     if args.json:
         check_output(args.json, force=args.force)
     res = qp_step_benchmark(args.points, args.repeats)

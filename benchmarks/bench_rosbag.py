@@ -15,14 +15,14 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from skincal.bench import rosbag as rosbag_options
+from skincal.bench import options
 from skincal.bench.harness import parse_args
 from skincal.bench.rosbag import run_seed, summarise
 from skincal.bench.script import run_script
 
 
 def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], rosbag_options.OPTIONS)
+    args = parse_args(__doc__.splitlines()[0], options.ROSBAG)
     console = Console(width=170)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

@@ -68,7 +68,7 @@ def test_argparse_refuses_a_value_outside_the_choices():
                "monitor"],
 )  # fmt: skip
 def test_every_benchmark_declares_its_options_once_with_unique_flags(module):
-    options = importlib.import_module(f"skincal.bench.{module}").OPTIONS
+    options = getattr(importlib.import_module("skincal.bench.options"), module.upper())
     flags = [o.cli_flag for o in options]
     assert len(set(flags)) == len(flags) and len({o.name for o in options}) == len(options)
     defaults = parse("test", options, [])

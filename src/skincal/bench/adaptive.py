@@ -24,10 +24,8 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
-from skincal.bench.harness import Opt
 from skincal.workflows.live import Target, all_reached, make_calibrator
 
 
@@ -130,15 +128,3 @@ def run_case(robot: str, seed: int, noise: str = "realistic", target: Target = T
     rpos, rrot = (None, None) if fixed["at_reach"] is None else worst(fixed["at_reach"])[:2]
     return Row(robot, seed, run.motion_s, run.loop.reached, len(run.loop.segments), pos, rot, links, wall, true_s,
                fixed["duration_s"], fixed["reached_s"], rpos, rrot, fpos, frot, fixed["true_s"])  # fmt: skip
-
-
-OPTIONS = (
-    Opt("robots", str, ["panda", "sawyer", "ur5e"], many=True),
-    Opt("seeds", int, [0], many=True),
-    Opt("noise", str, "realistic"),
-    Opt("target", str, "0.3mm,0.05deg"),
-    Opt("max_motion", float, 180.0, "motion budget of the adaptive loop, s"),
-    Opt("std_factor", float, 1.0, "the adaptive loop runs to this times the target std (true errors: the target)"),
-    Opt("json", Path | None, None, "write the numbers here"),
-)
-"""The options of ``benchmarks/bench_adaptive.py``."""

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from skincal.bench.harness import Opt
+from skincal.bench.options import ISO_ROBOTS
 from skincal.control import AvoidanceController, ControllerConfig
 from skincal.control.iso_metrics import AvoidMetrics
 from skincal.kinematics import panda
@@ -142,7 +142,6 @@ def run_avoid_benchmark(
 
 
 # ---------------------------------------------------------------------------------------------- issue 17
-ISO_ROBOTS = ("panda", "ur5e", "iiwa14")
 ISO_BELIEFS = ("mle", "degraded 5cm/5deg")
 DEGRADE = (0.05, 5.0)
 """The degradation of the issue: 5 cm, 5 deg per unit."""
@@ -245,19 +244,3 @@ def _std_text(label: str) -> str:
         return ""
     pos, ang = DEGRADE
     return f"{100 * pos / np.sqrt(3):.1f} cm / {ang / np.sqrt(3):.1f} deg per axis"
-
-
-OPTIONS = (
-    Opt("scenarios", str, "arm,hand,walk,fast"),
-    Opt("placement", str, "ring", "the simulated skin", choices=("ring", "paper")),
-    Opt("seeds", str, "0", "sensor-noise seeds, comma separated (each run once)"),
-    Opt("quick", bool, False, "fast calibration protocol for the mle poses", switch=False),
-    Opt("json", str | None, None),
-    Opt("plots", str | None, None, "folder for docs/avoid_<scenario>.png (mle poses, first seed)"),
-    Opt("iso", bool, False, "the issue-17 matrix (ISO/TS 15066 separation, any robot)", switch=False),
-    Opt("robots", str, ",".join(ISO_ROBOTS)),
-    Opt("modes", str, "kinematic,torque"),
-    Opt("beliefs", str, "mle,degraded", "mle, degraded, truth, blind"),
-    Opt("duration", float | None, None, "shorten every run to this, s"),
-)
-"""The options of ``benchmarks/bench_avoid.py``."""

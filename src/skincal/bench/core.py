@@ -9,12 +9,10 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from skincal.bench.harness import Opt
 from skincal.kinematics import get_robot
 from skincal.sim import simulate
 from skincal.workflows.session import make_session
@@ -113,10 +111,3 @@ def core_report(doc: dict[str, Any]) -> list[Any]:
             str(row["units"]), f"{row['seconds']:.2f}", str(row["imu_samples"]), f"{row['samples_per_s']:.3g}"
         )
     return [line, table]
-
-
-OPTIONS = (
-    Opt("robot", str, "panda", "robot preset"),
-    Opt("json_out", Path | None, None, "also write the figures as JSON", flag="--json"),
-)
-"""The options of ``skincal benchmark core`` and ``benchmarks/bench_core.py``."""

@@ -9,22 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from skincal.bench.harness import Opt
 from skincal.calib.imu_only import calibrate_relative
 from skincal.skin.imu import get_imu_model
 from skincal.workflows.handheld import handheld_dataset, relative_errors
-
-OPTIONS = (
-    Opt("runs", int, 20),
-    Opt("duration", float, 60.0),
-    Opt("spacing", float, 0.2),
-    Opt("imu", str, "real"),
-    Opt("clock", str, "driver"),
-    Opt("scale_free", bool, False, "accelerometers without scale/misalignment errors", switch=False),
-    Opt("holds", int | None, None, "still holds in the motion (default: 12, as fit)"),
-    Opt("json", str | None, None),
-)
-"""The options of ``benchmarks/bench_imu_only.py``."""
 
 
 def bench_relative(

@@ -2,10 +2,11 @@
 
 A benchmark is ``options -> config -> jobs -> records -> summary -> report``:
 
-* :class:`Opt` declares one command-line option (name, type, default, help) ONCE; a benchmark module keeps
-  its tuple of them (``OPTIONS``). :func:`add_arguments` puts them on an ``argparse`` parser (the scripts in
-  ``benchmarks/``), :func:`typer_command` registers a ``skincal benchmark ...`` command with the same names,
-  defaults and help; both hand the values to the benchmark as one ``dict`` (:func:`values`).
+* :class:`Opt` declares one command-line option (name, type, default, help) ONCE; every benchmark's tuple
+  of them is in :mod:`skincal.bench.options` (plain data: the ``skincal`` command imports it at start-up).
+  :func:`add_arguments` puts them on an ``argparse`` parser (the scripts in ``benchmarks/``),
+  :func:`typer_command` registers a ``skincal benchmark ...`` command with the same names, defaults and
+  help; both hand the values to the benchmark as one ``dict`` (:func:`values`).
 * :class:`Harness`: ``config(values)`` checks the options and builds a frozen config, ``jobs(config)`` the
   picklable jobs (each a pure function's input, so it runs the same in a local pool or on Dask),
   ``run_job(job)`` one typed record, ``summary(config, records)`` the JSON document, ``report(config, doc)``

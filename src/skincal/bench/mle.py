@@ -17,12 +17,10 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from skincal.bench.harness import Opt
 from skincal.calib import calibrate, evaluate
 from skincal.sim import simulate
 from skincal.workflows.session import make_session
@@ -155,12 +153,3 @@ def _aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
     agg["units_total"] = int(sum(r["units_total"] for r in rows))
     agg["runs"] = len(rows)
     return agg
-
-
-OPTIONS = (
-    Opt("runs", int, 20, "random placements per robot"),
-    Opt("quick", bool, False, "short protocol, for a smoke test"),
-    Opt("om", bool, True, "also time the paper's OM on the same data"),
-    Opt("json_out", Path | None, None, "also write the figures as JSON", flag="--json"),
-)
-"""The options of ``skincal benchmark mle`` and ``benchmarks/bench_mle.py``."""

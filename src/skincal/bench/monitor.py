@@ -5,12 +5,10 @@ of :mod:`skincal.workflows.monitoring`. All figures SIMULATED."""
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from skincal.bench.harness import Opt
 from skincal.skin.pose import SkinUnitPose
 from skincal.workflows.monitoring import (
     knocked_dataset,
@@ -21,18 +19,6 @@ from skincal.workflows.monitoring import (
     simulate_session,
     work_session,
 )
-
-OPTIONS = (
-    Opt("hours", float, 1.0, "simulated hours of normal work per IMU preset"),
-    Opt("imu", str, None, "IMU preset (repeat; default realistic and real)", repeat=True),
-    Opt("kind", str, "teleop", "work cycle: teleop or pick-place"),
-    Opt("robot", str, "panda"),
-    Opt("seed", int, 0),
-    Opt("online_unit", str, None, "unit also knocked with the streaming calibrator (repeat; default su4)", repeat=True),
-    Opt("json", Path | None, None, "also write the figures as JSON"),
-)
-"""The options of ``benchmarks/bench_monitor.py``."""
-
 
 KNOCKS = (("5 mm", 0.005, 0.0), ("2 deg", 0.0, 2.0))
 """The knocks of the issue's target: (label, translation m, rotation deg)."""

@@ -29,12 +29,9 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from skincal.bench.harness import Opt
 
 Progress = Callable[[str], None]
 """``progress(message)``: the step now running."""
@@ -255,16 +252,3 @@ def stream_vs_batch_report(doc: dict[str, Any]) -> list[str]:
         lines.append(f"  {kind}: mean online/mle position {op / mp:.2f}x ({op:.3f} / {mp:.3f} mm), "
                      f"rotation {orr / mr:.2f}x ({orr:.4f} / {mr:.4f} deg)")  # fmt: skip
     return lines
-
-
-OPTIONS = (
-    Opt("units", int, 100, "skin units (random placement)"),
-    Opt("robot", str, "panda", "robot preset"),
-    Opt("joint_rate", float, 1000.0, "joint-state rate, Hz"),
-    Opt("seed", int, 0, "session seed"),
-    Opt("real_time", bool, False, "also replay at real speed and measure the delay", switch=False),
-    Opt("json", Path | None, None, "also write the figures as JSON"),
-    Opt("accuracy", bool, False, "instead: the stream's errors against the batch mle's on the same data (fast "
-        "protocol and a pick-and-place work cycle, 6 units, seeds 0-2)", switch=False),
-)
-"""The options of ``benchmarks/bench_online.py``."""

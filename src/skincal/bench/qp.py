@@ -19,7 +19,6 @@ from typing import Any
 
 import numpy as np
 
-from skincal.bench.harness import Opt
 from skincal.control import AvoidanceController, ControllerConfig, SeparationParams
 from skincal.errors import ConfigError
 from skincal.kinematics import panda
@@ -122,12 +121,3 @@ def format_qp_benchmark(res: dict[str, Any]) -> str:
         f"  separation / fixed: CPU median x{res['ratio_cpu_median']:.2f}, wall median x{res['ratio_wall_median']:.2f}"
     )
     return "\n".join(lines)
-
-
-OPTIONS = (
-    Opt("points", int, 100),
-    Opt("repeats", int, 2000),
-    Opt("json", str | None, None, "also write the figures here"),
-    Opt("force", bool, False, "overwrite an existing --json file", switch=False),
-)
-"""The options of ``benchmarks/bench_qp.py``."""

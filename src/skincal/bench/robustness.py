@@ -41,12 +41,12 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from skincal.bench.harness import DASK, WORKERS, Opt, RunInfo
+from skincal.bench.harness import RunInfo
+from skincal.bench.options import ROBUSTNESS
 from skincal.errors import ConfigError
 from skincal.skin.clock import ClockModel, get_clock_model
 
@@ -663,28 +663,12 @@ def report(config: RobustnessConfig, doc: Mapping[str, Any]) -> list[Any]:
     return [robustness_table(config, cells), LEGEND, line]
 
 
-OPTIONS = (
-    Opt("robots", str | None, None, "comma-separated robots (default panda,sawyer,ur5e)"),
-    Opt("backends", str | None, None,
-        "comma-separated backends: analytic, mujoco (kinematic), mujoco-dynamic (default analytic,mujoco)"),
-    Opt("faults", str | None, None, "comma-separated faults (default all of them; see --list)"),
-    Opt("seeds", int | None, None, "random placements of 6 units per cell (default 5; quick 1)"),
-    Opt("quick", bool, False, "1 seed and the short fast protocol"),
-    Opt("protocol", str | None, None, "protocol preset (default paper-sim; quick fast)"),
-    Opt("seed", int, 0, "first placement seed"),
-    WORKERS,
-    DASK,
-    Opt("out", Path | None, None, "write every cell and job record here (JSON)"),
-    Opt("force", bool, False, "overwrite --out if it exists"),
-    Opt("list_faults", bool, False, "list the faults and exit", flag="--list", switch=False),
-)  # fmt: skip
-"""The options of ``skincal benchmark robustness`` and ``benchmarks/robustness.py``."""
 
 
 class RobustnessHarness:
     """The robustness benchmark as a :class:`~skincal.bench.harness.Harness`."""
 
-    options = OPTIONS
+    options = ROBUSTNESS
     jobs = staticmethod(jobs)
     run_job = staticmethod(run_job)
 

@@ -22,8 +22,6 @@ from typing import Any
 
 import numpy as np
 
-from skincal.bench.harness import Opt
-
 ERROR_KEYS = ("mean_position_error_mm", "mean_rotation_error_deg")
 
 
@@ -98,15 +96,3 @@ def summarise(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, float]]:
         bag = float(np.mean([r["bag"][key] for r in rows]))
         out[key] = {"hdf5": h5, "bag": bag, "ratio": bag / h5}
     return out
-
-
-OPTIONS = (
-    Opt("seeds", int, [0, 1, 2], many=True),
-    Opt("joint_rate", float, 200.0, "joint state rate, Hz"),
-    Opt("protocol", str, "paper-sim"),
-    Opt("noise", str, "realistic"),
-    Opt("ros", int, 2, choices=(1, 2)),
-    Opt("storage", str, "mcap", choices=("sqlite3", "mcap")),
-    Opt("json", Path | None, None, "write the numbers here"),
-)
-"""The options of ``benchmarks/bench_rosbag.py``."""

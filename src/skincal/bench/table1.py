@@ -20,12 +20,12 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from skincal.bench.harness import DASK, WORKERS, Opt, RunInfo
+from skincal.bench.harness import RunInfo
+from skincal.bench.options import TABLE1
 from skincal.errors import ConfigError
 from skincal.protocol import ProtocolConfig, get_protocol
 
@@ -341,23 +341,12 @@ def report(config: Table1Config, doc: dict[str, Any], workers: int = 1, dask: An
     return [table1_table(config, doc["summary"]), line]
 
 
-OPTIONS = (
-    Opt("quick", bool, False, "tiny run for tests: 1 set x 1 run, 2 units, short protocol"),
-    Opt("runs", int | None, None, "optimiser runs per set (default 10; quick 1)"),
-    Opt("sets", int | None, None, "random placement sets (default 4; quick 1)"),
-    Opt("methods", str, "om,mmm,mm", "comma-separated methods, e.g. om,om-joint,mmm,mm"),
-    WORKERS,
-    DASK,
-    Opt("seed", int, 0, "base seed of the placement sets"),
-    Opt("json_out", Path | None, None, "write the records and summary here", flag="--json"),
-)
-"""The options of ``skincal benchmark table1`` and ``benchmarks/table1.py``."""
 
 
 class Table1Harness:
     """The Table I benchmark as a :class:`~skincal.bench.harness.Harness`."""
 
-    options = OPTIONS
+    options = TABLE1
     jobs = staticmethod(jobs)
     run_job = staticmethod(run_job)
 

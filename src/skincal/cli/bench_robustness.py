@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from skincal.bench import robustness as rb
+from skincal.bench import options
 from skincal.bench.harness import typer_command
 from skincal.cli.app import console
 from skincal.cli.benchmark import benchmark_app
@@ -16,6 +16,7 @@ def robustness(v: dict[str, Any]) -> None:
     per cell: errors, links right, z RMS, warnings and silent errors against targets."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from skincal.bench import robustness as rb
     from skincal.bench.harness import run_harness
     from skincal.data.atomic import check_output, write_bytes_atomic
 
@@ -46,4 +47,4 @@ def robustness(v: dict[str, Any]) -> None:
         console.print(f"wrote {out}")
 
 
-typer_command(benchmark_app, "robustness", rb.OPTIONS, robustness)
+typer_command(benchmark_app, "robustness", options.ROBUSTNESS, robustness)

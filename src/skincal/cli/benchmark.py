@@ -1,9 +1,8 @@
 """``skincal benchmark table1|core|mle``: the paper's Table I beside the paper's numbers, throughput, the
 default calibrator's targets (``robustness`` is in :mod:`skincal.cli.bench_robustness`).
 
-The options of every command are declared once, in the benchmark's module (``OPTIONS`` of
-:mod:`skincal.bench.table1`, :mod:`skincal.bench.core`, :mod:`skincal.bench.mle`), and serve the scripts in
-``benchmarks/`` too (:mod:`skincal.bench.harness`)."""
+The options of every command are declared once, in :mod:`skincal.bench.options`, and serve the scripts in
+``benchmarks/`` too (:mod:`skincal.bench.harness`); a benchmark's module is imported only when it runs."""
 
 from __future__ import annotations
 
@@ -13,9 +12,7 @@ from typing import Any
 
 import typer
 
-from skincal.bench import core as bench_core
-from skincal.bench import mle as bench_mle
-from skincal.bench import table1 as t1
+from skincal.bench import options
 from skincal.bench.harness import FORCE, typer_command
 from skincal.cli.app import app, console, err_console, shown
 
@@ -43,6 +40,7 @@ def table1(v: dict[str, Any]) -> None:
     """Reproduce the paper's Table I: per-unit position error and quaternion distance per method."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from skincal.bench import table1 as t1
     from skincal.bench.harness import run_harness
 
     _check_json(v["json_out"], v["force"])
@@ -66,6 +64,8 @@ def core(v: dict[str, Any]) -> None:
     """Forward-kinematics and simulation throughput at 1, 10 and 100 units."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from skincal.bench import core as bench_core
+
     _check_json(v["json_out"], v["force"])
 
     columns = (
@@ -87,6 +87,8 @@ def core(v: dict[str, Any]) -> None:
 
 def mle(v: dict[str, Any]) -> None:
     """The default calibrator's accuracy, uncertainty calibration and speed targets."""
+    from skincal.bench import mle as bench_mle
+
     _check_json(v["json_out"], v["force"])
 
     with console.status("benchmarking mle...") as status:
@@ -97,6 +99,6 @@ def mle(v: dict[str, Any]) -> None:
     _write_json(doc, v["json_out"])
 
 
-typer_command(benchmark_app, "table1", t1.OPTIONS + (FORCE,), table1)
-typer_command(benchmark_app, "core", bench_core.OPTIONS + (FORCE,), core)
-typer_command(benchmark_app, "mle", bench_mle.OPTIONS + (FORCE,), mle)
+typer_command(benchmark_app, "table1", options.TABLE1 + (FORCE,), table1)
+typer_command(benchmark_app, "core", options.CORE + (FORCE,), core)
+typer_command(benchmark_app, "mle", options.MLE + (FORCE,), mle)
