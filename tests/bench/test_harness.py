@@ -119,3 +119,15 @@ def test_run_harness_refuses_no_workers():
     harness = Squares()
     with pytest.raises(ConfigError, match="--workers must be at least 1"):
         run_harness(harness, SquaresConfig(1), workers=0)
+
+
+@pytest.mark.parametrize(("module", "n_jobs"), [("table1", 40), ("robustness", None), ("rosbag", 3), ("adaptive", 3)])
+def test_harness_benchmarks_build_picklable_jobs_from_their_default_options(module, n_jobs):
+    import pickle
+
+    harness = importlib.import_module(f"skincal.bench.{module}").HARNESS
+    config = harness.config(parse("test", harness.options, []))
+    jobs = harness.jobs(config)
+    assert jobs and (n_jobs is None or len(jobs) == n_jobs)
+    assert pickle.loads(pickle.dumps(harness.run_job)) is harness.run_job  # a module-level function
+    pickle.dumps(jobs)  # a local pool or a Dask worker receives them
