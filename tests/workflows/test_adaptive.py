@@ -343,7 +343,7 @@ def test_cli_adaptive_live_closes_the_loop_over_udp(tmp_path):
 
 
 def test_benchmark_reads_the_worst_unit_and_the_first_time_within_target():
-    from skincal.workflows.bench_adaptive import first_within, worst
+    from skincal.bench.adaptive import first_within, worst
 
     def errors(pos, rot, right=True):
         return {"units": {"a": {"position_error_mm": 0.1, "rotation_error_deg": 0.01, "link_true": 2,

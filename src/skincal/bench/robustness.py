@@ -50,6 +50,8 @@ from typing import Any
 
 import numpy as np
 
+from skincal.bench.harness import RunInfo
+from skincal.bench.options import ROBUSTNESS
 from skincal.errors import ConfigError
 from skincal.skin.clock import ClockModel, get_clock_model
 
@@ -621,25 +623,13 @@ def run_benchmark(
     dask: Any = None,
     progress: Callable[[dict[str, Any]], None] | None = None,
 ) -> dict[str, Any]:
-    """Run every job (:func:`run`) and summarise.
+    """Run every job and summarise (:func:`~skincal.bench.harness.run_harness`).
 
     Returns ``{"config", "cells", "records", "wall_time_s", "workers", "dask"}`` (the ``--out`` document).
     """
-    import time
+    from skincal.bench.harness import run_harness
 
-    if workers < 1:
-        raise ConfigError(f"--workers must be at least 1, got {workers}")
-    start = time.perf_counter()
-    records = run(config, workers=workers, dask=dask, progress=progress)
-    wall = time.perf_counter() - start
-    return {
-        "config": config_dict(config),
-        "cells": summarise(config, records),
-        "records": records,
-        "wall_time_s": wall,
-        "workers": None if dask else workers,
-        "dask": dask,
-    }
+    return run_harness(HARNESS, config, workers=workers, dask=dask, progress=progress)[0]
 
 
 def _num(x: float | None, digits: int) -> str:
@@ -701,3 +691,37 @@ def report(config: RobustnessConfig, doc: Mapping[str, Any]) -> list[Any]:
         f"wall ({where(doc['workers'] or 1, doc['dask'])})"
     )
     return [robustness_table(config, cells), LEGEND, line]
+
+
+
+
+class RobustnessHarness:
+    """The robustness benchmark as a :class:`~skincal.bench.harness.Harness`."""
+
+    options = ROBUSTNESS
+    jobs = staticmethod(jobs)
+    run_job = staticmethod(run_job)
+
+    def config(self, values: Mapping[str, Any]) -> RobustnessConfig:
+        """:func:`config_from_options` of the parsed options."""
+        v = values
+        return config_from_options(v["robots"], v["backends"], v["faults"], v["seeds"], v["quick"], v["protocol"],
+                                   v["seed"])  # fmt: skip
+
+    def summary(self, config: RobustnessConfig, records: list[dict[str, Any]], run: RunInfo) -> dict[str, Any]:
+        """The ``--out`` document: ``{"config", "cells", "records", "wall_time_s", "workers", "dask"}``."""
+        return {
+            "config": config_dict(config),
+            "cells": summarise(config, records),
+            "records": records,
+            "wall_time_s": run.wall_time_s,
+            "workers": None if run.dask else run.workers,
+            "dask": run.dask,
+        }
+
+    def report(self, config: RobustnessConfig, doc: Mapping[str, Any], run: RunInfo) -> list[Any]:
+        """:func:`report`."""
+        return report(config, doc)
+
+
+HARNESS = RobustnessHarness()
