@@ -184,3 +184,35 @@ def test_motion_profile_spectra_are_the_conjugate_fft_of_the_mean_removed_signal
     assert prof.fft_size == 1024 and prof.fft_size >= 2 * t.size
     np.testing.assert_allclose(prof.spectra["gyroscope"], np.conj(np.fft.rfft(w - w.mean(0), 1024, axis=0)))
     np.testing.assert_allclose(prof.spectra["accelerometer"], np.conj(np.fft.rfft(s - s.mean(0), 1024, axis=0)))
+
+
+def test_one_off_clock_steps_at_gaps_are_found_and_named():
+    """Issue 24: a clock that steps once after a stamp gap (simulated ``host-gaps``: gaps of 0.3-0.7 s each
+    followed by a step N(0, 20 ms)) is found by aligning the pieces between gaps on their own, and named."""
+    from skincal.calib import calibrate
+    from skincal.calib.timing import GapSteps, find_gaps
+    from skincal.sim import simulate
+    from skincal.workflows.session import make_session
+
+    t = np.r_[np.arange(0.0, 10.0, 0.01), np.arange(10.5, 20.0, 0.01)]
+    start, end = find_gaps(t)
+    assert np.allclose(start, [9.99]) and np.allclose(end, [10.5])
+    steps = GapSteps(start, end, np.array([0.08]))
+    assert np.allclose(steps.correct(t)[t > 10.4], t[t > 10.4] - 0.08)
+    assert np.array_equal(steps.correct(t)[:999], t[:999])
+    assert np.array_equal(GapSteps(start, end, np.array([0.01])).correct(t), t)  # small steps named, not corrected
+
+    ds = simulate(make_session("panda", "random", 4, "realistic", "fast", 0, joints="controller", clock="host-gaps"),
+                  "analytic")  # fmt: skip
+    result = calibrate(ds, "mle")
+    named = 0
+    for name, unit in result.units.items():
+        true = np.atleast_1d(ds.truth_sensor[name].get("clock_step_s", []))
+        found = np.asarray(unit.extras.get("clock_gap_steps", np.zeros((0, 3))))
+        if np.any(np.abs(true) > 0.01):
+            assert found.size and np.any(np.abs(found[:, 2]) > 0.005), (name, true)
+            said = unit.warnings + tuple(unit.extras.get("notes", ()))
+            named += any("clock stepped at stamp gaps" in w for w in said)
+        e = unit.pose.p_link_su - ds.truth[name].p_link_su
+        assert np.all(np.abs(e) <= 4 * np.asarray(unit.position_std_m)), (name, e)
+    assert named >= 3

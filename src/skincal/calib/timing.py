@@ -281,3 +281,100 @@ def find_clock_steps(t: FloatArray) -> ClockSteps | None:
     return ClockSteps(
         int(idx.size), period, mean_step, -mean_step / period * 1e6, syncs, P, threshold, float(np.sum(steps))
     )
+
+
+GAP_MIN_S = 0.2
+"""A stamp interval longer than this (s)..."""
+GAP_INTERVALS = 10.0
+"""...and than this many median intervals is a gap, after which the unit's clock may have stepped."""
+PIECE_MIN_S = 4.0
+"""A piece between gaps is aligned on its own only when it spans this long, s."""
+GAP_STEP_MIN_S = 0.005
+"""A piece's offset that differs from the first piece's by more than this (s)..."""
+GAP_STEP_SHARPNESS = 0.05
+"""...with a correlation peak at least this distinct, is a one-off clock step at the gap."""
+GAP_STEP_CORRECT_S = 0.05
+"""Steps beyond this (s) are corrected in the stamps; smaller ones are named only: the robust fit of one
+offset copes with them better than the pieces' coarse offsets (about 1-2 ms each) would correct them
+(simulated ``host-gaps`` clocks: steps of N(0, 20 ms))."""
+
+
+@dataclass(frozen=True)
+class GapSteps:
+    """One-off clock steps at stamp gaps (:func:`find_gap_steps`): a sensor that lost its link and
+    re-synchronised (or a host that re-stamped after a pause) shifts its clock once at the gap.
+
+    Attributes:
+        gap_start_s, gap_end_s: ``(K,)`` the last stamp before and the first after each gap, s.
+        step_s: ``(K,)`` the step at each gap (the offset after it minus before it), s; 0 where none was seen.
+    """
+
+    gap_start_s: FloatArray
+    gap_end_s: FloatArray
+    step_s: FloatArray
+
+    @property
+    def corrected(self) -> np.ndarray:
+        """``(K,)`` the steps :meth:`correct` removes (beyond :data:`GAP_STEP_CORRECT_S`)."""
+        return np.abs(self.step_s) > GAP_STEP_CORRECT_S
+
+    def correct(self, t: FloatArray) -> FloatArray:
+        """Stamps with the large steps removed: each stamp after gap ``k`` less the corrected steps of gaps
+        ``<= k``, s."""
+        t = np.asarray(t, dtype=float)
+        k = np.searchsorted(self.gap_end_s, t, side="right")  # gaps at or before each stamp
+        cum = np.r_[0.0, np.cumsum(np.where(self.corrected, self.step_s, 0.0))]
+        return t - cum[k]
+
+    def describe(self) -> str:
+        parts = [
+            f"{s * 1e3:+.0f} ms after the {e - b:.2f} s gap at {b:.1f} s"
+            for b, e, s in zip(self.gap_start_s, self.gap_end_s, self.step_s, strict=True)
+            if s != 0.0
+        ]
+        how = "corrected" if self.corrected.any() else "not corrected"
+        return "clock stepped at stamp gaps: " + ", ".join(parts) + f" (found by cross-correlation, {how})"
+
+
+def find_gaps(t: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``(start, end)`` stamps ``(K,)`` of the gaps in ``t`` (:data:`GAP_MIN_S`, :data:`GAP_INTERVALS`)."""
+    t = np.asarray(t, dtype=float)
+    if t.size < 10:
+        return np.zeros(0), np.zeros(0)
+    dt = np.diff(t)
+    big = np.flatnonzero(dt > max(GAP_MIN_S, GAP_INTERVALS * float(np.median(dt))))
+    return t[big], t[big + 1]
+
+
+def find_gap_steps(
+    profile: MotionProfile, t: FloatArray, accel: FloatArray, gyro: FloatArray | None
+) -> GapSteps | None:
+    """One-off clock steps at the gaps of a unit's stamps ``t`` ``(M,)`` (readings ``accel``/``gyro``
+    ``(M, 3)``): each piece between gaps spanning :data:`PIECE_MIN_S` is aligned on its own by
+    :func:`coarse_time_offset`; a piece whose offset differs from the previous aligned piece's by more
+    than :data:`GAP_STEP_MIN_S` with a distinct peak makes a step at the gap before it. None without gaps
+    or steps."""
+    start, end = find_gaps(t)
+    if start.size == 0:
+        return None
+    edges = np.r_[t[0], end]
+    stops = np.r_[start, t[-1]]
+    offsets: list[float | None] = []
+    for a, b in zip(edges, stops, strict=True):
+        m = (t >= a) & (t <= b)
+        if b - a < PIECE_MIN_S or m.sum() < 50:
+            offsets.append(None)
+            continue
+        s = coarse_time_offset(profile, t[m], accel[m], None if gyro is None else gyro[m])
+        offsets.append(s.offset_s if s.sharpness >= GAP_STEP_SHARPNESS else None)
+    steps = np.zeros(start.size)
+    last = offsets[0]
+    for k in range(start.size):
+        o = offsets[k + 1]
+        if o is not None and last is not None and abs(o - last) > GAP_STEP_MIN_S:
+            steps[k] = o - last
+        if o is not None:
+            last = o
+    if not np.any(steps):
+        return None
+    return GapSteps(start, end, steps)

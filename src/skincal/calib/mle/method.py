@@ -53,10 +53,12 @@ from skincal.calib.rest import JointRest, joint_rest
 from skincal.calib.signals import SignalTable
 from skincal.calib.timing import (
     ClockSteps,
+    GapSteps,
     MotionProfile,
     OffsetSearch,
     coarse_time_offset,
     find_clock_steps,
+    find_gap_steps,
     motion_profile,
 )
 from skincal.data.dataset import STATIC, Dataset, ImuStream
@@ -169,12 +171,14 @@ class Alignment:
         search: the cross-correlation's outcome.
         steps: the re-sync steps found, or ``None``.
         stamps: ``(M,)`` the corrected stamps, or ``None`` when unchanged.
+        gaps: one-off clock steps found at stamp gaps (:func:`~skincal.calib.timing.find_gap_steps`), or ``None``.
     """
 
     offset_s: float
     search: OffsetSearch
     steps: ClockSteps | None = None
     stamps: FloatArray | None = None
+    gaps: GapSteps | None = None
 
 
 def align(shared: Shared, imu: ImuStream) -> Alignment:
@@ -188,8 +192,11 @@ def align(shared: Shared, imu: ImuStream) -> Alignment:
     accel = np.asarray(imu.accel, dtype=float)
     finite = np.all(np.isfinite(accel), axis=1)
     gyro = None if imu.gyro is None else np.asarray(imu.gyro, dtype=float)[finite]
+    gaps = find_gap_steps(shared.profile, t[finite], accel[finite], gyro)
+    if gaps is not None and gaps.corrected.any():  # large one-off clock steps at stamp gaps: stamps put back
+        t = stamps = gaps.correct(t)
     search = coarse_time_offset(shared.profile, t[finite], accel[finite], gyro)
-    return Alignment(search.offset_s, search, steps, stamps)
+    return Alignment(search.offset_s, search, steps, stamps, gaps)
 
 
 @dataclass(frozen=True)
@@ -693,6 +700,10 @@ def run_unit(problem: UnitProblem) -> UnitResult:
             f"{steps.mean_step_s * 1e3:.2f} ms: the sensor clock drifts {steps.drift_ppm:+.0f} ppm between "
             "re-syncs); stamps corrected"
         )
+    gaps = None if alignment is None else alignment.gaps
+    if gaps is not None:  # a step found is named; one not corrected is a warning (the estimate had to cope)
+        (notes if gaps.corrected.all() else warnings).append(gaps.describe())
+        extras["clock_gap_steps"] = np.c_[gaps.gap_start_s, gaps.gap_end_s, gaps.step_s].tolist()
     if "bg" in sl:
         imu["gyro_bias_rps"] = st.bg
         imu["gyro_bias_std_rps"] = get_std("bg")
