@@ -15,6 +15,7 @@ import threading
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.interpolate import make_smoothing_spline
 from scipy.ndimage import maximum_filter1d, uniform_filter1d
 from scipy.signal import savgol_coeffs, savgol_filter
 
@@ -74,6 +75,110 @@ class JointConditioning:
     qdd_noise: float = 0.0
     unreliable: np.ndarray | None = None
     """``(N,)`` True on the stream's samples where the acceleration estimate is unreliable."""
+    qdd_variance: FloatArray | None = None
+    """``(N, n)`` variance of the acceleration estimate on the conditioned stream's stamps,
+    rad^2/s^4 (m^2/s^4 for a prismatic joint): the interpolation error between a low-rate
+    stream's reports (:func:`spline_condition`); ``None`` when the stream resolves its motion
+    (the kink test then marks the few places it does not)."""
+    report_rate_hz: float = 0.0
+    """Median rate of the reported stream, Hz (0 when not measured)."""
+
+
+LOW_RATE_HZ = 60.0
+"""A joint stream reported more slowly than this (median rate) is conditioned by smoothing splines
+(:func:`spline_condition`): its samples are too far apart for a local fit over
+:data:`DEFAULT_QDD_WINDOW_S` (which then spans only the 5-sample minimum, ~0.1-0.5 s), and the kink
+test of such a fit rejects most of a general motion."""
+IRREGULAR_SPREAD = 0.25
+"""...and so is a stream whose stamps fit no regular grid and whose spacing varies by more than
+this fraction of its median (std): resampling it linearly would smear its accelerations."""
+FINE_RATE_HZ = 250.0
+"""Rate of the uniform grid a spline-conditioned stream is evaluated on, Hz (the link-signal table
+then takes every second sample, 125 Hz)."""
+ERROR_ORDER_RANGE = (1.0, 4.0)
+"""Range of the convergence order ``p`` (:func:`spline_condition`) the acceleration error is
+extrapolated with."""
+
+
+def is_low_rate(t: FloatArray) -> bool:
+    """Whether stamps ``t`` ``(N,)`` are those of a low-rate stream (median rate below
+    :data:`LOW_RATE_HZ`) or of an irregular one (spacing std above :data:`IRREGULAR_SPREAD` of its
+    median and no regular grid under it, :func:`_regular_grid`). Judged from the stamps alone."""
+    d = np.diff(np.asarray(t, dtype=float))
+    dt = float(np.median(d))
+    if dt <= 0:
+        return False
+    if 1.0 / dt < LOW_RATE_HZ:
+        return True
+    return float(np.std(d)) > IRREGULAR_SPREAD * dt and _regular_grid(np.asarray(t, dtype=float)) is None
+
+
+def spline_condition(joints: JointStates) -> tuple[JointStates, JointConditioning]:
+    """A low-rate or irregular joint stream as smoothing splines of its positions, evaluated on a
+    uniform :data:`FINE_RATE_HZ` grid, with the variance of the accelerations they give.
+
+    Each joint's positions ``q_j(t_i)`` (the reported velocities of such streams are usually
+    differences of the positions and add nothing) are fitted by the cubic smoothing spline
+    ``s_j = argmin sum_i (q_j(t_i) - s(t_i))^2 + lam int s''^2`` over the stamps as they are
+    (:func:`scipy.interpolate.make_smoothing_spline`, ``lam`` by generalised cross-validation);
+    ``q, qd, qdd`` are ``s, s', s''`` on the grid.
+
+    Error of ``s''`` between the reports, from the data themselves: the same fit on every second
+    (and every third) report only gives ``s''_2`` (``s''_3``); with an error ``e(h) ~ h^p`` of the
+    report spacing ``h``, ``s''_k - s'' ~ (k^p - 1) e(h)``. ``p`` is solved from the ratio of the
+    two differences' rms per joint (clipped to :data:`ERROR_ORDER_RANGE`: 1 when the half-rate
+    stream no longer resolves the motion, the conservative end) and the local variance is
+    ``var(t) = <(s''_2 - s'')^2> / (2^p - 1)^2``, averaged over both half streams and over one
+    report spacing. It carries the acceleration the reports do not resolve (corners, stops), the
+    stamps' jitter that the spline did not smooth away, and gaps (larger where reports are far apart).
+    """
+    t = np.asarray(joints.t, dtype=float)
+    q = np.asarray(joints.q, dtype=float)
+    dt_report = float(np.median(np.diff(t)))
+    step = 1.0 / FINE_RATE_HZ
+    grid = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step)) + 1)
+    n = q.shape[1]
+    qf, qdf, qddf, var = (np.empty((grid.size, n)) for _ in range(4))
+    sigma_q = np.empty(n)
+    width = max(1, int(round(dt_report / step)))
+    lo, hi = ERROR_ORDER_RANGE
+    for j in range(n):
+        s = make_smoothing_spline(t, q[:, j])
+        qf[:, j], qdf[:, j], qddf[:, j] = s(grid), s(grid, 1), s(grid, 2)
+        sigma_q[j] = float(np.std(q[:, j] - s(t)))
+        if np.ptp(q[:, j]) == 0.0:
+            var[:, j] = 0.0
+            continue
+        d2 = np.mean([(make_smoothing_spline(t[k::2], q[k::2, j])(grid, 2) - qddf[:, j]) ** 2 for k in range(2)], axis=0)
+        d3 = np.mean([(make_smoothing_spline(t[k::3], q[k::3, j])(grid, 2) - qddf[:, j]) ** 2 for k in range(3)], axis=0)
+        ratio = float(np.sqrt(np.mean(d3) / max(float(np.mean(d2)), 1e-300)))
+        p = _error_order(ratio, lo, hi)
+        var[:, j] = uniform_filter1d(d2, width, mode="nearest") / (2.0**p - 1.0) ** 2
+    out = JointStates(t=grid, q=qf, qd=qdf, qdd=qddf)
+    noise = float(np.sqrt(np.max(np.median(var, axis=0))))
+    return out, JointConditioning(
+        source="spline",
+        position_noise=sigma_q,
+        velocity_noise=np.asarray(joint_noise(qf, qdf)[1]),
+        qdd_noise=noise,
+        qdd_variance=var,
+        report_rate_hz=1.0 / dt_report,
+    )
+
+
+def _error_order(ratio: float, lo: float, hi: float) -> float:
+    """``p`` with ``(3^p - 1) / (2^p - 1) = ratio`` (the ratio grows with ``p`` from ~1.58 at
+    ``p -> 0``), clipped to ``[lo, hi]``; bisection (the function is monotonic)."""
+    f = lambda p: (3.0**p - 1.0) / (2.0**p - 1.0)  # noqa: E731
+    if ratio <= f(lo):
+        return lo
+    if ratio >= f(hi):
+        return hi
+    a, b = lo, hi
+    for _ in range(60):
+        m = 0.5 * (a + b)
+        a, b = (m, b) if f(m) < ratio else (a, m)
+    return 0.5 * (a + b)
 
 
 MAX_REFILL = 4
@@ -221,6 +326,8 @@ def condition_joint_stream(
     noise includes the encoder step's rounding (step / sqrt(12)).
     """
     t = np.asarray(joints.t, dtype=float)
+    if t.shape[0] >= 7 and is_low_rate(t):
+        return spline_condition(joints)
     q = np.asarray(joints.q, dtype=float)
     qd = np.asarray(joints.qd, dtype=float)
     dt = float(np.median(np.diff(t)))
@@ -300,7 +407,7 @@ class JointInterpolator:
         self._qdd_fit: FloatArray | None = None
         self._lock = threading.Lock()
         dt = float(np.median(np.diff(tj)))
-        if use_reported or joints.qdd is not None and self.conditioning.source == "positions":
+        if use_reported or joints.qdd is not None and self.conditioning.source in ("positions", "spline"):
             self._t_acc, self._qd, self._qdd_full = tj, self._qd_j, np.asarray(joints.qdd, dtype=float)
         elif np.max(np.abs(np.diff(tj) - dt)) > 0.01 * dt:  # uneven: resample, estimate everything now
             self._t_acc, self._qd, self._qdd_full = estimate_qdd(joints, qdd_window_s)
@@ -360,6 +467,16 @@ class JointInterpolator:
             return np.ones(t.shape, dtype=bool)
         i = np.clip(np.searchsorted(self._tj, t), 0, self._tj.size - 1)
         return ~(bad[i] | bad[np.maximum(i - 1, 0)])
+
+    def qdd_variance(self, t: FloatArray) -> FloatArray | None:
+        """``(M, n)`` variance of the joint accelerations at instants ``t`` (M,) (linear in the
+        conditioned stream's :attr:`JointConditioning.qdd_variance`), rad^2/s^4; ``None`` when the
+        conditioning did not estimate one (a stream that resolves its motion)."""
+        var = self.conditioning.qdd_variance
+        if var is None:
+            return None
+        t = np.asarray(t, dtype=float)
+        return np.column_stack([np.interp(t, self._tj, c) for c in var.T])
 
     @property
     def dt(self) -> float:
