@@ -143,14 +143,14 @@ def spline_condition(joints: JointStates) -> tuple[JointStates, JointConditionin
     width = max(1, int(round(dt_report / step)))
     lo, hi = ERROR_ORDER_RANGE
     for j in range(n):
-        s = make_smoothing_spline(t, q[:, j])
+        s = _smoothing_spline(t, q[:, j])
         qf[:, j], qdf[:, j], qddf[:, j] = s(grid), s(grid, 1), s(grid, 2)
         sigma_q[j] = float(np.std(q[:, j] - s(t)))
         if np.ptp(q[:, j]) == 0.0:
             var[:, j] = 0.0
             continue
-        d2 = np.mean([(make_smoothing_spline(t[k::2], q[k::2, j])(grid, 2) - qddf[:, j]) ** 2 for k in range(2)], axis=0)
-        d3 = np.mean([(make_smoothing_spline(t[k::3], q[k::3, j])(grid, 2) - qddf[:, j]) ** 2 for k in range(3)], axis=0)
+        d2 = np.mean([(_smoothing_spline(t[k::2], q[k::2, j])(grid, 2) - qddf[:, j]) ** 2 for k in range(2)], axis=0)
+        d3 = np.mean([(_smoothing_spline(t[k::3], q[k::3, j])(grid, 2) - qddf[:, j]) ** 2 for k in range(3)], axis=0)
         ratio = float(np.sqrt(np.mean(d3) / max(float(np.mean(d2)), 1e-300)))
         p = _error_order(ratio, lo, hi)
         var[:, j] = uniform_filter1d(d2, width, mode="nearest") / (2.0**p - 1.0) ** 2
@@ -164,6 +164,27 @@ def spline_condition(joints: JointStates) -> tuple[JointStates, JointConditionin
         qdd_variance=var,
         report_rate_hz=1.0 / dt_report,
     )
+
+
+SMOOTHING_SPAN = 0.4
+"""The smoothing spline's equivalent kernel never spans more than this many report spacings ``h``
+(see :func:`_smoothing_spline`): its transfer function is ``1 / (1 + (b w)^4)`` for a bandwidth
+``b``, so a quarter of the reports' Nyquist frequency, ``w = pi / (4 h)``, loses under 1 %."""
+
+
+def _smoothing_spline(t: FloatArray, y: FloatArray):  # noqa: ANN202 - a scipy BSpline
+    """The cubic smoothing spline of ``y(t)`` with ``lam`` by generalised cross-validation, but never
+    smoother than an equivalent kernel of :data:`SMOOTHING_SPAN` report spacings ``h``: its
+    bandwidth is ``(lam h)^(1/4)``, so ``lam <= (SMOOTHING_SPAN h)^4 / h``. Cross-validation on
+    nearly noise-free positions can pick an enormous ``lam`` (a straight line through a sine);
+    the capped fit is taken whenever it leaves the smaller residual (the smoothing is monotonic in
+    ``lam``: GCV chose more than the cap)."""
+    h = float(np.median(np.diff(t)))
+    gcv = make_smoothing_spline(t, y)
+    capped = make_smoothing_spline(t, y, lam=(SMOOTHING_SPAN * h) ** 4 / h)
+    r_gcv = float(np.sum((gcv(t) - y) ** 2))
+    r_cap = float(np.sum((capped(t) - y) ** 2))
+    return capped if r_cap < r_gcv else gcv
 
 
 def _error_order(ratio: float, lo: float, hi: float) -> float:
@@ -530,6 +551,30 @@ def joint_states_at(
 
 
 @dataclass(frozen=True)
+class SampleAccount:
+    """What :func:`unit_samples` dropped from a unit's stream before any method saw it (counts of
+    IMU samples) and what the screening said.
+
+    Attributes:
+        n_total: samples in the stream.
+        n_nonfinite: samples with a non-finite accelerometer reading.
+        n_outside: samples whose (shifted) instant lies outside the joint stream.
+        n_saturated: samples at a saturating extreme of some channel (accelerometer or gyroscope).
+        n_stuck: samples where an accelerometer axis had stopped updating.
+        saturated_t: ``(K,)`` instants of the saturated samples (shifted to the joint clock), s.
+        warnings: the screening's and the unit check's warnings.
+    """
+
+    n_total: int
+    n_nonfinite: int = 0
+    n_outside: int = 0
+    n_saturated: int = 0
+    n_stuck: int = 0
+    saturated_t: FloatArray | None = None
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class UnitSamples:
     """One unit's IMU samples with the joint states at their instants and their segment tags.
 
@@ -543,6 +588,7 @@ class UnitSamples:
         kind: ``(M,)`` :data:`STATIC` / :data:`DYNAMIC`, -1 outside every segment.
         joint: ``(M,)`` 0-based excited joint, -1 when static or outside.
         pose: ``(M,)`` 0-based pose index, -1 outside.
+        account: what :func:`unit_samples` dropped before (``None`` when built by hand).
     """
 
     unit: str
@@ -556,6 +602,7 @@ class UnitSamples:
     kind: np.ndarray
     joint: np.ndarray
     pose: np.ndarray
+    account: SampleAccount | None = None
 
     def select(self, mask: np.ndarray) -> UnitSamples:
         """The samples where ``mask`` is true."""
@@ -571,6 +618,7 @@ class UnitSamples:
             self.kind[mask],
             self.joint[mask],
             self.pose[mask],
+            self.account,
         )
 
     @property
@@ -615,11 +663,23 @@ def unit_samples(
     t = np.asarray(imu.t, dtype=float) - time_offset_s
     accel = np.asarray(imu.accel, dtype=float)
     finite = np.all(np.isfinite(accel), axis=1)
+    unit_warnings = check_accel_units(unit, accel[finite], float(np.linalg.norm(dataset.gravity)))
     tj = dataset.joint_states.t
-    keep = finite & (t >= tj[0]) & (t <= tj[-1])
+    inside_joints = (t >= tj[0]) & (t <= tj[-1])
+    keep = finite & inside_joints
     t, accel = t[keep], accel[keep]
     gyro = None if imu.gyro is None else np.asarray(imu.gyro, dtype=float)[keep]
-    usable, _ = screen_readings(unit, accel, t)
+    screen = screen_channels(unit, accel, gyro, t)
+    usable = screen.keep
+    account = SampleAccount(
+        n_total=int(finite.size),
+        n_nonfinite=int(np.count_nonzero(~finite)),
+        n_outside=int(np.count_nonzero(finite & ~inside_joints)),
+        n_saturated=int(np.count_nonzero(screen.saturated)),
+        n_stuck=int(np.count_nonzero(~usable & ~screen.saturated)),
+        saturated_t=t[screen.saturated],
+        warnings=tuple(unit_warnings) + screen.warnings,
+    )
     t, accel = t[usable], accel[usable]
     gyro = None if gyro is None else gyro[usable]
     if interpolator is None:
@@ -641,6 +701,7 @@ def unit_samples(
         kind=seg.astype(np.int8) if segments is None else pick(segments.kind, -1).astype(np.int8),
         joint=seg.astype(np.int32) if segments is None else pick(segments.joint, -1).astype(np.int32),
         pose=seg.astype(np.int32) if segments is None else pick(segments.pose, -1).astype(np.int32),
+        account=account,
     )
 
 
@@ -649,6 +710,72 @@ SATURATION_FRACTION = 0.002
 SATURATION_MIN = 11.0
 """...if that value is beyond this magnitude, m/s^2 (above 1 g plus any bias: a unit at rest
 repeats its reading too, but never saturates there)."""
+
+
+GYRO_SATURATION_MIN = 1.0
+"""A gyroscope extreme repeated as often as :data:`SATURATION_FRACTION` says is a rail if it lies
+beyond this rate, rad/s (57 deg/s: below every MEMS gyroscope's smallest range, 125 deg/s, and far
+above any reading at rest)."""
+
+
+@dataclass(frozen=True)
+class Screening:
+    """The outcome of :func:`screen_channels`: ``keep`` ``(M,)`` usable samples, ``saturated``
+    ``(M,)`` samples at a channel's rail, and the warnings."""
+
+    keep: np.ndarray
+    saturated: np.ndarray
+    warnings: tuple[str, ...]
+
+
+RAIL_BAND = 0.05
+"""With ``pile_up``, the samples within this fraction of an extreme are its neighbourhood..."""
+RAIL_SHARE = 0.5
+"""...of which a rail holds more than this share (a clipped channel piles up at its rail; a
+quantised one merely repeats its peak a few times among many readings close to it)."""
+
+
+def _rails(x: FloatArray, minimum: float, pile_up: bool = False) -> list[tuple[int, float, np.ndarray]]:
+    """Per axis of ``x`` ``(M, 3)``: the extremes beyond ``minimum`` in magnitude that repeat exactly
+    in more than :data:`SATURATION_FRACTION` of the samples (and more than 3) and, with ``pile_up``,
+    hold more than :data:`RAIL_SHARE` of the samples within :data:`RAIL_BAND` of them: ``(axis,
+    value, mask)``. A saturating channel clips at its rail and reports the same value every time."""
+    out = []
+    for k in range(x.shape[1]):
+        a = x[:, k]
+        fin = a[np.isfinite(a)]
+        if fin.size == 0:
+            continue
+        for extreme in (fin.max(), fin.min()):
+            hits = a == extreme
+            n_hits = np.count_nonzero(hits)
+            if not (abs(extreme) > minimum and hits.mean() > SATURATION_FRACTION and n_hits > 3):
+                continue
+            if pile_up and n_hits <= RAIL_SHARE * np.count_nonzero(np.abs(fin - extreme) <= RAIL_BAND * abs(extreme)):
+                continue
+            out.append((k, float(extreme), hits))
+    return out
+
+
+def screen_channels(
+    unit: str, accel: FloatArray, gyro: FloatArray | None = None, t: FloatArray | None = None, **stuck: float
+) -> Screening:
+    """:func:`screen_readings` of the accelerometer, and the same saturation test on the gyroscope
+    (rails beyond :data:`GYRO_SATURATION_MIN`): a gyroscope at its rail under-reads the rotation
+    exactly when it matters most. ``stuck``: the stuck-axis test's options."""
+    keep, warnings = screen_readings(unit, accel, t, **stuck)
+    saturated = np.zeros(len(keep), dtype=bool)
+    for _, _, hits in _rails(np.asarray(accel, dtype=float), SATURATION_MIN):
+        saturated |= hits
+    if gyro is not None:
+        for k, value, hits in _rails(np.asarray(gyro, dtype=float), GYRO_SATURATION_MIN, pile_up=True):
+            keep &= ~hits
+            saturated |= hits
+            warnings.append(
+                f"gyroscope {'xyz'[k]} axis saturates at {value:+.4g} rad/s ({np.degrees(value):+.0f} deg/s) in "
+                f"{100 * hits.mean():.1f}% of samples; those samples are ignored"
+            )
+    return Screening(keep, saturated & ~keep, tuple(warnings))
 
 
 def screen_readings(
@@ -721,6 +848,100 @@ def screen_readings(
                     "of samples; those samples are ignored"
                 )
     return keep, warnings
+
+
+G_UNIT_RANGE = (0.08, 0.125)
+"""A median specific-force magnitude this fraction of gravity (1/9.81 = 0.102) is an accelerometer
+in g..."""
+RAW_COUNT_MIN = 50.0
+"""...and one beyond this multiple of gravity a stream of raw counts (an MPU's 16384 LSB/g at
++-2 g is 1670 times gravity in m/s^2)..."""
+PLAUSIBLE_G_RANGE = (0.7, 1.4)
+"""...while one outside this range of gravity (but neither of the above) is only suspicious."""
+
+
+def check_accel_units(unit: str, accel: FloatArray, gravity_mps2: float) -> list[str]:
+    """The accelerometer's unit from the magnitude of its readings: a robot accelerates its links
+    by a fraction of gravity, so the median ``|f|`` over the stream is gravity within tens of
+    percent in m/s^2 (:data:`PLAUSIBLE_G_RANGE`). About 1/9.81 of it (:data:`G_UNIT_RANGE`) is a
+    stream in g and beyond :data:`RAW_COUNT_MIN` times it raw counts: both are certain and raise a
+    one-line :class:`~skincal.errors.DatasetError`; anything else outside the plausible range is a
+    warning. Without gravity (``gravity_mps2 < 1``) nothing is checked."""
+    from skincal.errors import DatasetError
+
+    accel = np.asarray(accel, dtype=float)
+    if gravity_mps2 < 1.0 or accel.shape[0] < 10:
+        return []
+    m = float(np.median(np.linalg.norm(accel, axis=1)))
+    r = m / gravity_mps2
+    if G_UNIT_RANGE[0] <= r <= G_UNIT_RANGE[1]:
+        raise DatasetError(
+            f"unit '{unit}': accelerometer reads |f| = {m:.3g} (median), {r:.3f} of gravity: it is in g, not m/s^2 "
+            f"(multiply by {gravity_mps2:.5g})"
+        )
+    if r > RAW_COUNT_MIN:
+        raise DatasetError(
+            f"unit '{unit}': accelerometer reads |f| = {m:.4g} (median), {r:.0f} times gravity: raw counts? "
+            "convert them to m/s^2 with the sensor's sensitivity"
+        )
+    if not PLAUSIBLE_G_RANGE[0] <= r <= PLAUSIBLE_G_RANGE[1]:
+        return [
+            f"accelerometer reads |f| = {m:.3g} m/s^2 (median), {r:.2f} of gravity: wrong unit or scale? "
+            "(the estimated scale/misalignment absorbs a few percent, not this)"
+        ]
+    return []
+
+
+DEG_PER_RAD = 180.0 / np.pi
+GYRO_SCALE_TOLERANCE = 0.25
+"""A gyroscope whose readings are within this fraction of 180/pi times the robot's rotation rate is
+in deg/s; within it of 1 the unit is right."""
+GYRO_RAW_MIN = 100.0
+"""A gyroscope reading more than this many times the rotation rate is raw counts (an MPU's 131
+LSB per deg/s is 7506 per rad/s)."""
+GYRO_CHECK_MIN_RATE = 0.1
+"""The check needs the link to turn at least this fast (rms), rad/s, and..."""
+GYRO_CHECK_MIN_CORRELATION = 0.7
+"""...the gyroscope's magnitude to follow the link's rotation rate this closely (correlation)."""
+
+
+def check_gyro_units(unit: str, gyro_speed: FloatArray, link_speed: FloatArray) -> list[str]:
+    """The gyroscope's unit from its rate ``|w_meas - b|`` ``(M,)`` against its link's rotation rate
+    from the chain ``|w_link|`` ``(M,)`` (rad/s; any frame: magnitudes need no alignment, only the
+    time offset), at the same instants. ``s = <|w_meas|, |w_link|> / <|w_link|, |w_link|>`` (least
+    squares) is 1 within a consumer part's scale error; ``s ~ 57.3`` (within
+    :data:`GYRO_SCALE_TOLERANCE`) is a stream in deg/s and ``s >`` :data:`GYRO_RAW_MIN` raw counts:
+    both raise a one-line :class:`~skincal.errors.DatasetError` when the link turns enough and the
+    magnitudes correlate (:data:`GYRO_CHECK_MIN_RATE`, :data:`GYRO_CHECK_MIN_CORRELATION`); any
+    other ``s`` outside ``1 +- GYRO_SCALE_TOLERANCE`` is a warning."""
+    from skincal.errors import DatasetError
+
+    g, w = np.asarray(gyro_speed, dtype=float), np.asarray(link_speed, dtype=float)
+    ok = np.isfinite(g) & np.isfinite(w)
+    g, w = g[ok], w[ok]
+    if g.size < 20 or float(np.sqrt(np.mean(w * w))) < GYRO_CHECK_MIN_RATE or np.std(g) == 0 or np.std(w) == 0:
+        return []
+    s = float(g @ w / (w @ w))
+    rho = float(np.corrcoef(g, w)[0, 1])
+    certain = rho >= GYRO_CHECK_MIN_CORRELATION
+    if abs(s / DEG_PER_RAD - 1.0) <= GYRO_SCALE_TOLERANCE and certain:
+        raise DatasetError(
+            f"unit '{unit}': gyroscope reads {s:.1f} times the robot's rotation rate: it is in deg/s, not rad/s "
+            f"(multiply by pi/180)"
+        )
+    if s > GYRO_RAW_MIN and certain:
+        raise DatasetError(
+            f"unit '{unit}': gyroscope reads {s:.0f} times the robot's rotation rate: raw counts? convert them to "
+            "rad/s with the sensor's sensitivity"
+        )
+    if not certain:
+        return [
+            f"gyroscope rate follows its link's rotation rate poorly (correlation {rho:.2f}, ratio {s:.2f}): the "
+            "joint stream misrepresents the rotation between its reports, or the clock is off"
+        ]
+    if abs(s - 1.0) > GYRO_SCALE_TOLERANCE:
+        return [f"gyroscope reads {s:.2f} times its link's rotation rate (correlation {rho:.2f}): wrong unit or scale?"]
+    return []
 
 
 @dataclass(frozen=True)
