@@ -74,13 +74,15 @@ def test_a_low_rate_stream_is_splined_and_its_acceleration_error_characterised()
     _, qd_true, qdd_true = exact(t)
     var = ip.qdd_variance(t)
     assert var.shape == qdd.shape and np.all(var > 0)
-    # velocities to a fraction of a percent, accelerations to a few percent of their amplitude...
-    assert np.max(np.abs(qd - qd_true)) < 0.01 * np.max(np.abs(qd_true))
+    # velocities and accelerations to a few percent of their amplitude (the spline may smooth over a
+    # report spacing: SMOOTHING_SPAN)...
+    assert np.max(np.abs(qd - qd_true)) < 0.02 * np.max(np.abs(qd_true))
     err = qdd - qdd_true
     assert np.sqrt(np.mean(err**2)) < 0.05 * np.max(np.abs(qdd_true))
-    # ...and the reported variance covers the error without drowning it (conservative by design: p >= 1)
+    # ...and the reported variance has the error's size: within the factor 2 spline_condition claims
+    # for resolved motion (its h^p extrapolation), and not far above it (p >= 1 is conservative)
     ratio = np.sqrt(np.mean(err**2, axis=0) / np.mean(var, axis=0))
-    assert np.all(ratio < 1.5) and np.all(ratio > 0.05), ratio
+    assert np.all(ratio < 2.0) and np.all(ratio > 0.1), ratio
 
 
 def _low_rate_session(ds, rate_hz: float = 20.0, seed: int = 2):
