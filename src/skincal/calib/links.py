@@ -99,3 +99,90 @@ def discover_link(samples: UnitSamples, n_joints: int, *, use_gyro: bool = False
             + (f", next joint {a_next:.2f}x" if later.size else "")
         )
     return LinkAssignment(link, confidence, activity, tuple(warnings))
+
+
+GYRO_ROTATES = 0.05
+"""A gyroscope whose bias-corrected rate exceeds this (rms over the unit's samples), rad/s (3 deg/s),
+rotates: its link's chain must rotate it."""
+GYRO_MISMATCH = 0.5
+"""A link whose rotation rate misses the gyroscope's rate by more than this fraction (rms of the
+difference over rms of the rate) cannot carry the unit."""
+
+
+@dataclass(frozen=True)
+class GyroLinks:
+    """Which links can carry a unit whose gyroscope turns (:func:`gyro_rules_out`).
+
+    Attributes:
+        rotates: the gyroscope turns (rms rate above :data:`GYRO_ROTATES`).
+        mismatch: ``(n,)`` per link ``k``: ``rms(|w_meas| - |w_k|) / rms(|w_meas|)``.
+        allowed: ``(n,)`` True for the links not ruled out (all True when the gyroscope does not turn).
+        rate_rms: rms of the gyroscope's rate, rad/s; ``link_rms``: ``(n,)`` of each link's.
+    """
+
+    rotates: bool
+    mismatch: FloatArray
+    allowed: np.ndarray
+    rate_rms: float
+    link_rms: FloatArray
+
+    def note(self) -> str | None:
+        """Words for the links ruled out, or ``None`` when none is."""
+        out = [int(k) + 1 for k in np.flatnonzero(~self.allowed)]
+        if not out:
+            return None
+        parts = ", ".join(f"{k} ({self.link_rms[k - 1]:.2g})" for k in out)
+        return (
+            f"links {out} ruled out by the gyroscope: it turns at {self.rate_rms:.2g} rad/s rms, unlike their "
+            f"chain (link rate rms in rad/s: {parts})"
+        )
+
+
+def gyro_rules_out(gyro_rate: FloatArray, link_rate: FloatArray) -> GyroLinks:
+    """Links a turning gyroscope rules out, from magnitudes alone.
+
+    A gyroscope on link ``k`` reads ``w_meas = R_link_su^T w_k + b + noise``, so its rate
+    ``|w_meas - b|`` ``(M,)`` equals the link's rotation rate from the chain ``|w_k|`` ``(M, n)`` at
+    the same instants, whatever the unit's rotation (a scale error of a few percent aside). A link
+    whose rate misses it by more than :data:`GYRO_MISMATCH` (relative rms) is ruled out: a
+    translation-only chain (prismatic joints) cannot turn the unit at all, and a link before the
+    wrist turns it differently. Never rules out every link (a gyroscope in another unit, or a clock
+    far off, would; the caller's checks name those): if none is left, all are allowed.
+    """
+    g = np.asarray(gyro_rate, dtype=float)
+    w = np.asarray(link_rate, dtype=float)
+    ok = np.isfinite(g) & np.all(np.isfinite(w), axis=1)
+    g, w = g[ok], w[ok]
+    n = w.shape[1]
+    rate_rms = float(np.sqrt(np.mean(g * g))) if g.size else 0.0
+    link_rms = np.sqrt(np.mean(w * w, axis=0)) if g.size else np.zeros(n)
+    if rate_rms < GYRO_ROTATES:
+        return GyroLinks(False, np.zeros(n), np.ones(n, dtype=bool), rate_rms, link_rms)
+    mismatch = np.sqrt(np.mean((w - g[:, None]) ** 2, axis=0)) / rate_rms
+    allowed = mismatch <= GYRO_MISMATCH
+    if not allowed.any():
+        allowed = np.ones(n, dtype=bool)
+    return GyroLinks(True, mismatch, allowed, rate_rms, link_rms)
+
+
+def activity_in(samples: UnitSamples, mask: np.ndarray, *, use_gyro: bool = False) -> float:
+    """The unit's activity over the samples ``mask`` ``(M,)`` (e.g. general motion no segment
+    tags) as :func:`discover_link` measures it per joint: the RMS deviation of the readings from
+    their mean over those samples divided by the threshold (noise floor of the static segments
+    times :data:`ACTIVITY_RATIO`, at least the absolute floor); the larger of accelerometer and
+    gyroscope with ``use_gyro``. NaN with fewer than 3 samples."""
+    if np.count_nonzero(mask) < 3:
+        return float("nan")
+    channels = [(samples.accel, ABSOLUTE_FLOOR_ACCEL)]
+    if use_gyro and samples.gyro is not None:
+        channels.append((samples.gyro, ABSOLUTE_FLOOR_GYRO))
+    static = samples.kind == 0
+    out = 0.0
+    for values, absolute_floor in channels:
+        floor = absolute_floor
+        if np.any(static):
+            _, rms_static = _rms_per_segment(values[static], samples.segment[static])
+            floor = max(absolute_floor, ACTIVITY_RATIO * float(np.median(rms_static)))
+        v = values[mask]
+        out = max(out, float(np.sqrt(np.mean(np.sum((v - v.mean(axis=0)) ** 2, axis=1)))) / floor)
+    return out

@@ -33,7 +33,7 @@ import numpy as np
 from skincal.calib.api import MethodSpec, UnitProblem, register
 from skincal.calib.closed_form import position_and_bias, static_rotation_and_bias, wahba
 from skincal.calib.gyro import GyroScale, gyro_scale
-from skincal.calib.links import discover_link
+from skincal.calib.links import GyroLinks, activity_in, discover_link, gyro_rules_out
 from skincal.calib.mle.arrange import UnitData, arrange_unit_data
 from skincal.calib.mle.solver import (
     SCALE_FULL,
@@ -48,7 +48,7 @@ from skincal.calib.mle.solver import (
     sym_from_e,
 )
 from skincal.calib.model import predict_specific_force
-from skincal.calib.preprocess import JointInterpolator
+from skincal.calib.preprocess import JointInterpolator, check_gyro_units
 from skincal.calib.rest import JointRest, joint_rest
 from skincal.calib.signals import SignalTable
 from skincal.calib.timing import (
@@ -61,7 +61,7 @@ from skincal.calib.timing import (
     find_gap_steps,
     motion_profile,
 )
-from skincal.data.dataset import STATIC, Dataset, ImuStream
+from skincal.data.dataset import DYNAMIC, STATIC, Dataset, ImuStream
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.result import UnitResult
 from skincal.errors import CalibrationError
@@ -364,31 +364,87 @@ def _residual_level(problem: UnitProblem, link: int, state: State) -> float:
     return float(np.median(np.linalg.norm(pred - s.accel[keep], axis=1)))
 
 
-def choose_link(problem: UnitProblem) -> tuple[int, float, list[str], dict[int, float], State | None]:
-    """Link discovery by activity, then model comparison among neighbouring links.
+GYRO_STILL_RATE = 0.01
+"""Instants at which every link turns slower than this (rad/s) give the gyroscope's bias for the
+rate comparisons of link discovery and the unit check."""
+GENERAL_MOTION_SHARE = 0.25
+"""When more than this share of a unit's moving samples lies outside the single-joint (dynamic)
+segments, the motion is general: the segments' activity matrix cannot judge the link alone."""
 
-    Returns the link, its confidence, warnings, the residual level of each candidate fitted and
-    the winner's quick-fit state (a start for the full fit; ``None`` when the activity alone was
-    decisive and no candidate had to be fitted).
+
+def gyro_rates(problem: UnitProblem) -> tuple[FloatArray, FloatArray] | None:
+    """The unit's gyroscope rate ``|w_meas - b|`` ``(M,)`` and every link's rotation rate from the
+    chain ``(M, n)`` at the unit's (coarsely aligned) instants inside the joint stream, rad/s; ``b``
+    the median reading where no link turns (0 when the robot never rests). ``None`` without a
+    gyroscope (or with ``gyro=false``)."""
+    s = problem.samples
+    if not _use_gyro(problem):
+        return None
+    table: SignalTable = problem.shared.table
+    g_t = table.grid_t
+    keep = (s.t >= g_t[0]) & (s.t <= g_t[-1])
+    w = np.column_stack([np.interp(s.t[keep], g_t, c) for c in table.angular_speed.T])
+    g = s.gyro[keep]
+    still = np.max(w, axis=1) < GYRO_STILL_RATE
+    bias = np.median(g[still], axis=0) if np.count_nonzero(still) >= 10 else np.zeros(3)
+    return np.linalg.norm(g - bias, axis=1), w
+
+
+def _untagged_motion(problem: UnitProblem) -> np.ndarray | None:
+    """``(M,)`` the unit's samples while some joint moves outside every single-joint segment, when
+    they are more than :data:`GENERAL_MOTION_SHARE` of the samples while some joint moves (general
+    motion: the segments cannot judge the link alone); ``None`` otherwise."""
+    s = problem.samples
+    moving = ~problem.shared.rest.unit_rest(s.t, problem.chain.n_joints)
+    untagged = moving & (s.kind != DYNAMIC)
+    general = np.any(moving) and np.count_nonzero(untagged) > GENERAL_MOTION_SHARE * np.count_nonzero(moving)
+    return untagged if general else None
+
+
+def choose_link(
+    problem: UnitProblem,
+) -> tuple[int, float, list[str], dict[int, float], State | None, GyroLinks | None]:
+    """Link discovery by activity and the gyroscope, then model comparison among candidate links.
+
+    A turning gyroscope first rules out the links whose chain cannot turn it so
+    (:func:`~skincal.calib.links.gyro_rules_out`). A decisive activity (single-joint segments) on a
+    link the gyroscope allows is taken; otherwise, with single-joint segments covering the motion,
+    neighbouring links of the activity's proposal compete, and with general (multi-joint) motion
+    (:data:`GENERAL_MOTION_SHARE`) every link not ruled out does (the segments' verdict that no
+    excited joint moves the unit is then no verdict: the motion they did not tag may).
+
+    Returns the link, its confidence, warnings, the residual level of each candidate fitted, the
+    winner's quick-fit state (a start for the full fit; ``None`` when the activity alone was
+    decisive and no candidate had to be fitted) and the gyroscope's verdict (``None`` without one).
     """
     n = problem.chain.n_joints
+    rates = gyro_rates(problem)
+    by_gyro = None if rates is None else gyro_rules_out(*rates)
+    allowed = set(range(1, n + 1)) if by_gyro is None else {int(k) + 1 for k in np.flatnonzero(by_gyro.allowed)}
     activity = discover_link(problem.samples, n, use_gyro=True)
     levels: dict[int, float] = {}
     states: dict[int, State] = {}
     warnings = [w for w in activity.warnings if "ambiguous" not in w and "never excited" not in w]
     tagged = bool(np.any(problem.samples.kind == STATIC))  # the activity's noise floor needs static segments
-    if not tagged:
-        warnings = []
-    if tagged and activity.link != 0 and activity.confidence >= DECISIVE_ACTIVITY:
-        return activity.link, activity.confidence, warnings, levels, None  # no doubt: nothing to compare
-    if tagged and activity.link == 0 and np.any(np.isfinite(activity.activity)):  # joints excited, none moved it
+    untagged = _untagged_motion(problem)
+    general = untagged is not None
+    if general and np.nan_to_num(activity_in(problem.samples, untagged, use_gyro=True)) < 1.0:
+        general = False  # the unit did not move in the motion the segments do not tag either
+    if not tagged or general:
+        warnings = []  # the segments do not tell which joint moved the unit
+    segmented = tagged and not general
+    if tagged and activity.link in allowed and activity.confidence >= DECISIVE_ACTIVITY:
+        return activity.link, activity.confidence, warnings, levels, None, by_gyro  # no doubt: nothing to compare
+    if segmented and activity.link == 0 and np.any(np.isfinite(activity.activity)):  # joints excited, none moved it
         raise CalibrationError("; ".join(activity.warnings) or "no joint motion excites this unit")
     # Not decisive: a joint's motion can shake earlier links through the servos' finite stiffness
     # (the activity then points too far out), so every link up to one past the suggestion competes;
-    # without any activity (no segments to tell the excited joint), every link does.
+    # without any activity (no segments to tell the excited joint, or general motion), every link does.
     hint = problem.alignment.search.link if problem.alignment is not None else n
-    top = n if activity.link == 0 or not tagged else min(n, max(activity.link, hint) + 1)
+    top = n if activity.link == 0 or not segmented else min(n, max(activity.link, hint) + 1)
     for link in range(1, top + 1):
+        if link not in allowed:
+            continue
         try:
             fit = _fit(_arrange(problem, link, decimate=10), Blocks(scale=SCALE_NONE), max_outer=2)
         except CalibrationError:
@@ -408,7 +464,56 @@ def choose_link(problem: UnitProblem) -> tuple[int, float, list[str], dict[int, 
                 f"link is ambiguous: links {best} and {ranked[1]} explain the data almost equally "
                 f"(residual {levels[best]:.3g} vs {levels[ranked[1]]:.3g} m/s^2); chose {best}"
             )
-    return best, confidence, warnings, levels, states[best]
+    return best, confidence, warnings, levels, states[best], by_gyro
+
+
+def sample_account(problem: UnitProblem, p: _Problem) -> dict:
+    """Where the unit's motion went: IMU samples at instants when some joint up to its link moves
+    (the *motion*), those the fit kept as moving samples, and those dropped, by reason: at the joint
+    stream's kinks (:meth:`JointInterpolator.reliable`), saturated (:class:`SampleAccount`, the
+    moving ones), stuck, at the joint stream's ends (the residual clock margin) and otherwise (a
+    rest run the IMU contradicted, the part before or after a move). Counts and shares of the motion."""
+    s = problem.samples
+    shared: Shared = problem.shared
+    link = p.data.link
+    ip = shared.interpolator
+    moving = ~shared.rest.unit_rest(s.t, link)
+    margin = MAX_RESIDUAL_OFFSET_S + 0.01
+    inside = (s.t >= ip.t_start + margin) & (s.t <= ip.t_end - margin)
+    kinks = int(np.count_nonzero(moving & inside & ~ip.reliable(s.t)))
+    ends = int(np.count_nonzero(moving & ~inside))
+    acc = s.account
+    saturated = 0
+    stuck = 0
+    if acc is not None:
+        sat_t = np.asarray(acc.saturated_t if acc.saturated_t is not None else np.zeros(0))
+        sat_t = sat_t[(sat_t >= ip.t_start) & (sat_t <= ip.t_end)]
+        saturated = int(np.count_nonzero(~shared.rest.unit_rest(sat_t, link))) if sat_t.size else 0
+        stuck = int(acc.n_stuck)
+    kept = int(len(p.data.rows.moving_t))
+    motion = int(np.count_nonzero(moving)) + saturated + stuck
+    other = max(motion - kept - kinks - ends - saturated - stuck, 0)
+    counts = {"motion": motion, "kept": kept, "kinks": kinks, "saturated": saturated, "stuck": stuck,
+              "ends": ends, "other": other}
+    return {**counts, "shares": {k: (v / motion if motion else 0.0) for k, v in counts.items() if k != "motion"}}
+
+
+_ACCOUNT_WORDS = {
+    "kinks": "at the joint stream's kinks",
+    "saturated": "saturated",
+    "stuck": "a stuck axis",
+    "ends": "at the joint stream's ends",
+    "other": "in rest runs the IMU contradicted or beyond a move",
+}
+
+
+def describe_account(account: dict) -> str:
+    """One line for :func:`sample_account`: "kept 52 % of the motion (1065 samples): 31 % at the
+    joint stream's kinks, 17 % saturated"."""
+    sh = account["shares"]
+    dropped = [f"{100 * sh[k]:.0f} % {w}" for k, w in _ACCOUNT_WORDS.items() if account[k] > 0]
+    head = f"kept {100 * sh['kept']:.0f} % of the motion ({account['kept']} of {account['motion']} samples)"
+    return head + (": " + ", ".join(dropped) if dropped else "")
 
 
 NULL_POSITION_SCALE_M = 0.1
@@ -569,13 +674,23 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     warnings: list[str] = []
     extras: dict = {}
     start = None
+    early_notes: list[str] = []
+    account = problem.samples.account
+    if account is not None:  # the gyroscope's screening (the accelerometer's reaches the result elsewhere)
+        warnings += [w for w in account.warnings if not w.startswith("accelerometer ")]
     if problem.link == 0:
-        link, confidence, link_warnings, levels, start = choose_link(problem)
+        link, confidence, link_warnings, levels, start, by_gyro = choose_link(problem)
         warnings += link_warnings
         extras["link_confidence"] = confidence
         extras["link_residual_mps2"] = {str(k): v for k, v in levels.items()}
+        ruled_out = None if by_gyro is None else by_gyro.note()
+        if ruled_out:
+            early_notes.append(ruled_out)
     else:
         link = problem.link
+    rates = gyro_rates(problem)
+    if rates is not None:
+        warnings += check_gyro_units(problem.samples.unit, rates[0], rates[1][:, link - 1])
     if _use_gyro(problem):  # the gyroscope's scale checked against the robot's rotation rate (calib.gyro)
         # Checked, not corrected: a gyroscope's misalignment to the accelerometer has an antisymmetric part
         # that only a rotation of its own could absorb; correcting the scale alone made the gyroscope's
@@ -637,6 +752,10 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     cov, honesty, notes = _honesty(fit, p, None if alignment is None else alignment.search, total_offset, angle_noise)
 
     warnings += honesty
+    notes = early_notes + notes
+    kept = sample_account(problem, p)
+    extras["samples"] = kept
+    notes.append(describe_account(kept))
     observable = fit.null_space.shape[1] == 0
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     pos_std = std[3:6].copy()
