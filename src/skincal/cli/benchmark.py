@@ -1,5 +1,6 @@
-"""``skincal benchmark table1|core|mle``: the paper's Table I beside the paper's numbers, throughput, the
-default calibrator's targets (``robustness`` is in :mod:`skincal.cli.bench_robustness`)."""
+"""``skincal benchmark table1|core|mle|realdata``: the paper's Table I beside the paper's numbers, throughput, the
+default calibrator's targets, the repeatability across recordings of one mount (``robustness`` is in
+:mod:`skincal.cli.bench_robustness`)."""
 
 from __future__ import annotations
 
@@ -109,4 +110,25 @@ def mle(
     with console.status("benchmarking mle...") as status:
         doc = run_mle_benchmark(runs=runs, quick=quick, with_om=om, progress=lambda m: status.update(m))
     console.print_json(json.dumps(doc))
+    _write_json(doc, json_out)
+
+
+@benchmark_app.command("realdata")
+def realdata(
+    folder: Path = typer.Argument(..., help="folder of recordings sharing a mount (folders with recording.h5, or .h5)"),
+    om: bool = typer.Option(True, help="also run the paper's OM (a recording it cannot take is a failure)"),
+    workers: int = typer.Option(1, min=1, help="units calibrated at once per recording"),
+    json_out: Path | None = typer.Option(None, "--json", help="also write the figures as JSON"),
+    force: bool = FORCE,
+) -> None:
+    """Repeatability across recordings of one mount, per IMU: spread of positions and rotations, spread
+    over the reported std, motion kept, time offsets, failures."""
+    from skincal.workflows.bench_realdata import METHODS, realdata_report, run_realdata_benchmark
+
+    _check_json(json_out, force)
+    methods = METHODS if om else tuple(m for m in METHODS if m != "om")
+    with console.status("benchmarking recordings...") as status:
+        doc = run_realdata_benchmark(folder, methods, workers=workers, progress=lambda n: status.update(shown(n)))
+    for part in realdata_report(doc):
+        console.print(part, highlight=False)
     _write_json(doc, json_out)
