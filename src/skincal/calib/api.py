@@ -29,8 +29,8 @@ from skincal.calib.preprocess import (
     screen_readings,
     unit_samples,
 )
-from skincal.data.dataset import NO_JOINTS_MESSAGE, Dataset
-from skincal.data.result import CalibrationResult, UnitResult
+from skincal.data.dataset import NO_JOINTS_MESSAGE, STATIC, Dataset
+from skincal.data.result import CalibrationResult, UnitResult, has_position
 from skincal.errors import CalibrationError, ConfigError, DatasetError, SkincalError
 from skincal.kinematics.chain import SerialChain
 
@@ -170,7 +170,10 @@ def calibrate(
     **options: Any,
 ) -> CalibrationResult:
     """Calibrate the units of ``dataset`` with ``method``; units that fail are reported in
-    ``result.extras["failed_units"]`` (name -> reason) while the others are calibrated.
+    ``result.extras["failed_units"]`` (name -> reason) while the others are calibrated. When every
+    unit fails the result is still returned (``units`` empty, every unit in ``failed_units``): a
+    calibration that ran and could determine nothing is an answer, not an error (usage and data
+    errors that concern every unit still raise).
 
     Args:
         dataset: a validated dataset with segments.
@@ -267,9 +270,8 @@ def calibrate(
             pool.shutdown()
         _FORKED.pop(id(one), None)
     results = {name: results[name] for name in names if name in results}
-    if not results:
-        reasons = "; ".join(f"{u}: {m}" for u, m in failed.items())
-        raise CalibrationError(f"no unit could be calibrated ({reasons})")
+    failed = {name: failed[name] for name in names if name in failed}
+    # every unit failed: still a result (each unit listed with its reason, observable: false)
     extras: dict[str, Any] = {"failed_units": failed, "seed": seed} if failed else {"seed": seed}
     if notes:
         extras["notes"] = notes
@@ -376,9 +378,19 @@ def calibrate_unit(
         interpolator = JointInterpolator(dataset.joints)
     if shared is None and spec.prepare is not None:
         shared = spec.prepare(dataset, interpolator)
+    options = parse_options(spec.options, {}, "") if options is None else options
     alignment, offset = None, 0.0
     _check_overlap(dataset, unit)
-    if spec.align is not None:
+    motion = sees_motion(dataset, unit)
+    skipped = None  # why the coarse clock search did not run
+    if spec.align is not None and not getattr(options, "time_offset", True):
+        skipped = "time offset not estimated (time_offset=false): no clock search, the stamps taken as they are"
+    elif spec.align is not None and not motion:
+        skipped = (
+            "coarse clock search skipped: the unit's samples hold no motion (static poses only), so nothing "
+            "determines the clock offset; the stamps taken as they are"
+        )
+    if spec.align is not None and skipped is None:
         alignment = spec.align(shared, dataset.imu[unit])
         offset = float(alignment.offset_s)
         stamps = getattr(alignment, "stamps", None)  # the unit's stamps corrected by the alignment
@@ -404,7 +416,7 @@ def calibrate_unit(
         rng=rng,
         interpolator=interpolator,
         shared=shared,
-        options=parse_options(spec.options, {}, "") if options is None else options,
+        options=options,
         time_offset_s=offset,
         alignment=alignment,
     )
@@ -412,5 +424,30 @@ def calibrate_unit(
     _, screening = screen_readings(unit, dataset.imu[unit].accel, dataset.imu[unit].t)
     if screening:
         result = replace(result, warnings=tuple(screening) + tuple(result.warnings))
+    extras = dict(result.extras)
+    if skipped is not None:
+        extras["notes"] = [*extras.get("notes", []), skipped]
+    if not has_position(result):
+        what = "static poses only" if not motion else "the data do not determine any component of it"
+        result = replace(result, warnings=(
+            *result.warnings, f"position not determined ({what}): written as null; rotation and link from the rests"))  # fmt: skip
     # the link by name as well as index (a URDF robot's own link name; link<i> for a DH robot)
-    return replace(result, extras={**result.extras, "link_name": dataset.chain.link_name(result.pose.link)})
+    return replace(result, extras={**extras, "link_name": dataset.chain.link_name(result.pose.link)})
+
+
+def sees_motion(dataset: Dataset, unit: str) -> bool:
+    """Whether any of ``unit``'s samples (inside the joint stream) lies outside the dataset's rests
+    (its static segments): ``False`` for a static-only session (samples in the rests only), where
+    neither the accelerometer nor a gyroscope can tell a clock offset; ``True`` when the dataset has
+    no segments (nothing tells)."""
+    segments = dataset.segments
+    if segments is None or len(segments) == 0:
+        return True
+    t = np.asarray(dataset.imu[unit].t, dtype=float)
+    tj = np.asarray(dataset.joint_states.t, dtype=float)
+    t = t[(t >= tj[0]) & (t <= tj[-1])]
+    rest = np.zeros(t.shape, dtype=bool)
+    for t0, t1, kind in zip(segments.t_start, segments.t_end, segments.kind, strict=True):
+        if kind == STATIC:
+            rest |= (t >= t0) & (t <= t1)
+    return bool(t.size) and not bool(np.all(rest))
