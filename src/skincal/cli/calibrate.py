@@ -10,7 +10,6 @@ import typer
 from skincal.cli.app import app, console, console_warning, shown
 from skincal.errors import ConfigError
 
-
 NO_UNIT_EXIT = 1
 """Exit code of ``calibrate`` when the result was written but no unit could be calibrated (each unit
 is listed in it with its reason and ``observable: false``); 2 stays for usage and data errors, where
