@@ -50,9 +50,10 @@ def test_every_unit_failed_still_writes_the_result(static_only, tmp_path, capsys
     assert back.units == {} and set(back.extras["failed_units"]) == {"su1", "su2"}
 
 
-def test_static_only_writes_rotations_with_null_positions(static_only, tmp_path):
+def test_static_only_writes_rotations_with_null_positions(static_only, tmp_path, capsys):
     out = tmp_path / "mle.json"
     assert main(["calibrate", str(static_only), "--out", str(out)]) == 0
+    assert capsys.readouterr().out.count("- (not determined)") == 2  # the table shows no made-up position
     doc = json.loads(out.read_text())
     for name, entry in doc["units"].items():
         assert entry["position_m"] is None and entry["observable"] is False, name

@@ -45,7 +45,7 @@ def _unit_table(result, title: str):
     notes are shown escaped (:func:`skincal.cli.app.shown`)."""
     from rich.table import Table
 
-    from skincal.data.result import failed_units
+    from skincal.data.result import failed_units, has_position
 
     table = Table(title=shown(title))
     for col in ("unit", "link", "position (m)", "quaternion (w,x,y,z)", "pos std (mm)", "rot std (deg)", "notes"):
@@ -57,7 +57,7 @@ def _unit_table(result, title: str):
         table.add_row(
             shown(name),
             str(unit.pose.link),
-            " ".join(f"{x:+.4f}" for x in unit.pose.p_link_su),
+            " ".join(f"{x:+.4f}" for x in unit.pose.p_link_su) if has_position(unit) else "- (not determined)",
             " ".join(f"{x:+.4f}" for x in unit.pose.quaternion_wxyz),
             std_p,
             std_r,
