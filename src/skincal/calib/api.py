@@ -30,7 +30,7 @@ from skincal.calib.preprocess import (
     unit_samples,
 )
 from skincal.data.dataset import NO_JOINTS_MESSAGE, STATIC, Dataset
-from skincal.data.result import CalibrationResult, UnitResult, has_position
+from skincal.data.result import POSITION_DETERMINED, CalibrationResult, UnitResult
 from skincal.errors import CalibrationError, ConfigError, DatasetError, SkincalError
 from skincal.kinematics.chain import SerialChain
 
@@ -444,13 +444,13 @@ def calibrate_unit(
     extras = dict(result.extras)
     if skipped is not None:
         extras["notes"] = [*extras.get("notes", []), skipped]
-    if not has_position(result):
-        said = (
-            "position not determined (static poses only): written as null; the rotation and link come from the rests"
-            if not motion
-            else "position not determined by the data (no component of it): written as null"
-        )
-        result = replace(result, warnings=(*result.warnings, said))
+    std = result.position_std_m
+    rests_only = not motion or result.extras.get("n_moving_samples") == 0  # rests never tell a position
+    if rests_only and not result.observable and std is not None and bool(np.all(np.isnan(std))):
+        extras[POSITION_DETERMINED] = False
+        said = "static poses only" if not motion else "no moving sample used: rests only"
+        result = replace(result, warnings=(*result.warnings, f"position not determined ({said}): written as null; "
+                                           "the rotation and link come from the rests"))  # fmt: skip
     # the link by name as well as index (a URDF robot's own link name; link<i> for a DH robot)
     return replace(result, extras={**extras, "link_name": dataset.chain.link_name(result.pose.link)})
 

@@ -217,12 +217,15 @@ class CalibrationResult:
     extras: dict[str, Any] = field(default_factory=dict)
 
 
+POSITION_DETERMINED = "position_determined"
+"""Per-unit extra: ``False`` for a unit whose position the data do not determine at all (rests only)."""
+
+
 def has_position(unit: UnitResult) -> bool:
-    """False for a unit whose position the data do not determine at all: not observable, with every
-    ``position_std_m`` component undetermined (NaN), e.g. from static poses only. Its ``position_m`` is
-    written as ``null`` (its rotation and link are kept) and read back as ``p_link_su = 0`` with NaN std."""
-    std = unit.position_std_m
-    return unit.observable or std is None or not bool(np.all(np.isnan(std)))
+    """False for a unit whose position the data do not determine at all (``extras["position_determined"]
+    is False``, e.g. from static poses only; never for an observable unit). Its ``position_m`` is written
+    as ``null`` (link and rotation kept) and read back as ``p_link_su = 0`` with NaN std."""
+    return unit.observable or unit.extras.get(POSITION_DETERMINED, True) is not False
 
 
 def failed_units(result: CalibrationResult) -> dict[str, str]:
@@ -558,13 +561,15 @@ def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
         except ConfigError as exc:
             raise DatasetError(f"{source}: units.{name} is not a valid pose: {exc}") from None
         stds = {k: None if entry[k] is None else np.array(_none_to_nan(entry[k]), dtype=float) for k in _UNIT_KEYS[4:6]}
+        extras = {k: _from_json(v) for k, v in entry.items() if k not in _UNIT_KEYS and k not in IMU_KEYS}
         if rotation_only:
             stds["position_std_m"] = np.full(3, np.nan)
+            extras[POSITION_DETERMINED] = False
         units[name] = UnitResult(
             pose=pose,
             observable=entry["observable"],
             warnings=tuple(entry["warnings"]),
-            extras={k: _from_json(v) for k, v in entry.items() if k not in _UNIT_KEYS and k not in IMU_KEYS},
+            extras=extras,
             imu=_Checker(source).imu(entry, f"units.{name}"),
             **stds,
         )

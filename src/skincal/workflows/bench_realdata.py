@@ -10,8 +10,8 @@ Per group and method, over the recordings calibrated on the group's most common 
 
 * positions ``p_link_su`` (link frame axes, mm): std across recordings per axis (``ddof = 1``) and the
   pairwise spread per axis (largest difference between two recordings, ``max_ij |p_i - p_j|``), over the
-  recordings that determine a position (a unit whose every position std component is undetermined,
-  e.g. from static poses only, has none: counted in ``position_undetermined``);
+  recordings that determine a position (a unit calibrated from rests only has none,
+  :func:`~skincal.data.result.has_position`: counted in ``position_undetermined``);
 * rotations (deg): each recording's deviation from the chordal mean ``R_bar`` as a rotation vector
   about the link frame's axes, ``delta_i = log(R_i R_bar^T)``: std per axis, largest pairwise angle
   ``max_ij angle(R_i^T R_j)``;
@@ -97,10 +97,12 @@ def _moving_counts(dataset: Any) -> dict[str, int]:
 
 def _unit_record(unit: Any) -> dict[str, Any]:
     """The figures of one calibrated unit (positions in mm, rotations as matrices, offsets in ms)."""
+    from skincal.data.result import has_position
+
     imu = unit.imu
     offset = None if imu is None or imu.time_offset_s is None else 1e3 * float(imu.time_offset_s)
     p_std = None if unit.position_std_m is None else 1e3 * np.asarray(unit.position_std_m, dtype=float)
-    positioned = p_std is None or bool(np.any(np.isfinite(p_std)))  # every component undetermined: no position
+    positioned = has_position(unit)  # rests only: no position (written as null)
     r_std = None if unit.rotation_std_deg is None else np.asarray(unit.rotation_std_deg, dtype=float)
     return {
         "calibrated": True,
