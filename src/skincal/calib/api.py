@@ -29,8 +29,8 @@ from skincal.calib.preprocess import (
     screen_readings,
     unit_samples,
 )
-from skincal.data.dataset import NO_JOINTS_MESSAGE, Dataset
-from skincal.data.result import CalibrationResult, UnitResult
+from skincal.data.dataset import NO_JOINTS_MESSAGE, STATIC, Dataset
+from skincal.data.result import POSITION_DETERMINED, CalibrationResult, UnitResult
 from skincal.errors import CalibrationError, ConfigError, DatasetError, SkincalError
 from skincal.kinematics.chain import SerialChain
 
@@ -127,7 +127,18 @@ def _resolve_links(
     return dict(links)
 
 
-_FORKED: dict[int, Callable[[int, str], tuple[str, UnitResult | None, str | None]]] = {}
+class UnitDataError(CalibrationError):
+    """A unit's data cannot be used at all (no samples; stamps on another clock than the joints'): that
+    unit fails alone, but when every unit fails so, the run is a data error (raised: exit 2, nothing
+    written) rather than a calibration that found nothing."""
+
+
+_Outcome = tuple[str, UnitResult | None, str | None, bool]
+"""A unit's outcome in :func:`calibrate`: name, result or None, the failure's reason, and whether
+that failure is a :class:`UnitDataError`."""
+
+
+_FORKED: dict[int, Callable[[int, str], _Outcome]] = {}
 """Per-unit closures of the running :func:`calibrate` calls by token, inherited by forked workers."""
 
 
@@ -148,7 +159,7 @@ def _one_blas_thread() -> None:
     _BLAS_LIMIT = threadpool_limits(limits=1, user_api="blas")
 
 
-def _forked_unit(token: int, k: int, name: str) -> tuple[str, UnitResult | None, str | None]:
+def _forked_unit(token: int, k: int, name: str) -> _Outcome:
     """Entry point of a forked worker: run the inherited closure (only the token, ``k`` and ``name``
     are pickled)."""
     return _FORKED[token](k, name)
@@ -170,7 +181,11 @@ def calibrate(
     **options: Any,
 ) -> CalibrationResult:
     """Calibrate the units of ``dataset`` with ``method``; units that fail are reported in
-    ``result.extras["failed_units"]`` (name -> reason) while the others are calibrated.
+    ``result.extras["failed_units"]`` (name -> reason) while the others are calibrated. When every
+    unit fails the result is still returned (``units`` empty, every unit in ``failed_units``): a
+    calibration that ran and could determine nothing is an answer, not an error (usage and data
+    errors that concern every unit still raise, and so does a run in which every unit's data was
+    unusable: :class:`UnitDataError`).
 
     Args:
         dataset: a validated dataset with segments.
@@ -213,19 +228,19 @@ def calibrate(
     results: dict[str, UnitResult] = {}
     failed: dict[str, str] = {}
 
-    def one(k: int, name: str) -> tuple[str, UnitResult | None, str | None]:
+    def one(k: int, name: str) -> _Outcome:
         try:
             unit = calibrate_unit(
                 tagged, name, spec, link=given.get(name), rng=np.random.default_rng([seed, k]),
                 interpolator=interpolator, shared=shared, options=parsed,
             )
-            return name, unit, None
+            return name, unit, None, False
         except CalibrationError as exc:
-            return name, None, str(exc)
+            return name, None, str(exc), isinstance(exc, UnitDataError)
         except SkincalError:
             raise  # a usage or data error concerns every unit
         except Exception as exc:  # noqa: BLE001 - a foreign error in one unit never stops the others
-            return name, None, f"internal error ({type(exc).__name__}: {exc})"
+            return name, None, f"internal error ({type(exc).__name__}: {exc})", False
 
     n_workers = max(1, min(int(workers), len(names), os.cpu_count() or 1))  # more would only oversubscribe
     pool: Executor | None = None
@@ -234,7 +249,7 @@ def calibrate(
         # more, and results are then identical whatever ``workers`` is
         from threadpoolctl import threadpool_limits
 
-        def serial() -> Iterator[tuple[str, UnitResult | None, str | None]]:
+        def serial() -> Iterator[_Outcome]:
             for k, name in enumerate(names):
                 with threadpool_limits(limits=1, user_api="blas"):
                     outcome = one(k, name)
@@ -254,12 +269,14 @@ def calibrate(
     else:  # NumPy releases the GIL in much of the array work
         pool = ThreadPoolExecutor(max_workers=n_workers)
         outcomes = pool.map(one, range(len(names)), names)
+    unusable = 0  # units whose data could not be used at all (UnitDataError)
     try:
-        for name, unit, error in outcomes:
+        for name, unit, error, data_error in outcomes:
             if unit is not None:
                 results[name] = unit
             else:
                 failed[name] = str(error)
+                unusable += int(data_error)
             if progress is not None:
                 progress(name)
     finally:
@@ -267,9 +284,11 @@ def calibrate(
             pool.shutdown()
         _FORKED.pop(id(one), None)
     results = {name: results[name] for name in names if name in results}
-    if not results:
+    failed = {name: failed[name] for name in names if name in failed}
+    if not results and unusable == len(names):  # the data, not the calibration: one error for the run
         reasons = "; ".join(f"{u}: {m}" for u, m in failed.items())
         raise CalibrationError(f"no unit could be calibrated ({reasons})")
+    # every unit failed otherwise: still a result (each unit listed with its reason, observable: false)
     extras: dict[str, Any] = {"failed_units": failed, "seed": seed} if failed else {"seed": seed}
     if notes:
         extras["notes"] = notes
@@ -339,11 +358,11 @@ def _check_overlap(dataset: Dataset, unit: str, min_overlap_s: float = MIN_OVERL
     t = np.asarray(dataset.imu[unit].t, dtype=float)
     tj = np.asarray(dataset.joint_states.t, dtype=float)
     if t.size == 0:
-        raise CalibrationError(f"unit '{unit}': no IMU samples")
+        raise UnitDataError(f"unit '{unit}': no IMU samples")
     inside = t[(t >= tj[0]) & (t <= tj[-1])]
     overlap = float(inside[-1] - inside[0]) if inside.size else 0.0
     if inside.size < 10 or overlap < min(min_overlap_s, 0.5 * float(tj[-1] - tj[0])):
-        raise CalibrationError(
+        raise UnitDataError(
             f"unit '{unit}': its stamps {t[0]:.3f}..{t[-1]:.3f} s do not overlap the joint stream "
             f"{tj[0]:.3f}..{tj[-1]:.3f} s enough ({overlap:.3g} s, {inside.size} samples; at least {min_overlap_s:g} s "
             f"needed): stamped by another clock? put both on one clock first"
@@ -387,9 +406,19 @@ def calibrate_unit(
         interpolator = JointInterpolator(dataset.joints)
     if shared is None and spec.prepare is not None:
         shared = spec.prepare(dataset, interpolator)
+    options = parse_options(spec.options, {}, "") if options is None else options
     alignment, offset = None, 0.0
     _check_overlap(dataset, unit)
-    if spec.align is not None:
+    motion = sees_motion(dataset, unit)
+    skipped = None  # why the coarse clock search did not run
+    if spec.align is not None and not getattr(options, "time_offset", True):
+        skipped = "time offset not estimated (time_offset=false): no clock search, the stamps taken as they are"
+    elif spec.align is not None and not motion:
+        skipped = (
+            "coarse clock search skipped: the unit's samples hold no motion (static poses only), so nothing "
+            "determines the clock offset; the stamps taken as they are"
+        )
+    if spec.align is not None and skipped is None:
         alignment = spec.align(shared, dataset.imu[unit])
         offset = float(alignment.offset_s)
         stamps = getattr(alignment, "stamps", None)  # the unit's stamps corrected by the alignment
@@ -415,7 +444,7 @@ def calibrate_unit(
         rng=rng,
         interpolator=interpolator,
         shared=shared,
-        options=parse_options(spec.options, {}, "") if options is None else options,
+        options=options,
         time_offset_s=offset,
         alignment=alignment,
     )
@@ -423,5 +452,33 @@ def calibrate_unit(
     _, screening = screen_readings(unit, dataset.imu[unit].accel, dataset.imu[unit].t)
     if screening:
         result = replace(result, warnings=tuple(screening) + tuple(result.warnings))
+    extras = dict(result.extras)
+    if skipped is not None:
+        extras["notes"] = [*extras.get("notes", []), skipped]
+    std = result.position_std_m
+    rests_only = not motion or result.extras.get("n_moving_samples") == 0  # rests never tell a position
+    if rests_only and not result.observable and std is not None and bool(np.all(np.isnan(std))):
+        extras[POSITION_DETERMINED] = False
+        said = "static poses only" if not motion else "no moving sample used: rests only"
+        result = replace(result, warnings=(*result.warnings, f"position not determined ({said}): written as null; "
+                                           "the rotation and link come from the rests"))  # fmt: skip
     # the link by name as well as index (a URDF robot's own link name; link<i> for a DH robot)
-    return replace(result, extras={**result.extras, "link_name": dataset.chain.link_name(result.pose.link)})
+    return replace(result, extras={**extras, "link_name": dataset.chain.link_name(result.pose.link)})
+
+
+def sees_motion(dataset: Dataset, unit: str) -> bool:
+    """Whether any of ``unit``'s samples (inside the joint stream) lies outside the dataset's rests
+    (its static segments): ``False`` for a static-only session (samples in the rests only), where
+    neither the accelerometer nor a gyroscope can tell a clock offset; ``True`` when the dataset has
+    no segments (nothing tells)."""
+    segments = dataset.segments
+    if segments is None or len(segments) == 0:
+        return True
+    t = np.asarray(dataset.imu[unit].t, dtype=float)
+    tj = np.asarray(dataset.joint_states.t, dtype=float)
+    t = t[(t >= tj[0]) & (t <= tj[-1])]
+    rest = np.zeros(t.shape, dtype=bool)
+    for t0, t1, kind in zip(segments.t_start, segments.t_end, segments.kind, strict=True):
+        if kind == STATIC:
+            rest |= (t >= t0) & (t <= t1)
+    return bool(t.size) and not bool(np.all(rest))

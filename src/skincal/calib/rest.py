@@ -42,6 +42,9 @@ GUARD_S = 0.06
 """Samples this close to the edges of a rest run are not used (settling, stamp error), s."""
 MIN_RUN_SAMPLES = 5
 """A rest run needs at least this many IMU samples after the guard."""
+GAP_FACTOR = 10.0
+"""A gap between a unit's stamps longer than this many median sample intervals (and the guard) ends a
+rest run: samples recorded only in the rests (a static-only session) must not merge two poses."""
 STILL_FACTOR = 4.0
 """A run whose IMU spread exceeds this multiple of the unit's typical rest spread moved."""
 STILL_FLOOR_ACCEL = 0.01
@@ -228,10 +231,12 @@ def unit_rest_runs(
     dt = float(np.median(np.diff(t))) if t.size > 1 else 0.01
     guard = int(np.ceil(guard_s / dt))
     candidates = []
+    cuts = np.flatnonzero(np.diff(t) > max(GAP_FACTOR * dt, guard_s)) + 1  # a gap in the stamps ends a run
     for start, end in runs(rest_mask):
-        a, b = start + guard, end - guard
-        if b - a >= MIN_RUN_SAMPLES:
-            candidates.append((a, b))
+        edges = [start, *cuts[(cuts > start) & (cuts < end)].tolist(), end]
+        for a, b in zip(np.add(edges[:-1], guard), np.subtract(edges[1:], guard), strict=True):
+            if b - a >= MIN_RUN_SAMPLES:
+                candidates.append((int(a), int(b)))
     if not candidates:
         empty = np.zeros(t.size, dtype=bool)
         return RestRuns(np.zeros((0, 2), dtype=np.intp), empty, ~rest_mask, np.zeros((0, 2)), 0.0, 0.0, ())

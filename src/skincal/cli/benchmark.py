@@ -1,5 +1,6 @@
-"""``skincal benchmark table1|core|mle``: the paper's Table I beside the paper's numbers, throughput, the
-default calibrator's targets (``robustness`` is in :mod:`skincal.cli.bench_robustness`).
+"""``skincal benchmark table1|core|mle|realdata``: the paper's Table I beside the paper's numbers, throughput,
+the default calibrator's targets, the repeatability across real recordings of one mount (``robustness`` is in
+:mod:`skincal.cli.bench_robustness`).
 
 The options of every command are declared once, in :mod:`skincal.bench.options`, and serve the scripts in
 ``benchmarks/`` too (:mod:`skincal.bench.harness`); a benchmark's module is imported only when it runs."""
@@ -102,3 +103,24 @@ def mle(v: dict[str, Any]) -> None:
 typer_command(benchmark_app, "table1", options.TABLE1 + (FORCE,), table1)
 typer_command(benchmark_app, "core", options.CORE + (FORCE,), core)
 typer_command(benchmark_app, "mle", options.MLE + (FORCE,), mle)
+
+
+@benchmark_app.command("realdata")
+def realdata(
+    folder: Path = typer.Argument(..., help="folder of recordings sharing a mount (folders with recording.h5, or .h5)"),
+    om: bool = typer.Option(True, help="also run the paper's OM (a recording it cannot take is a failure)"),
+    workers: int = typer.Option(1, min=1, help="units calibrated at once per recording"),
+    json_out: Path | None = typer.Option(None, "--json", help="also write the figures as JSON"),
+    force: bool = FORCE,
+) -> None:
+    """Repeatability across recordings of one mount, per IMU: spread of positions and rotations, spread
+    over the reported std, motion kept, time offsets, failures."""
+    from skincal.bench.realdata import METHODS, realdata_report, run_realdata_benchmark
+
+    _check_json(json_out, force)
+    methods = METHODS if om else tuple(m for m in METHODS if m != "om")
+    with console.status("benchmarking recordings...") as status:
+        doc = run_realdata_benchmark(folder, methods, workers=workers, progress=lambda n: status.update(shown(n)))
+    for part in realdata_report(doc):
+        console.print(part, highlight=False)
+    _write_json(doc, json_out)

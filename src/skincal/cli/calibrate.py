@@ -10,6 +10,11 @@ import typer
 from skincal.cli.app import app, console, console_warning, shown
 from skincal.errors import ConfigError
 
+NO_UNIT_EXIT = 1
+"""Exit code of ``calibrate`` when the result was written but no unit could be calibrated (each unit
+is listed in it with its reason and ``observable: false``); 2 stays for usage and data errors, where
+nothing is written (``docs/interfaces.md``, exit codes)."""
+
 
 def read_links_file(path: Path) -> dict[str, int]:
     """A mapping ``unit -> 1-based link`` from a YAML or JSON file."""
@@ -40,7 +45,7 @@ def _unit_table(result, title: str):
     notes are shown escaped (:func:`skincal.cli.app.shown`)."""
     from rich.table import Table
 
-    from skincal.data.result import failed_units
+    from skincal.data.result import failed_units, has_position
 
     table = Table(title=shown(title))
     for col in ("unit", "link", "position (m)", "quaternion (w,x,y,z)", "pos std (mm)", "rot std (deg)", "notes"):
@@ -52,7 +57,7 @@ def _unit_table(result, title: str):
         table.add_row(
             shown(name),
             str(unit.pose.link),
-            " ".join(f"{x:+.4f}" for x in unit.pose.p_link_su),
+            " ".join(f"{x:+.4f}" for x in unit.pose.p_link_su) if has_position(unit) else "- (not determined)",
             " ".join(f"{x:+.4f}" for x in unit.pose.quaternion_wxyz),
             std_p,
             std_r,
@@ -164,6 +169,9 @@ def calibrate(
     for name, reason in result.extras.get("failed_units", {}).items():
         console.print(f"[yellow]warning[/]: unit {shown(name)} not calibrated: {shown(reason)}", highlight=False)
     console.print(f"wrote {shown(out)}", highlight=False)
+    if not result.units:  # a result, not an error: written, each unit's reason in it; exit NO_UNIT_EXIT
+        console_warning(f"no unit could be calibrated ({len(names)} unit(s), each with its reason in {out})")
+        raise typer.Exit(NO_UNIT_EXIT)
 
 
 def _calibrate_follow(
@@ -301,7 +309,8 @@ def _calibrate_fleet(
     force: bool,
 ) -> None:
     """Several datasets: one result each in the folder ``out``, on the sweep runner; a dataset that
-    fails is named and the others are written; exit 2 when any failed."""
+    fails is named and the others are written; exit 2 when any failed, else :data:`NO_UNIT_EXIT`
+    when a result has no calibrated unit."""
     from rich.progress import Progress
     from rich.table import Table
 
@@ -331,6 +340,11 @@ def _calibrate_fleet(
     failed = [r for r in records if r.error is not None]
     if failed:
         raise ConfigError(f"{len(failed)} of {len(records)} datasets could not be calibrated (see the table)")
+    empty = [r for r in records if r.units == 0]
+    if empty:
+        console_warning(f"{len(empty)} of {len(records)} results have no calibrated unit (each unit's reason is in "
+                        "its result)")  # fmt: skip
+        raise typer.Exit(NO_UNIT_EXIT)
 
 
 @app.command()

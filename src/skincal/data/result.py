@@ -217,6 +217,17 @@ class CalibrationResult:
     extras: dict[str, Any] = field(default_factory=dict)
 
 
+POSITION_DETERMINED = "position_determined"
+"""Per-unit extra: ``False`` for a unit whose position the data do not determine at all (rests only)."""
+
+
+def has_position(unit: UnitResult) -> bool:
+    """False for a unit whose position the data do not determine at all (``extras["position_determined"]
+    is False``, e.g. from static poses only; never for an observable unit). Its ``position_m`` is written
+    as ``null`` (link and rotation kept) and read back as ``p_link_su = 0`` with NaN std."""
+    return unit.observable or unit.extras.get(POSITION_DETERMINED, True) is not False
+
+
 def failed_units(result: CalibrationResult) -> dict[str, str]:
     """Units of ``result`` that could not be calibrated, name -> reason (``extras["failed_units"]``;
     a hand-written list of names gives reason ``"not calibrated"``; anything else gives ``{}``)."""
@@ -493,7 +504,7 @@ def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[
             )
         entry = {
             "link": unit.pose.link,
-            "position_m": _to_json(unit.pose.p_link_su, source, f"{where}.position_m"),
+            "position_m": _to_json(unit.pose.p_link_su, source, f"{where}.position_m") if has_position(unit) else None,
             "quaternion_wxyz": _to_json(unit.pose.quaternion_wxyz, source, f"{where}.quaternion_wxyz"),
             "observable": _to_json(unit.observable, source, f"{where}.observable"),
             "position_std_m": _to_json(unit.position_std_m, source, f"{where}.position_std_m"),
@@ -540,19 +551,25 @@ def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
     units = {}
     unposed: dict[str, str] = {}
     for name, entry in doc["units"].items():
-        if entry["position_m"] is None or entry["quaternion_wxyz"] is None:
+        rotation_only = entry["position_m"] is None and entry["link"] is not None  # no position (has_position)
+        if entry["quaternion_wxyz"] is None or (entry["position_m"] is None and not rotation_only):
             unposed[name] = "; ".join(entry["warnings"]) or _NO_REASON
             continue
         try:
-            pose = SkinUnitPose.from_quaternion(entry["link"], entry["position_m"], entry["quaternion_wxyz"])
+            position = np.zeros(3) if rotation_only else entry["position_m"]
+            pose = SkinUnitPose.from_quaternion(entry["link"], position, entry["quaternion_wxyz"])
         except ConfigError as exc:
             raise DatasetError(f"{source}: units.{name} is not a valid pose: {exc}") from None
         stds = {k: None if entry[k] is None else np.array(_none_to_nan(entry[k]), dtype=float) for k in _UNIT_KEYS[4:6]}
+        extras = {k: _from_json(v) for k, v in entry.items() if k not in _UNIT_KEYS and k not in IMU_KEYS}
+        if rotation_only:
+            stds["position_std_m"] = np.full(3, np.nan)
+            extras[POSITION_DETERMINED] = False
         units[name] = UnitResult(
             pose=pose,
             observable=entry["observable"],
             warnings=tuple(entry["warnings"]),
-            extras={k: _from_json(v) for k, v in entry.items() if k not in _UNIT_KEYS and k not in IMU_KEYS},
+            extras=extras,
             imu=_Checker(source).imu(entry, f"units.{name}"),
             **stds,
         )

@@ -35,6 +35,7 @@ from skincal.calib.closed_form import position_and_bias, static_rotation_and_bia
 from skincal.calib.gyro import GyroScale, gyro_scale
 from skincal.calib.links import GyroLinks, activity_in, discover_link, gyro_rules_out
 from skincal.calib.mle.arrange import UnitData, arrange_unit_data
+from skincal.calib.mle.likelihood import rest_nll
 from skincal.calib.mle.solver import (
     SCALE_FULL,
     SCALE_NONE,
@@ -77,6 +78,9 @@ DECISIVE_ACTIVITY = 0.9
 """Activity confidence above which neighbouring links are not fitted for comparison."""
 AMBIGUITY_RATIO = 1.5
 """A second link whose residual level is within this factor of the best makes the link ambiguous."""
+AMBIGUITY_NLL = 3.0
+"""The rests decide the link when the second candidate's negative log-likelihood over them exceeds the
+best's by this much (a likelihood ratio of e^3 = 20; :mod:`skincal.calib.mle.likelihood`)."""
 CLOCK_DRIFT_MIN_SPAN_S = 60.0
 """The clock drift is estimated when the unit's moving samples span at least this long, s."""
 BIAS_DRIFT_MIN_RUNS = 6
@@ -442,17 +446,30 @@ def choose_link(
     # without any activity (no segments to tell the excited joint, or general motion), every link does.
     hint = problem.alignment.search.link if problem.alignment is not None else n
     top = n if activity.link == 0 or not segmented else min(n, max(activity.link, hint) + 1)
+    common = None  # the rests of the furthest candidate: every candidate's joints rest in them
     for link in range(1, top + 1):
         if link not in allowed:
             continue
         try:
-            fit = _fit(_arrange(problem, link, decimate=10), Blocks(scale=SCALE_NONE), max_outer=2)
+            arranged = _arrange(problem, link, decimate=10)
+            fit = _fit(arranged, Blocks(scale=SCALE_NONE), max_outer=2)
         except CalibrationError:
             continue
         levels[link] = _residual_level(problem, link, fit.state)
         states[link] = fit.state
+        common = arranged.data
     if not levels:
         raise CalibrationError("; ".join(activity.warnings) or "no candidate link could be fitted")
+    nll = {} if common is None or len(common.rows.static_f) < 2 else rest_nll(
+        problem.chain, problem.gravity, common.static_q, common.rows.static_f, common.rows.static_weight,
+        common.rest.accel_noise, states,
+    )  # fmt: skip
+    by_rests = sorted(nll, key=nll.get)
+    if len(by_rests) > 1 and nll[by_rests[1]] - nll[by_rests[0]] >= AMBIGUITY_NLL:
+        # the rests decide (a sum over every rest: one decisive pose counts); else the median below
+        gap = np.array([nll[k] - nll[by_rests[0]] for k in by_rests])
+        confidence = float(1.0 / np.sum(np.exp(-np.minimum(gap, 700.0))))
+        return by_rests[0], confidence, warnings, levels, states[by_rests[0]], by_gyro
     ranked = sorted(levels, key=levels.get)
     best = ranked[0]
     confidence = 1.0

@@ -1,0 +1,342 @@
+"""Repeatability on recordings that share a mount (``skincal benchmark realdata DIR``).
+
+Real recordings have no ground truth; what they do have is repetition: every recording of one IMU
+on one mount must give the same pose within the reported uncertainty. ``DIR`` holds the recordings
+(each a folder with ``recording.h5``, or ``.h5`` files directly); they are grouped by IMU (the part
+of the folder name after the last ``_S<n>_``, as in ``V500_S3_MPU9150``, else the unit name in the
+dataset) and each is calibrated with ``mle`` and, where the data allow it, the paper's ``om``.
+
+Per group and method, over the recordings calibrated on the group's most common link:
+
+* positions ``p_link_su`` (link frame axes, mm): std across recordings per axis (``ddof = 1``) and the
+  pairwise spread per axis (largest difference between two recordings, ``max_ij |p_i - p_j|``), over the
+  recordings that determine a position (a unit calibrated from rests only has none,
+  :func:`~skincal.data.result.has_position`: counted in ``position_undetermined``);
+* rotations (deg): each recording's deviation from the chordal mean ``R_bar`` as a rotation vector
+  about the link frame's axes, ``delta_i = log(R_i R_bar^T)``: std per axis, largest pairwise angle
+  ``max_ij angle(R_i^T R_j)``;
+* spread over the reported uncertainty: the std across recordings divided by the median reported
+  std, per axis (1 when the reported std is honest; ``null`` where no std was reported);
+* motion kept: the moving samples the calibration used over the unit's samples not at rest;
+* time offsets (ms) and their spread; links chosen; failures (recording and reason).
+
+Every figure is marked ``simulated`` when the recordings carry a simulation's truth, else ``real``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from skincal.errors import ConfigError, SkincalError
+
+RECORDING_FILE = "recording.h5"
+"""Name of the dataset file inside a recording folder."""
+METHODS = ("mle", "om")
+"""Methods the benchmark runs on every recording (``om``: the paper's, where the data allow it)."""
+_GROUP = re.compile(r"_S\d+_(.+)$")
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One recording of the folder: its name (folder or file stem) and dataset path."""
+
+    name: str
+    path: Path
+
+
+def find_recordings(folder: Path) -> list[Recording]:
+    """The recordings of ``folder``, sorted by name: sub-folders holding :data:`RECORDING_FILE`, and
+    ``.h5`` files directly in it; none is a :class:`ConfigError`."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ConfigError(f"{folder}: not a folder of recordings")
+    found = [Recording(p.name, p / RECORDING_FILE) for p in folder.iterdir() if (p / RECORDING_FILE).is_file()]
+    found += [Recording(p.stem, p) for p in folder.glob("*.h5") if p.is_file()]
+    if not found:
+        raise ConfigError(f"{folder}: no recordings (folders with {RECORDING_FILE}, or .h5 files)")
+    return sorted(found, key=lambda r: r.name)
+
+
+def group_name(recording: str, unit: str, n_units: int) -> str:
+    """The IMU a unit's recording belongs to: the folder name's part after the last ``_S<n>_`` for a
+    one-unit recording named so, else the unit name."""
+    match = _GROUP.search(recording)
+    return match.group(1) if match and n_units == 1 else unit
+
+
+def _moving_counts(dataset: Any) -> dict[str, int]:
+    """Per unit, the IMU samples not inside a rest (static segment; the dataset's, or found as
+    ``calibrate`` finds them) and inside the joint stream."""
+    from skincal.calib.api import METHODS as SPECS
+    from skincal.calib.api import _segment_automatically
+    from skincal.data.dataset import STATIC
+
+    tagged = dataset
+    if dataset.segments is None or len(dataset.segments) == 0:
+        tagged, _ = _segment_automatically(dataset, SPECS["mle"])
+    tj = np.asarray(dataset.joint_states.t, dtype=float)
+    out = {}
+    for name, imu in dataset.imu.items():
+        t = np.asarray(imu.t, dtype=float)
+        moving = (t >= tj[0]) & (t <= tj[-1])
+        seg = tagged.segments
+        if seg is not None and len(seg) > 0:
+            for t0, t1, kind in zip(seg.t_start, seg.t_end, seg.kind, strict=True):
+                if kind == STATIC:
+                    moving &= ~((t >= t0) & (t <= t1))
+        out[name] = int(np.count_nonzero(moving))
+    return out
+
+
+def _unit_record(unit: Any) -> dict[str, Any]:
+    """The figures of one calibrated unit (positions in mm, rotations as matrices, offsets in ms)."""
+    from skincal.data.result import has_position
+
+    imu = unit.imu
+    offset = None if imu is None or imu.time_offset_s is None else 1e3 * float(imu.time_offset_s)
+    p_std = None if unit.position_std_m is None else 1e3 * np.asarray(unit.position_std_m, dtype=float)
+    positioned = has_position(unit)  # rests only: no position (written as null)
+    r_std = None if unit.rotation_std_deg is None else np.asarray(unit.rotation_std_deg, dtype=float)
+    return {
+        "calibrated": True,
+        "link": int(unit.pose.link),
+        "observable": bool(unit.observable),
+        "position_mm": 1e3 * np.asarray(unit.pose.p_link_su, dtype=float) if positioned else None,
+        "R": np.asarray(unit.pose.R_link_su, dtype=float),
+        "position_std_mm": p_std,
+        "rotation_std_deg": r_std,
+        "time_offset_ms": offset,
+        "n_moving_samples": unit.extras.get("n_moving_samples"),
+        "warnings": list(unit.warnings),
+    }
+
+
+def calibrate_recording(
+    recording: Recording, methods: Sequence[str] = METHODS, workers: int = 1
+) -> dict[str, Any]:
+    """Calibrate one recording with each method; a method that fails (for one unit or all) is a
+    failure with its reason, never an exception."""
+    from skincal.calib import calibrate
+    from skincal.data.hdf5 import read_dataset
+    from skincal.data.result import failed_units
+
+    record: dict[str, Any] = {"recording": recording.name, "path": str(recording.path), "error": None}
+    try:
+        ds = read_dataset(recording.path)
+    except SkincalError as exc:
+        record["error"] = str(exc)
+        return record
+    record["simulated"] = bool(ds.truth)
+    record["units"] = list(ds.units)
+    record["groups"] = {u: group_name(recording.name, u, len(ds.units)) for u in ds.units}
+    try:
+        moving = _moving_counts(ds)
+    except SkincalError:
+        moving = {}
+    record["moving_samples"] = moving
+    record["methods"] = {}
+    for method in methods:
+        units: dict[str, Any] = {}
+        try:
+            result = calibrate(ds, method, workers=workers)
+        except SkincalError as exc:
+            units = {u: {"calibrated": False, "reason": str(exc)} for u in ds.units}
+        else:
+            failed = failed_units(result)
+            for u in ds.units:
+                if u in result.units:
+                    units[u] = _unit_record(result.units[u])
+                    n_mov = units[u]["n_moving_samples"]
+                    total = moving.get(u)
+                    units[u]["motion_kept"] = (
+                        None if n_mov is None or not total else float(min(1.0, int(n_mov) / total))
+                    )
+                else:
+                    units[u] = {"calibrated": False, "reason": failed.get(u, "no result")}
+        record["methods"][method] = units
+    return record
+
+
+def _mean_rotation(Rs: np.ndarray) -> np.ndarray:
+    """Chordal L2 mean of rotations ``(K, 3, 3)``: the rotation nearest ``sum_i R_i`` (SVD)."""
+    U, _, Vt = np.linalg.svd(Rs.sum(axis=0))
+    D = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(U @ Vt)))])
+    return U @ D @ Vt
+
+
+def _finite_or_none(x: Any) -> Any:
+    if x is None:
+        return None
+    arr = np.asarray(x, dtype=float)
+    if arr.ndim == 0:
+        return float(arr) if math.isfinite(float(arr)) else None
+    return [_finite_or_none(v) for v in arr]
+
+
+def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
+    """The spread across recordings of one group and method (module docstring); ``entries`` are the
+    per-recording unit records (:func:`calibrate_recording`), each with ``recording``."""
+    from scipy.spatial.transform import Rotation
+
+    ok = [e for e in entries if e.get("calibrated")]
+    failures = [{"recording": e["recording"], "reason": e["reason"]} for e in entries if not e.get("calibrated")]
+    out: dict[str, Any] = {"recordings": len(entries), "calibrated": len(ok), "failures": failures}
+    links = [e["link"] for e in ok]
+    out["links"] = {str(k): links.count(k) for k in sorted(set(links))}
+    if not ok:
+        return out
+    link = max(set(links), key=lambda k: (links.count(k), -k))
+    same = [e for e in ok if e["link"] == link]
+    out["link"] = link
+    out["on_link"] = len(same)
+    out["observable"] = sum(1 for e in same if e["observable"])
+    placed = [e for e in same if e["position_mm"] is not None]
+    out["position_undetermined"] = len(same) - len(placed)
+    P = np.array([e["position_mm"] for e in placed]).reshape(-1, 3)
+    Rs = np.array([e["R"] for e in same])
+    R_bar = _mean_rotation(Rs)
+    delta = np.degrees(Rotation.from_matrix(Rs @ R_bar.T).as_rotvec())
+    K, KP = len(same), len(P)
+    p_std = P.std(axis=0, ddof=1) if KP > 1 else np.full(3, np.nan)
+    r_std = delta.std(axis=0, ddof=1) if K > 1 else np.full(3, np.nan)
+    pair_p = np.ptp(P, axis=0) if KP > 1 else np.full(3, np.nan)
+    pair_dist = max((float(np.linalg.norm(P[i] - P[j])) for i in range(KP) for j in range(i)), default=math.nan)
+    pair_angle = max(
+        (float(np.degrees(Rotation.from_matrix(Rs[i].T @ Rs[j]).magnitude())) for i in range(K) for j in range(i)),
+        default=math.nan,
+    )
+
+    def median_std(key: str, among: list[dict[str, Any]]) -> np.ndarray:
+        rows = [e[key] for e in among if e[key] is not None]
+        if not rows:
+            return np.full(3, np.nan)
+        arr = np.array(rows, dtype=float)
+        with np.errstate(all="ignore"):
+            return np.array([np.median(c[np.isfinite(c)]) if np.any(np.isfinite(c)) else np.nan for c in arr.T])
+
+    p_rep, r_rep = median_std("position_std_mm", placed), median_std("rotation_std_deg", same)
+    with np.errstate(all="ignore"):
+        p_ratio, r_ratio = p_std / p_rep, r_std / r_rep
+    offsets = [e["time_offset_ms"] for e in same if e["time_offset_ms"] is not None]
+    kept = [e["motion_kept"] for e in same if e.get("motion_kept") is not None]
+    out.update(
+        {
+            "position_mean_mm": _finite_or_none(P.mean(axis=0)),
+            "position_std_mm": _finite_or_none(p_std),
+            "position_pairwise_mm": _finite_or_none(pair_p),
+            "position_pairwise_max_mm": _finite_or_none(pair_dist),
+            "rotation_std_deg": _finite_or_none(r_std),
+            "rotation_pairwise_max_deg": _finite_or_none(pair_angle),
+            "median_reported_position_std_mm": _finite_or_none(p_rep),
+            "median_reported_rotation_std_deg": _finite_or_none(r_rep),
+            "position_spread_over_std": _finite_or_none(p_ratio),
+            "rotation_spread_over_std": _finite_or_none(r_ratio),
+            "time_offsets_ms": _finite_or_none(offsets),
+            "time_offset_spread_ms": _finite_or_none(np.ptp(offsets)) if offsets else None,
+            "motion_kept": _finite_or_none(kept),
+            "median_motion_kept": _finite_or_none(np.median(kept)) if kept else None,
+            "per_recording": [
+                {
+                    "recording": e["recording"],
+                    "position_mm": _finite_or_none(e["position_mm"]),
+                    "rotation_from_mean_deg": _finite_or_none(d),
+                    "position_std_mm": _finite_or_none(e["position_std_mm"]),
+                    "rotation_std_deg": _finite_or_none(e["rotation_std_deg"]),
+                    "time_offset_ms": _finite_or_none(e["time_offset_ms"]),
+                    "motion_kept": _finite_or_none(e.get("motion_kept")),
+                }
+                for e, d in zip(same, delta, strict=True)
+            ],
+        }
+    )
+    return out
+
+
+def run_realdata_benchmark(
+    folder: Path,
+    methods: Sequence[str] = METHODS,
+    workers: int = 1,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Calibrate every recording of ``folder`` with each method and report the repeatability per
+    IMU group (module docstring). A recording that cannot be read is listed under ``errors``."""
+    recordings = find_recordings(folder)
+    records = []
+    for rec in recordings:
+        if progress is not None:
+            progress(rec.name)
+        records.append(calibrate_recording(rec, methods, workers=workers))
+    groups: dict[str, dict[str, list[dict[str, Any]]]] = {}
+    for r in records:
+        if r["error"] is not None:
+            continue
+        for method, units in r["methods"].items():
+            for unit, entry in units.items():
+                groups.setdefault(r["groups"][unit], {}).setdefault(method, []).append(
+                    {**entry, "recording": r["recording"]}
+                )
+    simulated = sorted({bool(r.get("simulated")) for r in records if r["error"] is None})
+    return {
+        "folder": str(folder),
+        "data": "simulated" if simulated == [True] else "real" if simulated == [False] else "mixed",
+        "methods": list(methods),
+        "recordings": len(records),
+        "errors": [{"recording": r["recording"], "reason": r["error"]} for r in records if r["error"] is not None],
+        "groups": {name: {m: repeatability(v) for m, v in by_m.items()} for name, by_m in sorted(groups.items())},
+    }
+
+
+def _fmt(values: Any, digits: int = 1) -> str:
+    if values is None:
+        return "-"
+    if isinstance(values, list):
+        return " ".join(_fmt(v, digits) for v in values)
+    return f"{values:.{digits}f}"
+
+
+def realdata_report(doc: dict[str, Any]) -> list[Any]:
+    """Rich output of :func:`run_realdata_benchmark`'s document: a table with one row per group and
+    method, a line per distinct failure reason (with its count) and per recording that could not be
+    read (names, reasons and paths shown escaped)."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from skincal.names import printable
+
+    def shown(text: object) -> str:
+        return escape(printable(str(text)))
+
+    table = Table(title=f"repeatability across recordings ({doc['data']}): {shown(doc['folder'])}")
+    for col in (
+        "IMU", "method", "ok/all", "link", "pos std x y z (mm)", "pos pairwise x y z (mm)", "rot std (deg)",
+        "rot pairwise (deg)", "spread/std pos", "spread/std rot", "motion kept", "offsets (ms)", "failures",
+    ):  # fmt: skip
+        table.add_column(col)
+    failures: list[str] = []
+    for name, by_method in doc["groups"].items():
+        for method, g in by_method.items():
+            reasons = sorted({str(f["reason"]) for f in g["failures"]})
+            offsets = g.get("time_offsets_ms")
+            offset_text = "-" if not offsets else f"{min(offsets):.0f}..{max(offsets):.0f}"
+            table.add_row(
+                shown(name), method, f"{g['calibrated']}/{g['recordings']}", str(g.get("link", "-")),
+                _fmt(g.get("position_std_mm")), _fmt(g.get("position_pairwise_mm")),
+                _fmt(g.get("rotation_std_deg"), 2), _fmt(g.get("rotation_pairwise_max_deg"), 2),
+                _fmt(g.get("position_spread_over_std")), _fmt(g.get("rotation_spread_over_std")),
+                _fmt(g.get("median_motion_kept"), 2), offset_text,
+                str(len(g["failures"])),
+            )  # fmt: skip
+            for reason in reasons:
+                count = sum(1 for f in g["failures"] if f["reason"] == reason)
+                failures.append(f"{shown(name)} {method}: {count} x {shown(reason)}")
+    parts: list[Any] = [table, *failures]
+    for e in doc["errors"]:
+        parts.append(f"[red]error[/]: {shown(e['recording'])}: {shown(e['reason'])}")
+    return parts

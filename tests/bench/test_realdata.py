@@ -1,0 +1,84 @@
+"""``skincal benchmark realdata``: repeatability across recordings of one mount (issue 24).
+
+The simulated test always runs (three small simulated recordings of one mount in a tmp folder); the
+real one reads the recordings from ``$SKINCAL_REALDATA/abb-tool-imus`` and skips without them."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from skincal.bench.realdata import find_recordings, group_name, run_realdata_benchmark
+from skincal.cli import main
+from skincal.data.hdf5 import write_dataset
+from skincal.sim import simulate
+from skincal.workflows.session import make_session
+
+
+def test_group_names_come_from_the_folder_or_the_unit():
+    assert group_name("V_300_S1_MPU9150", "MPU9150", 1) == "MPU9150"
+    assert group_name("eV50p_S4_MPU6050RM3100", "imu", 1) == "MPU6050RM3100"
+    assert group_name("V1_S2_board", "su2", 2) == "su2"  # several units: by unit
+    assert group_name("session-a", "su1", 1) == "su1"
+
+
+@pytest.fixture(scope="module")
+def mount(tmp_path_factory):
+    """Three simulated recordings (other motions, other noise draws) of the same two units on the
+    same mount, as folders ``<name>/recording.h5``."""
+    root = tmp_path_factory.mktemp("mount")
+    first = make_session("panda", "random", 2, "realistic", "fast", 11, links=[4, 6])
+    for k in range(3):
+        session = replace(make_session("panda", "random", 2, "realistic", "fast", 20 + k), placements=first.placements)
+        folder = root / f"V{100 * (k + 1)}_S{k + 1}_board"
+        folder.mkdir()
+        write_dataset(simulate(session), folder / "recording.h5")
+    return root, first.placements
+
+
+def test_simulated_recordings_of_one_mount_agree(mount, tmp_path):
+    root, truth = mount
+    assert [r.name for r in find_recordings(root)] == ["V100_S1_board", "V200_S2_board", "V300_S3_board"]
+    out = tmp_path / "bench.json"
+    assert main(["benchmark", "realdata", str(root), "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["data"] == "simulated" and doc["recordings"] == 3 and doc["errors"] == []
+    assert set(doc["groups"]) == {"su1", "su2"}
+    for name, by_method in doc["groups"].items():
+        g = by_method["mle"]
+        assert g["calibrated"] == 3 and g["link"] == truth[name].link and g["failures"] == []
+        # realistic sensors, fast protocol (simulated): this seed gives at most 0.08 mm and 0.005 deg std
+        assert all(math.isfinite(v) and v < 0.3 for v in g["position_std_mm"]), g["position_std_mm"]
+        assert all(math.isfinite(v) and v < 0.02 for v in g["rotation_std_deg"]), g["rotation_std_deg"]
+        assert g["position_pairwise_max_mm"] < 0.6 and g["rotation_pairwise_max_deg"] < 0.04
+        assert np.allclose(g["position_mean_mm"], 1e3 * truth[name].p_link_su, atol=0.5)
+        for ratio in g["position_spread_over_std"] + g["rotation_spread_over_std"]:
+            assert math.isfinite(ratio) and ratio < 4.0  # 3 recordings (2 dof): 1.7 at most here
+        assert len(g["time_offsets_ms"]) == 3 and g["time_offset_spread_ms"] < 1.0
+        assert g["median_motion_kept"] > 0.5
+        om = by_method["om"]  # the paper's method joins; whatever it cannot take is a failure with its reason
+        assert om["calibrated"] + len(om["failures"]) == 3
+        assert all(f["reason"] for f in om["failures"])
+
+
+REALDATA = os.environ.get("SKINCAL_REALDATA")
+
+
+@pytest.mark.skipif(not REALDATA or not (Path(REALDATA) / "abb-tool-imus").is_dir(),
+                    reason="real recordings not given (set SKINCAL_REALDATA to the folder holding abb-tool-imus)")
+def test_real_recordings_each_get_an_answer():
+    folder = Path(REALDATA or "") / "abb-tool-imus"
+    doc = run_realdata_benchmark(folder)
+    assert doc["data"] == "real" and doc["errors"] == []
+    assert set(doc["groups"]) == {"MPU9150", "MPU6050RM3100"}
+    for by_method in doc["groups"].values():
+        for method in ("mle", "om"):
+            g = by_method[method]
+            assert g["recordings"] == 19  # every recording answered: calibrated, or a failure with its reason
+            assert g["calibrated"] + len(g["failures"]) == 19 and all(f["reason"] for f in g["failures"])
