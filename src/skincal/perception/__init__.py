@@ -5,7 +5,6 @@ from skincal.perception.body import (
     RobotBody,
     body_proximity,
     closest_on_segments,
-    point_jacobians,
     segment_distance,
 )
 from skincal.perception.points import (
@@ -39,7 +38,6 @@ __all__ = [
     "closest_on_segments",
     "interpolate_joints",
     "point_covariance",
-    "point_jacobians",
     "points_from_streams",
     "pose_jacobian",
     "ray_velocity",
