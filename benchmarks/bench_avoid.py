@@ -124,7 +124,7 @@ def iso(args) -> None:
     rows = run_iso_benchmark(robots, scenarios, args.modes.split(","), labels, args.quick, args.duration, on_run=show)
     print(f"{len(rows)} runs, {time.process_time() - t0:.0f} s CPU", flush=True)
     if args.json:
-        from skincal.data.atomic import write_bytes_atomic
+        from skincal.io.atomic import write_bytes_atomic
 
         write_bytes_atomic(args.json, json.dumps({"step": step, "runs": rows}, indent=2).encode())
 

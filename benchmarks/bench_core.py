@@ -10,7 +10,7 @@ from pathlib import Path
 
 from rich.console import Console
 
-from skincal.data.atomic import write_bytes_atomic
+from skincal.io.atomic import write_bytes_atomic
 from skincal.workflows.bench_core import core_report, run_core_benchmark
 from skincal.workflows.script import run_script
 

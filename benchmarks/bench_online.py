@@ -15,7 +15,7 @@ from pathlib import Path  # noqa: E402
 
 from rich.console import Console  # noqa: E402
 
-from skincal.data.atomic import write_bytes_atomic  # noqa: E402
+from skincal.io.atomic import write_bytes_atomic  # noqa: E402
 from skincal.workflows.bench_online import online_report, run_online_benchmark, stream_vs_batch, stream_vs_batch_report  # noqa: E402
 from skincal.workflows.script import run_script  # noqa: E402
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from skincal.data.atomic import check_output, write_bytes_atomic
+from skincal.io.atomic import check_output, write_bytes_atomic
 from skincal.workflows.bench_qp import format_qp_benchmark, qp_step_benchmark
 from skincal.workflows.script import run_script
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from rich.console import Console
 
-from skincal.data.atomic import check_output, write_bytes_atomic
+from skincal.io.atomic import check_output, write_bytes_atomic
 from skincal.workflows import robustness as rb
 from skincal.workflows.script import run_script
 

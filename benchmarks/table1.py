@@ -13,7 +13,7 @@ from pathlib import Path
 
 from rich.console import Console
 
-from skincal.data.atomic import write_bytes_atomic
+from skincal.io.atomic import write_bytes_atomic
 from skincal.workflows import table1 as t1
 from skincal.workflows.script import run_script
 

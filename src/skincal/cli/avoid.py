@@ -56,7 +56,7 @@ def avoid(
     import numpy as np
 
     from skincal.control import ControllerConfig
-    from skincal.data.atomic import check_output
+    from skincal.io.atomic import check_output
     from skincal.errors import ConfigError
     from skincal.kinematics import get_robot
     from skincal.names import printable

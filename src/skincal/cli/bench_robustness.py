@@ -33,7 +33,7 @@ def robustness(
     per cell: errors, links right, z RMS, warnings and silent errors against targets."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from skincal.data.atomic import check_output, write_bytes_atomic
+    from skincal.io.atomic import check_output, write_bytes_atomic
     from skincal.workflows import robustness as rb
 
     if list_faults:

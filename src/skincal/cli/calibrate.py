@@ -13,7 +13,7 @@ from skincal.errors import ConfigError
 
 def read_links_file(path: Path) -> dict[str, int]:
     """A mapping ``unit -> 1-based link`` from a YAML or JSON file."""
-    from skincal.data.jsonio import load_yaml
+    from skincal.io.jsonio import load_yaml
 
     doc = load_yaml(path, "links file", ConfigError)  # JSON is YAML
     if not isinstance(doc, dict) or not all(isinstance(v, int) and not isinstance(v, bool) for v in doc.values()):
@@ -118,7 +118,7 @@ def calibrate(
     from rich.progress import Progress
 
     from skincal.calib import calibrate as run
-    from skincal.data.atomic import check_output
+    from skincal.io.atomic import check_output
     from skincal.data.hdf5 import read_dataset
     from skincal.data.result import sha256_file, write_result
 
@@ -178,7 +178,7 @@ def _calibrate_follow(
 
     from rich.live import Live
 
-    from skincal.data.atomic import check_output
+    from skincal.io.atomic import check_output
     from skincal.data.result import sha256_file, write_result
     from skincal.viz.meter import meter_line, meter_table
     from skincal.workflows.live import Target, follow_dataset, is_bag, load_source, parse_target
@@ -250,7 +250,7 @@ def _calibrate_relative(
 
     from skincal.calib.imu_only import RelativeOptions, calibrate_relative, compare_with_joint_result
     from skincal.calib.options import parse_option_strings, parse_options
-    from skincal.data.atomic import check_output
+    from skincal.io.atomic import check_output
     from skincal.data.hdf5 import read_dataset
     from skincal.data.result import read_result, sha256_file, write_result
 
@@ -305,7 +305,7 @@ def _calibrate_fleet(
     from rich.progress import Progress
     from rich.table import Table
 
-    from skincal.data.atomic import check_output
+    from skincal.io.atomic import check_output
     from skincal.workflows.fleet import calibrate_fleet, fleet_jobs
 
     if unit:

@@ -114,7 +114,7 @@ def import_bag(
     """Import a ROS bag (no ROS install needed), segment it and write a dataset."""
     from dataclasses import replace
 
-    from skincal.data.atomic import check_output
+    from skincal.io.atomic import check_output
     from skincal.data.hdf5 import write_dataset
     from skincal.data.ros import topic_map
     from skincal.data.segment import segment_dataset
@@ -188,7 +188,7 @@ def segment_cmd(
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Find static and single-joint dynamic segments in a recording and write them to /segments."""
-    from skincal.data.atomic import check_output
+    from skincal.io.atomic import check_output
     from skincal.data.hdf5 import read_dataset, write_dataset
     from skincal.data.segment import segment_dataset
 
@@ -227,7 +227,7 @@ def export_cmd(
     """Export calibrated unit poses onto the robot's link frames for ROS (URDF, xacro, YAML/JSON, TF node, CSV)."""
     from rich.markup import escape
 
-    from skincal.data.atomic import check_output
+    from skincal.io.atomic import check_output
     from skincal.data.export import export_result
     from skincal.data.result import failed_units, read_result
     from skincal.kinematics import PRESETS

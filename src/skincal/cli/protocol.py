@@ -82,7 +82,7 @@ def protocol_cmd(
 
     import numpy as np
 
-    from skincal.data.atomic import check_output
+    from skincal.io.atomic import check_output
     from skincal.errors import ConfigError
     from skincal.kinematics import PRESETS, get_robot
     from skincal.names import printable

@@ -35,7 +35,7 @@ def run_adaptive(chain, out: Path, *, rate: float, seed: int, force: bool, targe
                  port: int | None, bind: str, public: bool, record_out: Path | None,
                  inputs: tuple[Path, ...]) -> None:  # fmt: skip
     """The ``--adaptive`` branch of ``skincal protocol`` (module docstring); options checked before any work."""
-    from skincal.data.atomic import check_output
+    from skincal.io.atomic import check_output
     from skincal.workflows.live import parse_target
 
     goal = parse_target(target)
@@ -145,7 +145,7 @@ def _live(chain, out: Path, result_path: Path, *, rate: float, seed: int, goal, 
 
     import numpy as np
 
-    from skincal.data.atomic import check_output
+    from skincal.io.atomic import check_output
     from skincal.hw.net import check_bind
     from skincal.workflows.adaptive import LiveDesigner
     from skincal.workflows.live import record_live

@@ -51,9 +51,9 @@ from typing import Any, Literal, cast, overload
 import h5py
 import numpy as np
 
-from skincal.data.atomic import atomic_path
+from skincal.io.atomic import atomic_path
 from skincal.data.dataset import BodyPose, Dataset, ImuStream, JointStates, Segments, TofStream
-from skincal.data.jsonio import regular_file
+from skincal.io.jsonio import regular_file
 from skincal.data.result import check_events
 from skincal.data.validate import TRUTH_BODY_ATTRS, check_unit_name, shown, validate_dataset
 from skincal.errors import ConfigError, DatasetError

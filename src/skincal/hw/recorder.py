@@ -46,7 +46,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from skincal.data.atomic import atomic_path
+from skincal.io.atomic import atomic_path
 from skincal.data.hdf5 import FORMAT, VERSION, write_robot
 from skincal.errors import ConfigError, DatasetError
 from skincal.hw.clock import ClockFit

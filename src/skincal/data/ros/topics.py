@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from skincal.data.jsonio import load_yaml
+from skincal.io.jsonio import load_yaml
 from skincal.errors import ConfigError, DatasetError
 from skincal.names import name_problem, printable
 
