@@ -52,10 +52,10 @@ from typing import Any
 
 import numpy as np
 
-from skincal.io.atomic import write_bytes_atomic
 from skincal.data.imu_calibration import IMU_KEYS, IMU_SHAPES, INTEGER_KEYS, ImuCalibration, imu_to_fields
-from skincal.io.jsonio import load_json, regular_file
 from skincal.errors import ConfigError, DatasetError
+from skincal.io.atomic import write_bytes_atomic
+from skincal.io.jsonio import load_json, regular_file
 from skincal.kinematics.transforms import FloatArray
 from skincal.names import MAX_NAME_CHARS, name_problem
 from skincal.skin.pose import SkinUnitPose
