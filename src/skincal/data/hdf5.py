@@ -52,6 +52,7 @@ import h5py
 import numpy as np
 
 from skincal.data.dataset import BodyPose, Dataset, ImuStream, JointStates, Segments, TofStream
+from skincal.data.result import check_events
 from skincal.data.validate import TRUTH_BODY_ATTRS, check_unit_name, shown, validate_dataset
 from skincal.data.writer import FORMAT, JOINT_TYPE_CODES, VERSION, DatasetWriter
 from skincal.errors import ConfigError, DatasetError
