@@ -27,7 +27,7 @@ from skincal.calib.online.monitor import Alarm, MonitorOptions, MovedUnitMonitor
 from skincal.data.dataset import Dataset, ImuStream, JointStates, Segments
 from skincal.data.result import CalibrationResult, UnitResult
 from skincal.errors import ConfigError
-from skincal.kinematics.transforms import FloatArray
+from skincal.kinematics.transforms import FloatArray, rotation_angle
 from skincal.skin.pose import SkinUnitPose
 
 MOVING_SPEED = 0.05
@@ -280,8 +280,7 @@ def pose_errors(T_est: Any, truth: SkinUnitPose) -> tuple[float, float]:
     """Position (m) and rotation (deg) error of a ``(4, 4)`` pose against ``truth``."""
     T = np.asarray(T_est, dtype=float)
     dp = float(np.linalg.norm(T[:3, 3] - truth.p_link_su))
-    c = (np.trace(truth.R_link_su.T @ T[:3, :3]) - 1) / 2
-    return dp, float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+    return dp, float(np.degrees(rotation_angle(truth.R_link_su, T[:3, :3])))
 
 
 KNOCKS = (("5 mm", 0.005, 0.0), ("2 deg", 0.0, 2.0))
