@@ -7,7 +7,6 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from registry_robots import random_chain
 
 from skincal.control import (
     AvoidanceController,
@@ -21,6 +20,8 @@ from skincal.control import (
 from skincal.kinematics import SerialChain, panda, sawyer, transform_points
 from skincal.perception import RobotBody
 from skincal.workflows.avoid_metrics import count_contacts, recovery_time
+
+from registry_robots import random_chain
 
 Q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
 CFG = ControllerConfig()

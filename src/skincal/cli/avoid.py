@@ -56,8 +56,8 @@ def avoid(
     import numpy as np
 
     from skincal.control import ControllerConfig
-    from skincal.io.atomic import check_output
     from skincal.errors import ConfigError
+    from skincal.io.atomic import check_output
     from skincal.kinematics import get_robot
     from skincal.names import printable
     from skincal.perception.body import RobotBody

@@ -118,9 +118,9 @@ def calibrate(
     from rich.progress import Progress
 
     from skincal.calib import calibrate as run
-    from skincal.io.atomic import check_output
     from skincal.data.hdf5 import read_dataset
     from skincal.data.result import sha256_file, write_result
+    from skincal.io.atomic import check_output
 
     if compare_with is not None and reference is None:
         raise ConfigError("--compare-with needs --reference (it compares an IMU-only result with a joint-based one)")
@@ -178,8 +178,8 @@ def _calibrate_follow(
 
     from rich.live import Live
 
-    from skincal.io.atomic import check_output
     from skincal.data.result import sha256_file, write_result
+    from skincal.io.atomic import check_output
     from skincal.viz.meter import meter_line, meter_table
     from skincal.workflows.live import Target, follow_dataset, is_bag, load_source, parse_target
 
@@ -250,9 +250,9 @@ def _calibrate_relative(
 
     from skincal.calib.imu_only import RelativeOptions, calibrate_relative, compare_with_joint_result
     from skincal.calib.options import parse_option_strings, parse_options
-    from skincal.io.atomic import check_output
     from skincal.data.hdf5 import read_dataset
     from skincal.data.result import read_result, sha256_file, write_result
+    from skincal.io.atomic import check_output
 
     options = dataclasses.asdict(parse_options(RelativeOptions, parse_option_strings(option), "imu-only"))
     inputs = (dataset,) if compare_with is None else (dataset, compare_with)

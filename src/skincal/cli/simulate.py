@@ -47,8 +47,8 @@ def simulate(
         return
     from rich.progress import Progress
 
-    from skincal.io.atomic import check_output
     from skincal.data.hdf5 import write_dataset
+    from skincal.io.atomic import check_output
     from skincal.kinematics import get_robot
     from skincal.workflows.session import simulate_dataset
 
@@ -74,9 +74,9 @@ def _simulate_handheld(
     force: bool,
 ) -> None:  # fmt: skip
     """``--handheld``: an IMU-only session (:func:`skincal.workflows.handheld.handheld_dataset`)."""
-    from skincal.io.atomic import check_output
     from skincal.data.hdf5 import write_dataset
     from skincal.errors import ConfigError
+    from skincal.io.atomic import check_output
     from skincal.workflows.handheld import handheld_dataset
 
     check_output(out, force=force)

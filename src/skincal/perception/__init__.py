@@ -7,9 +7,9 @@ from skincal.perception.body import (
     closest_on_segments,
     segment_distance,
 )
+from skincal.perception.config import PerceptionConfig
 from skincal.perception.points import (
     ObstaclePoints,
-    PerceptionConfig,
     interpolate_joints,
     points_from_streams,
     unit_points,

@@ -18,7 +18,7 @@ present (:func:`skincal.data.export.pose_covariance`).
     dp/d(dp)     = R_bl                         (3 x 3)
     dp/d(dtheta) = -R_bl [r a]_x                (3 x 3: Exp(dtheta) r a ~ r a + dtheta x r a)
     dp/dr        = R_bl a                       (3 x 1: the ray)
-    dp/dq        = the point's position Jacobian on link l  (3 x n, :meth:`skincal.kinematics.chain.SerialChain.point_jacobians`)
+    dp/dq        = the point's position Jacobian on link l  (3 x n, :meth:`SerialChain.point_jacobians`)
 
 and, the three sources independent, ``Cov_p = J_pose Cov_pose J_pose^T + sigma_r^2 (R_bl a)(R_bl a)^T +
 J_q Cov_q J_q^T``. The range variance is the ToF model's noise at the reading,
@@ -43,7 +43,7 @@ from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray
 from skincal.names import printable
-from skincal.perception.points import PerceptionConfig
+from skincal.perception.config import PerceptionConfig
 from skincal.skin.tof import TofModel, get_tof_model
 
 POSE_ORDER = ("x", "y", "z", "rx", "ry", "rz")

@@ -24,11 +24,11 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from skincal.io.atomic import atomic_path, remove_debris
 from skincal.data.dataset import Segments
-from skincal.io.jsonio import load_json
 from skincal.data.validate import validate_segments
 from skincal.errors import ConfigError, DatasetError
+from skincal.io.atomic import atomic_path, remove_debris
+from skincal.io.jsonio import load_json
 from skincal.kinematics.transforms import FloatArray
 from skincal.protocol.config import ProtocolConfig
 from skincal.protocol.trajectory import Trajectory
