@@ -13,6 +13,7 @@ import pytest
 from test_viz_report import _dataset
 
 from skincal.calib import calibrate
+from skincal.calib.residuals import unit_residuals
 from skincal.cli import main
 from skincal.data.hdf5 import _Reader, open_dataset, read_dataset, write_dataset
 from skincal.data.result import write_result
@@ -20,7 +21,6 @@ from skincal.errors import DatasetError
 from skincal.skin.imu import get_imu_model
 from skincal.viz.content import collect
 from skincal.viz.report import write_report
-from skincal.viz.residuals import unit_residuals
 
 
 @pytest.fixture(scope="module")

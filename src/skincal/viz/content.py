@@ -11,12 +11,12 @@ import numpy as np
 
 from skincal.calib.metrics import evaluate
 from skincal.calib.preprocess import JointInterpolator
+from skincal.calib.residuals import PLOT_POINTS, UnitResiduals, unit_activity, unit_residuals
 from skincal.data.dataset import Dataset, ImuStream
 from skincal.data.result import CalibrationResult, failed_units
 from skincal.errors import DatasetError
 from skincal.kinematics.transforms import FloatArray
 from skincal.parallel import can_fork, imap
-from skincal.viz.residuals import PLOT_POINTS, UnitResiduals, unit_activity, unit_residuals
 
 WORST_SHOWN = 10
 """Units whose residuals the HTML report plots: the worst by the report's key figure (:class:`Ranking`)."""

@@ -1,4 +1,4 @@
-"""Accelerometer residuals of a calibration result and the data coverage, for plots and reports.
+"""Accelerometer residuals of a calibration result and the data coverage (the report, the monitor's batch mode).
 
 The model is the one ``mle`` fits, evaluated by the same code (:mod:`skincal.calib.mle.model`): the
 sample stamped ``t`` measured the motion at ``s = t - tau - d (t - t_ref)``, and
