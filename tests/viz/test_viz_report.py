@@ -32,7 +32,7 @@ from skincal.viz.summary import render_markdown
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
-def _dataset(imu: ImuModel, seed: int = 3, n_poses: int = 4):
+def report_dataset(imu: ImuModel, seed: int = 3, n_poses: int = 4):
     chain = get_robot("panda")
     rng = np.random.default_rng(seed)
     config = dataclasses.replace(get_protocol("paper-sim"), n_poses=n_poses)
@@ -43,13 +43,13 @@ def _dataset(imu: ImuModel, seed: int = 3, n_poses: int = 4):
 def biased():
     """Noise-free IMUs with bias (~0.4 m/s^2), scale/misalignment (~1 %) and a 15 ms latency."""
     imu = ImuModel(accel_bias_std=0.4, accel_scale_std=0.01, misalignment_std=0.005, latency_s=0.015)
-    return _dataset(imu)
+    return report_dataset(imu)
 
 
 @pytest.fixture(scope="module")
 def calibrated():
     """A small realistic run: datasheet noise, the default calibrator."""
-    ds = _dataset(get_imu_model("datasheet"), seed=5)
+    ds = report_dataset(get_imu_model("datasheet"), seed=5)
     return ds, calibrate(ds, "mle")
 
 

@@ -35,7 +35,7 @@ def std_cell(values, scale: float = 1.0) -> str:
     return f"{text} ({missing} undetermined)" if missing else text
 
 
-def _unit_table(result, title: str):
+def unit_table(result, title: str):
     """The per-unit table; units without a pose (``failed_units``) get a row saying why. Names and
     notes are shown escaped (:func:`skincal.cli.app.shown`)."""
     from rich.table import Table
@@ -158,7 +158,7 @@ def calibrate(
             progress=lambda _name: progress.advance(task), workers=workers, **options,
         )
     write_result(result, out)
-    console.print(_unit_table(result, f"{method}: {len(result.units)} units in {result.runtime_s:.2f} s"))
+    console.print(unit_table(result, f"{method}: {len(result.units)} units in {result.runtime_s:.2f} s"))
     for note in result.extras.get("notes", []):
         console.print(f"note: {shown(note)}", highlight=False)
     for name, reason in result.extras.get("failed_units", {}).items():
@@ -264,7 +264,7 @@ def _calibrate_relative(
     )
     write_result(result, out)
     title = f"imu-only (frame of {reference}): {len(result.units)} units in {result.runtime_s:.2f} s"
-    console.print(_unit_table(result, title))
+    console.print(unit_table(result, title))
     if "accel_scale_fit" in result.extras:  # the positions' scale: fitted from rests, or what is missing
         console.print(f"note: {shown(result.extras['accel_scale_fit']['note'])}", highlight=False)
     for name, reason in result.extras.get("failed_units", {}).items():
