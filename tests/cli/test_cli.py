@@ -12,7 +12,7 @@ import pytest
 from rich.console import Console
 
 from skincal.cli import main
-from skincal.cli.calibrate import unit_table, std_cell
+from skincal.cli.calibrate import std_cell, unit_table
 from skincal.data.result import CalibrationResult, UnitResult
 from skincal.skin.pose import SkinUnitPose
 
