@@ -17,9 +17,9 @@ from skincal.control import (
     joint_velocity_bounds,
     obstacle_geometry,
 )
+from skincal.control.iso_metrics import count_contacts, recovery_time
 from skincal.kinematics import SerialChain, panda, sawyer, transform_points
 from skincal.perception import RobotBody
-from skincal.workflows.avoid_metrics import count_contacts, recovery_time
 
 from registry_robots import random_chain
 

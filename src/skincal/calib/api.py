@@ -245,7 +245,7 @@ def calibrate(
     extras: dict[str, Any] = {"failed_units": failed, "seed": seed} if failed else {"seed": seed}
     if notes:
         extras["notes"] = notes
-    return CalibrationResult(
+    result = CalibrationResult(
         method=method,
         robot=dataset.chain.name,
         dataset_sha256=dataset_sha256,
@@ -253,6 +253,17 @@ def calibrate(
         units=results,
         extras=extras,
     )
+    if getattr(parsed, "consistency", False):  # the split check (skincal.calib.consistency)
+        from skincal.calib.consistency import check
+
+        def refit(part: Dataset, part_links: dict[str, int]) -> CalibrationResult:
+            return calibrate(
+                part, method, seed=seed, links=part_links, use_dataset_qdd=use_dataset_qdd, qdd_window_s=qdd_window_s,
+                units=list(part_links), workers=workers, **{**options, "consistency": False},
+            )  # fmt: skip
+
+        result = check(tagged, result, refit)
+    return result
 
 
 JOINT_LIMIT_MARGIN_RAD = 0.25
