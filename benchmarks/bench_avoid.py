@@ -114,7 +114,7 @@ def iso(args) -> None:
     )
     print(f"{len(rows)} runs, {time.process_time() - t0:.0f} s CPU", flush=True)
     if args.json:
-        from skincal.data.atomic import write_bytes_atomic
+        from skincal.io.atomic import write_bytes_atomic
 
         write_bytes_atomic(args.json, json.dumps({"step": step, "runs": rows}, indent=2).encode())
 

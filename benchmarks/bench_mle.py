@@ -12,7 +12,7 @@ from skincal.bench import options
 from skincal.bench.harness import parse_args
 from skincal.bench.mle import run_mle_benchmark
 from skincal.bench.script import run_script
-from skincal.data.atomic import write_bytes_atomic
+from skincal.io.atomic import write_bytes_atomic
 
 
 def main() -> None:

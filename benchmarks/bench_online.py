@@ -17,7 +17,7 @@ from skincal.bench import options  # noqa: E402
 from skincal.bench.harness import parse_args  # noqa: E402
 from skincal.bench.online import online_report, run_online_benchmark, stream_vs_batch, stream_vs_batch_report  # noqa: E402
 from skincal.bench.script import run_script  # noqa: E402
-from skincal.data.atomic import write_bytes_atomic  # noqa: E402
+from skincal.io.atomic import write_bytes_atomic  # noqa: E402
 
 
 def main() -> None:

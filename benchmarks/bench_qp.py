@@ -15,7 +15,7 @@ from skincal.bench import options
 from skincal.bench.harness import parse_args
 from skincal.bench.qp import format_qp_benchmark, qp_step_benchmark
 from skincal.bench.script import run_script
-from skincal.data.atomic import check_output, write_bytes_atomic
+from skincal.io.atomic import check_output, write_bytes_atomic
 
 
 def main() -> None:

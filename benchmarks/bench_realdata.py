@@ -11,7 +11,7 @@ from pathlib import Path
 from rich.console import Console
 
 from skincal.bench.realdata import METHODS, realdata_report, run_realdata_benchmark
-from skincal.data.atomic import write_bytes_atomic
+from skincal.io.atomic import write_bytes_atomic
 from skincal.workflows.script import run_script
 
 

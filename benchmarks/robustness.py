@@ -15,7 +15,7 @@ from rich.console import Console
 from skincal.bench import robustness as rb
 from skincal.bench.harness import parse_args, run_harness, values
 from skincal.bench.script import run_script
-from skincal.data.atomic import check_output, write_bytes_atomic
+from skincal.io.atomic import check_output, write_bytes_atomic
 
 
 def main() -> None:

@@ -14,7 +14,7 @@ from rich.console import Console
 from skincal.bench import table1 as t1
 from skincal.bench.harness import parse_args, run_harness, values
 from skincal.bench.script import run_script
-from skincal.data.atomic import write_bytes_atomic
+from skincal.io.atomic import write_bytes_atomic
 
 
 def main() -> None:

@@ -6,7 +6,7 @@ import pytest
 
 from skincal.calib import METHODS
 from skincal.calib.mle.method import MleOptions
-from skincal.calib.options import NoOptions, parse_option_strings, parse_options
+from skincal.calib.options import INT_OPTION_MAX, NoOptions, parse_option_strings, parse_options
 from skincal.calib.paper_opt import PaperOptions
 from skincal.errors import ConfigError
 
@@ -56,3 +56,19 @@ def test_malformed_option_strings_are_refused(item):
 def test_an_option_given_twice_is_refused():
     with pytest.raises(ConfigError, match="given twice"):
         parse_option_strings(["scale=1", "scale=0"])
+
+
+# an integer option beyond a C int is refused when parsed (it used to reach nlopt and fail every unit
+# with an internal OverflowError)
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize("value", ["99999999999999999999", str(INT_OPTION_MAX + 1), str(-INT_OPTION_MAX - 1)])
+def test_an_integer_option_beyond_a_c_int_is_refused(value):
+    with pytest.raises(ConfigError, match=rf"option maxeval_static must be at most {INT_OPTION_MAX} in magnitude"):
+        parse_options(PaperOptions, parse_option_strings([f"maxeval_static={value}"]), "om")
+
+
+def test_the_largest_c_int_is_taken():
+    opts = parse_options(PaperOptions, parse_option_strings([f"maxeval_static={INT_OPTION_MAX}"]), "om")
+    assert opts.maxeval_static == INT_OPTION_MAX

@@ -2,7 +2,7 @@
 
 A noise-free simulated Panda session whose accelerometers drift (0.05 m/s^2 over the session) and whose
 dataset states gravity 0.1 % too high: ``mle`` fits the drift and the gravity factor, the result
-carries them in ``UnitResult.imu``, and the report's prediction (:mod:`skincal.viz.residuals`) uses
+carries them in ``UnitResult.imu``, and the report's prediction (:mod:`skincal.calib.residuals`) uses
 them through :mod:`skincal.calib.model`, the code the solver evaluates.
 """
 
@@ -100,7 +100,7 @@ def test_report_residuals_vanish_at_rest_and_equal_the_methods_own(fitted, tmp_p
     report's residual at the same instant equals the solver's (which evaluates the link signals from
     a 125 Hz table: they agree to its interpolation error, 1e-5 m/s^2). Old code: the report left out
     the bias drift and the gravity factor (up to 0.025 m/s^2 at rest here), and read extras keys."""
-    from skincal.viz.residuals import unit_residuals
+    from skincal.calib.residuals import unit_residuals
 
     ds, name, unit, problem, interp = fitted
     path = tmp_path / "result.json"
@@ -173,8 +173,8 @@ def test_report_follows_a_clock_that_re_syncs_periodically(tmp_path: Path):
     residuals show a time error growing to 0.1 s (old code: RMS 0.25 m/s^2 against 0.018 m/s^2 for
     the same session on an ideal clock, the samples at acceleration steps, which the fit leaves out)."""
     from skincal.calib import calibrate
+    from skincal.calib.residuals import unit_residuals
     from skincal.skin.clock import get_clock_model
-    from skincal.viz.residuals import unit_residuals
 
     chain = panda()
     rms = {}

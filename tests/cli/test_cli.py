@@ -12,7 +12,7 @@ import pytest
 from rich.console import Console
 
 from skincal.cli import main
-from skincal.cli.calibrate import _unit_table, std_cell
+from skincal.cli.calibrate import std_cell, unit_table
 from skincal.data.result import CalibrationResult, UnitResult
 from skincal.skin.pose import SkinUnitPose
 
@@ -94,7 +94,7 @@ def test_calibrate_table_with_an_undetermined_std_and_a_failed_unit():
                      rotation_std_deg=[0.02, np.nan, np.nan], warnings=("yaw about joint 1 undetermined",))
     result = CalibrationResult("mle", "panda", "", 1.0, {"su1": su1}, extras={"failed_units": {"su2": "diverged"}})
     console = Console(width=250, record=True)
-    console.print(_unit_table(result, "t"))
+    console.print(unit_table(result, "t"))
     text = console.export_text()
     row1 = next(line for line in text.splitlines() if "su1" in line)
     assert "0.660 (1 undetermined)" in row1 and "0.020 (2 undetermined)" in row1 and "unobservable" in row1

@@ -4,8 +4,10 @@ plot not clobbered, and one-line errors for bad options and bad scenario files."
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
+from cli_subprocess import one_line_error, run_cli
 
 from skincal.cli import main
 
@@ -100,3 +102,68 @@ def test_bad_scenario_file_one_line_naming_the_field(tmp_path, capsys, text, fie
     assert main(["avoid", "--scenario", str(path), "--duration", "0.1"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and f"bad.yaml: {field}" in err, err
+
+
+# the issue-16/17 review: scenario names and descriptions as written, bad durations and degradations
+SCENARIO_WITH_MARKUP = """\
+name: "[bold red]EVIL [blink]y"
+description: "desc [bold]z[/bold] [link=http:x]q"
+duration: 0.05
+people:
+  - name: "[red]hand"
+    shape: sphere
+    radius: 0.05
+    speed: 0.5
+    relative_to: flange
+    waypoints:
+      - {p: [0.5, 0.0, 0.0]}
+      - {p: [0.2, 0.0, 0.0]}
+"""
+
+
+@pytest.mark.adversarial
+def test_avoid_prints_scenario_names_and_descriptions_as_written(tmp_path: Path) -> None:
+    """A scenario file's name and description are shown as stored, never read as rich markup (the tags
+    were swallowed: ``scenario EVIL y (desc z q)``)."""
+    (tmp_path / "mk.yaml").write_text(SCENARIO_WITH_MARKUP)
+    proc = run_cli(["avoid", "--scenario", "mk.yaml"], tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    first = proc.stdout.splitlines()[0]
+    assert first.startswith("scenario [bold red]EVIL [blink]y (desc [bold]z[/bold] [link=http:x]q) on panda"), first
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize("duration", ["1e-9", "0.0005"])
+def test_avoid_refuses_a_run_too_short_to_have_a_step(tmp_path: Path, duration: str) -> None:
+    """``--duration`` below one control step gave exit 3 (``internal error (ValueError: zero-size array
+    ...)``); it is a one-line usage error."""
+    line = one_line_error(run_cli(["avoid", "--scenario", "hand", "--duration", duration], tmp_path))
+    assert "duration" in line and "0.02" in line
+
+
+@pytest.mark.adversarial
+def test_scenario_file_duration_too_short_is_refused_naming_the_field(tmp_path: Path) -> None:
+    (tmp_path / "short.yaml").write_text(SCENARIO_WITH_MARKUP.replace("duration: 0.05", "duration: 0.0001"))
+    line = one_line_error(run_cli(["avoid", "--scenario", "short.yaml"], tmp_path))
+    assert line.startswith("error: short.yaml: duration: "), line
+
+
+@pytest.mark.adversarial
+def test_avoid_clips_a_long_description(tmp_path: Path) -> None:
+    """A scenario description of any length (a 16 MB one was printed whole) is shown clipped to one line."""
+    old = 'description: "desc [bold]z[/bold] [link=http:x]q"'
+    text = SCENARIO_WITH_MARKUP.replace(old, f"description: {'x' * 5000}")
+    (tmp_path / "long.yaml").write_text(text)
+    proc = run_cli(["avoid", "--scenario", "long.yaml"], tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    shown = proc.stdout.replace("\n", "")  # rich wraps the long line in a pipe
+    assert "x" * 197 + "..." in shown and "x" * 198 not in shown, shown[:300]
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize("degrade", ["1e308,5", "0.05,1e308"])
+def test_avoid_refuses_an_absurd_degradation_on_one_line(tmp_path: Path, degrade: str) -> None:
+    """``--degrade 1e308,5`` printed a numpy overflow warning (3 lines on stderr) before the error."""
+    line = one_line_error(run_cli(["avoid", "--degrade", degrade, "--duration", "0.05"], tmp_path))
+    assert "at most" in line
+

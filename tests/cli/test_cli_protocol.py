@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from cli_subprocess import one_line_error, run_cli
 
 from skincal.cli import main
 from skincal.kinematics import get_robot
@@ -132,3 +134,60 @@ def test_bags_hold_one_joint_trajectory(tmp_path, capsys, name):
         code, _, err = _run(capsys, "--robot", "panda", "--out", str(out), "--force")
         assert code == 2 and err.count("\n") == 1 and "folder" in err
     assert [p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp")] == []
+
+
+# --out onto what exists
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize("force", [[], ["--force"]])
+def test_an_existing_bag_folder_is_named_as_such_and_kept(tmp_path, capsys, force):
+    """It used to say "is a folder; give a file name", though a folder is what a ROS 2 bag is."""
+    out = tmp_path / "motion"
+    out.mkdir()
+    (out / "keep.db3").write_bytes(b"mine")
+    code = main(["protocol", "--robot", "panda", "--rate", "10", "--out", str(out), *force])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1
+    assert "exists; a ROS 2 bag folder is never overwritten" in err
+    assert [p.name for p in out.iterdir()] == ["keep.db3"] and (out / "keep.db3").read_bytes() == b"mine"
+
+
+@pytest.mark.adversarial
+def test_an_existing_dataset_is_not_a_protocol_output(tmp_path, capsys):
+    data = tmp_path / "data.h5"
+    data.write_bytes(b"dataset")
+    code = main(["protocol", "--robot", "panda", "--out", str(data), "--force"])
+    assert code == 2 and "unknown trajectory format '.h5'" in capsys.readouterr().err
+    assert data.read_bytes() == b"dataset"
+
+
+# --adaptive --force
+
+
+@pytest.mark.adversarial
+def test_adaptive_force_leaves_no_segment_of_an_earlier_run(tmp_path: Path) -> None:
+    """``protocol --adaptive --force`` overwrote segments 1..k of an earlier run and left its k+1.. beside
+    them: a robot executing the files in order ran stale motion. The earlier run's segments go first."""
+    stale = [tmp_path / f"m_{k:03d}.json" for k in (1, 2, 7)]
+    for path in stale:
+        path.write_text("stale")
+    keep = tmp_path / "m_notes.json"
+    keep.write_text("user file")
+    proc = run_cli(["protocol", "--robot", "panda", "--adaptive", "--simulate", "--out", "m.json", "--max-motion",
+                 "0.001", "--force"], tmp_path)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    segments = sorted(p.name for p in tmp_path.glob("m_[0-9][0-9][0-9].json"))
+    assert segments == ["m_001.json"], segments
+    assert (tmp_path / "m_001.json").read_text() != "stale"
+    assert keep.read_text() == "user file"
+    assert "inf mm" not in proc.stdout
+
+
+@pytest.mark.adversarial
+def test_adaptive_force_refuses_a_folder_named_like_a_segment(tmp_path: Path) -> None:
+    (tmp_path / "m_001.json").mkdir()
+    line = one_line_error(run_cli(["protocol", "--robot", "panda", "--adaptive", "--simulate", "--out", "m.json",
+                                 "--max-motion", "0.001", "--force"], tmp_path))  # fmt: skip
+    assert "m_001.json" in line
+    assert (tmp_path / "m_001.json").is_dir()

@@ -3,6 +3,8 @@ resulting motion, safe stop on infeasible problems, joint limits, metrics helper
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -13,11 +15,13 @@ from skincal.control import (
     approach_speed_bound,
     cap_candidates,
     joint_velocity_bounds,
-    point_jacobians,
+    obstacle_geometry,
 )
 from skincal.control.iso_metrics import count_contacts, recovery_time
-from skincal.kinematics import panda, sawyer
+from skincal.kinematics import SerialChain, panda, sawyer, transform_points
 from skincal.perception import RobotBody
+
+from registry_robots import random_chain
 
 Q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
 CFG = ControllerConfig()
@@ -51,8 +55,52 @@ def test_frames_and_jacobians_match_the_chain(make, rng):
     for link in (2, 5, chain.n_joints):
         p_link = rng.normal(size=3) * 0.1
         p_base = T[link, :3, :3] @ p_link + T[link, :3, 3]
-        J = point_jacobians(chain, T, [link], p_base)[0]
+        J = chain.point_jacobians(T, [link], p_base)[0]
         np.testing.assert_allclose(J, chain.point_jacobian(q, link, p_link)[0, :3], atol=1e-12)
+
+
+def _prismatic_chain(rng) -> SerialChain:
+    """A random 5-joint chain with prismatic joints 2 and 5 and velocity limits (the controller needs them)."""
+    chain = random_chain(rng, 5)
+    n = chain.n_joints
+    return replace(chain, velocity_limit=np.ones(n), joint_lower=-np.full(n, 2.0), joint_upper=np.full(n, 2.0))
+
+
+def test_controller_jacobians_on_a_prismatic_chain_match_finite_differences(rng):
+    """The controller's rows ``n^T J`` of obstacle points and its flange Jacobian (in ``P = J^T J + damping I``)
+    against the chain moved by +-h on each joint, on a chain whose prismatic joints translate along their axes."""
+    chain = _prismatic_chain(rng)
+    assert not chain.revolute.all()
+    n = chain.n_joints
+    body = RobotBody.of(chain)
+    q = rng.uniform(-0.5, 0.5, n)
+    T = chain.link_frames(q)[0]
+    obstacles = T[1:, :3, 3] + rng.normal(size=(n, 3)) * 0.3
+    prox, G = obstacle_geometry(body, T, obstacles)
+    h = 1e-6
+    T_inv = np.linalg.inv(T[prox.link])  # the robot points fixed in their links
+    p_link = np.einsum("kij,kj->ki", T_inv[:, :3, :3], prox.p_base_robot) + T_inv[:, :3, 3]
+    for j in range(n):
+        dq = np.zeros(n)
+        dq[j] = h
+        moved = [transform_points(chain.link_frames(q + s * dq)[0][prox.link], p_link) for s in (1.0, -1.0)]
+        fd = np.einsum("ki,ki->k", prox.normal, (moved[0] - moved[1]) / (2 * h))
+        np.testing.assert_allclose(G[:, j], fd, atol=1e-7)
+    ctl = AvoidanceController(chain, replace(CFG, gain=0.0, posture_gain=0.0))
+    prob = ctl.problem(q, np.zeros(3), np.zeros(3), np.zeros((0, 3)))
+    flange = chain.T_link_flange[:3, 3]
+    J_fd = np.stack(
+        [
+            (
+                transform_points(chain.link_frames(q + h * e)[0][n : n + 1], flange)[0]
+                - transform_points(chain.link_frames(q - h * e)[0][n : n + 1], flange)[0]
+            )
+            / (2 * h)
+            for e in np.eye(n)
+        ],
+        axis=1,
+    )
+    np.testing.assert_allclose(prob.P, J_fd.T @ J_fd + CFG.damping * np.eye(n), atol=1e-7)
 
 
 def _toward_obstacle_problem(distance_to_padded: float):

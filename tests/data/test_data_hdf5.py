@@ -441,3 +441,47 @@ def test_a_bad_link_name_is_refused(good_file: Path, tmp_path: Path) -> None:
         f["robot"].attrs["link_names"] = np.array(names, dtype=h5py.string_dtype())
     with pytest.raises(DatasetError, match="link_names.*not a valid name"):
         read_dataset(bad)
+
+
+def test_a_recording_and_a_written_dataset_read_identically(tmp_path):
+    """The recorder and ``write_dataset`` share one layout writer (:class:`skincal.data.writer.DatasetWriter`):
+    a recording reads back as a dataset that, written and read again, is the same, and the two files hold
+    the same layout paths (the recorder's own fields, ``device_t_us``, ``host_receive_t``, ``/clock``, aside)."""
+    from skincal.hw.clock import ClockFit
+    from skincal.hw.packet import decode_packet, encode_joint_packet, encode_packet
+    from skincal.hw.receiver import Delivery
+    from skincal.hw.recorder import Recorder
+
+    def delivery(data: bytes, host_s: float) -> Delivery:
+        p = decode_packet(data)
+        return Delivery(("joints", p.source_id) if hasattr(p, "q") else ("skin", p.unit_id), p, host_s)
+
+    rng = np.random.default_rng(5)
+    rec_path, ds_path = tmp_path / "rec.h5", tmp_path / "ds.h5"
+    rec = Recorder(rec_path, flush_every_samples=5, flush_every_s=1e9, t_origin_s=100.0, host_clock=lambda: 0.0,
+                   unit_names={7: "forearm", 8: "upper"}, robot=panda(), description="two units")
+    fits = {("skin", 7): ClockFit(99.0, 0.0, 1.0), ("skin", 8): ClockFit(99.0, 2e-5, 1.0),
+            ("joints", 0): ClockFit(100.0, 0.0, 0.0)}
+    for k in range(4):
+        t_us = 1_000_000 + 10_000 * (3 * k + np.arange(3))
+        rec.add(delivery(encode_packet(7, k, t_us, accel=rng.normal(size=(3, 3)), gyro=rng.normal(size=(3, 3)),
+                                       range=rng.uniform(0.1, 1.0, 3)), 101.0 + k))
+        rec.add(delivery(encode_packet(8, k, t_us, accel=rng.normal(size=(3, 3))), 101.0 + k))
+        rec.add(delivery(encode_joint_packet(0, k, 3 * k + np.arange(3), rng.normal(size=(3, 7)),
+                                             rng.normal(size=(3, 7))), 101.0 + k))
+        rec.maybe_flush(fits)
+    rec.finish(fits)
+    recorded = read_dataset(rec_path)
+    write_dataset(recorded, ds_path)
+    assert_datasets_equal(recorded, read_dataset(ds_path))
+    assert recorded.description == "two units" and list(recorded.imu) == ["forearm", "upper"]
+
+    def layout(path: Path) -> set[str]:
+        names: set[str] = set()
+        with h5py.File(path, "r") as f:
+            f.visit(names.add)
+            names |= {f"@{key}" for key in ("format", "version", "description") if key in f.attrs}
+            assert (f.attrs["format"], int(f.attrs["version"])) == ("skincal-dataset", 2)
+        return {n for n in names if not n.startswith("clock") and not n.endswith(("device_t_us", "host_receive_t"))}
+
+    assert layout(rec_path) == layout(ds_path)

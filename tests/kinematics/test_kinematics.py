@@ -153,3 +153,33 @@ def test_unknown_robot_and_chain_files(tmp_path):
         load_chain(bad)
     with pytest.raises(ConfigError, match="cannot read"):
         load_chain(tmp_path / "nope.yaml")
+
+
+def test_nearest_rotation_is_the_polar_factor_and_never_a_reflection(rng):
+    """``nearest_rotation`` (the one SVD projection): for ``det M > 0`` the orthogonal polar factor of ``M``;
+    for a reflected ``M`` still a rotation (det +1); a rotation maps to itself."""
+    from scipy.linalg import polar
+    from scipy.spatial.transform import Rotation
+
+    from skincal.kinematics import nearest_rotation
+
+    R = Rotation.random(random_state=1).as_matrix()
+    M = R + 0.05 * rng.normal(size=(3, 3))
+    np.testing.assert_allclose(nearest_rotation(M), polar(M)[0], atol=1e-12)
+    np.testing.assert_allclose(nearest_rotation(R), R, atol=1e-14)
+    flipped = nearest_rotation(M @ np.diag([1.0, 1.0, -1.0]))
+    np.testing.assert_allclose(flipped @ flipped.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(flipped) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_rotation_angle_is_accurate_for_tiny_and_large_angles():
+    """The one rotation error (atan2 form): exact to rounding near 0, where ``arccos((tr - 1) / 2)`` loses
+    half the digits, and near pi."""
+    from scipy.spatial.transform import Rotation
+
+    from skincal.kinematics import rotation_angle
+
+    axis = np.array([1.0, 2.0, -2.0]) / 3.0
+    for angle in (1e-9, 1e-6, 0.3, np.pi - 1e-6):
+        R = Rotation.from_rotvec(angle * axis).as_matrix()
+        assert rotation_angle(np.eye(3), R) == pytest.approx(angle, rel=1e-6)

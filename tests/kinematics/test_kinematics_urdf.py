@@ -92,6 +92,34 @@ def test_general_chain_motion_matches_finite_differences():
     np.testing.assert_allclose(J[3:] @ qd(t), m.omega[0, 6], atol=1e-12)
 
 
+def test_point_jacobians_on_a_chain_with_prismatic_joints_match_finite_differences():
+    """``point_jacobians`` (points in the base frame on any links, one configuration or one per point) against
+    each point carried by its link with each joint moved by +-h; on a prismatic joint the column is the axis."""
+    rng = np.random.default_rng(3)
+    chain = random_chain(rng, 6)
+    assert not chain.revolute.all()
+    K = 12
+    links = rng.integers(0, 7, K)
+    p_link = rng.normal(size=(K, 3)) * 0.1
+    h = 1e-6
+    for q in (rng.uniform(-1, 1, 6), rng.uniform(-1, 1, (K, 6))):
+        T = chain.link_frames(q)
+        T = T[0] if q.ndim == 1 else T
+        T_pt = T[links] if q.ndim == 1 else T[np.arange(K), links]
+        p_base = np.einsum("kij,kj->ki", T_pt[:, :3, :3], p_link) + T_pt[:, :3, 3]
+        J = chain.point_jacobians(T, links, p_base)
+        for j in range(6):
+            dq = np.zeros(6)
+            dq[j] = h
+            moved = []
+            for sign in (1.0, -1.0):
+                Tm = chain.link_frames(q + sign * dq)
+                Tm = Tm[0][links] if q.ndim == 1 else Tm[np.arange(K), links]
+                moved.append(np.einsum("kij,kj->ki", Tm[:, :3, :3], p_link) + Tm[:, :3, 3])
+            np.testing.assert_allclose(J[:, :, j], (moved[0] - moved[1]) / (2 * h), atol=1e-8)
+        assert np.all(J[links == 0] == 0)
+
+
 URDF_HEAD = '<?xml version="1.0"?>\n<robot name="r">'
 
 

@@ -10,23 +10,23 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_viz_report import _dataset
+from test_viz_report import report_dataset
 
 from skincal.calib import calibrate
+from skincal.calib.residuals import unit_residuals
 from skincal.cli import main
-from skincal.data.hdf5 import _Reader, open_dataset, read_dataset, write_dataset
+from skincal.data.hdf5 import LazyImu, open_dataset, read_dataset, write_dataset
 from skincal.data.result import write_result
 from skincal.errors import DatasetError
 from skincal.skin.imu import get_imu_model
 from skincal.viz.content import collect
 from skincal.viz.report import write_report
-from skincal.viz.residuals import unit_residuals
 
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
     """A small simulated dataset (with truth), the same without truth, and a calibration result."""
-    ds = _dataset(get_imu_model("datasheet"), seed=5, n_poses=3)
+    ds = report_dataset(get_imu_model("datasheet"), seed=5, n_poses=3)
     result = calibrate(ds, "mle")
     result = dataclasses.replace(result, units={k: result.units[k] for k in list(result.units)[:4]})
     work = tmp_path_factory.mktemp("streaming")
@@ -77,13 +77,13 @@ def test_the_report_reads_each_unit_once_after_the_validation(files, monkeypatch
     truth, _real, res_path = files
     result = read_result(res_path)
     reads: Counter[str] = Counter()
-    original = _Reader.imu_unit
+    original = LazyImu.__getitem__
 
-    def counted(self: _Reader, unit: str):
+    def counted(self: LazyImu, unit: str):
         reads[unit] += 1
         return original(self, unit)
 
-    monkeypatch.setattr(_Reader, "imu_unit", counted)
+    monkeypatch.setattr(LazyImu, "__getitem__", counted)
     with open_dataset(truth) as ds:
         units = list(ds.imu)
         assert reads == Counter(dict.fromkeys(units, 1))  # the validation

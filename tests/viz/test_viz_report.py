@@ -14,6 +14,7 @@ import pytest
 from skincal.calib import calibrate
 from skincal.calib.metrics import evaluate
 from skincal.calib.preprocess import JointInterpolator
+from skincal.calib.residuals import activity_matrix, unit_residuals
 from skincal.cli import main
 from skincal.data.hdf5 import write_dataset
 from skincal.data.imu_calibration import ImuCalibration
@@ -26,13 +27,12 @@ from skincal.skin.placement import paper_placement
 from skincal.skin.pose import SkinUnitPose
 from skincal.viz.content import collect
 from skincal.viz.report import render_html, write_report
-from skincal.viz.residuals import activity_matrix, unit_residuals
 from skincal.viz.summary import render_markdown
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
-def _dataset(imu: ImuModel, seed: int = 3, n_poses: int = 4):
+def report_dataset(imu: ImuModel, seed: int = 3, n_poses: int = 4):
     chain = get_robot("panda")
     rng = np.random.default_rng(seed)
     config = dataclasses.replace(get_protocol("paper-sim"), n_poses=n_poses)
@@ -43,13 +43,13 @@ def _dataset(imu: ImuModel, seed: int = 3, n_poses: int = 4):
 def biased():
     """Noise-free IMUs with bias (~0.4 m/s^2), scale/misalignment (~1 %) and a 15 ms latency."""
     imu = ImuModel(accel_bias_std=0.4, accel_scale_std=0.01, misalignment_std=0.005, latency_s=0.015)
-    return _dataset(imu)
+    return report_dataset(imu)
 
 
 @pytest.fixture(scope="module")
 def calibrated():
     """A small realistic run: datasheet noise, the default calibrator."""
-    ds = _dataset(get_imu_model("datasheet"), seed=5)
+    ds = report_dataset(get_imu_model("datasheet"), seed=5)
     return ds, calibrate(ds, "mle")
 
 
@@ -279,7 +279,7 @@ def test_without_truth_units_are_ranked_by_residual_rms(calibrated):
 def test_thinned_residuals_keep_the_envelope():
     """At most max_points samples; every component's minimum and maximum in each bucket kept, so a
     one-sample spike anywhere survives; fewer samples than max_points are kept as they are."""
-    from skincal.viz.residuals import envelope_indices
+    from skincal.calib.residuals import envelope_indices
 
     rng = np.random.default_rng(4)
     for m, max_points in ((100_000, 2000), (8163, 2000), (12_345, 500), (3, 2000), (2000, 2000)):

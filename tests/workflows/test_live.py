@@ -201,9 +201,9 @@ def test_record_live_follows_the_received_stream_on_the_recording_clock(tmp_path
 
 
 def test_one_core_schedule_carries_the_backlog():
-    from skincal.bench.online import _schedule
+    from skincal.bench.online import one_core_schedule
 
-    ends, backlog = _schedule(np.array([0.1, 0.2, 0.3, 1.0]), np.array([0.05, 0.3, 0.01, 0.02]))
+    ends, backlog = one_core_schedule(np.array([0.1, 0.2, 0.3, 1.0]), np.array([0.05, 0.3, 0.01, 0.02]))
     np.testing.assert_allclose(ends, [0.15, 0.5, 0.51, 1.02])  # chunk 3 waits for chunk 2; chunk 4 for its data
     assert backlog == pytest.approx(0.3)
 

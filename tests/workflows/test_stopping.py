@@ -15,7 +15,7 @@ separation = pytest.importorskip("skincal.control.separation")
 from skincal.sim.dynamics import TorqueRobot  # noqa: E402 - after the importorskip
 from skincal.workflows.stopping import (  # noqa: E402
     SENSING_LATENCY_S,
-    _Capsules,
+    LinkSegments,
     default_configurations,
     measure_stopping,
     stop_once,
@@ -71,7 +71,7 @@ def test_capsule_displacement_and_speed_bounds_are_tight():
     """The stop's distance and speed (segment ends + radius terms) bound those of 4000 points sampled on
     the capsule surfaces, and are within 3 % of the sampled maximum."""
     chain = panda()
-    caps = _Capsules(chain, 0.06)
+    caps = LinkSegments(chain, 0.06)
     rng = np.random.default_rng(2)
     surface = [(c.link, *sample_capsule_surface(c, rng, 4000 // 8)[:1]) for c in link_capsules(chain, 0.06) if c.link]
     for _ in range(3):
@@ -100,7 +100,7 @@ def test_per_axis_stop_moves_one_joint_and_brakes_at_its_limit():
     run = stop_once(robot, q0, 0.5, direction=2)
     moved = np.abs(robot.q - run.q0)
     assert moved[1] == pytest.approx(run.joint_distance) and np.delete(moved, 1).max() < 1e-9
-    qd0 = 0.5 / _Capsules(chain, 0.06).speed(q0, np.eye(7)[1])
+    qd0 = 0.5 / LinkSegments(chain, 0.06).speed(q0, np.eye(7)[1])
     assert run.joint_distance == pytest.approx(qd0**2 / (2 * 7.5), rel=0.02)
     assert run.time == pytest.approx(qd0 / 7.5, abs=0.002)
 

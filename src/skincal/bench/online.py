@@ -49,7 +49,7 @@ def bench_dataset(units: int = 100, seed: int = 0, robot: str = "panda", joint_r
     return simulate(session, "analytic")
 
 
-def _schedule(arrivals: np.ndarray, costs: np.ndarray) -> tuple[np.ndarray, float]:
+def one_core_schedule(arrivals: np.ndarray, costs: np.ndarray) -> tuple[np.ndarray, float]:
     """One core following the stream: chunk ``k`` starts at ``max(arrival_k, end_{k-1})`` and takes
     ``costs[k]``; returns each chunk's end and the largest backlog (end minus arrival), s."""
     ends = np.empty_like(costs)
@@ -115,7 +115,7 @@ def run_online_benchmark(
     costs = done - starts
     finish_cpu = cpu_replayed - (done[-1] + status_cpu[-1]) if len(done) else cpu_replayed - cpu_start
     result_cpu = cpu_end - cpu_replayed
-    ends, backlog = _schedule(times, costs)
+    ends, backlog = one_core_schedule(times, costs)
     last_arrival = t1 - t0
     ready = max(float(ends[-1]) if len(ends) else 0.0, last_arrival) + finish_cpu + result_cpu
     stream_cpu = float(costs.sum()) + finish_cpu

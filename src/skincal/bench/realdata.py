@@ -75,12 +75,12 @@ def _moving_counts(dataset: Any) -> dict[str, int]:
     """Per unit, the IMU samples not inside a rest (static segment; the dataset's, or found as
     ``calibrate`` finds them) and inside the joint stream."""
     from skincal.calib.api import METHODS as SPECS
-    from skincal.calib.api import _segment_automatically
+    from skincal.calib.api import segment_automatically
     from skincal.data.dataset import STATIC
 
     tagged = dataset
     if dataset.segments is None or len(dataset.segments) == 0:
-        tagged, _ = _segment_automatically(dataset, SPECS["mle"])
+        tagged, _ = segment_automatically(dataset, SPECS["mle"])
     tj = np.asarray(dataset.joint_states.t, dtype=float)
     out = {}
     for name, imu in dataset.imu.items():

@@ -53,7 +53,9 @@ import numpy as np
 from skincal.bench.harness import RunInfo
 from skincal.bench.options import ROBUSTNESS
 from skincal.errors import ConfigError
+from skincal.sim.faults import GRAVITY_DECLARED_MPS2
 from skincal.skin.clock import ClockModel, get_clock_model
+from skincal.skin.imu import STANDARD_GRAVITY
 
 ROBOTS = ("panda", "sawyer", "ur5e")
 BACKENDS = {
@@ -67,7 +69,7 @@ DEFAULT_BACKENDS = ("analytic", "mujoco")
 N_UNITS = 6
 BASE_VELOCITY_NOISE = 3e-3
 """Joint-velocity noise of the base session, rad/s (the ``controller`` preset's)."""
-SATURATION_RANGE_MPS2 = 2.0 * 9.80665
+SATURATION_RANGE_MPS2 = 2.0 * STANDARD_GRAVITY
 """Accelerometer full scale of the saturation fault, m/s^2 (+-2 g)."""
 BRISK_FREQUENCY_FACTOR = 1.5
 """Brisk motion: every excitation frequency of the protocol times this (accelerations x 1.5)."""
@@ -81,7 +83,6 @@ KNOCK_AT = 2.0 / 3.0
 KNOCK_TRANSLATION_M = 0.03
 KNOCK_ROTATION_DEG = 10.0
 GRAVITY_TRUE_MPS2 = 9.796
-GRAVITY_DECLARED_MPS2 = 9.81
 SILENT_Z = 3.0
 
 SILENT_RULE = (

@@ -9,11 +9,10 @@ or the method's own discovery when it has one).
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 import time
-from collections.abc import Callable, Iterator, Mapping
-from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
+from collections.abc import Callable, Generator, Iterator, Mapping
+from concurrent.futures import Executor, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
@@ -33,6 +32,7 @@ from skincal.data.dataset import NO_JOINTS_MESSAGE, STATIC, Dataset
 from skincal.data.result import POSITION_DETERMINED, CalibrationResult, UnitResult
 from skincal.errors import CalibrationError, ConfigError, DatasetError, SkincalError
 from skincal.kinematics.chain import SerialChain
+from skincal.parallel import can_fork, imap
 
 
 @dataclass(frozen=True)
@@ -138,33 +138,6 @@ _Outcome = tuple[str, UnitResult | None, str | None, bool]
 that failure is a :class:`UnitDataError`."""
 
 
-_FORKED: dict[int, Callable[[int, str], _Outcome]] = {}
-"""Per-unit closures of the running :func:`calibrate` calls by token, inherited by forked workers."""
-
-
-_BLAS_LIMIT: Any = None
-"""The BLAS thread limit of a worker process (kept alive for the worker's life)."""
-
-
-def _one_blas_thread() -> None:
-    """Worker initializer: the worker dies with its parent (:func:`skincal.processes.die_with_parent`);
-    one BLAS thread per worker process (``workers`` processes already fill the cores; more threads
-    each would oversubscribe them)."""
-    from threadpoolctl import threadpool_limits
-
-    from skincal.processes import die_with_parent
-
-    die_with_parent()
-    global _BLAS_LIMIT
-    _BLAS_LIMIT = threadpool_limits(limits=1, user_api="blas")
-
-
-def _forked_unit(token: int, k: int, name: str) -> _Outcome:
-    """Entry point of a forked worker: run the inherited closure (only the token, ``k`` and ``name``
-    are pickled)."""
-    return _FORKED[token](k, name)
-
-
 def calibrate(
     dataset: Dataset,
     method: str = "mle",
@@ -220,7 +193,7 @@ def calibrate(
     start = time.perf_counter()
     tagged, notes = dataset, []
     if dataset.segments is None or len(dataset.segments) == 0:
-        tagged, notes = _segment_automatically(dataset, spec)
+        tagged, notes = segment_automatically(dataset, spec)
     interpolator = JointInterpolator(
         dataset.joints, use_dataset_qdd=use_dataset_qdd, qdd_window_s=qdd_window_s or DEFAULT_QDD_WINDOW_S
     )
@@ -244,6 +217,7 @@ def calibrate(
 
     n_workers = max(1, min(int(workers), len(names), os.cpu_count() or 1))  # more would only oversubscribe
     pool: Executor | None = None
+    forked: Generator[tuple[int, _Outcome], None, None] | None = None
     if n_workers == 1:
         # one BLAS thread, as in the worker processes: the small per-unit matrices gain nothing from
         # more, and results are then identical whatever ``workers`` is
@@ -256,16 +230,13 @@ def calibrate(
                 yield outcome
 
         outcomes = serial()
-    elif "fork" in multiprocessing.get_all_start_methods():
+    elif can_fork():
         interpolator.warm()  # computed once here, inherited by every child
         warm = getattr(shared, "warm", None)
         if warm is not None:
             warm()
-        _FORKED[id(one)] = one
-        pool = ProcessPoolExecutor(
-            max_workers=n_workers, mp_context=multiprocessing.get_context("fork"), initializer=_one_blas_thread
-        )
-        outcomes = pool.map(_forked_unit, [id(one)] * len(names), range(len(names)), names)
+        forked = imap(lambda pair: one(*pair), enumerate(names), n_workers, fork=True, one_blas_thread=True)
+        outcomes = (outcome for _, outcome in forked)
     else:  # NumPy releases the GIL in much of the array work
         pool = ThreadPoolExecutor(max_workers=n_workers)
         outcomes = pool.map(one, range(len(names)), names)
@@ -282,7 +253,8 @@ def calibrate(
     finally:
         if pool is not None:
             pool.shutdown()
-        _FORKED.pop(id(one), None)
+        if forked is not None:
+            forked.close()  # the worker processes end with the run
     results = {name: results[name] for name in names if name in results}
     failed = {name: failed[name] for name in names if name in failed}
     if not results and unusable == len(names):  # the data, not the calibration: one error for the run
@@ -369,7 +341,7 @@ def _check_overlap(dataset: Dataset, unit: str, min_overlap_s: float = MIN_OVERL
         )
 
 
-def _segment_automatically(dataset: Dataset, spec: MethodSpec) -> tuple[Dataset, list[str]]:
+def segment_automatically(dataset: Dataset, spec: MethodSpec) -> tuple[Dataset, list[str]]:
     """Segments for a dataset without ``/segments``, from its joint stream, with the rest speed
     threshold raised above the stream's own velocity noise (six standard deviations)."""
     from skincal.data.segment import SegmentationConfig, segment_dataset

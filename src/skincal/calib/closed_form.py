@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from skincal.kinematics.transforms import FloatArray
+from skincal.kinematics.transforms import FloatArray, nearest_rotation
 
 
 def wahba(v_link: FloatArray, v_su: FloatArray, weights: FloatArray | None = None) -> FloatArray:
@@ -25,9 +25,7 @@ def wahba(v_link: FloatArray, v_su: FloatArray, weights: FloatArray | None = Non
     """
     w = np.ones(len(v_link)) if weights is None else np.asarray(weights, dtype=float)
     B = np.einsum("i,ij,ik->jk", w, v_link, v_su)
-    U, _, Vt = np.linalg.svd(B)
-    D = np.diag([1.0, 1.0, np.linalg.det(U) * np.linalg.det(Vt)])
-    return U @ D @ Vt
+    return nearest_rotation(B)
 
 
 def static_rotation_and_bias(

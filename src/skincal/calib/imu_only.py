@@ -59,7 +59,7 @@ from skincal.data.dataset import Dataset, ImuStream
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.result import REFERENCE, REFERENCE_LINK, CalibrationResult, UnitResult
 from skincal.errors import ConfigError, DatasetError
-from skincal.kinematics.transforms import FloatArray
+from skincal.kinematics.transforms import FloatArray, nearest_rotation, skew
 from skincal.names import name_problem, printable
 from skincal.skin.pose import SkinUnitPose
 
@@ -350,13 +350,6 @@ def _gyro_fit(w_ref: FloatArray, w_j: FloatArray) -> tuple[FloatArray, FloatArra
     return R, c, w_ref - w_j @ R.T - c
 
 
-def _skew(v: FloatArray) -> FloatArray:
-    S = np.zeros(v.shape[:-1] + (3, 3))
-    S[..., 0, 1], S[..., 0, 2], S[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    S[..., 1, 0], S[..., 2, 0], S[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return S
-
-
 def rate_derivative(t: FloatArray, w: FloatArray, window_s: float = 0.12) -> FloatArray:
     """Angular acceleration ``(M, 3)`` at stamps ``t``: a quintic Savitzky-Golay derivative on a uniform
     grid (the rates resampled by a cubic spline), read back at ``t``."""
@@ -374,7 +367,7 @@ def _position_rows(
     ``theta = [b (3), r (3), M (9, row-major), d (3)]``."""
     b, r, M, d = theta[:3], theta[3:6], theta[6:15].reshape(3, 3), theta[15:18]
     v = w - b
-    K = _skew(dw) + _skew(v) @ _skew(v)
+    K = skew(dw) + skew(v) @ skew(v)
     res = a_j @ M.T + d - K @ r - a_ref
     n = len(a_j)
     J = np.zeros((n, 3, 18))
@@ -477,7 +470,7 @@ def fit_relative(
         gauge_jacobian = (H_inv @ (Jw.T @ dA))[3:6]
     # rotation covariance from the gyroscope equation: d(res_g) = [R w_j]x dphi
     sigma_g = float(np.sqrt(np.mean(res_g**2)))
-    A = _skew(w_j @ R.T - (w_j @ R.T).mean(axis=0))
+    A = skew(w_j @ R.T - (w_j @ R.T).mean(axis=0))
     rho_g = residual_correlation(res_g)
     rot_cov = pinv(np.einsum("mji,mjk->ik", A, A)) * sigma_g**2 * rho_g
     return RelativeFit(
@@ -497,11 +490,6 @@ def fit_relative(
         null_axis=null_axis,
         gauge_jacobian=gauge_jacobian,
     )
-
-
-def _closest_rotation(R: FloatArray) -> FloatArray:
-    U, _, Vt = np.linalg.svd(R)
-    return U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
 
 
 @dataclass(frozen=True)
@@ -688,7 +676,7 @@ def _unit_result(fit: RelativeFit, reference: str, notes: list[str], imu: ImuCal
         "notes": list(notes),
     }
     return UnitResult(
-        SkinUnitPose(REFERENCE_LINK, _closest_rotation(fit.R), fit.r),
+        SkinUnitPose(REFERENCE_LINK, nearest_rotation(fit.R), fit.r),
         observable=observable,
         position_std_m=pos_std,
         rotation_std_deg=rot_std,

@@ -1,7 +1,7 @@
 """The forward model of ``mle``: what a skin unit's accelerometer reads, given its link's motion, its
 pose on the link and its IMU calibration. Written once here; the solver (:mod:`skincal.calib.mle.solver`),
 the link comparison (:mod:`skincal.calib.mle.method`) and the report's residuals
-(:mod:`skincal.viz.residuals`) all evaluate it, so the residuals a report shows are those of the
+(:mod:`skincal.calib.residuals`) all evaluate it, so the residuals a report shows are those of the
 model that was fitted.
 
 Unit frame ``su``, link frame ``n`` (``R = R_link_su``, ``p = p_link_su`` in m)::

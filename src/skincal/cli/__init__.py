@@ -49,7 +49,7 @@ def _click_exceptions() -> tuple[tuple[type, ...], tuple[type, ...], tuple[type,
 
 class Terminated(SystemExit):
     """Raised in the main thread when the process receives SIGTERM: it unwinds the command like an
-    exception, so every ``finally`` and :func:`skincal.data.atomic.atomic_path` clean-up runs (no
+    exception, so every ``finally`` and :func:`skincal.io.atomic.atomic_path` clean-up runs (no
     temporary file is left); exit code 143 (128 + SIGTERM), as if killed by the signal."""
 
     def __init__(self) -> None:

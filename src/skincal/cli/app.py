@@ -44,3 +44,19 @@ def shown(text: object) -> str:
     from skincal.names import printable
 
     return escape(printable(str(text)))
+
+
+def at_rate(traj, rate: float):  # noqa: ANN001, ANN201  (a skincal.protocol.Trajectory)
+    """``traj`` sampled at ``rate`` Hz for the controller (the limits were checked at the protocol's 1 kHz)."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    t = np.arange(int(np.floor(traj.duration * rate + 1e-9)) + 1) / rate
+    q, qd, qdd = traj.evaluate(t)
+    return replace(traj, t=t, q=q, qd=qd, qdd=qdd, config=replace(traj.config, rate_hz=float(rate)))
+
+
+def joint_names(chain) -> tuple[str, ...]:  # noqa: ANN001
+    """The chain's joint names (``joint1``... when it has none)."""
+    return tuple(chain.joint_names or tuple(f"joint{i + 1}" for i in range(chain.n_joints)))

@@ -53,8 +53,8 @@ def avoid(
     skin (simulated at its true poses) feeds the controller through the chosen calibration (a result
     file must come from a dataset of the same --robot and --placement). With --resume the same run
     without anybody is made too, for the task time lost."""
-    from skincal.data.atomic import check_output
     from skincal.errors import ConfigError
+    from skincal.io.atomic import check_output
     from skincal.kinematics import get_robot
     from skincal.names import printable
     from skincal.protocol.flange import TASKS

@@ -18,7 +18,7 @@ def robustness(v: dict[str, Any]) -> None:
 
     from skincal.bench import robustness as rb
     from skincal.bench.harness import run_harness
-    from skincal.data.atomic import check_output, write_bytes_atomic
+    from skincal.io.atomic import check_output, write_bytes_atomic
 
     harness, out, workers, dask = rb.HARNESS, v["out"], v["workers"], v["dask"]
     if v["list_faults"]:

@@ -24,14 +24,14 @@ app.add_typer(benchmark_app, name="benchmark")
 def _check_json(path: Path | None, force: bool) -> None:
     """Refuse a ``--json`` path before any work (exists without ``--force``, a folder, no folder)."""
     if path is not None:
-        from skincal.data.atomic import check_output
+        from skincal.io.atomic import check_output
 
         check_output(path, force=force)
 
 
 def _write_json(doc: dict, path: Path | None) -> None:
     if path is not None:
-        from skincal.data.atomic import write_bytes_atomic
+        from skincal.io.atomic import write_bytes_atomic
 
         write_bytes_atomic(path, (json.dumps(doc, indent=1) + "\n").encode())
         console.print(f"wrote {shown(path)}", highlight=False)

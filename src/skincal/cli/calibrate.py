@@ -18,7 +18,7 @@ nothing is written (``docs/interfaces.md``, exit codes)."""
 
 def read_links_file(path: Path) -> dict[str, int]:
     """A mapping ``unit -> 1-based link`` from a YAML or JSON file."""
-    from skincal.data.jsonio import load_yaml
+    from skincal.io.jsonio import load_yaml
 
     doc = load_yaml(path, "links file", ConfigError)  # JSON is YAML
     if not isinstance(doc, dict) or not all(isinstance(v, int) and not isinstance(v, bool) for v in doc.values()):
@@ -40,7 +40,7 @@ def std_cell(values, scale: float = 1.0) -> str:
     return f"{text} ({missing} undetermined)" if missing else text
 
 
-def _unit_table(result, title: str):
+def unit_table(result, title: str):
     """The per-unit table; units without a pose (``failed_units``) get a row saying why. Names and
     notes are shown escaped (:func:`skincal.cli.app.shown`)."""
     from rich.table import Table
@@ -123,9 +123,9 @@ def calibrate(
     from rich.progress import Progress
 
     from skincal.calib import calibrate as run
-    from skincal.data.atomic import check_output
     from skincal.data.hdf5 import read_dataset
     from skincal.data.result import sha256_file, write_result
+    from skincal.io.atomic import check_output
 
     if compare_with is not None and reference is None:
         raise ConfigError("--compare-with needs --reference (it compares an IMU-only result with a joint-based one)")
@@ -163,7 +163,7 @@ def calibrate(
             progress=lambda _name: progress.advance(task), workers=workers, **options,
         )
     write_result(result, out)
-    console.print(_unit_table(result, f"{method}: {len(result.units)} units in {result.runtime_s:.2f} s"))
+    console.print(unit_table(result, f"{method}: {len(result.units)} units in {result.runtime_s:.2f} s"))
     for note in result.extras.get("notes", []):
         console.print(f"note: {shown(note)}", highlight=False)
     for name, reason in result.extras.get("failed_units", {}).items():
@@ -186,8 +186,8 @@ def _calibrate_follow(
 
     from rich.live import Live
 
-    from skincal.data.atomic import check_output
     from skincal.data.result import sha256_file, write_result
+    from skincal.io.atomic import check_output
     from skincal.viz.meter import meter_line, meter_table
     from skincal.workflows.live import Target, follow_dataset, is_bag, load_source, parse_target
 
@@ -258,9 +258,9 @@ def _calibrate_relative(
 
     from skincal.calib.imu_only import RelativeOptions, calibrate_relative, compare_with_joint_result
     from skincal.calib.options import parse_option_strings, parse_options
-    from skincal.data.atomic import check_output
     from skincal.data.hdf5 import read_dataset
     from skincal.data.result import read_result, sha256_file, write_result
+    from skincal.io.atomic import check_output
 
     options = dataclasses.asdict(parse_options(RelativeOptions, parse_option_strings(option), "imu-only"))
     inputs = (dataset,) if compare_with is None else (dataset, compare_with)
@@ -272,7 +272,7 @@ def _calibrate_relative(
     )
     write_result(result, out)
     title = f"imu-only (frame of {reference}): {len(result.units)} units in {result.runtime_s:.2f} s"
-    console.print(_unit_table(result, title))
+    console.print(unit_table(result, title))
     if "accel_scale_fit" in result.extras:  # the positions' scale: fitted from rests, or what is missing
         console.print(f"note: {shown(result.extras['accel_scale_fit']['note'])}", highlight=False)
     for name, reason in result.extras.get("failed_units", {}).items():
@@ -314,7 +314,7 @@ def _calibrate_fleet(
     from rich.progress import Progress
     from rich.table import Table
 
-    from skincal.data.atomic import check_output
+    from skincal.io.atomic import check_output
     from skincal.workflows.fleet import calibrate_fleet, fleet_jobs
 
     if unit:

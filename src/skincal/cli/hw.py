@@ -130,8 +130,8 @@ def _record_live(out: Path, chain, target_text: str | None, result: Path | None,
     import time
 
     from skincal.cli.app import shown
-    from skincal.data.atomic import check_output
     from skincal.data.result import write_result
+    from skincal.io.atomic import check_output
     from skincal.viz.meter import meter_line, meter_table
     from skincal.workflows.live import Target, parse_target, record_live
 

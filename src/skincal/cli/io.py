@@ -114,11 +114,11 @@ def import_bag(
     """Import a ROS bag (no ROS install needed), segment it and write a dataset."""
     from dataclasses import replace
 
-    from skincal.data.atomic import check_output
     from skincal.data.hdf5 import write_dataset
     from skincal.data.ros import topic_map
     from skincal.data.segment import segment_dataset
     from skincal.errors import ConfigError
+    from skincal.io.atomic import check_output
     from skincal.kinematics import PRESETS
     from skincal.names import printable
 
@@ -188,9 +188,9 @@ def segment_cmd(
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
     """Find static and single-joint dynamic segments in a recording and write them to /segments."""
-    from skincal.data.atomic import check_output
     from skincal.data.hdf5 import read_dataset, write_dataset
     from skincal.data.segment import segment_dataset
+    from skincal.io.atomic import check_output
 
     check_output(out, force=force, inputs=(dataset,) + ((protocol,) if protocol else ()))
     ds = read_dataset(dataset)
@@ -227,9 +227,9 @@ def export_cmd(
     """Export calibrated unit poses onto the robot's link frames for ROS (URDF, xacro, YAML/JSON, TF node, CSV)."""
     from rich.markup import escape
 
-    from skincal.data.atomic import check_output
     from skincal.data.export import export_result
     from skincal.data.result import failed_units, read_result
+    from skincal.io.atomic import check_output
     from skincal.kinematics import PRESETS
     from skincal.names import printable
 

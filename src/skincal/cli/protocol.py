@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console
+from skincal.cli.app import app, at_rate, console, joint_names
 
 
 @app.command("protocol")
@@ -82,8 +82,8 @@ def protocol_cmd(
 
     import numpy as np
 
-    from skincal.data.atomic import check_output
     from skincal.errors import ConfigError
+    from skincal.io.atomic import check_output
     from skincal.kinematics import PRESETS, get_robot
     from skincal.names import printable
     from skincal.protocol import build_trajectory, get_protocol
@@ -105,7 +105,7 @@ def protocol_cmd(
     check_output(out, force=force, inputs=() if robot in PRESETS else (Path(robot),))
     chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
     if adaptive:
-        from skincal.cli.protocol_adaptive import run_adaptive
+        from skincal.cli.protocol_adaptive import run_adaptive  # (it does not import this module)
 
         run_adaptive(chain, out, rate=rate, seed=seed, force=force, target=target, result=result,
                      max_motion=max_motion, simulate=simulate, noise=noise, placement=placement, units=units,
@@ -130,19 +130,3 @@ def protocol_cmd(
         f"{rate:g} Hz, {traj.poses.shape[0]} poses, {len(seg)} segments"), highlight=False, markup=False)  # fmt: skip
     for note in config.notes:
         console.print(printable(f"  note: {note}"), highlight=False, markup=False)
-
-
-def at_rate(traj, rate: float):  # noqa: ANN001, ANN201  (a skincal.protocol.Trajectory)
-    """``traj`` sampled at ``rate`` Hz for the controller (the limits were checked at the protocol's 1 kHz)."""
-    from dataclasses import replace
-
-    import numpy as np
-
-    t = np.arange(int(np.floor(traj.duration * rate + 1e-9)) + 1) / rate
-    q, qd, qdd = traj.evaluate(t)
-    return replace(traj, t=t, q=q, qd=qd, qdd=qdd, config=replace(traj.config, rate_hz=float(rate)))
-
-
-def joint_names(chain) -> tuple[str, ...]:  # noqa: ANN001
-    """The chain's joint names (``joint1``... when it has none)."""
-    return tuple(chain.joint_names or tuple(f"joint{i + 1}" for i in range(chain.n_joints)))

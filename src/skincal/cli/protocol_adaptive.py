@@ -17,7 +17,7 @@ import glob
 import math
 from pathlib import Path
 
-from skincal.cli.app import console, shown
+from skincal.cli.app import at_rate, console, joint_names, shown
 from skincal.errors import ConfigError
 
 
@@ -35,7 +35,7 @@ def run_adaptive(chain, out: Path, *, rate: float, seed: int, force: bool, targe
                  port: int | None, bind: str, public: bool, record_out: Path | None,
                  inputs: tuple[Path, ...]) -> None:  # fmt: skip
     """The ``--adaptive`` branch of ``skincal protocol`` (module docstring); options checked before any work."""
-    from skincal.data.atomic import check_output
+    from skincal.io.atomic import check_output
     from skincal.workflows.live import parse_target
 
     goal = parse_target(target)
@@ -82,7 +82,6 @@ def _remove_segments(earlier: list[str]) -> None:
 
 
 def _write_segment(chain, out: Path, k: int, segment, rate: float) -> Path:  # noqa: ANN001
-    from skincal.cli.protocol import at_rate, joint_names
     from skincal.protocol.export import export_trajectory
 
     path = segment_path(out, k)
@@ -101,7 +100,6 @@ def _segment_line(record, path: Path) -> str:  # noqa: ANN001
 
 def _finish(chain, out: Path, result_path: Path, trajectory, result, reached: bool, motion_s: float, n: int,  # noqa: ANN001
             rate: float, goal) -> None:  # noqa: ANN001  # fmt: skip
-    from skincal.cli.protocol import at_rate, joint_names
     from skincal.data.result import write_result
     from skincal.protocol.export import export_trajectory
 
@@ -145,8 +143,8 @@ def _live(chain, out: Path, result_path: Path, *, rate: float, seed: int, goal, 
 
     import numpy as np
 
-    from skincal.data.atomic import check_output
     from skincal.hw.net import check_bind
+    from skincal.io.atomic import check_output
     from skincal.workflows.adaptive import LiveDesigner
     from skincal.workflows.live import record_live
 

@@ -57,8 +57,8 @@ def simulate(
         return
     from rich.progress import Progress
 
-    from skincal.data.atomic import check_output
     from skincal.data.hdf5 import write_dataset
+    from skincal.io.atomic import check_output
     from skincal.kinematics import get_robot
     from skincal.workflows.session import simulate_dataset
 
@@ -84,9 +84,9 @@ def _simulate_handheld(
     force: bool,
 ) -> None:  # fmt: skip
     """``--handheld``: an IMU-only session (:func:`skincal.workflows.handheld.handheld_dataset`)."""
-    from skincal.data.atomic import check_output
     from skincal.data.hdf5 import write_dataset
     from skincal.errors import ConfigError
+    from skincal.io.atomic import check_output
     from skincal.workflows.handheld import handheld_dataset
     from skincal.workflows.session import resolve_timing
 

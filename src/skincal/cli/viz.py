@@ -275,7 +275,7 @@ def report(
             "html needs --out FILE (without --out the markdown summary is printed)", param_hint="'--format'"
         )
     if out is not None:
-        from skincal.data.atomic import check_output
+        from skincal.io.atomic import check_output
 
         check_output(out, force=force, inputs=(result, dataset))
     from rich.markup import escape

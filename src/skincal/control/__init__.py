@@ -15,7 +15,6 @@ from skincal.control.constraints import (
     obstacle_bounds,
     obstacle_geometry,
     obstacle_rows,
-    point_jacobians,
     ramp_width,
 )
 from skincal.control.qp import AvoidanceController, ControllerConfig, QpProblem, StepResult
@@ -51,7 +50,6 @@ __all__ = [
     "obstacle_bounds",
     "obstacle_geometry",
     "obstacle_rows",
-    "point_jacobians",
     "protective_separation",
     "ramp_width",
 ]

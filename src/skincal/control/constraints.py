@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike
 
 from skincal.kinematics.chain import SerialChain, cross
 from skincal.kinematics.transforms import FloatArray
-from skincal.perception.body import BodyProximity, RobotBody, body_proximity, point_jacobians
+from skincal.perception.body import BodyProximity, RobotBody, body_proximity
 
 SATURATION = 0.99
 """Fraction of ``v_max`` the bound reaches at the notice distance."""
@@ -150,7 +150,7 @@ def obstacle_geometry(
         prox = body_proximity(body, T_base_link, cand.reshape(-1, 3), group=cand.shape[1])
     else:
         prox = body_proximity(body, T_base_link, pts)
-    J = point_jacobians(body.chain, T_base_link, prox.link, prox.p_base_robot)
+    J = body.chain.point_jacobians(T_base_link, prox.link, prox.p_base_robot)
     return prox, np.einsum("ki,kij->kj", prox.normal, J)
 
 

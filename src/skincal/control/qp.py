@@ -73,7 +73,6 @@ from skincal.control.constraints import (
     joint_velocity_bounds,
     obstacle_geometry,
     obstacle_rows,
-    point_jacobians,
     ramp_width,
 )
 from skincal.control.separation import (
@@ -274,7 +273,7 @@ class AvoidanceController:
         n = self.chain.n_joints
         T = self._frames.frames(q)
         x = T[n, :3, :3] @ self._flange + T[n, :3, 3]
-        J = point_jacobians(self.chain, T, [n], x)[0]
+        J = self.chain.point_jacobians(T, [n], x)[0]
         xd_cmd = np.asarray(xd_des, dtype=float) + cfg.gain * (np.asarray(x_des, dtype=float) - x)
         P = J.T @ J + cfg.damping * np.eye(n)
         c = -J.T @ xd_cmd

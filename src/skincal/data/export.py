@@ -60,11 +60,11 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from skincal.data.atomic import write_bytes_atomic
-from skincal.data.jsonio import load_yaml
 from skincal.data.provenance import result_robot
 from skincal.data.result import CalibrationResult, UnitResult
 from skincal.errors import ConfigError, DatasetError
+from skincal.io.atomic import write_bytes_atomic
+from skincal.io.jsonio import load_yaml
 from skincal.kinematics.chain import PRISMATIC, SerialChain
 from skincal.kinematics.transforms import FloatArray
 from skincal.names import name_problem, printable

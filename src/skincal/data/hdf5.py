@@ -51,22 +51,19 @@ from typing import Any, Literal, cast, overload
 import h5py
 import numpy as np
 
-from skincal.data.atomic import atomic_path
 from skincal.data.dataset import BodyPose, Dataset, ImuStream, JointStates, Segments, TofStream
-from skincal.data.jsonio import regular_file
 from skincal.data.result import check_events
 from skincal.data.validate import TRUTH_BODY_ATTRS, check_unit_name, shown, validate_dataset
+from skincal.data.writer import FORMAT, JOINT_TYPE_CODES, VERSION, DatasetWriter
 from skincal.errors import ConfigError, DatasetError
 from skincal.errors import first_line as _first_line
+from skincal.io.atomic import atomic_path
+from skincal.io.jsonio import regular_file
 from skincal.kinematics.chain import CONVENTIONS, GRAVITY_BASE, SerialChain
 from skincal.names import printable
 from skincal.skin.pose import SkinUnitPose
 
-FORMAT = "skincal-dataset"
-VERSION = 2
-"""Version written; :data:`READABLE_VERSIONS` are read."""
 READABLE_VERSIONS = (1, 2)
-JOINT_TYPE_CODES = {"revolute": 0, "prismatic": 1}
 """``/robot/joint_type`` codes."""
 _QUAT_NORM_TOL = 1e-3
 
@@ -625,105 +622,6 @@ def read_dataset(path: str | Path) -> Dataset:
         return _build(r, lazy=False)
 
 
-def _write_floats(grp: h5py.Group, name: str, value: object) -> None:
-    grp.create_dataset(name, data=np.asarray(value, dtype=np.float64), fletcher32=True)
-
-
-def write_robot(f: h5py.File, chain: SerialChain, gravity: object) -> None:
-    """The ``/robot`` group of a version-2 file (the general chain; a DH robot's table besides)."""
-    robot = f.create_group("robot")
-    robot.attrs["name"] = chain.name
-    robot.attrs["convention"] = chain.convention
-    robot.attrs["gravity"] = np.asarray(gravity, dtype=np.float64)
-    n = chain.n_joints
-    text = h5py.string_dtype("utf-8")
-    robot.attrs["joint_names"] = np.array([chain.joint_name(i) for i in range(1, n + 1)], dtype=text)
-    robot.attrs["link_names"] = np.array([chain.link_name(i) for i in range(n + 1)], dtype=text)
-    _write_floats(robot, "T_parent_joint", chain.T_parent_joint)
-    _write_floats(robot, "axis", chain.axis)
-    _write_floats(robot, "T_joint_link", chain.T_joint_link)
-    robot.create_dataset(
-        "joint_type", data=np.array([JOINT_TYPE_CODES[t] for t in chain.joint_type], dtype=np.int8), fletcher32=True
-    )
-    if chain.dh is not None:
-        _write_floats(robot, "dh", chain.dh)
-    if chain.source is not None:
-        robot.create_dataset("urdf", data=np.frombuffer(chain.source.encode("utf-8"), dtype=np.uint8), fletcher32=True)
-    for key in ("joint_lower", "joint_upper", "velocity_limit", "acceleration_limit", "effort_limit"):
-        value = getattr(chain, key)
-        if value is not None:
-            _write_floats(robot, key, value)
-    if not np.array_equal(chain.T_link_flange, np.eye(4)):
-        _write_floats(robot, "T_link_flange", chain.T_link_flange)
-
-
-def _write(f: h5py.File, ds: Dataset) -> None:
-    f.attrs["format"] = FORMAT
-    f.attrs["version"] = np.int64(VERSION)
-    if ds.description:
-        f.attrs["description"] = ds.description
-
-    if ds.robot is not None:
-        write_robot(f, ds.robot, ds.gravity)
-    else:  # IMU-only without a robot: gravity at the root
-        f.attrs["gravity"] = np.asarray(ds.gravity, dtype=np.float64)
-
-    if ds.joints is not None:
-        joints = f.create_group("joints")
-        for key in ("t", "q", "qd", "qdd"):
-            value = getattr(ds.joints, key)
-            if value is not None:
-                _write_floats(joints, key, value)
-
-    imu = f.create_group("imu", track_order=True)  # keep the unit order
-    for unit, stream in ds.imu.items():
-        g = imu.create_group(unit)
-        _write_floats(g, "t", stream.t)
-        _write_floats(g, "accel", stream.accel)
-        if stream.gyro is not None:
-            _write_floats(g, "gyro", stream.gyro)
-
-    if ds.tof:
-        tof = f.create_group("tof", track_order=True)
-        for unit, ranges in ds.tof.items():
-            g = tof.create_group(unit)
-            _write_floats(g, "t", ranges.t)
-            _write_floats(g, "range", ranges.range)
-
-    if ds.segments is not None:
-        seg = f.create_group("segments")
-        _write_floats(seg, "t_start", ds.segments.t_start)
-        _write_floats(seg, "t_end", ds.segments.t_end)
-        seg.create_dataset("kind", data=np.asarray(ds.segments.kind, dtype=np.int8), fletcher32=True)
-        seg.create_dataset("pose", data=np.asarray(ds.segments.pose, dtype=np.int32), fletcher32=True)
-        seg.create_dataset("joint", data=np.asarray(ds.segments.joint, dtype=np.int32), fletcher32=True)
-
-    if ds.truth or ds.truth_body:
-        truth = f.create_group("truth", track_order=True)
-        for unit in [*ds.truth, *(u for u in ds.truth_body if u not in ds.truth)]:
-            g = truth.create_group(unit)
-            pose = ds.truth.get(unit)
-            if pose is not None:
-                g.attrs["link"] = np.int64(pose.link)
-                g.attrs["position"] = np.asarray(pose.p_link_su, dtype=np.float64)
-                g.attrs["quaternion_wxyz"] = np.asarray(pose.quaternion_wxyz, dtype=np.float64)
-            body = ds.truth_body.get(unit)
-            if body is not None:
-                g.attrs["body"] = body.body
-                g.attrs["T_body_su"] = np.asarray(body.T_body_su, dtype=np.float64)
-            for key, value in ds.truth_sensor.get(unit, {}).items():
-                g.attrs[key] = np.asarray(value, dtype=np.float64)
-
-    if ds.events:
-        events = f.create_group("events", track_order=True)
-        for k, event in enumerate(check_events(list(ds.events), "events", units=set(ds.imu))):
-            g = events.create_group(str(k))
-            for key, value in event.items():
-                g.attrs[key] = value if isinstance(value, str) else np.asarray(value, dtype=np.float64)
-            if "link" in event:
-                g.attrs["link"] = np.int64(event["link"])
-
-
 def write_dataset(dataset: Dataset, path: str | Path) -> None:
     """Validate ``dataset`` and write it to ``path`` atomically (temporary file, fsync, rename).
 
@@ -735,5 +633,5 @@ def write_dataset(dataset: Dataset, path: str | Path) -> None:
     """
     path = Path(path)
     validate_dataset(dataset, source=str(path))
-    with atomic_path(path) as tmp, h5py.File(tmp, "w", libver=("v108", "latest")) as f:
-        _write(f, dataset)
+    with atomic_path(path) as tmp, DatasetWriter(tmp, libver=("v108", "latest")) as writer:
+        writer.write(dataset)

@@ -52,10 +52,10 @@ from typing import Any
 
 import numpy as np
 
-from skincal.data.atomic import write_bytes_atomic
 from skincal.data.imu_calibration import IMU_KEYS, IMU_SHAPES, INTEGER_KEYS, ImuCalibration, imu_to_fields
-from skincal.data.jsonio import load_json, regular_file
 from skincal.errors import ConfigError, DatasetError
+from skincal.io.atomic import write_bytes_atomic
+from skincal.io.jsonio import load_json, regular_file
 from skincal.kinematics.transforms import FloatArray
 from skincal.names import MAX_NAME_CHARS, name_problem
 from skincal.skin.pose import SkinUnitPose
@@ -606,7 +606,7 @@ def read_result(path: str | Path) -> CalibrationResult:
 
     Raises:
         DatasetError: missing file, not a regular file, too large, not JSON (or JSON that
-            :func:`skincal.data.jsonio.load_json` refuses: duplicate keys, nesting deeper than 64,
+            :func:`skincal.io.jsonio.load_json` refuses: duplicate keys, nesting deeper than 64,
             NaN/Infinity, overflowing numbers), wrong format or version, a malformed field, a bad
             unit or robot name (:func:`skincal.names.name_problem`), no units, a position
             beyond :data:`MAX_POSITION_M`, or a link beyond a preset robot's links; one line naming

@@ -46,13 +46,13 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from skincal.data.atomic import atomic_path
-from skincal.data.hdf5 import FORMAT, VERSION, write_robot
+from skincal.data.writer import DatasetWriter
 from skincal.errors import ConfigError, DatasetError
 from skincal.hw.clock import ClockFit
 from skincal.hw.packet import JointPacket, SkinPacket
 from skincal.hw.receiver import Delivery, ReceiverStats, StreamKey
-from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
+from skincal.io.atomic import atomic_path
+from skincal.kinematics.chain import SerialChain
 from skincal.names import name_problem, printable
 
 MAX_UNIT_SAMPLES = 1 << 22
@@ -190,19 +190,20 @@ class Recorder:
         self._joint_source: tuple[int, int] | None = None  # (robot id, n_joints)
         self._last_flush_s = host_clock()
         try:
-            self._file: h5py.File | None = h5py.File(self.path, "w")
+            self._file: DatasetWriter | None = DatasetWriter(self.path)
         except OSError as exc:
             raise DatasetError(f"{self.path}: cannot create the recording: {exc}") from exc
-        f = self._file
-        f.attrs.update(
-            format=FORMAT, version=VERSION, description=description, recording_complete=False,
-            t_origin_host_s=self.t_origin_s, host_clock=getattr(host_clock, "__name__", "host_clock"),
-            started_utc=_dt.datetime.now(_dt.UTC).isoformat(), flushed_samples=0,
-            max_unit_samples=self.max_unit_samples,
+        self._file.start(
+            dict(
+                description=description, recording_complete=False, t_origin_host_s=self.t_origin_s,
+                host_clock=getattr(host_clock, "__name__", "host_clock"),
+                started_utc=_dt.datetime.now(_dt.UTC).isoformat(), flushed_samples=0,
+                max_unit_samples=self.max_unit_samples,
+            ),
+            robot,
+            gravity=None,  # no root gravity in a recording without a robot; /robot gets the standard one
         )
-        if robot is not None:
-            write_robot(f, robot, GRAVITY_BASE)
-        f.flush()
+        self._file.flush()
 
     @property
     def ignored_samples(self) -> int:
@@ -338,29 +339,18 @@ class Recorder:
                 self.ignored["tof_without_imu"] += n
         self.flushed_samples += written
         self._pending_samples -= written
-        f.attrs["flushed_samples"] = self.flushed_samples
+        f.file.attrs["flushed_samples"] = self.flushed_samples
         f.flush()
         self._last_flush_s = self.host_clock()
         if self.on_flush is not None:
             self.on_flush(self.flushed_samples)
 
-    def _append(self, f: h5py.File, group: str, g: _Group, rows: dict[str, np.ndarray]) -> None:
-        h = f.require_group(group)
-        if not h.attrs:
-            h.attrs.update(stream=g.key[0], source_id=g.key[1])
-        n = len(rows["t"])
-        for name, value in rows.items():
-            value = np.asarray(value, dtype=np.int64 if name == "device_t_us" else np.float64)
-            if name not in h:
-                row_shape = value.shape[1:]
-                h.create_dataset(name, shape=(0, *row_shape), maxshape=(None, *row_shape), dtype=value.dtype,
-                                 chunks=(self.chunk_rows, *row_shape))
-            ds = h[name]
-            old = ds.shape[0]
-            ds.resize(old + n, axis=0)
-            ds[old:] = value
+    def _append(self, f: DatasetWriter, group: str, g: _Group, rows: dict[str, np.ndarray]) -> None:
+        typed = {name: np.asarray(value, dtype=np.int64 if name == "device_t_us" else np.float64)
+                 for name, value in rows.items()}
+        f.append(group, typed, {"stream": g.key[0], "source_id": g.key[1]}, self.chunk_rows)
 
-    def _require_open(self) -> h5py.File:
+    def _require_open(self) -> DatasetWriter:
         if self._file is None:
             raise DatasetError(f"{self.path}: recording already finished")
         return self._file
@@ -384,10 +374,9 @@ class Recorder:
         self.close()
         samples: dict[str, int] = {}
         with atomic_path(self.path) as tmp:
-            with h5py.File(self.path, "r") as src, h5py.File(tmp, "w") as dst:
-                dst.attrs.update(src.attrs)
-                for name in src:
-                    src.copy(src[name], dst, name=name)
+            with h5py.File(self.path, "r") as src, DatasetWriter(tmp) as writer:
+                writer.copy_from(src)
+                dst = writer.file
                 for group, g in self._groups.items():
                     if not g.written:
                         continue

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from skincal.data.dataset import Dataset, ImuStream, JointStates, TofStream
+from skincal.kinematics.chain import GRAVITY_BASE
 from skincal.kinematics.presets import get_robot
 
 
@@ -35,7 +36,7 @@ def traffic_dataset(
     for k in range(1, n_units + 1):
         t = np.arange(rng.uniform(0, 1.0 / imu_hz), duration_s, 1.0 / imu_hz)
         up = rng.normal(size=3)
-        up *= 9.81 / np.linalg.norm(up)
+        up *= -GRAVITY_BASE[2] / np.linalg.norm(up)
         imu[f"su{k}"] = ImuStream(t, up + rng.normal(0, 0.02, (t.size, 3)), rng.normal(0, 0.01, (t.size, 3)))
         if tof_hz > 0:
             t_r = np.arange(rng.uniform(0, 1.0 / tof_hz), duration_s, 1.0 / tof_hz)

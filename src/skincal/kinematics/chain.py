@@ -428,10 +428,39 @@ class SerialChain:
         x = transform_points(T[:, link], p_link)
         J = np.zeros((T.shape[0], 6, self.n_joints))
         rev = self.revolute[:link]
-        lin = np.where(rev[None, :, None], np.cross(z[:, :link], x[:, None, :] - c[:, :link]), z[:, :link])
-        J[:, :3, :link] = np.swapaxes(lin, 1, 2)
+        J[:, :3, :link] = np.swapaxes(self._linear_columns(c[:, :link], z[:, :link], x[:, None, :]), 1, 2)
         J[:, 3:, :link] = np.swapaxes(np.where(rev[None, :, None], z[:, :link], 0.0), 1, 2)
         return J
+
+    def point_jacobians(self, T_base_link: FloatArray, links: ArrayLike, p_base: ArrayLike) -> FloatArray:
+        """Position Jacobians ``(K, 3, n)`` of points ``p_base`` ``(K, 3)`` (base frame, m) fixed to ``links`` ``(K,)``.
+
+        The linear rows of :meth:`point_jacobian` for many points on any links at known frames: column
+        ``j`` (0-based) of a point ``x`` on link ``l`` is ``z_j x (x - c_j)`` for a revolute joint and
+        ``z_j`` for a prismatic one when ``j < l``, 0 otherwise, with joint axis ``z_j`` through ``c_j``
+        (:meth:`joint_axes`); a point on the base (link 0) has a zero Jacobian. ``T_base_link``:
+        ``(n + 1, 4, 4)`` at one configuration, or ``(K, n + 1, 4, 4)``: each point at its own configuration.
+        """
+        T = np.asarray(T_base_link)
+        p = np.asarray(p_base, dtype=float).reshape(-1, 3)
+        links = np.asarray(links, dtype=int).reshape(-1)
+        if T.ndim == 4:
+            c, z = self.joint_axes(T)  # (K, n, 3)
+        else:
+            c, z = self.joint_axes(T[None])
+            c, z = c[0][None], z[0][None]  # (1, n, 3)
+        cols = self._linear_columns(c, z, p[:, None, :])  # (K, n, 3)
+        mask = np.arange(self.n_joints)[None, :] < links[:, None]
+        return np.swapaxes(cols * mask[..., None], 1, 2)
+
+    def _linear_columns(self, c: FloatArray, z: FloatArray, x: FloatArray) -> FloatArray:
+        """``(..., m, 3)`` linear Jacobian columns of points ``x`` ``(..., 1, 3)`` for joints ``0..m-1``
+        (axes ``z`` through ``c``, ``(..., m, 3)``): ``z_j x (x - c_j)`` if revolute, ``z_j`` if prismatic."""
+        m = c.shape[-2]
+        lin = cross(z, x - c)
+        if self.revolute[:m].all():
+            return lin
+        return np.where(self.revolute[:m, None], lin, np.broadcast_to(z, lin.shape))
 
     def check_link(self, link: int) -> int:
         """Return ``link`` if it names a moving link ``1..n``, else raise :class:`ConfigError`."""

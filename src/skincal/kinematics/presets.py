@@ -251,7 +251,7 @@ def load_chain(path: str | Path) -> SerialChain:
         velocity_limit: [...]         # optional, rad/s
         T_link_flange: [[...], ...]   # optional 4x4
     """
-    from skincal.data.jsonio import load_json, load_yaml
+    from skincal.io.jsonio import load_json, load_yaml
 
     path = Path(path)
     load = load_json if path.suffix.lower() == ".json" else load_yaml

@@ -127,6 +127,17 @@ def rotation_angle(R_a: ArrayLike, R_b: ArrayLike) -> FloatArray:
     return np.arctan2(0.5 * np.linalg.norm(w, axis=-1), 0.5 * (tr - 1.0))
 
 
+def nearest_rotation(M: ArrayLike) -> FloatArray:
+    """The rotation nearest to ``M`` ``(3, 3)`` in the Frobenius norm (SVD projection onto SO(3)).
+
+    ``M = U S V^T``: ``R = U diag(1, 1, det(U) det(V)) V^T`` (the last sign keeps ``det R = +1``); the
+    solution of Wahba's problem for ``M = B`` (:func:`skincal.calib.closed_form.wahba`).
+    """
+    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=float))
+    D = np.diag([1.0, 1.0, np.linalg.det(U) * np.linalg.det(Vt)])
+    return U @ D @ Vt
+
+
 def quaternion_distance(q_a: ArrayLike, q_b: ArrayLike) -> FloatArray:
     """The paper's quaternion distance ``min(|q_a - q_b|, |q_a + q_b|)`` on unit quaternions."""
     q_a = np.asarray(q_a, dtype=float)

@@ -46,7 +46,13 @@ MAX_URDF_BYTES = 32 * 1024 * 1024
 """Largest URDF text read, bytes (robot descriptions are kilobytes; meshes live in other files)."""
 
 
-def _parse(text: str, source: str):  # -> yourdfpy.URDF
+def parse_urdf(text: str, source: str):  # -> yourdfpy.URDF
+    """A URDF's text parsed by yourdfpy (no scene graph, no meshes), trusting nothing: at most
+    :data:`MAX_URDF_BYTES`, strictly well-formed XML without entities, external DTDs or network access.
+
+    Raises:
+        ConfigError: one line ``<source>: ...`` for any of those or any parser error.
+    """
     try:
         import yourdfpy
     except ImportError:  # pragma: no cover - a core dependency
@@ -146,7 +152,7 @@ def chain_from_urdf(
     source = str(path) if path is not None else "URDF"
     if text is None:
         text = read_urdf_text(path)  # type: ignore[arg-type]
-    urdf = _parse(text, source)
+    urdf = parse_urdf(text, source)
     robot = urdf.robot
     joints = {j.child: j for j in robot.joints}
     links = [link.name for link in robot.links]

@@ -5,12 +5,11 @@ from skincal.perception.body import (
     RobotBody,
     body_proximity,
     closest_on_segments,
-    point_jacobians,
     segment_distance,
 )
+from skincal.perception.config import PerceptionConfig
 from skincal.perception.points import (
     ObstaclePoints,
-    PerceptionConfig,
     interpolate_joints,
     points_from_streams,
     unit_points,
@@ -39,7 +38,6 @@ __all__ = [
     "closest_on_segments",
     "interpolate_joints",
     "point_covariance",
-    "point_jacobians",
     "points_from_streams",
     "pose_jacobian",
     "ray_velocity",

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from skincal.kinematics.chain import SerialChain, cross
+from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.geometry import DEFAULT_LINK_RADIUS, Capsule, link_capsules
 from skincal.kinematics.transforms import FloatArray
 
@@ -172,24 +172,3 @@ def segment_distance(a1: FloatArray, b1: FloatArray, a2: FloatArray, b2: FloatAr
     gap = w + s[..., None] * u - t_clamped[..., None] * v
     return np.linalg.norm(gap, axis=-1)
 
-
-def point_jacobians(chain: SerialChain, T_base_link: FloatArray, links: ArrayLike, p_base: ArrayLike) -> FloatArray:
-    """Position Jacobians ``(K, 3, n)`` of points ``p_base`` ``(K, 3)`` (base frame, m) fixed to ``links`` ``(K,)``.
-
-    Column ``j`` (0-based) of a point on link ``l`` is ``z_j x (p - c_j)`` for ``j < l`` and 0 otherwise,
-    with joint axis ``z_j`` through ``c_j`` (:meth:`SerialChain.joint_axes`); a point on the base
-    (link 0) has a zero Jacobian. ``T_base_link``: ``(n + 1, 4, 4)`` at one configuration, or
-    ``(K, n + 1, 4, 4)``: each point at its own configuration.
-    """
-    T = np.asarray(T_base_link)
-    p = np.asarray(p_base, dtype=float).reshape(-1, 3)
-    links = np.asarray(links, dtype=int).reshape(-1)
-    if T.ndim == 4:
-        c, z = chain.joint_axes(T)  # (K, n, 3)
-        cols = cross(z, p[:, None, :] - c)
-    else:
-        c, z = chain.joint_axes(T[None])
-        c, z = c[0], z[0]  # (n, 3)
-        cols = cross(z[None, :, :], p[:, None, :] - c[None, :, :])  # (K, n, 3)
-    mask = np.arange(chain.n_joints)[None, :] < links[:, None]
-    return np.swapaxes(cols * mask[..., None], 1, 2)

@@ -51,7 +51,8 @@ from numpy.typing import ArrayLike
 
 from skincal.kinematics.chain import SerialChain
 from skincal.perception.body import RobotBody, body_proximity
-from skincal.perception.points import ObstaclePoints, PerceptionConfig, valid_ranges
+from skincal.perception.config import PerceptionConfig
+from skincal.perception.points import ObstaclePoints, valid_ranges
 from skincal.perception.uncertainty import SkinUncertainty, reading_covariance
 from skincal.skin.pose import SkinUnitPose
 

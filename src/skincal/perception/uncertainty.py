@@ -18,7 +18,7 @@ present (:func:`skincal.data.export.pose_covariance`).
     dp/d(dp)     = R_bl                         (3 x 3)
     dp/d(dtheta) = -R_bl [r a]_x                (3 x 3: Exp(dtheta) r a ~ r a + dtheta x r a)
     dp/dr        = R_bl a                       (3 x 1: the ray)
-    dp/dq        = the point's position Jacobian on link l  (3 x n, :func:`skincal.perception.body.point_jacobians`)
+    dp/dq        = the point's position Jacobian on link l  (3 x n, :meth:`SerialChain.point_jacobians`)
 
 and, the three sources independent, ``Cov_p = J_pose Cov_pose J_pose^T + sigma_r^2 (R_bl a)(R_bl a)^T +
 J_q Cov_q J_q^T``. The range variance is the ToF model's noise at the reading,
@@ -43,8 +43,7 @@ from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray
 from skincal.names import printable
-from skincal.perception.body import point_jacobians
-from skincal.perception.points import PerceptionConfig
+from skincal.perception.config import PerceptionConfig
 from skincal.skin.tof import TofModel, get_tof_model
 
 POSE_ORDER = ("x", "y", "z", "rx", "ry", "rz")
@@ -218,5 +217,5 @@ def reading_covariance(
     R_bl = T[links, :3, :3] if T.ndim == 3 else T[np.arange(links.size), links, :3, :3]
     r = np.asarray(ranges, dtype=float).reshape(-1)
     joint_cov = uncertainty.joint_covariance(chain.n_joints)
-    J_q = None if joint_cov is None else point_jacobians(chain, T, links, points)
+    J_q = None if joint_cov is None else chain.point_jacobians(T, links, points)
     return point_covariance(R_bl, R_link_su, r, pose_cov, uncertainty.range_variance(r), J_q, joint_cov)

@@ -11,7 +11,7 @@
   ``{sec, nanosec}``), one point per sample, 17 significant digits, as ``ros2 topic pub`` or a
   ``FollowJointTrajectory`` goal takes it; comment lines name the robot, protocol and segments file.
 
-Writes are atomic (:func:`skincal.data.atomic.atomic_path`: a temporary file in the target's
+Writes are atomic (:func:`skincal.io.atomic.atomic_path`: a temporary file in the target's
 directory is fsynced and moved onto the target with :func:`os.replace`): readers never see half a file.
 """
 
@@ -24,11 +24,11 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from skincal.data.atomic import atomic_path, remove_debris
 from skincal.data.dataset import Segments
-from skincal.data.jsonio import load_json
 from skincal.data.validate import validate_segments
 from skincal.errors import ConfigError, DatasetError
+from skincal.io.atomic import atomic_path, remove_debris
+from skincal.io.jsonio import load_json
 from skincal.kinematics.transforms import FloatArray
 from skincal.protocol.config import ProtocolConfig
 from skincal.protocol.trajectory import Trajectory

@@ -43,6 +43,7 @@ from skincal.kinematics.geometry import DEFAULT_LINK_RADIUS, link_capsules
 from skincal.kinematics.inertia import LinkInertial
 from skincal.kinematics.presets import iiwa14, panda, ur5e
 from skincal.kinematics.transforms import FloatArray, quat_wxyz_from_matrix
+from skincal.sim.mjcf import mjcf_floats
 from skincal.skin.pose import SkinUnitPose
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -169,13 +170,6 @@ def sensor_name(unit: str, kind: str) -> str:
 
 
 # ---------------------------------------------------------------------------------------------- MJCF
-def mjcf_floats(values: FloatArray | Sequence[float] | float) -> str:
-    """Floats as MJCF attribute text at full precision (repr round-trips), so frames survive the XML
-    text exactly: the one float formatting of every MJCF skincal writes (robot and scene)."""
-    arr = np.atleast_1d(np.asarray(values, dtype=float))
-    return " ".join(repr(float(x)) for x in arr)
-
-
 def _body_offset(chain: SerialChain, i: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Body ``i`` (1-based) in body ``i-1`` at ``q_i = 0``, and its joint: ``(pos, quat_wxyz, axis,
     anchor)``. With ``T_{i-1,i}(q) = A M(q) B = (A B) (B^-1 M(q) B)`` (module docstring) the body sits

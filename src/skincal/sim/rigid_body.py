@@ -34,7 +34,7 @@ from scipy.spatial.transform import Rotation
 from skincal.data.dataset import BodyPose, Dataset, ImuStream
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import GRAVITY_BASE
-from skincal.kinematics.transforms import FloatArray
+from skincal.kinematics.transforms import FloatArray, skew
 from skincal.sim.common import sensor_truth, unit_clock_stamps
 from skincal.skin.clock import ClockModel
 from skincal.skin.imu import ImuModel, apply_imu_model, draw_imu_errors, sample_instants, true_sample_times
@@ -43,15 +43,6 @@ _H_ROT = 1e-6  # s, central difference of the rotation (analytic phi, so only ro
 _H_RATE = 1e-4  # s, central difference of the angular velocity
 MIN_MOVE_S = 1.0
 """Shortest motion before, between and after the holds of :meth:`HandMotion.turn_over`, s."""
-
-
-def skew(v: FloatArray) -> FloatArray:
-    """``(M, 3) -> (M, 3, 3)`` cross-product matrices ``[v]x``."""
-    v = np.asarray(v, dtype=float)
-    S = np.zeros(v.shape[:-1] + (3, 3))
-    S[..., 0, 1], S[..., 0, 2], S[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    S[..., 1, 0], S[..., 2, 0], S[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return S
 
 
 def rigid_body_matrix(w: FloatArray, dw: FloatArray) -> FloatArray:

@@ -409,8 +409,8 @@ def load_scenario(
     task: str = "circle",
     q0: ArrayLike | None = None,
 ) -> Scenario:
-    """Read a scenario file (YAML or JSON, through the guarded :mod:`skincal.data.jsonio` readers)."""
-    from skincal.data.jsonio import parse_json, parse_yaml, read_text
+    """Read a scenario file (YAML or JSON, through the guarded :mod:`skincal.io.jsonio` readers)."""
+    from skincal.io.jsonio import parse_json, parse_yaml, read_text
 
     path = Path(path)
     parse = parse_json if path.suffix.lower() == ".json" else parse_yaml

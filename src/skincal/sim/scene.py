@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike
 from skincal.data.interp import interp_rows
 from skincal.errors import ConfigError
 from skincal.kinematics.transforms import FloatArray, quat_wxyz_from_matrix, rot_z
-from skincal.sim.mujoco_model import mjcf_floats
+from skincal.sim.mjcf import mjcf_floats
 from skincal.skin.tof import finite_array
 
 KINDS = {"sphere": 1, "capsule": 2, "box": 3, "plane": 2}

@@ -4,8 +4,8 @@
   :func:`~skincal.viz.viewer.start_viewer`.
 * :mod:`~skincal.viz.report`: one self-contained HTML report, :func:`~skincal.viz.report.write_report`;
   :mod:`~skincal.viz.summary`: the markdown summary, :func:`~skincal.viz.summary.render_markdown`.
-* :mod:`~skincal.viz.content`, :mod:`~skincal.viz.residuals`, :mod:`~skincal.viz.plots`: what the
-  reports show (residuals, coverage, errors) and the matplotlib figures.
+* :mod:`~skincal.viz.content`, :mod:`~skincal.viz.plots`: what the reports show (residuals from
+  :mod:`skincal.calib.residuals`, coverage, errors) and the matplotlib figures.
 * :mod:`~skincal.viz.model`: what the viewer draws, as numbers (no viser).
 * :mod:`~skincal.viz.browser`: headless Chromium screenshots and console errors (tests, docs).
 

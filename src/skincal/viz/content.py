@@ -2,11 +2,8 @@
 
 from __future__ import annotations
 
-import multiprocessing
 import os
-from collections import deque
 from collections.abc import Callable, Iterator
-from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -14,27 +11,18 @@ import numpy as np
 
 from skincal.calib.metrics import evaluate
 from skincal.calib.preprocess import JointInterpolator
+from skincal.calib.residuals import PLOT_POINTS, UnitResiduals, unit_activity, unit_residuals
 from skincal.data.dataset import Dataset, ImuStream
 from skincal.data.result import CalibrationResult, failed_units
 from skincal.errors import DatasetError
 from skincal.kinematics.transforms import FloatArray
-from skincal.viz.residuals import PLOT_POINTS, UnitResiduals, unit_activity, unit_residuals
+from skincal.parallel import can_fork, imap
 
 WORST_SHOWN = 10
 """Units whose residuals the HTML report plots: the worst by the report's key figure (:class:`Ranking`)."""
 
 _UnitOutcome = tuple[float, "UnitResiduals | None", FloatArray]
 """One unit's residual RMS, its thinned residual trace (None: not plotted) and its activity row."""
-_FORKED: dict[int, Callable[[str, ImuStream], _UnitOutcome]] = {}
-"""Per-unit closures of the running :func:`collect` calls by token, inherited by forked workers."""
-
-
-def _forked_unit(token: int, name: str, imu: ImuStream) -> _UnitOutcome:
-    """Entry point of a forked worker: the inherited closure on one unit's IMU stream (sent by the
-    parent, which alone reads the dataset file)."""
-    return _FORKED[token](name, imu)
-
-
 @dataclass(frozen=True)
 class UnitRow:
     """One line of the per-unit table (SI units; ``scale`` is the diagonal of the scale/misalignment
@@ -197,32 +185,11 @@ def _per_unit(
     """``one(name, dataset.imu[name])`` for each unit in order; with ``workers > 1`` (and ``fork``) in
     that many forked processes, at most two units per worker read ahead (bounded memory)."""
     n_workers = max(1, min(int(workers), len(names), os.cpu_count() or 1))
-    if n_workers == 1 or "fork" not in multiprocessing.get_all_start_methods():
+    if n_workers == 1 or not can_fork():
         for name in names:
             yield one(name, dataset.imu[name])
         return
-    from skincal.processes import worker_initializer
-
     interp.warm()  # computed once here, inherited by every child
-    token = id(one)
-    _FORKED[token] = one
-    pending: deque[Future[_UnitOutcome]] = deque()
-    queue = iter(names)
-    try:
-        with ProcessPoolExecutor(
-            max_workers=n_workers, mp_context=multiprocessing.get_context("fork"), initializer=worker_initializer
-        ) as pool:
-            for name in queue:
-                pending.append(pool.submit(_forked_unit, token, name, dataset.imu[name]))
-                if len(pending) >= 2 * n_workers:
-                    break
-            while pending:
-                outcome = pending.popleft().result()
-                name = next(queue, None)
-                if name is not None:
-                    pending.append(pool.submit(_forked_unit, token, name, dataset.imu[name]))
-                yield outcome
-    finally:
-        for future in pending:
-            future.cancel()
-        _FORKED.pop(token, None)
+    items = ((name, dataset.imu[name]) for name in names)  # read by the parent alone, as the workers need them
+    for _, outcome in imap(lambda item: one(*item), items, n_workers, fork=True, window=2 * n_workers):
+        yield outcome

@@ -270,10 +270,10 @@ def urdf_visuals(chain: Any, resolver: MeshResolver) -> UrdfVisuals:
         raise MeshRefused(f"robot '{printable(chain.name)}' has no URDF")
     import yourdfpy
 
-    from skincal.kinematics.urdf import _parse
+    from skincal.kinematics.urdf import parse_urdf
 
     try:
-        robot = _parse(chain.source, "the robot's URDF").robot
+        robot = parse_urdf(chain.source, "the robot's URDF").robot
     except ConfigError as exc:
         raise MeshRefused(str(exc)) from None
     for link in robot.links:

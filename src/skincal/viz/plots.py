@@ -16,9 +16,9 @@ from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
+from skincal.calib.residuals import PLOT_POINTS, UnitResiduals
 from skincal.data.dataset import Segments
 from skincal.kinematics.transforms import FloatArray
-from skincal.viz.residuals import PLOT_POINTS, UnitResiduals
 
 MAX_PLOT_POINTS = PLOT_POINTS
 """Residual traces are thinned to at most this many points (a picture, not the data)."""

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from skincal.data.atomic import write_bytes_atomic
 from skincal.data.dataset import Dataset
 from skincal.data.result import CalibrationResult
+from skincal.io.atomic import write_bytes_atomic
 from skincal.viz.content import WORST_SHOWN, ReportContent, UnitRow, collect
 
 _CSS = """

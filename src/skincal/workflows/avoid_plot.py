@@ -69,7 +69,7 @@ def plot_run(
     more = err_ax.get_legend_handles_labels()
     ax.legend(lines[0] + more[0], lines[1] + more[1], loc="upper right", fontsize=8, markerscale=3)
     ax.set_title(title or f"scenario '{log.scenario.name}': {log.scenario.description}", fontsize=9)
-    from skincal.data.atomic import atomic_path
+    from skincal.io.atomic import atomic_path
 
     written = [path] + ([path.with_suffix(".svg")] if path.suffix.lower() == ".png" else [])
     try:

@@ -48,7 +48,7 @@ from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.geometry import DEFAULT_LINK_RADIUS
 from skincal.kinematics.transforms import FloatArray
 from skincal.perception.body import RobotBody
-from skincal.perception.points import PerceptionConfig
+from skincal.perception.config import PerceptionConfig
 from skincal.perception.tracker import ProximityTracker
 from skincal.perception.uncertainty import SkinUncertainty
 from skincal.sim.mujoco_model import SensorIndex, build_model, link_body_ids, require_mujoco

@@ -6,7 +6,7 @@
   turned by ``rotation_deg``) at stamp ``t_knock`` (:func:`skincal.sim.faults.simulate_knock`);
 * :func:`monitor_batch`: the monitor on residuals computed with the batch model: the units are
   calibrated with ``mle`` from the first ``initial_s`` s, their residuals over the rest of the session
-  (:func:`skincal.viz.residuals.unit_residuals`, divided by the unit's white-noise std) feed
+  (:func:`skincal.calib.residuals.unit_residuals`, divided by the unit's white-noise std) feed
   :class:`~skincal.calib.online.monitor.MovedUnitMonitor`; on an alarm the unit is re-calibrated from
   ``recal_s`` s of data after the estimated change and watched again from there on;
 * :func:`monitor_online`: the same with the streaming calibrator
@@ -27,7 +27,7 @@ from skincal.calib.online.monitor import Alarm, MonitorOptions, MovedUnitMonitor
 from skincal.data.dataset import Dataset, ImuStream, JointStates, Segments
 from skincal.data.result import CalibrationResult, UnitResult
 from skincal.errors import ConfigError
-from skincal.kinematics.transforms import FloatArray
+from skincal.kinematics.transforms import FloatArray, rotation_angle
 from skincal.skin.pose import SkinUnitPose
 
 MOVING_SPEED = 0.05
@@ -119,8 +119,8 @@ def normalised_residuals(
     dataset: Dataset, unit: str, result: UnitResult, sigma: FloatArray, interpolator=None
 ) -> tuple[FloatArray, FloatArray]:
     """``t`` ``(M,)`` s and ``r`` ``(M, 3)``: ``unit``'s accelerometer residuals at ``result`` (the model
-    of :mod:`skincal.viz.residuals`) divided by ``sigma`` ``(3,)``."""
-    from skincal.viz.residuals import unit_residuals
+    of :mod:`skincal.calib.residuals`) divided by ``sigma`` ``(3,)``."""
+    from skincal.calib.residuals import unit_residuals
 
     res = unit_residuals(dataset, unit, result, interpolator)
     return res.t, res.residual / sigma
@@ -280,5 +280,4 @@ def pose_errors(T_est: Any, truth: SkinUnitPose) -> tuple[float, float]:
     """Position (m) and rotation (deg) error of a ``(4, 4)`` pose against ``truth``."""
     T = np.asarray(T_est, dtype=float)
     dp = float(np.linalg.norm(T[:3, 3] - truth.p_link_su))
-    c = (np.trace(truth.R_link_su.T @ T[:3, :3]) - 1) / 2
-    return dp, float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+    return dp, float(np.degrees(rotation_angle(truth.R_link_su, T[:3, :3])))

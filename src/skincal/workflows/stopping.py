@@ -82,7 +82,7 @@ class StopRun:
     saturated: bool
 
 
-class _Capsules:
+class LinkSegments:
     """Segment ends ``(C, 2, 3)`` in their link frames, their links and radii, for speed/displacement."""
 
     def __init__(self, chain: SerialChain, link_radius: float | FloatArray) -> None:
@@ -161,11 +161,11 @@ def stop_once(
     timeout_s: float = 3.0,
     rest_speed: float = REST_SPEED,
     link_radius: float | FloatArray = DEFAULT_LINK_RADIUS,
-    capsules: _Capsules | None = None,
+    capsules: LinkSegments | None = None,
 ) -> StopRun | None:
     """One stop from ``speed`` m/s at ``q0`` (module docstring); ``None`` when that speed needs more
     than the velocity limits in this direction."""
-    caps = capsules if capsules is not None else _Capsules(robot.chain, link_radius)
+    caps = capsules if capsules is not None else LinkSegments(robot.chain, link_radius)
     q0 = np.asarray(q0, dtype=float)
     d = _direction(robot, direction)
     unit = caps.speed(q0, d)
@@ -233,7 +233,7 @@ def stopping_runs(
         else np.atleast_2d(np.asarray(configurations, float))
     )
     robot = robot if robot is not None else TorqueRobot(chain, config=config)
-    caps = _Capsules(chain, link_radius)
+    caps = LinkSegments(chain, link_radius)
     plan = [(q0, direction, float(speed)) for q0 in qs for direction in directions for speed in v]
     if screen > 0:
         candidates = default_configurations(chain, int(screen), seed + 1)

@@ -27,17 +27,14 @@ def map_local(
             if progress is not None:
                 progress(out[-1])
         return out
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from skincal.parallel import imap
 
-    from skincal.processes import worker_initializer
-
-    with ProcessPoolExecutor(max_workers=workers, initializer=worker_initializer) as pool:  # workers die with us
-        futures = [pool.submit(fn, job) for job in jobs]
-        for fut in as_completed(futures):
-            record = fut.result()
-            if progress is not None:
-                progress(record)
-        return [fut.result() for fut in futures]
+    records: dict[int, R] = {}
+    for k, record in imap(fn, jobs, workers, ordered=False):  # workers die with us
+        records[k] = record
+        if progress is not None:
+            progress(record)
+    return [records[k] for k in range(len(jobs))]
 
 
 def map_dask(

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from skincal.kinematics.transforms import FloatArray, skew
+from skincal.kinematics.transforms import FloatArray, nearest_rotation, skew
 
 NA = 28
 """Columns of the accelerometer Gram: ``[vec(G) 9, h 3, p 3, tau 1, tau p 3, k 1, k p 3, d 1, d p 3]`` and the
@@ -199,12 +199,6 @@ def _linear_start(Z: FloatArray, n: int) -> FloatArray | None:
     return x if np.all(np.isfinite(x)) else None
 
 
-def _nearest_rotation(M: FloatArray) -> FloatArray:
-    U, _, Vt = np.linalg.svd(M)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-    return U @ D @ Vt
-
-
 def linearise(R: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """The unknowns of (1) and (2) at ``R`` and ``x = [0 (3), E, h, p, c, tau, k, d]`` ``(NP,)`` and their
     Jacobians with respect to ``delta`` (module docstring): ``x_a`` ``(NA - 1,)``, ``J_a``
@@ -257,10 +251,10 @@ def solve(
     if R0 is None:
         start = _linear_start(Zg, NG - 1) if have_g else None
         if start is not None and np.linalg.matrix_rank(Zg[:9, :9], tol=1e-9 * Zg[:9, :9].trace()) >= 9:
-            R0 = _nearest_rotation(start[:9].reshape(3, 3))
+            R0 = nearest_rotation(start[:9].reshape(3, 3))
         else:
             start_a = _linear_start(Za, NA - 1)
-            R0 = np.eye(3) if start_a is None else _nearest_rotation(start_a[:9].reshape(3, 3))
+            R0 = np.eye(3) if start_a is None else nearest_rotation(start_a[:9].reshape(3, 3))
     R, x = np.array(R0, dtype=float), np.zeros(NP)  # x holds E, h, p, c, tau, k, d (dtheta always 0 at the current R)
     wa, wg = 1.0 / sigma_a**2, (1.0 / sigma_g**2 if have_g else 0.0)
     prior = np.zeros(NP)

@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from skincal.data.jsonio import load_yaml
 from skincal.errors import ConfigError, DatasetError
+from skincal.io.jsonio import load_yaml
 from skincal.names import name_problem, printable
 
 IMU, JOINTS, RANGE, SCAN = (f"sensor_msgs/msg/{x}" for x in ("Imu", "JointState", "Range", "LaserScan"))

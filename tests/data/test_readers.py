@@ -29,8 +29,8 @@ from skincal.cli import main
 from skincal.data import CalibrationResult, Dataset, read_dataset, read_result, write_dataset, write_result
 from skincal.data import hdf5 as hdf5_module
 from skincal.data.hdf5 import open_dataset
-from skincal.data.jsonio import MAX_DEPTH, MAX_TEXT_BYTES, load_json, load_yaml
 from skincal.errors import ConfigError, DatasetError, SkincalError
+from skincal.io.jsonio import MAX_DEPTH, MAX_TEXT_BYTES, load_json, load_yaml
 from skincal.kinematics import load_chain
 
 pytestmark = pytest.mark.adversarial

@@ -1,5 +1,5 @@
-"""Hostile URDFs (found by the new-user/attacker review): entity declarations and external DTDs are
-refused before yourdfpy's own parser could expand them, and a URDF whose joints do not form a tree
+"""Parsing URDFs that trust nothing (:func:`skincal.kinematics.urdf.parse_urdf`): entity declarations and
+external DTDs are refused before yourdfpy's own parser could expand them, and a URDF whose joints do not form a tree
 (a link with two parent joints, a loop of links no root reaches) is one ConfigError line instead of
 an endless walk."""
 

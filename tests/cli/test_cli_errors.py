@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from skincal.cli import main
-from skincal.data.atomic import atomic_path
+from skincal.io.atomic import atomic_path
 
 pytestmark = pytest.mark.adversarial
 
@@ -84,7 +84,7 @@ def test_atomic_path_removes_debris_of_dead_writers_only(tmp_path):
     assert target.read_bytes() == b"new"
     assert not dead.exists() and live.exists() and other.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([target.name, live.name, other.name])
-    from skincal.data.atomic import remove_debris
+    from skincal.io.atomic import remove_debris
 
     assert remove_debris(target) == []  # nothing more to remove
 
@@ -105,7 +105,7 @@ SLOW_WRITER = """
     import sys, time
     from pathlib import Path
     from skincal.cli import app, main
-    from skincal.data.atomic import atomic_path
+    from skincal.io.atomic import atomic_path
 
     @app.command("slow-write")
     def slow_write(out: Path) -> None:
@@ -144,7 +144,7 @@ FINALIZER_WRITER = """
     import sys, time, weakref
     from pathlib import Path
     from skincal.cli import app, main
-    from skincal.data.atomic import atomic_path
+    from skincal.io.atomic import atomic_path
 
     class Handle:
         pass

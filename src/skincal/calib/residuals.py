@@ -1,4 +1,4 @@
-"""Accelerometer residuals of a calibration result and the data coverage, for plots and reports.
+"""Accelerometer residuals of a calibration result and the data coverage (the report, the monitor's batch mode).
 
 The model is the one ``mle`` fits, evaluated by the same code (:mod:`skincal.calib.model`): the
 sample stamped ``t`` measured the motion at ``s = t - tau - d (t - t_ref)``, and
@@ -139,7 +139,7 @@ def activity_matrix(dataset: Dataset, units: list[str], interpolator: JointInter
     if interpolator is None:
         interpolator = JointInterpolator(dataset.joints)
     rows = [unit_activity(dataset, name, interpolator) for name in units]
-    return np.array(rows).reshape(len(units), dataset.robot.n_joints)
+    return np.array(rows).reshape(len(units), dataset.chain.n_joints)
 
 
 def unit_activity(dataset: Dataset, name: str, interpolator: JointInterpolator | None = None) -> FloatArray:
@@ -148,5 +148,5 @@ def unit_activity(dataset: Dataset, name: str, interpolator: JointInterpolator |
         interpolator = JointInterpolator(dataset.joints)
     # the activity uses the readings and their segment tags only: no need to interpolate the joints
     s = unit_samples(dataset, name, interpolator=interpolator, exact_joint_states=False)
-    return discover_link(s, dataset.robot.n_joints, use_gyro=True).activity
+    return discover_link(s, dataset.chain.n_joints, use_gyro=True).activity
 
