@@ -49,6 +49,7 @@ class Opt:
         repeat: may be given several times, the values collected in a list.
         many: takes one or more values after the flag (``--seeds 0 1 2``), a list.
         choices: the allowed values (argparse checks them; typer shows them in the help).
+        positional: a required argument without a flag (``skincal benchmark realdata DIR``).
     """
 
     name: str
@@ -60,6 +61,7 @@ class Opt:
     repeat: bool = False
     many: bool = False
     choices: tuple[Any, ...] | None = None
+    positional: bool = False
 
     @property
     def cli_flag(self) -> str:
@@ -83,6 +85,9 @@ DASK = Opt("dask", str | None, None, "address of an existing dask.distributed sc
 def add_arguments(parser: argparse.ArgumentParser, options: Sequence[Opt]) -> argparse.ArgumentParser:
     """Put ``options`` on ``parser`` (the scripts in ``benchmarks/``); returns ``parser``."""
     for o in options:
+        if o.positional:
+            parser.add_argument(o.name, type=o.base_type if o.base_type in (int, float, Path) else None, help=o.help)
+            continue
         kw: dict[str, Any] = {"dest": o.name, "default": o.default, "help": o.help}
         base = o.base_type
         if base is bool:
@@ -130,7 +135,7 @@ def _typer_parameter(o: Opt) -> inspect.Parameter:
     help_text = o.help
     if o.choices and help_text is not None and not all(str(c) in help_text for c in o.choices):
         help_text = f"{help_text} ({', '.join(o.choices)})"
-    default = typer.Option(o.default, decl, help=help_text)
+    default = typer.Argument(..., help=help_text) if o.positional else typer.Option(o.default, decl, help=help_text)
     return inspect.Parameter(o.name, inspect.Parameter.KEYWORD_ONLY, default=default, annotation=annotation)
 
 

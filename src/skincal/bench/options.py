@@ -147,3 +147,13 @@ MONITOR = (
     Opt("json", Path | None, None, "also write the figures as JSON"),
 )
 """The options of ``benchmarks/bench_monitor.py``."""
+
+
+REALDATA = (
+    Opt("folder", Path, None, "folder of recordings sharing a mount (folders with recording.h5, or .h5 files)",
+        positional=True),
+    Opt("om", bool, True, "also run the paper's OM (a recording it cannot take is a failure)"),
+    Opt("workers", int, 1, "units calibrated at once per recording"),
+    Opt("json_out", Path | None, None, "also write the figures as JSON", flag="--json"),
+)
+"""The options of ``skincal benchmark realdata`` and ``benchmarks/bench_realdata.py``."""

@@ -105,22 +105,20 @@ typer_command(benchmark_app, "core", options.CORE + (FORCE,), core)
 typer_command(benchmark_app, "mle", options.MLE + (FORCE,), mle)
 
 
-@benchmark_app.command("realdata")
-def realdata(
-    folder: Path = typer.Argument(..., help="folder of recordings sharing a mount (folders with recording.h5, or .h5)"),
-    om: bool = typer.Option(True, help="also run the paper's OM (a recording it cannot take is a failure)"),
-    workers: int = typer.Option(1, min=1, help="units calibrated at once per recording"),
-    json_out: Path | None = typer.Option(None, "--json", help="also write the figures as JSON"),
-    force: bool = FORCE,
-) -> None:
+def realdata(v: dict[str, Any]) -> None:
     """Repeatability across recordings of one mount, per IMU: spread of positions and rotations, spread
     over the reported std, motion kept, time offsets, failures."""
     from skincal.bench.realdata import METHODS, realdata_report, run_realdata_benchmark
 
-    _check_json(json_out, force)
-    methods = METHODS if om else tuple(m for m in METHODS if m != "om")
+    _check_json(v["json_out"], v["force"])
+    methods = METHODS if v["om"] else tuple(m for m in METHODS if m != "om")
     with console.status("benchmarking recordings...") as status:
-        doc = run_realdata_benchmark(folder, methods, workers=workers, progress=lambda n: status.update(shown(n)))
+        doc = run_realdata_benchmark(
+            v["folder"], methods, workers=v["workers"], progress=lambda n: status.update(shown(n))
+        )
     for part in realdata_report(doc):
         console.print(part, highlight=False)
-    _write_json(doc, json_out)
+    _write_json(doc, v["json_out"])
+
+
+typer_command(benchmark_app, "realdata", options.REALDATA + (FORCE,), realdata)
