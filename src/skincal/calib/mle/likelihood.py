@@ -3,7 +3,7 @@
 At rest the accelerometer reads gravity in the unit frame, so a rest run ``r`` (mean reading
 ``f_r`` over ``n_r`` samples, joint configuration ``q_r``) tells two candidate links apart through
 the gravity each predicts with its own fitted pose and sensor state ``x_k`` (``R``, ``A``, ``b``;
-:func:`~skincal.calib.mle.model.predict_specific_force` with the link-frame gravity
+:func:`~skincal.calib.model.predict_specific_force` with the link-frame gravity
 ``u_k(q_r)`` and no motion). With the residual ``e_kr = f_r - f_k(q_r, x_k)`` and the variance of a
 rest mean ``v_r = sigma^2 / n_r + s^2`` per axis (``sigma`` the unit's rest noise, ``s^2`` what the
 model leaves unexplained at the best candidate's rests: the smallest over candidates of
@@ -21,9 +21,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from skincal.calib.mle.model import predict_specific_force
-from skincal.calib.mle.signals import link_signals
 from skincal.calib.mle.solver import State
+from skincal.calib.model import predict_specific_force
+from skincal.calib.signals import link_signals
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray
 
