@@ -14,6 +14,7 @@ import os
 import time
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
@@ -127,7 +128,7 @@ def _resolve_links(
     return dict(links)
 
 
-_FORKED: dict[int, Callable[[int, str], tuple[str, UnitResult | None, str | None]]] = {}
+_FORKED: dict[int, Callable[[int, str], tuple[str, UnitResult | None, CalibrationError | None]]] = {}
 """Per-unit closures of the running :func:`calibrate` calls by token, inherited by forked workers."""
 
 
@@ -148,7 +149,7 @@ def _one_blas_thread() -> None:
     _BLAS_LIMIT = threadpool_limits(limits=1, user_api="blas")
 
 
-def _forked_unit(token: int, k: int, name: str) -> tuple[str, UnitResult | None, str | None]:
+def _forked_unit(token: int, k: int, name: str) -> tuple[str, UnitResult | None, CalibrationError | None]:
     """Entry point of a forked worker: run the inherited closure (only the token, ``k`` and ``name``
     are pickled)."""
     return _FORKED[token](k, name)
@@ -170,7 +171,11 @@ def calibrate(
     **options: Any,
 ) -> CalibrationResult:
     """Calibrate the units of ``dataset`` with ``method``; units that fail are reported in
-    ``result.extras["failed_units"]`` (name -> reason) while the others are calibrated.
+    ``result.failed_units`` (name -> reason) while the others are calibrated.
+
+    A foreign exception raised in the method (its ``prepare``, ``align`` or ``run_unit``: a bug, not
+    bad input) is a :class:`CalibrationError` naming its type, with the exception as its cause
+    (:func:`method_errors`): in one unit, that unit's failure; in ``prepare`` or in every unit, raised.
 
     Args:
         dataset: a validated dataset with segments.
@@ -209,23 +214,23 @@ def calibrate(
     interpolator = JointInterpolator(
         dataset.joints, use_dataset_qdd=use_dataset_qdd, qdd_window_s=qdd_window_s or DEFAULT_QDD_WINDOW_S
     )
-    shared = spec.prepare(dataset, interpolator) if spec.prepare is not None else None
+    shared = None
+    if spec.prepare is not None:
+        with method_errors(f"method '{method}', preparing the dataset: "):
+            shared = spec.prepare(dataset, interpolator)
     results: dict[str, UnitResult] = {}
     failed: dict[str, str] = {}
+    errors: list[CalibrationError] = []
 
-    def one(k: int, name: str) -> tuple[str, UnitResult | None, str | None]:
-        try:
+    def one(k: int, name: str) -> tuple[str, UnitResult | None, CalibrationError | None]:
+        try:  # a usage or data error (another SkincalError) concerns every unit: it propagates
             unit = calibrate_unit(
                 tagged, name, spec, link=given.get(name), rng=np.random.default_rng([seed, k]),
                 interpolator=interpolator, shared=shared, options=parsed,
             )
             return name, unit, None
-        except CalibrationError as exc:
-            return name, None, str(exc)
-        except SkincalError:
-            raise  # a usage or data error concerns every unit
-        except Exception as exc:  # noqa: BLE001 - a foreign error in one unit never stops the others
-            return name, None, f"internal error ({type(exc).__name__}: {exc})"
+        except CalibrationError as exc:  # a foreign error in one unit too: it never stops the others
+            return name, None, exc
 
     n_workers = max(1, min(int(workers), len(names), os.cpu_count() or 1))  # more would only oversubscribe
     pool: Executor | None = None
@@ -234,7 +239,7 @@ def calibrate(
         # more, and results are then identical whatever ``workers`` is
         from threadpoolctl import threadpool_limits
 
-        def serial() -> Iterator[tuple[str, UnitResult | None, str | None]]:
+        def serial() -> Iterator[tuple[str, UnitResult | None, CalibrationError | None]]:
             for k, name in enumerate(names):
                 with threadpool_limits(limits=1, user_api="blas"):
                     outcome = one(k, name)
@@ -260,6 +265,7 @@ def calibrate(
                 results[name] = unit
             else:
                 failed[name] = str(error)
+                errors.append(error)
             if progress is not None:
                 progress(name)
     finally:
@@ -269,18 +275,31 @@ def calibrate(
     results = {name: results[name] for name in names if name in results}
     if not results:
         reasons = "; ".join(f"{u}: {m}" for u, m in failed.items())
-        raise CalibrationError(f"no unit could be calibrated ({reasons})")
-    extras: dict[str, Any] = {"failed_units": failed, "seed": seed} if failed else {"seed": seed}
-    if notes:
-        extras["notes"] = notes
+        raise CalibrationError(f"no unit could be calibrated ({reasons})") from (errors[0] if errors else None)
     return CalibrationResult(
         method=method,
         robot=dataset.chain.name,
         dataset_sha256=dataset_sha256,
         runtime_s=time.perf_counter() - start,
         units=results,
-        extras=extras,
+        extras={"seed": seed},
+        failed_units=failed,
+        notes=tuple(notes),
     )
+
+
+@contextmanager
+def method_errors(context: str = "") -> Iterator[None]:
+    """Run a calibration method's code: skincal's own errors pass; a foreign exception (a bug in the
+    method, or a library failing inside it) becomes a :class:`CalibrationError` ``"<context>internal
+    error (<type>: <message>)"`` raised from it (``__cause__``), so callers see one error family and
+    the traceback is kept."""
+    try:
+        yield
+    except SkincalError:
+        raise
+    except Exception as exc:
+        raise CalibrationError(f"{context}internal error ({type(exc).__name__}: {exc})") from exc
 
 
 JOINT_LIMIT_MARGIN_RAD = 0.25
@@ -372,45 +391,46 @@ def calibrate_unit(
 ) -> UnitResult:
     """Calibrate one unit (see :func:`calibrate`); ``options``: the method's parsed options
     (default: the method's defaults)."""
-    if interpolator is None:
-        interpolator = JointInterpolator(dataset.joints)
-    if shared is None and spec.prepare is not None:
-        shared = spec.prepare(dataset, interpolator)
-    alignment, offset = None, 0.0
-    _check_overlap(dataset, unit)
-    if spec.align is not None:
-        alignment = spec.align(shared, dataset.imu[unit])
-        offset = float(alignment.offset_s)
-        stamps = getattr(alignment, "stamps", None)  # the unit's stamps corrected by the alignment
-        if stamps is not None:
-            dataset = replace(dataset, imu={**dataset.imu, unit: replace(dataset.imu[unit], t=stamps)})
-    samples = unit_samples(
-        dataset, unit, time_offset_s=offset, interpolator=interpolator, exact_joint_states=spec.exact_joint_states
-    )
-    if spec.needs_segments and not np.any(samples.kind == 0):
-        raise CalibrationError(f"unit '{unit}': no samples in static segments")
-    assignment = None
-    if link is None and not spec.discovers_links:
-        assignment = discover_link(samples, dataset.chain.n_joints, use_gyro=spec.use_gyro_for_links)
-        if assignment.link == 0:
-            raise CalibrationError(f"unit '{unit}': {'; '.join(assignment.warnings)}")
-        link = assignment.link
-    problem = UnitProblem(
-        chain=dataset.robot,
-        gravity=np.asarray(dataset.gravity, dtype=float),
-        samples=samples,
-        link=0 if link is None else int(link),
-        link_assignment=assignment,
-        rng=rng,
-        interpolator=interpolator,
-        shared=shared,
-        options=parse_options(spec.options, {}, "") if options is None else options,
-        time_offset_s=offset,
-        alignment=alignment,
-    )
-    result = spec.run_unit(problem)
-    _, screening = screen_readings(unit, dataset.imu[unit].accel, dataset.imu[unit].t)
-    if screening:
-        result = replace(result, warnings=tuple(screening) + tuple(result.warnings))
-    # the link by name as well as index (a URDF robot's own link name; link<i> for a DH robot)
-    return replace(result, extras={**result.extras, "link_name": dataset.chain.link_name(result.pose.link)})
+    with method_errors():  # a foreign exception: this unit's CalibrationError, raised from it
+        if interpolator is None:
+            interpolator = JointInterpolator(dataset.joints)
+        if shared is None and spec.prepare is not None:
+            shared = spec.prepare(dataset, interpolator)
+        alignment, offset = None, 0.0
+        _check_overlap(dataset, unit)
+        if spec.align is not None:
+            alignment = spec.align(shared, dataset.imu[unit])
+            offset = float(alignment.offset_s)
+            stamps = getattr(alignment, "stamps", None)  # the unit's stamps corrected by the alignment
+            if stamps is not None:
+                dataset = replace(dataset, imu={**dataset.imu, unit: replace(dataset.imu[unit], t=stamps)})
+        samples = unit_samples(
+            dataset, unit, time_offset_s=offset, interpolator=interpolator, exact_joint_states=spec.exact_joint_states
+        )
+        if spec.needs_segments and not np.any(samples.kind == 0):
+            raise CalibrationError(f"unit '{unit}': no samples in static segments")
+        assignment = None
+        if link is None and not spec.discovers_links:
+            assignment = discover_link(samples, dataset.chain.n_joints, use_gyro=spec.use_gyro_for_links)
+            if assignment.link == 0:
+                raise CalibrationError(f"unit '{unit}': {'; '.join(assignment.warnings)}")
+            link = assignment.link
+        problem = UnitProblem(
+            chain=dataset.robot,
+            gravity=np.asarray(dataset.gravity, dtype=float),
+            samples=samples,
+            link=0 if link is None else int(link),
+            link_assignment=assignment,
+            rng=rng,
+            interpolator=interpolator,
+            shared=shared,
+            options=parse_options(spec.options, {}, "") if options is None else options,
+            time_offset_s=offset,
+            alignment=alignment,
+        )
+        result = spec.run_unit(problem)
+        _, screening = screen_readings(unit, dataset.imu[unit].accel, dataset.imu[unit].t)
+        if screening:
+            result = replace(result, warnings=tuple(screening) + tuple(result.warnings))
+        # the link by name as well as index (a URDF robot's own link name; link<i> for a DH robot)
+        return replace(result, extras={**result.extras, "link_name": dataset.chain.link_name(result.pose.link)})

@@ -53,8 +53,8 @@ import numpy as np
 
 from skincal.data.atomic import atomic_path
 from skincal.data.dataset import BodyPose, Dataset, ImuStream, JointStates, Segments, TofStream
+from skincal.data.events import MoveEvent, check_events
 from skincal.data.jsonio import regular_file
-from skincal.data.result import check_events
 from skincal.data.validate import TRUTH_BODY_ATTRS, check_unit_name, shown, validate_dataset
 from skincal.errors import ConfigError, DatasetError
 from skincal.errors import first_line as _first_line
@@ -468,9 +468,9 @@ class _Reader:
                 sensor[unit] = extra
         return poses, sensor, bodies
 
-    def events(self, units: list[str]) -> tuple[dict[str, Any], ...]:
-        """Moved-unit events (``/events/<k>``, k = 0, 1, ... in order; absent: none), each checked by
-        :func:`~skincal.data.result.check_event`, its unit one of ``units``."""
+    def events(self, units: list[str]) -> tuple[MoveEvent, ...]:
+        """Moved-unit events (``/events/<k>``, k = 0, 1, ... in order; absent: none), each a checked
+        :class:`~skincal.data.events.MoveEvent`, its unit one of ``units``."""
         grp = self.group("/events", required=False)
         if grp is None:
             return ()
@@ -718,10 +718,10 @@ def _write(f: h5py.File, ds: Dataset) -> None:
         events = f.create_group("events", track_order=True)
         for k, event in enumerate(check_events(list(ds.events), "events", units=set(ds.imu))):
             g = events.create_group(str(k))
-            for key, value in event.items():
+            for key, value in event.fields().items():
                 g.attrs[key] = value if isinstance(value, str) else np.asarray(value, dtype=np.float64)
-            if "link" in event:
-                g.attrs["link"] = np.int64(event["link"])
+            if event.link is not None:
+                g.attrs["link"] = np.int64(event.link)
 
 
 def write_dataset(dataset: Dataset, path: str | Path) -> None:

@@ -419,14 +419,14 @@ def run_job(job: Job) -> dict[str, Any]:
         start = time.perf_counter()
         try:
             result = calibrate(ds, "mle", workers=1)
-            ev = evaluate(result, ds)
+            ev = evaluate(result, ds).to_dict()
         except Exception as exc:  # noqa: BLE001 - one broken cell must not end a long benchmark
             record["calibrate_s"] = time.perf_counter() - start
             record["error"] = f"{type(exc).__name__}: {exc}"
             record["units"] = {u: {"calibrated": False, "failure": record["error"]} for u in ds.units}
             return record
         record["calibrate_s"] = time.perf_counter() - start
-    failed = dict(result.extras.get("failed_units", {}))
+    failed = dict(result.failed_units)
     units: dict[str, Any] = {}
     for name in ds.units:
         if name in result.units:

@@ -535,11 +535,10 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     """Calibrate one unit with the default method (module docstring)."""
     warnings: list[str] = []
     extras: dict = {}
-    start = None
+    start, confidence = None, None
     if problem.link == 0:
         link, confidence, link_warnings, levels, start = choose_link(problem)
         warnings += link_warnings
-        extras["link_confidence"] = confidence
         extras["link_residual_mps2"] = {str(k): v for k, v in levels.items()}
     else:
         link = problem.link
@@ -677,8 +676,6 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         extras["accel_scale"] = np.diag(st.A).copy()
         sym = 0.5 * (st.E + st.E.T)
         extras["accel_misalignment_sym"] = sym - np.diag(np.diag(sym))
-    if notes:
-        extras["notes"] = notes
     return UnitResult(
         pose=SkinUnitPose(link, st.R, st.p),
         observable=observable,
@@ -687,6 +684,8 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         warnings=tuple(warnings),
         extras=extras,
         imu=ImuCalibration(**imu),
+        link_confidence=confidence,
+        notes=tuple(notes),
     )
 
 
