@@ -119,7 +119,7 @@ def test_comparison_with_a_joint_based_result():
         "su1": UnitResult(SkinUnitPose(0, np.eye(3), np.zeros(3))),
         "su2": UnitResult(SkinUnitPose(0, T_J[:3, :3], T_J[:3, 3])),
         "su3": UnitResult(SkinUnitPose(0, np.eye(3), np.zeros(3))),
-    }, {"reference": "su1"})  # fmt: skip
+    }, reference="su1")  # fmt: skip
     diff = compare_with_joint_result(relative, joint)
     assert set(diff) == {"su2"}  # su3 is on another link
     assert diff["su2"][0] == pytest.approx(2.0, abs=1e-9) and diff["su2"][1] == pytest.approx(0.0, abs=1e-6)

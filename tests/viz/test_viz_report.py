@@ -217,7 +217,7 @@ def test_report_of_a_result_with_undetermined_std_and_failed_units(tmp_path: Pat
     undetermined = dataclasses.replace(unit, position_std_m=np.array([1.6e-4, 6.6e-4, np.nan]),
                                        rotation_std_deg=np.array([0.02, np.nan, np.nan]))
     partial = dataclasses.replace(result, units={names[0]: result.units[names[0]], names[1]: undetermined},
-                                  extras={**result.extras, "failed_units": {names[2]: "diverged <badly>"}})
+                                  failed_units={names[2]: "diverged <badly>"})
     write_result(partial, tmp_path / "r.json")
     back = read_result(tmp_path / "r.json")
     assert list(back.units) == names[:2] and back.failed_units == {names[2]: "diverged <badly>"}
