@@ -321,11 +321,11 @@ def build_dataset(job: Job):
     text = f"robustness: robot={job.robot} backend={job.backend} fault={job.fault} seed={job.seed}"
 
     def simulate(pl: Mapping[str, Any]):
-        from skincal.sim import Session, simulate
+        from skincal.sim import Session, SimOptions, simulate
 
         rng = np.random.default_rng([job.seed, 1])
         session = Session(chain, pl, trajectory, imu_model, rng, gravity=gravity, description=text, **timing)
-        return simulate(session, simulator, **({"mode": mode} if simulator == "mujoco" else {}))
+        return simulate(session, simulator, options=SimOptions(mode=mode) if simulator == "mujoco" else None)
 
     t0, t1 = float(trajectory.t[0]), float(trajectory.t[-1])
     if fault.knock:
