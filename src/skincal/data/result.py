@@ -13,27 +13,30 @@ named by ``link_name`` too; quaternions are (w, x, y, z). The IMU calibration of
 (``accel_bias_mps2``, ``accel_scale_misalignment``, ``time_offset_s``, ``clock_drift_ppm``,
 ``gyro_bias_rps``, their std, ...: :data:`~skincal.data.imu_calibration.IMU_KEYS`) is written next to
 the contract fields from ``UnitResult.imu`` and read back into it (a unit with none of those fields
-gets ``imu = None``; a malformed one is refused). Other fields beyond the
-contract (per unit, e.g. ``link_confidence``, ``dh6``; at the top level, e.g.
-``options``) are written next to the contract fields and read back into ``extras``. In extras,
+gets ``imu = None``; a malformed one is refused).
+
+The facts every method gives have typed fields, under the file's keys (checked on write and read):
+``CalibrationResult.failed_units`` (``failed_units``), ``.notes`` (``notes``), ``.events`` (``events``,
+:class:`~skincal.data.events.MoveEvent`), ``.reference`` (``reference``); ``UnitResult.link_confidence``,
+``.pose_covariance`` (6x6, ``null`` -> NaN), ``.notes``, ``.moved_at_s``. Other fields beyond the
+contract (per unit, e.g. ``dh6``; at the top level, e.g. ``seed``) are the method's own: written next to
+the contract fields and read back into ``extras`` (which may not hold a typed fact). In extras,
 NumPy arrays become JSON lists (non-finite numbers become ``null``) and numeric lists come back as
 float64 arrays (``null`` -> NaN). Floats are written with full (round-trip) precision.
 
 Undetermined std components: a NaN component of ``position_std_m`` / ``rotation_std_deg`` is written
 as ``null`` and read back as NaN (the other components must be finite and >= 0).
 
-Units without a pose ("never lose a result"): each unit of ``extras["failed_units"]`` (name ->
-reason) that is not in ``units`` is also written under ``units`` as ``{"link": null, "position_m":
-null, "quaternion_wxyz": null, "observable": false, "position_std_m": null, "rotation_std_deg":
-null, "warnings": [reason]}``; the top-level ``failed_units`` is written as before. On read, a unit
-entry with a ``null`` ``position_m`` or ``quaternion_wxyz`` must have ``observable: false``; it is
-returned in ``extras["failed_units"]`` (name -> its warnings joined with ``"; "``), not in
-``CalibrationResult.units``, so every unit in ``units`` has a pose.
+Units without a pose ("never lose a result"): each unit of ``failed_units`` (name -> reason) that is
+not in ``units`` is also written under ``units`` as ``{"link": null, "position_m": null,
+"quaternion_wxyz": null, "observable": false, "position_std_m": null, "rotation_std_deg": null,
+"warnings": [reason]}``; the top-level ``failed_units`` is written as before. On read, a unit entry
+with a ``null`` ``position_m`` or ``quaternion_wxyz`` must have ``observable: false``; it is returned
+in ``failed_units`` (name -> its warnings joined with ``"; "``), not in ``CalibrationResult.units``,
+so every unit in ``units`` has a pose.
 
-Moved units (``docs/interfaces.md``): a top-level ``events`` list (each event checked by
-:func:`check_event`: ``unit``, ``t_change_s``, ``t_detected_s``, the poses before and after ...) and a
-per-unit ``moved_at_s`` list are optional; they are checked on write and read, and read back into
-``extras`` (the events' poses as ``(4, 4)`` arrays).
+Moved units (``docs/interfaces.md``): a top-level ``events`` list and a per-unit ``moved_at_s`` list are
+optional; they are checked on write and read (:func:`~skincal.data.events.check_events`).
 
 Relative results (``skincal.calib.imu_only``): a top-level ``reference`` names a unit of ``units``; every
 pose is then ``T_ref_su`` in that unit's frame and ``link`` may be 0 (:data:`REFERENCE_LINK`), which
