@@ -5,12 +5,12 @@ Usage: ``python benchmarks/bench_avoid.py [--scenarios arm,hand,walk,fast] [--pl
 
 Issue 17 (ISO/TS 15066 separation, any robot, dynamics): ``python benchmarks/bench_avoid.py --iso
 [--robots panda,ur5e,iiwa14] [--scenarios ...] [--modes kinematic,torque] [--beliefs mle,degraded]
-[--duration S] [--quick] [--json out.json] [--plots folder]`` (:func:`skincal.workflows.bench_avoid.run_iso_benchmark`:
+[--duration S] [--quick] [--json out.json] [--plots folder]`` (:func:`skincal.bench.avoid.run_iso_benchmark`:
 every shipped scenario at its ISO 13855 speed, S_p from the covariance and the measured stopping model,
 the task clock that waits; contacts, min(clearance - S_p), time lost; the controller step with 100 points
 with covariances).
 
-A thin script over :mod:`skincal.workflows.bench_avoid` (what runs: the beliefs ``truth``, ``mle``,
+A thin script over :mod:`skincal.bench.avoid` (what runs: the beliefs ``truth``, ``mle``,
 ``degraded``, ``blind`` per scenario). Prints min clearance, contacts, max tracking error, recovery time
 after the person left, QP solve time (median, p95) and whole-loop time per 1 ms step, and the time of one
 controller step with 7 DoF and 10 obstacle points (the issue's target: <= 1 ms median).
@@ -18,28 +18,17 @@ controller step with 7 DoF and 10 obstacle points (the issue's target: <= 1 ms m
 
 from __future__ import annotations
 
-import argparse
 import json
 
+from skincal.bench import options
+from skincal.bench.avoid import beliefs, qp_step_time, run_avoid_benchmark, run_iso_benchmark
+from skincal.bench.harness import parse_args
+from skincal.bench.script import run_script
 from skincal.kinematics import panda
-from skincal.workflows.bench_avoid import ISO_ROBOTS, beliefs, qp_step_time, run_avoid_benchmark, run_iso_benchmark
-from skincal.workflows.script import run_script
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenarios", default="arm,hand,walk,fast")
-    ap.add_argument("--placement", default="ring", choices=["ring", "paper"], help="the simulated skin")
-    ap.add_argument("--seeds", default="0", help="sensor-noise seeds, comma separated (each run once)")
-    ap.add_argument("--quick", action="store_true", help="fast calibration protocol for the mle poses")
-    ap.add_argument("--json", default=None)
-    ap.add_argument("--plots", default=None, help="folder for docs/avoid_<scenario>.png (mle poses, first seed)")
-    ap.add_argument("--iso", action="store_true", help="the issue-17 matrix (ISO/TS 15066 separation, any robot)")
-    ap.add_argument("--robots", default=",".join(ISO_ROBOTS))
-    ap.add_argument("--modes", default="kinematic,torque")
-    ap.add_argument("--beliefs", default="mle,degraded", help="mle, degraded, truth, blind")
-    ap.add_argument("--duration", type=float, default=None, help="shorten every run to this, s")
-    args = ap.parse_args()
+    args = parse_args(__doc__.splitlines()[0], options.AVOID)
     if args.iso:
         return iso(args)
 
@@ -78,11 +67,10 @@ def iso(args) -> None:
 
     from skincal.control.separation import SeparationParams
     from skincal.kinematics import panda
-    from skincal.workflows.avoidance import stopping_model
+    from skincal.workflows.experiment import StoppingModels
 
-    step = qp_step_time(
-        panda(), n_points=100, repeats=1000, separation=SeparationParams(stopping=stopping_model(panda()))
-    )
+    stopping = StoppingModels()  # each robot's stopping model measured once for the whole run
+    step = qp_step_time(panda(), n_points=100, repeats=1000, separation=SeparationParams(stopping=stopping(panda())))
     print(
         f"controller step, 7 DoF, {step['points']} points with covariances (S_p per point): "
         f"{step['step_median_ms']:.3f} ms median ({step['step_p95_ms']:.3f} p95); "
@@ -121,7 +109,9 @@ def iso(args) -> None:
     log_chain = {r: get_robot(r) for r in robots}
     scenarios = args.scenarios.split(",") if args.scenarios != "arm,hand,walk,fast" else None
     t0 = time.process_time()
-    rows = run_iso_benchmark(robots, scenarios, args.modes.split(","), labels, args.quick, args.duration, on_run=show)
+    rows = run_iso_benchmark(
+        robots, scenarios, args.modes.split(","), labels, args.quick, args.duration, on_run=show, stopping=stopping
+    )
     print(f"{len(rows)} runs, {time.process_time() - t0:.0f} s CPU", flush=True)
     if args.json:
         from skincal.data.atomic import write_bytes_atomic

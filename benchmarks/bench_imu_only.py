@@ -3,7 +3,7 @@
 Usage: ``python benchmarks/bench_imu_only.py [--runs 20] [--duration 60] [--imu real] [--clock driver]
 [--scale-free] [--holds N] [--json out.json]``
 
-A thin script over :func:`skincal.workflows.handheld.bench_relative`: two units 0.2 m apart on one
+A thin script over :func:`skincal.bench.handheld.bench_relative`: two units 0.2 m apart on one
 hand-moved body ("turn it over": still holds in orientations spread over the sphere, from which the
 accelerometers' scale is fitted; ``--holds 0``: a motion without them), errors of the second unit's pose
 in the first's frame, and the RMS of error / std.
@@ -12,23 +12,15 @@ All figures are SIMULATED.
 
 from __future__ import annotations
 
-import argparse
 import json
 
-from skincal.workflows.handheld import bench_relative
+from skincal.bench import options
+from skincal.bench.handheld import bench_relative
+from skincal.bench.harness import parse_args
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=20)
-    ap.add_argument("--duration", type=float, default=60.0)
-    ap.add_argument("--spacing", type=float, default=0.2)
-    ap.add_argument("--imu", default="real")
-    ap.add_argument("--clock", default="driver")
-    ap.add_argument("--scale-free", action="store_true", help="accelerometers without scale/misalignment errors")
-    ap.add_argument("--holds", type=int, default=None, help="still holds in the motion (default: 12, as fit)")
-    ap.add_argument("--json", default=None)
-    args = ap.parse_args()
+    args = parse_args(__doc__.splitlines()[0], options.HANDHELD)
     doc = bench_relative(
         args.runs, args.duration, args.spacing, args.imu, args.clock, scale_free=args.scale_free, holds=args.holds
     )

@@ -1,36 +1,23 @@
 """A unit that moved is noticed (issue 16): ``python benchmarks/bench_monitor.py [--hours 1]
 [--imu realistic --imu real] [--kind teleop] [--online-unit su4] [--json out.json]``: false alarms over
 simulated hours of normal work and detection delays and pose errors of 5 mm / 2 deg knocks (a thin script
-over :func:`skincal.workflows.monitoring.bench_monitor`)."""
+over :func:`skincal.bench.monitor.bench_monitor`)."""
 
 from __future__ import annotations
 
-import argparse
 import json
-from pathlib import Path
 
 from rich.console import Console
 
+from skincal.bench import options
+from skincal.bench.harness import parse_args
+from skincal.bench.monitor import bench_monitor
+from skincal.bench.script import run_script
 from skincal.data.atomic import write_bytes_atomic
-from skincal.workflows.monitoring import bench_monitor
-from skincal.workflows.script import run_script
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--hours", type=float, default=1.0, help="simulated hours of normal work per IMU preset")
-    ap.add_argument("--imu", action="append", default=None, help="IMU preset (repeat; default realistic and real)")
-    ap.add_argument("--kind", default="teleop", help="work cycle: teleop or pick-place")
-    ap.add_argument("--robot", default="panda")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument(
-        "--online-unit",
-        action="append",
-        default=None,
-        help="unit also knocked with the streaming calibrator (repeat; default su4)",
-    )
-    ap.add_argument("--json", type=Path, default=None, help="also write the figures as JSON")
-    args = ap.parse_args()
+    args = parse_args(__doc__.splitlines()[0], options.MONITOR)
     console = Console()
     with console.status("benchmarking the moved-unit monitor...") as status:
         doc = bench_monitor(

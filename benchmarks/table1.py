@@ -1,5 +1,5 @@
 """Reproduce the paper's Table I (the figures of ``skincal benchmark table1``; a thin script over
-:mod:`skincal.workflows.table1`).
+:mod:`skincal.bench.table1`).
 
 Usage: ``python benchmarks/table1.py [--quick] [--runs 10] [--sets 4] [--methods om,om-joint,mmm,mm]
 [--workers 2] [--dask tcp://host:8786] [--seed 0] [--json table1.json]``
@@ -7,35 +7,26 @@ Usage: ``python benchmarks/table1.py [--quick] [--runs 10] [--sets 4] [--methods
 
 from __future__ import annotations
 
-import argparse
 import json
-from pathlib import Path
 
 from rich.console import Console
 
+from skincal.bench import table1 as t1
+from skincal.bench.harness import parse_args, run_harness, values
+from skincal.bench.script import run_script
 from skincal.data.atomic import write_bytes_atomic
-from skincal.workflows import table1 as t1
-from skincal.workflows.script import run_script
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="tiny run: 1 set x 1 run, 2 units, short protocol")
-    ap.add_argument("--runs", type=int, default=None, help="optimiser runs per set (default 10; quick 1)")
-    ap.add_argument("--sets", type=int, default=None, help="random placement sets (default 4; quick 1)")
-    ap.add_argument("--methods", default="om,mmm,mm", help="comma-separated methods")
-    ap.add_argument("--workers", type=int, default=1, help="local worker processes (ignored with --dask)")
-    ap.add_argument("--dask", default=None, help="address of an existing dask.distributed scheduler")
-    ap.add_argument("--seed", type=int, default=0, help="base seed of the placement sets")
-    ap.add_argument("--json", type=Path, default=None, help="write the records and summary here")
-    args = ap.parse_args()
+    harness = t1.HARNESS
+    v = values(parse_args(__doc__.splitlines()[0], harness.options), harness.options)
     console = Console(width=140)
-    config = t1.config_from_options(args.quick, args.runs, args.sets, args.methods, args.seed)
-    doc = t1.run_benchmark(config, args.workers, args.dask)
-    for part in t1.report(config, doc, args.workers, args.dask):
+    config = harness.config(v)
+    doc, run = run_harness(harness, config, workers=v["workers"], dask=v["dask"])
+    for part in harness.report(config, doc, run):
         console.print(part)
-    if args.json is not None:
-        write_bytes_atomic(args.json, (json.dumps(doc, indent=1) + "\n").encode())
+    if v["json_out"] is not None:
+        write_bytes_atomic(v["json_out"], (json.dumps(doc, indent=1) + "\n").encode())
 
 
 if __name__ == "__main__":

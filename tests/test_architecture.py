@@ -2,8 +2,9 @@
 
 Every import counts, at module level and inside functions (a lazy import is still a dependency). The rules:
 library packages (kinematics, skin, protocol, sim, data, calib, perception, control, hw) import neither ``cli``
-nor ``workflows`` nor ``viz``; ``control`` and ``calib`` import no ``sim``; ``viz`` is imported only by ``cli``
-and ``workflows``; neither ``workflows`` nor ``viz`` imports ``cli``.
+nor ``workflows`` nor ``bench`` nor ``viz``; ``control`` and ``calib`` import no ``sim``; ``viz`` is imported only
+by ``cli``, ``workflows`` and ``bench``; ``workflows`` and ``viz`` import neither ``cli`` nor ``bench``; ``bench``
+(beside ``workflows``: it may use library packages, ``workflows`` and ``viz``) imports no ``cli``.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import skincal
 
 SRC = Path(skincal.__file__).resolve().parent
 LIBRARY = ("kinematics", "skin", "protocol", "sim", "data", "calib", "perception", "control", "hw")
-TOP = ("cli", "workflows", "viz")
+TOP = ("cli", "workflows", "bench", "viz")
 
 
 def module_name(path: Path) -> str:
@@ -81,10 +82,12 @@ def violations(all_edges: list[tuple[str, str, str]]) -> list[str]:
             bad.append(f"library package {src} depends on {dst}: {where}")
         elif src in ("control", "calib") and dst == "sim":
             bad.append(f"{src} depends on sim: {where}")
-        elif dst == "viz" and src not in ("cli", "workflows"):
+        elif dst == "viz" and src not in ("cli", "workflows", "bench"):
             bad.append(f"viz imported by {src}: {where}")
-        elif src in ("workflows", "viz") and dst == "cli":
+        elif src in ("workflows", "bench", "viz") and dst == "cli":
             bad.append(f"{src} depends on cli: {where}")
+        elif src in ("workflows", "viz") and dst == "bench":
+            bad.append(f"{src} depends on bench: {where}")
     return sorted(set(bad))
 
 
@@ -105,7 +108,7 @@ def test_every_package_is_classified():
 @pytest.fixture
 def fake_tree(tmp_path, monkeypatch):
     root = tmp_path / "skincal"
-    for pkg in ("control", "sim", "viz", "cli", "workflows"):
+    for pkg in ("control", "sim", "viz", "cli", "workflows", "bench"):
         (root / pkg).mkdir(parents=True)
         (root / pkg / "__init__.py").write_text("")
     (root / "__init__.py").write_text("")
@@ -119,9 +122,17 @@ def test_checker_sees_function_level_and_relative_imports(fake_tree):
     (fake_tree / "sim" / "x.py").write_text("import skincal.workflows.sweep\n")
     (fake_tree / "workflows" / "ok.py").write_text("from skincal.viz.model import Recording\nfrom skincal import sim\n")
     (fake_tree / "viz" / "up.py").write_text("import skincal.cli.app\n")
+    (fake_tree / "bench" / "ok.py").write_text("from skincal.workflows import sweep\nfrom skincal.viz import model\n")
+    (fake_tree / "bench" / "up.py").write_text("from skincal.cli import app\n")
+    (fake_tree / "workflows" / "up.py").write_text("def f():\n    import skincal.bench.table1\n")
+    (fake_tree / "sim" / "y.py").write_text("from skincal.bench import avoid\n")
     bad = violations(edges())
     assert any("control depends on sim: skincal/control/loop.py:2" in b for b in bad)
     assert any("library package control depends on viz: skincal/control/play.py:1" in b for b in bad)
     assert any("library package sim depends on workflows: skincal/sim/x.py:1" in b for b in bad)
     assert any("viz depends on cli: skincal/viz/up.py:1" in b for b in bad)
     assert not any("workflows/ok.py" in b for b in bad)
+    assert any("bench depends on cli: skincal/bench/up.py:1" in b for b in bad)
+    assert any("workflows depends on bench: skincal/workflows/up.py:2" in b for b in bad)
+    assert any("library package sim depends on bench: skincal/sim/y.py:1" in b for b in bad)
+    assert not any("bench/ok.py" in b for b in bad)

@@ -148,9 +148,9 @@ def test_a_run_that_rings_for_most_of_its_length_or_moves_at_its_end_is_dropped(
 def test_calibrate_ignores_the_samples_after_an_axis_sticks():
     """The robustness benchmark's base session (panda, analytic, fast protocol) with 3 units; one
     unit's x axis stuck from mid-session: with those samples the fit was off by ~28 mm."""
+    from skincal.bench.robustness import Job, build_dataset
     from skincal.calib import calibrate, evaluate
     from skincal.sim.faults import session_span, stick_axis
-    from skincal.workflows.robustness import Job, build_dataset
 
     ds, _ = build_dataset(Job("panda", "analytic", "qd-3e-3", 0, "fast", n_units=3))
     t0, t1 = session_span(ds)

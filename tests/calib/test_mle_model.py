@@ -3,7 +3,7 @@
 A noise-free simulated Panda session whose accelerometers drift (0.05 m/s^2 over the session) and whose
 dataset states gravity 0.1 % too high: ``mle`` fits the drift and the gravity factor, the result
 carries them in ``UnitResult.imu``, and the report's prediction (:mod:`skincal.viz.residuals`) uses
-them through :mod:`skincal.calib.mle.model`, the code the solver evaluates.
+them through :mod:`skincal.calib.model`, the code the solver evaluates.
 """
 
 from __future__ import annotations
@@ -17,9 +17,10 @@ import pytest
 
 from skincal.calib.api import METHODS, calibrate_unit
 from skincal.calib.mle import method as mle
-from skincal.calib.mle.model import link_specific_force, motion_instants, predict_specific_force
 from skincal.calib.mle.solver import State, _accel_rows
+from skincal.calib.model import link_specific_force, predict_specific_force
 from skincal.calib.preprocess import JointInterpolator
+from skincal.calib.timing import motion_instants
 from skincal.data.result import CalibrationResult, read_result, write_result
 from skincal.kinematics import panda
 from skincal.protocol import ProtocolConfig, build_trajectory

@@ -15,9 +15,9 @@ from skincal.control import (
     joint_velocity_bounds,
     point_jacobians,
 )
+from skincal.control.iso_metrics import count_contacts, recovery_time
 from skincal.kinematics import panda, sawyer
 from skincal.perception import RobotBody
-from skincal.workflows.avoid_metrics import count_contacts, recovery_time
 
 Q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
 CFG = ControllerConfig()

@@ -317,7 +317,7 @@ def test_allowed_speed_is_never_above_the_fixed_point_and_close_to_it(stopping):
 
 def test_step_benchmark_runs_feasible_problems_with_covariances():
     """The benchmark's problem is the one it claims (no timing asserted here: benchmarks/bench_qp.py)."""
-    from skincal.workflows.bench_qp import benchmark_points, format_qp_benchmark, qp_step_benchmark
+    from skincal.bench.qp import benchmark_points, format_qp_benchmark, qp_step_benchmark
 
     pts = benchmark_points(panda(), 30)
     assert len(pts) == 30 and np.all(pts.spread > 0) and np.all(np.linalg.norm(pts.velocities, axis=1) > 0)

@@ -86,8 +86,8 @@ def test_mujoco_simulator_reads_tof_through_measure():
 
 def test_avoidance_loop_reads_tof_through_measure():
     pytest.importorskip("mujoco")
+    from skincal.sim.scenarios import get_scenario
     from skincal.workflows.avoidance import run_scenario
-    from skincal.workflows.scenarios import get_scenario
 
     chain = panda()
     poses = paper_placement(chain)

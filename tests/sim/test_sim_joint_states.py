@@ -42,13 +42,13 @@ def session():
 
 
 def test_presets_have_stated_values():
-    assert set(JOINT_PRESETS) == {"ideal", "controller"}
+    assert set(JOINT_PRESETS) == {"ideal", "controller", "report14"}
     assert get_joint_model("ideal") == JointStateModel() and JointStateModel().is_ideal
     c = CONTROLLER
     assert c.rate_hz == 500.0 and c.encoder_resolution_rad == 2 * math.pi / 2**18
     assert c.velocity_noise_std == 3e-3 and c.jitter_s == 2e-4 and c.latency_s == 0.0
     assert not c.report_qdd and not c.velocity_from_positions and not c.is_ideal
-    with pytest.raises(ConfigError, match="known: ideal, controller") as info:
+    with pytest.raises(ConfigError, match="known: ideal, controller, report14") as info:
         get_joint_model("robotic")
     assert "\n" not in str(info.value)
 

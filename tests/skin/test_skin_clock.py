@@ -45,7 +45,7 @@ def session():
 
 
 def test_presets_have_stated_values():
-    assert set(CLOCK_PRESETS) == {"ideal", "driver", "wifi", "wifi-resync"}
+    assert set(CLOCK_PRESETS) == {"ideal", "driver", "wifi", "wifi-resync", "host", "host-gaps"}
     ideal = get_clock_model("ideal")
     assert ideal.is_ideal and ideal == ClockModel() and math.isinf(ideal.resync_period_s)
     driver = get_clock_model("driver")
@@ -58,7 +58,7 @@ def test_presets_have_stated_values():
     assert (resync.offset_max_s, resync.drift_ppm_mean, resync.drift_ppm_std) == (0.5, -440.0, 100.0)
     assert (resync.resync_period_s, resync.jitter_s, resync.stamp_quantum_s) == (2.51, 0.0, 1e-6)
     assert not any(get_clock_model(n).is_ideal for n in ("driver", "wifi", "wifi-resync"))
-    with pytest.raises(ConfigError, match="ideal, driver, wifi, wifi-resync") as info:
+    with pytest.raises(ConfigError, match="ideal, driver, wifi, wifi-resync, host, host-gaps") as info:
         get_clock_model("sundial")
     assert "\n" not in str(info.value)
 

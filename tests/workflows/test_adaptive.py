@@ -1,5 +1,5 @@
 """The adaptive loop in simulation (skincal.workflows.adaptive) and the next best motion on a real
-streaming calibrator fed by a simulated robot (skincal.calib.online.design)."""
+streaming calibrator fed by a simulated robot (skincal.protocol.design)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from skincal.calib.online.design import (
+from skincal.protocol.design import (
     DesignOptions,
     build_segment,
     excitable,
@@ -343,7 +343,7 @@ def test_cli_adaptive_live_closes_the_loop_over_udp(tmp_path):
 
 
 def test_benchmark_reads_the_worst_unit_and_the_first_time_within_target():
-    from skincal.workflows.bench_adaptive import first_within, worst
+    from skincal.bench.adaptive import first_within, worst
 
     def errors(pos, rot, right=True):
         return {"units": {"a": {"position_error_mm": 0.1, "rotation_error_deg": 0.01, "link_true": 2,

@@ -9,14 +9,16 @@ import numpy as np
 import pytest
 
 from skincal.control import ControllerConfig
+from skincal.control.iso_metrics import NEAR_BAND
 from skincal.control.separation import SeparationParams, StoppingModel
 from skincal.kinematics import get_robot, panda
 from skincal.perception import RobotBody
 from skincal.perception.uncertainty import SkinUncertainty
+from skincal.protocol.flange import PickPlace
+from skincal.sim.scenarios import get_scenario, parse_scenario
 from skincal.skin.placement import paper_placement, ring_placement
-from skincal.workflows.avoid_metrics import NEAR_BAND, clearance, summarize, task_time_lost
 from skincal.workflows.avoidance import RunLog, degraded_uncertainty, run_scenario
-from skincal.workflows.scenarios import PickPlace, get_scenario, parse_scenario
+from skincal.workflows.experiment import clearance, summarize, task_time_lost
 
 pytest.importorskip("mujoco")
 

@@ -10,13 +10,13 @@ import pytest
 from skincal.cli import main
 from skincal.kinematics import panda, rotation_angle
 from skincal.perception import RobotBody
+from skincal.sim.scenarios import degrade_poses, get_scenario
 from skincal.skin.placement import paper_placement, ring_placement
 from skincal.skin.tof import Sphere
-from skincal.workflows.avoid_metrics import summarize
 from skincal.workflows.avoid_plot import below_intervals, plot_run
 from skincal.workflows.avoidance import run_scenario
+from skincal.workflows.experiment import summarize
 from skincal.workflows.playback import recording_from_run
-from skincal.workflows.scenarios import degrade_poses, get_scenario
 
 pytest.importorskip("mujoco")
 

@@ -201,7 +201,7 @@ def test_record_live_follows_the_received_stream_on_the_recording_clock(tmp_path
 
 
 def test_one_core_schedule_carries_the_backlog():
-    from skincal.workflows.bench_online import _schedule
+    from skincal.bench.online import _schedule
 
     ends, backlog = _schedule(np.array([0.1, 0.2, 0.3, 1.0]), np.array([0.05, 0.3, 0.01, 0.02]))
     np.testing.assert_allclose(ends, [0.15, 0.5, 0.51, 1.02])  # chunk 3 waits for chunk 2; chunk 4 for its data
@@ -209,7 +209,7 @@ def test_one_core_schedule_carries_the_backlog():
 
 
 def test_online_benchmark_figures_add_up(fast_ds):
-    from skincal.workflows.bench_online import online_report, run_online_benchmark
+    from skincal.bench.online import online_report, run_online_benchmark
 
     doc = run_online_benchmark(dataset=fast_ds)
     assert doc["units"] == 6 and doc["units_in_result"] == 6 and doc["data_s"] == pytest.approx(77.5, abs=1.0)

@@ -45,8 +45,8 @@ def test_fit_protocol_caps_only_above_95_percent_of_the_limit():
 
 
 def test_every_user_gets_the_same_session_for_the_same_presets():
-    from skincal.workflows.bench_mle import simulate_session
-    from skincal.workflows.table1 import Table1Config, set_dataset
+    from skincal.bench.mle import simulate_session
+    from skincal.bench.table1 import Table1Config, set_dataset
 
     cli = simulate_dataset("panda", "random", 2, "none", "fast", seed=3)
     mle = simulate_session("panda", "random", 2, "none", "fast", 3)
@@ -95,7 +95,7 @@ def test_mujoco_backend_through_the_registry_reports_progress():
 
 
 def test_core_benchmark_reports_every_step():
-    from skincal.workflows.bench_core import run_core_benchmark
+    from skincal.bench.core import run_core_benchmark
 
     calls = []
     doc = run_core_benchmark(units=(1,), protocol="fast", repeat=1, progress=lambda d, t, w: calls.append((d, t, w)))

@@ -276,7 +276,7 @@ def calibrate(
     if not results:
         reasons = "; ".join(f"{u}: {m}" for u, m in failed.items())
         raise CalibrationError(f"no unit could be calibrated ({reasons})") from (errors[0] if errors else None)
-    return CalibrationResult(
+    result = CalibrationResult(
         method=method,
         robot=dataset.chain.name,
         dataset_sha256=dataset_sha256,
@@ -286,6 +286,17 @@ def calibrate(
         failed_units=failed,
         notes=tuple(notes),
     )
+    if getattr(parsed, "consistency", False):  # the split check (skincal.calib.consistency)
+        from skincal.calib.consistency import check
+
+        def refit(part: Dataset, part_links: dict[str, int]) -> CalibrationResult:
+            return calibrate(
+                part, method, seed=seed, links=part_links, use_dataset_qdd=use_dataset_qdd, qdd_window_s=qdd_window_s,
+                units=list(part_links), workers=workers, **{**options, "consistency": False},
+            )  # fmt: skip
+
+        result = check(tagged, result, refit)
+    return result
 
 
 @contextmanager

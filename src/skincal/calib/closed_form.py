@@ -7,7 +7,7 @@ Measurement model (link frame ``n``, unit frame ``su``)::
 
 where ``u`` is the specific force of the link frame's origin and ``K = [dw]x + [w]x^2`` maps the
 unit's position to the rigid-body acceleration terms (both in link frame, see
-:mod:`skincal.calib.mle.signals`). At rest ``K = 0`` and ``u = R_base_link^T (-g)``.
+:mod:`skincal.calib.signals`). At rest ``K = 0`` and ``u = R_base_link^T (-g)``.
 """
 
 from __future__ import annotations

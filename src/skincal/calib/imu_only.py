@@ -22,7 +22,7 @@ rigid-body terms. For the reference unit ``ref`` and another unit ``j`` with pos
 accelerometer is fitted to its rests first (:func:`fit_accel_ellipsoid`: ``|C (a - b)| = |g|``, ``C``
 symmetric 3x3, i.e. scale and cross-axis terms, and the bias ``b``; 9 unknowns, one equation per
 orientation, so 9 distinct orientations at least; 6 give the diagonal scale and the bias). Rests are
-found from the gyroscopes (:func:`still_mask`: over a window the rates' spread and their mean less the
+found from the gyroscopes (``rest.imu_still_mask``: over a window the rates' spread and their mean less the
 bias within noise-derived limits, all units on the body agreeing, :func:`common_rests`). The
 reference's calibrated specific force ``C (a_ref - b)`` then replaces ``a_ref`` in the position
 equation, so positions come out in metres, and the fit's covariance is carried into the position's
@@ -52,9 +52,9 @@ from scipy.optimize import minimize_scalar
 from scipy.signal import savgol_filter
 
 from skincal.calib.closed_form import wahba
-from skincal.calib.mle.solver import _huber, _pinv, _residual_correlation, _robust_sigma
 from skincal.calib.preprocess import white_noise_std
-from skincal.calib.rest import _windowed_mean, runs
+from skincal.calib.rest import imu_still_mask, runs
+from skincal.calib.robust import huber_weights, pinv, residual_correlation, robust_sigma
 from skincal.data.dataset import Dataset, ImuStream
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.result import REFERENCE_LINK, CalibrationResult, UnitResult
@@ -70,12 +70,6 @@ reference's rate RMS (centred) moves on another rigid body."""
 MIN_AXIS_RATIO = 0.05
 """Rotation about fewer than two axes: the second singular value of the centred rates below this
 fraction of the first."""
-REST_WINDOW_S = 0.3
-"""Window over which a unit is judged still, s."""
-REST_SPREAD_FACTOR = 2.0
-"""Still: the rates' and accelerations' std over the window below this multiple of their noise std."""
-REST_MEAN_FACTOR = 4.0
-"""Still: the window's mean rate less the gyroscope bias below this many standard errors of the mean."""
 MIN_MOTION_FACTOR = 3.0
 """The body turned: the reference's centred rate RMS exceeds this multiple of the gyroscope's noise."""
 NOISE_FLOOR = 1e-4
@@ -83,8 +77,6 @@ NOISE_FLOOR = 1e-4
 windowed variances' round-off (sums of squares of ~10 m/s^2) stays far below the limits."""
 REST_GUARD_S = 0.05
 """Cut from both ends of a rest (beyond the window's reach: the units' stamp offsets), s."""
-REST_GAP_S = 0.15
-"""A still run broken for less than this (a noise excursion of the window's tests) is one rest, s."""
 MIN_REST_S = 0.4
 """Shortest rest used for the accelerometers, s (after the guard)."""
 DISTINCT_DEG = 15.0
@@ -181,42 +173,19 @@ def _symmetric(p: FloatArray) -> FloatArray:
     return C
 
 
-def still_mask(t: FloatArray, gyro: FloatArray, accel: FloatArray, window_s: float = REST_WINDOW_S) -> np.ndarray:
-    """``(M,)`` True where a unit is still: over ``window_s`` around each sample the std of its rates and
-    accelerations stays below ``REST_SPREAD_FACTOR`` times their white-noise std (from 4th differences,
-    :func:`~skincal.calib.preprocess.white_noise_std`) and the mean rate less the gyroscope bias (the
-    median rate over those samples) below ``REST_MEAN_FACTOR`` standard errors of the mean."""
-    sg = np.maximum(white_noise_std(gyro, 4), NOISE_FLOOR)
-    sa = np.maximum(white_noise_std(accel, 4), NOISE_FLOOR)
-    mg, n = _windowed_mean(t, gyro, window_s)
-    ma, _ = _windowed_mean(t, accel, window_s)
-    vg = np.maximum(_windowed_mean(t, gyro**2, window_s)[0] - mg**2, 0.0)
-    va = np.maximum(_windowed_mean(t, accel**2, window_s)[0] - ma**2, 0.0)
-    quiet = np.all(vg < (REST_SPREAD_FACTOR * sg) ** 2, axis=1) & np.all(va < (REST_SPREAD_FACTOR * sa) ** 2, axis=1)
-    if not quiet.any():
-        return quiet
-    bias = np.median(gyro[quiet], axis=0)
-    still = quiet & np.all(np.abs(mg - bias) < REST_MEAN_FACTOR * sg / np.sqrt(n)[:, None], axis=1)
-    bounds = runs(still)
-    for (_, end), (start, _) in zip(bounds[:-1], bounds[1:], strict=True):
-        if t[start] - t[end - 1] < REST_GAP_S:
-            still[end:start] = True
-    return still
-
-
 def common_rests(streams: dict[str, ImuStream], reference: str) -> FloatArray:
     """``(S, 2)`` start and end (reference stamps, s) of the rests of the body: where the reference is
-    still (:func:`still_mask`) and so is every other unit that is still for at least half of that time
+    still (``rest.imu_still_mask``) and so is every other unit that is still for at least half of that time
     (the units on the reference's body; a unit on another body moves on), less ``REST_GUARD_S`` at both
     ends, at least ``MIN_REST_S`` long."""
     ref = streams[reference]
     assert ref.gyro is not None
-    common = still_mask(ref.t, ref.gyro, ref.accel)
+    common = imu_still_mask(ref.t, ref.gyro, ref.accel)
     total = max(int(common.sum()), 1)
     for name, stream in streams.items():
         if name == reference or stream.gyro is None or len(stream.t) < 10:
             continue
-        mine = still_mask(stream.t, stream.gyro, stream.accel)
+        mine = imu_still_mask(stream.t, stream.gyro, stream.accel)
         i = np.clip(np.searchsorted(stream.t, ref.t), 1, len(stream.t) - 1)
         i -= (ref.t - stream.t[i - 1]) < (stream.t[i] - ref.t)
         at_ref = mine[i]
@@ -328,7 +297,7 @@ def fit_accel_ellipsoid(
     chi2 = float(np.sum(e**2 / sigma2))
     inflate = max(1.0, chi2 / dof) if dof >= 3 else 1.0
     cov = np.zeros((9, 9))
-    cov[np.ix_(free, free)] = _pinv(H) * inflate
+    cov[np.ix_(free, free)] = pinv(H) * inflate
     return AccelFit(_symmetric(p[:6]), p[6:], cov, model, len(means), distinct_orientations(means),
                     float(np.sqrt(np.mean(e**2))))  # fmt: skip
 
@@ -482,8 +451,8 @@ def fit_relative(
     for k in range(iterations):
         res, J = _position_rows(theta, a_j, a_ref, w_fused, dw)
         norm = np.linalg.norm(res, axis=1)
-        sigma = max(_robust_sigma(norm), 1e-9)
-        weights = _huber(norm, sigma) if k > 0 else np.ones(len(t))
+        sigma = max(robust_sigma(norm), 1e-9)
+        weights = huber_weights(norm, sigma) if k > 0 else np.ones(len(t))
         if k == 0:  # first pass: no reference gyro bias (linear in the rest)
             J = J.copy()
             J[:, :, :3] = 0.0
@@ -491,15 +460,15 @@ def fit_relative(
         Jw = (J * sw).reshape(-1, 18)
         H = Jw.T @ Jw
         g = Jw.T @ (res[:, :, None] * sw).reshape(-1)
-        step = -_pinv(H) @ g
+        step = -pinv(H) @ g
         theta = theta + step
         if k > 1 and np.max(np.abs(step[3:6])) < 1e-9:
             break
     res, J = _position_rows(theta, a_j, a_ref, w_fused, dw)
-    rho = _residual_correlation(res)
+    rho = residual_correlation(res)
     sw = np.sqrt(weights)[:, None, None]
     Jw = (J * sw).reshape(-1, 18)
-    H_inv = _pinv(Jw.T @ Jw)
+    H_inv = pinv(Jw.T @ Jw)
     cov = H_inv * sigma**2 * rho
     gauge_jacobian = None
     if ref_jacobian is not None:
@@ -509,8 +478,8 @@ def fit_relative(
     # rotation covariance from the gyroscope equation: d(res_g) = [R w_j]x dphi
     sigma_g = float(np.sqrt(np.mean(res_g**2)))
     A = _skew(w_j @ R.T - (w_j @ R.T).mean(axis=0))
-    rho_g = _residual_correlation(res_g)
-    rot_cov = _pinv(np.einsum("mji,mjk->ik", A, A)) * sigma_g**2 * rho_g
+    rho_g = residual_correlation(res_g)
+    rot_cov = pinv(np.einsum("mji,mjk->ik", A, A)) * sigma_g**2 * rho_g
     return RelativeFit(
         R=R,
         r=theta[3:6],

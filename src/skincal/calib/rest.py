@@ -1,4 +1,6 @@
-"""When is a unit at rest? Rest detection that survives the noise of real joint states and IMUs.
+"""When is a unit at rest? Rest detection that survives the noise of real joint states and IMUs: the one
+home of every rest rule (joint rests, a unit's rest runs cross-checked by its IMU, IMU stillness without
+joints :func:`imu_still_mask`, the streaming calibrator's moving/resting split :func:`link_moving`).
 
 A unit on link ``L`` is at rest when joints ``1 .. L`` are (joints after ``L`` may move: they do not
 move the unit). Two sources say when a joint rests:
@@ -46,6 +48,20 @@ STILL_FLOOR_ACCEL = 0.01
 """Spread (std, m/s^2) of the accelerometer inside a run always accepted as still."""
 STILL_FLOOR_GYRO = 2e-3
 """Spread (std, rad/s) of the gyroscope inside a run always accepted as still."""
+STILL_WINDOW_S = 0.3
+"""Window over which a unit is judged still, s."""
+STILL_SPREAD_FACTOR = 2.0
+"""Still: the rates' and accelerations' std over the window below this multiple of their noise std."""
+STILL_MEAN_FACTOR = 4.0
+"""Still: the window's mean rate less the gyroscope bias below this many standard errors of the mean."""
+STILL_GAP_S = 0.15
+"""A still run broken for less than this (a noise excursion of the window's tests) is one rest, s."""
+STILL_NOISE_FLOOR = 1e-4
+"""Smallest noise std :func:`imu_still_mask` assumes (rad/s, m/s^2): noise-free data still rest."""
+MOVING_RPS = 0.02
+"""The streaming calibrator's rule (:func:`link_moving`): a sample whose link turns faster than this (rad/s)..."""
+MOVING_RPS2 = 0.2
+"""...or accelerates its rotation faster than this (rad/s^2) counts as moving."""
 
 
 def second_difference_noise(x: FloatArray) -> FloatArray:
@@ -92,7 +108,7 @@ def _windowed_speed(t: FloatArray, x: FloatArray, window_s: float) -> FloatArray
     return np.abs(x[hi] - x[lo]) / span
 
 
-def _windowed_mean(t: FloatArray, x: FloatArray, window_s: float) -> tuple[FloatArray, FloatArray]:
+def windowed_mean(t: FloatArray, x: FloatArray, window_s: float) -> tuple[FloatArray, FloatArray]:
     """Mean of ``x`` over ``[t - W/2, t + W/2]`` per column and the sample count, by cumulative sums."""
     lo = np.searchsorted(t, t - window_s / 2)
     hi = np.searchsorted(t, t + window_s / 2, side="right")
@@ -112,7 +128,7 @@ def joint_rest_from_data(
     qd = np.asarray(joints.qd, dtype=float)
     sigma_q, sigma_v = noise if noise is not None else joint_noise(q, qd)
     speed_from_q = _windowed_speed(t, q, window_s)
-    mean_qd, n = _windowed_mean(t, qd, window_s)
+    mean_qd, n = windowed_mean(t, qd, window_s)
     # Std of each windowed estimate under pure noise: sqrt(2) sigma_q / W and sigma_v / sqrt(n).
     thr_q = np.maximum(REST_SPEED_FLOOR, NOISE_FACTOR * np.sqrt(2.0) * sigma_q / window_s)
     thr_v = np.maximum(REST_SPEED_FLOOR, NOISE_FACTOR * sigma_v[None, :] / np.sqrt(n)[:, None])
@@ -277,3 +293,33 @@ def unit_rest_runs(
         tuple(warnings),
         trimmed,
     )
+
+
+def imu_still_mask(t: FloatArray, gyro: FloatArray, accel: FloatArray, window_s: float = STILL_WINDOW_S) -> np.ndarray:
+    """``(M,)`` True where a unit is still: over ``window_s`` around each sample the std of its rates and
+    accelerations stays below ``STILL_SPREAD_FACTOR`` times their white-noise std (from 4th differences,
+    :func:`~skincal.calib.preprocess.white_noise_std`) and the mean rate less the gyroscope bias (the
+    median rate over those samples) below ``STILL_MEAN_FACTOR`` standard errors of the mean."""
+    sg = np.maximum(white_noise_std(gyro, 4), STILL_NOISE_FLOOR)
+    sa = np.maximum(white_noise_std(accel, 4), STILL_NOISE_FLOOR)
+    mg, n = windowed_mean(t, gyro, window_s)
+    ma, _ = windowed_mean(t, accel, window_s)
+    vg = np.maximum(windowed_mean(t, gyro**2, window_s)[0] - mg**2, 0.0)
+    va = np.maximum(windowed_mean(t, accel**2, window_s)[0] - ma**2, 0.0)
+    quiet = np.all(vg < (STILL_SPREAD_FACTOR * sg) ** 2, axis=1) & np.all(va < (STILL_SPREAD_FACTOR * sa) ** 2, axis=1)
+    if not quiet.any():
+        return quiet
+    bias = np.median(gyro[quiet], axis=0)
+    still = quiet & np.all(np.abs(mg - bias) < STILL_MEAN_FACTOR * sg / np.sqrt(n)[:, None], axis=1)
+    bounds = runs(still)
+    for (_, end), (start, _) in zip(bounds[:-1], bounds[1:], strict=True):
+        if t[start] - t[end - 1] < STILL_GAP_S:
+            still[end:start] = True
+    return still
+
+
+def link_moving(w: FloatArray, dw: FloatArray) -> np.ndarray:
+    """``(...)`` True where a link moves by the link signals at a sample: ``|w| > MOVING_RPS`` or
+    ``|dw| > MOVING_RPS2`` (``w``, ``dw`` ``(..., 3)`` its angular velocity and acceleration, link frame);
+    the streaming calibrator's split of samples into a resting and a moving class."""
+    return (np.linalg.norm(w, axis=-1) > MOVING_RPS) | (np.linalg.norm(dw, axis=-1) > MOVING_RPS2)

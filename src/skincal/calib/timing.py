@@ -1,4 +1,10 @@
-"""Time alignment of a unit's IMU stream with the robot's joint stream, found globally.
+"""Time alignment of a unit's IMU stream with the robot's joint stream: the one clock model and the one
+cross-correlation of the calibrators (``mle`` and the streaming calibrator).
+
+The clock model (:func:`motion_instants`, :class:`ClockSteps`): a sample stamped ``t`` by the unit's
+clock measured the motion at ``s = t' - tau - d (t' - t_ref)`` on the joint clock, with ``t'`` the
+stamp with periodic re-sync steps removed (:meth:`ClockSteps.correct`), ``tau`` the time offset at
+``t_ref`` and ``d`` the clock drift (dimensionless, 1e-6 per ppm).
 
 A unit stamped by its own clock (WiFi skin without time sync, a driver's buffering) can be off by
 a large fraction of a second. Gauss-Newton on the time offset converges only within about a
@@ -29,6 +35,24 @@ MAX_OFFSET_S = 0.5
 """Largest time offset searched, s."""
 SPREAD_WINDOW_S = 0.1
 """Window of the accelerometer-spread signal (no gyroscope), s."""
+
+
+def motion_instants(t: FloatArray, time_offset_s: float, drift: float = 0.0, t_ref: float = 0.0) -> FloatArray:
+    """``(M,)`` instants ``s = t - tau - d (t - t_ref)`` (s) at which samples stamped ``t`` measured the
+    motion (``drift`` dimensionless: 1e-6 per ppm)."""
+    t = np.asarray(t, dtype=float)
+    if drift:
+        return t - drift * (t - t_ref) - time_offset_s
+    return t - time_offset_s
+
+
+def compose_clock(
+    time_offset_s: float, drift: float, residual_offset_s: float, residual_drift: float
+) -> tuple[float, float]:
+    """The clock mapping ``(tau', d')`` (same ``t_ref``) after a residual ``(tau_r, d_r)``: samples mapped
+    by ``(tau, d)`` to ``s`` measured the motion at ``s + tau_r + d_r (s - t_ref)``, exactly the
+    mapping ``tau' = (1 + d_r) tau - tau_r``, ``d' = d - d_r + d_r d`` (:func:`motion_instants`)."""
+    return (1.0 + residual_drift) * time_offset_s - residual_offset_s, drift - residual_drift + residual_drift * drift
 
 
 @dataclass(frozen=True)
@@ -191,6 +215,32 @@ class ClockSteps:
     mean_step_s: float
     drift_ppm: float
     sync_stamps: FloatArray
+    interval_s: float = float("nan")
+    """The stream's median sample interval, s (for :meth:`extend`)."""
+    threshold_s: float = float("nan")
+    """Smallest deviation from whole intervals taken as a step, s (for :meth:`extend`)."""
+    step_sum_s: float = float("nan")
+    """Sum of the steps found, s (for :meth:`extend`)."""
+
+    def extend(self, t_prev: float, t: FloatArray) -> ClockSteps:
+        """The steps with those of newer stamps ``t`` ``(M,)`` (increasing, after ``t_prev``, the last
+        stamp already seen) added, found as :func:`find_clock_steps` finds them (same interval and
+        threshold; same sign as the steps so far): the streaming form of the search."""
+        t = np.asarray(t, dtype=float)
+        if t.size == 0 or not np.isfinite(self.interval_s) or t[0] <= t_prev:
+            return self
+        dt = np.diff(np.r_[t_prev, t])
+        resid = dt - np.maximum(np.rint(dt / self.interval_s), 1.0) * self.interval_s
+        idx = np.flatnonzero((np.abs(resid) > self.threshold_s) & (np.sign(resid) == np.sign(self.mean_step_s)))
+        if idx.size == 0:
+            return self
+        syncs = np.r_[self.sync_stamps, t[idx]]
+        n = self.n_steps + int(idx.size)
+        total = self.step_sum_s + float(resid[idx].sum())
+        period = float(np.median(np.diff(syncs)))
+        mean_step = total / n
+        drift_ppm = -mean_step / period * 1e6
+        return ClockSteps(n, period, mean_step, drift_ppm, syncs, self.interval_s, self.threshold_s, total)
 
     def correct(self, t: FloatArray) -> FloatArray:
         """Stamps with the sawtooth removed: ``t - drift (t - t_sync)`` (the last re-sync at or before
@@ -228,4 +278,6 @@ def find_clock_steps(t: FloatArray) -> ClockSteps | None:
     if period <= 0:
         return None
     mean_step = float(np.mean(steps))
-    return ClockSteps(int(idx.size), period, mean_step, -mean_step / period * 1e6, syncs)
+    return ClockSteps(
+        int(idx.size), period, mean_step, -mean_step / period * 1e6, syncs, P, threshold, float(np.sum(steps))
+    )

@@ -53,22 +53,19 @@ def avoid(
     skin (simulated at its true poses) feeds the controller through the chosen calibration (a result
     file must come from a dataset of the same --robot and --placement). With --resume the same run
     without anybody is made too, for the task time lost."""
-    import numpy as np
-
-    from skincal.control import ControllerConfig
     from skincal.data.atomic import check_output
     from skincal.errors import ConfigError
     from skincal.kinematics import get_robot
     from skincal.names import printable
-    from skincal.perception.body import RobotBody
-    from skincal.workflows.avoid_metrics import summarize
-    from skincal.workflows.avoidance import MODES, believed_skin, run_scenario, separation_for, simulated_skin
-    from skincal.workflows.scenarios import TASKS, get_scenario
+    from skincal.protocol.flange import TASKS
+    from skincal.sim.scenarios import get_scenario
+    from skincal.workflows.avoidance import MODES, believed_skin, simulated_skin
+    from skincal.workflows.experiment import MARGINS, ExperimentConfig, StoppingModels, run_experiment
 
     if mode not in MODES:
         raise ConfigError(f"unknown --mode '{printable(mode)[:40]}' (use {' or '.join(MODES)})")
-    if margin not in ("fixed", "iso"):
-        raise ConfigError(f"unknown --margin '{printable(margin)[:40]}' (use fixed or iso)")
+    if margin not in MARGINS:
+        raise ConfigError(f"unknown --margin '{printable(margin)[:40]}' (use {' or '.join(MARGINS)})")
     if task not in TASKS:
         raise ConfigError(f"unknown --task '{printable(task)[:40]}' (use {' or '.join(TASKS)})")
     plot_paths = []
@@ -82,18 +79,9 @@ def avoid(
     true_poses = simulated_skin(placement, chain)
     poses, label, uncertainty = believed_skin(true_poses, result, degrade, blind, seed)
     sc = get_scenario(scenario, chain, duration, speed=speed, task=task)
-    config = ControllerConfig()
-    if margin == "iso":
-        from dataclasses import replace
-
-        config = replace(config, separation=separation_for(chain, sc))
-    kw = dict(controller=config, uncertainty=uncertainty, resume=resume, mode=mode)
-    log = run_scenario(chain, sc, true_poses, poses, np.random.default_rng(seed), **kw)
-    reference = None
-    if resume:
-        reference = run_scenario(chain, sc.without_people(), true_poses, poses, np.random.default_rng(seed), **kw)
-    body = RobotBody.of(chain)
-    metrics = summarize(log, body, label, reference)
+    config = ExperimentConfig(chain, sc, true_poses, poses, label, uncertainty, margin, resume, mode, seed)
+    run = run_experiment(config, stopping=StoppingModels())
+    log, reference, body, metrics = run.log, run.reference, run.body, run.metrics
     written = []
     if plot is not None:
         from skincal.workflows.avoid_plot import plot_run

@@ -119,8 +119,8 @@ def _finish(chain, out: Path, result_path: Path, trajectory, result, reached: bo
 
 def _simulated(chain, out: Path, result_path: Path, *, rate: float, seed: int, goal, max_motion: float,  # noqa: ANN001
                noise: str, placement: str, units: int | None, joints: str) -> None:  # fmt: skip
+    from skincal.bench.adaptive import worst
     from skincal.workflows.adaptive import run_simulated
-    from skincal.workflows.bench_adaptive import worst
 
     def on_segment(record) -> None:  # noqa: ANN001
         path = _write_segment(chain, out, record.index, record.candidate.trajectory, rate)

@@ -20,7 +20,12 @@ def simulate(
     tip_link: str | None = typer.Option(None, help="URDF link the chain ends at (default: where the tree branches)"),
     placement: str = typer.Option("paper", help="paper (Table II, 6 units), random or ring (dense skin)"),
     units: int | None = typer.Option(None, help="number of units (random placement; default 6)"),
-    noise: str = typer.Option("none", help="IMU preset: none, datasheet, realistic or real (measured IMUs)"),
+    noise: str = typer.Option(
+        "none",
+        help="IMU preset: none, datasheet, realistic, real (measured IMUs) or real-consumer (a real recording "
+        "like the ABB tool-IMU ones: consumer IMU with gyroscope scale/misalignment; auto joints report14, "
+        "auto clock host-gaps)",
+    ),
     protocol: str = typer.Option("paper-sim", help="protocol preset: paper-sim, paper-real, ... (fitted to the robot)"),
     seed: int = typer.Option(0, help="random seed (placements, poses, noise)"),
     backend: str = typer.Option("analytic", help="analytic (exact, fast) or mujoco (independent physics)"),
@@ -28,10 +33,15 @@ def simulate(
         "kinematic", help="mujoco backend: kinematic (imposed motion) or dynamic (1 kHz velocity servos)"
     ),
     joints: str = typer.Option(
-        "auto", help="joint states: ideal, controller (500 Hz, encoder steps, noisy qd, no qdd) or auto"
+        "auto",
+        help="joint states: ideal, controller (500 Hz, encoder steps, noisy qd, no qdd), report14 (13.6 Hz "
+        "host-stamped reports, jitter, 8 % lost, qd by central differences, no qdd) or auto",
     ),
     clock: str = typer.Option(
-        "auto", help="unit clocks: ideal, driver, wifi, wifi-resync or auto (driver for --noise real)"
+        "auto",
+        help="unit clocks: ideal, driver, wifi, wifi-resync, host (host-stamped: 80-100 ms lag, spacing "
+        "2.5-17.5 ms), host-gaps (host with 0.3-0.7 s gaps and a clock step after each) or auto (driver "
+        "for --noise real, host-gaps for real-consumer)",
     ),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
     handheld: bool = typer.Option(
@@ -78,11 +88,12 @@ def _simulate_handheld(
     from skincal.data.hdf5 import write_dataset
     from skincal.errors import ConfigError
     from skincal.workflows.handheld import handheld_dataset
+    from skincal.workflows.session import resolve_timing
 
     check_output(out, force=force)
     if not (0.0 < duration <= 3600.0):
         raise ConfigError(f"--duration must be in (0, 3600] s, got {duration}")
-    clock_name = ("driver" if noise == "real" else "ideal") if clock == "auto" else clock
+    clock_name = resolve_timing(noise, clock=clock)[1]
     ds = handheld_dataset(units, spacing, duration, noise, clock_name, seed, other_body)
     write_dataset(ds, out)
     n = sum(len(s.t) for s in ds.imu.values())

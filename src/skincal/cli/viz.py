@@ -214,10 +214,10 @@ def _view_scenario(
 
     from skincal.data.result import CalibrationResult, UnitResult
     from skincal.kinematics import panda
+    from skincal.sim.scenarios import get_scenario
     from skincal.viz.viewer import serve_forever, start_viewer
     from skincal.workflows.avoidance import believed_poses, run_scenario, simulated_skin
     from skincal.workflows.playback import recording_from_run
-    from skincal.workflows.scenarios import get_scenario
 
     chain = panda()
     true_poses = simulated_skin(placement, chain)

@@ -1,7 +1,8 @@
 """Obstacle avoidance control: the QP controller and its constraints (kinematics, skin and perception only).
 
 The closed-loop experiment in MuJoCo, the human-approach scenarios, run metrics, plots and playback are
-in :mod:`skincal.workflows` (``avoidance``, ``scenarios``, ``avoid_metrics``, ``avoid_plot``, ``playback``).
+in :mod:`skincal.workflows` (``experiment``, ``avoidance``, ``avoid_plot``, ``playback``), the scenarios in
+:mod:`skincal.sim.scenarios`; the metrics of a run as functions of arrays are :mod:`skincal.control.iso_metrics`.
 """
 
 from skincal.control.constraints import (

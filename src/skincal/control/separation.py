@@ -14,7 +14,8 @@ with, per obstacle point (a part of a person the skin sees), all in m:
 * ``S_r = v_r T_r``: how far the robot moves toward the person during the reaction time; ``v_r`` m/s
   is the speed of the robot point nearest the person along the line to the person (clipped at 0: a
   robot moving away does not shrink the margin).
-* ``S_s``: the robot's stopping distance from ``v_r`` (a measured table, :class:`StoppingModel`).
+* ``S_s``: the robot's stopping distance from ``v_r`` (a measured table,
+  :class:`~skincal.kinematics.stopping.StoppingModel`).
 * ``C``: intrusion distance, how far a part of the body can reach toward the robot before it is
   detected (ISO 13855); for the skin, the part of a person outside every sensor cone.
 * ``Z_d``: position uncertainty of the sensed person; here per point ``sigma_level`` standard
@@ -30,7 +31,6 @@ the robot backs away.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from skincal.errors import ConfigError
+from skincal.kinematics.stopping import StoppingModel, default_stopping, finite_number
 from skincal.kinematics.transforms import FloatArray
 from skincal.names import printable
 
@@ -46,131 +47,6 @@ WALKING_SPEED_MPS = 1.6
 """ISO 13855 approach speed of a walking person, m/s."""
 HAND_SPEED_MPS = 2.0
 """ISO 13855 approach speed of a hand or arm near the machine, m/s."""
-
-
-def _table(name: str, value: Any) -> FloatArray:
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ConfigError(f"stopping model: {name} must be a list of numbers") from None
-    if arr.ndim != 1 or not np.all(np.isfinite(arr)) or np.any(arr < 0):
-        raise ConfigError(f"stopping model: {name} must be a list of finite non-negative numbers")
-    arr.setflags(write=False)
-    return arr
-
-
-def _number(where: str, value: Any, positive: bool = False) -> float:
-    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-    if not ok or not math.isfinite(float(value)) or float(value) < 0 or (positive and float(value) == 0):
-        need = "a finite positive number" if positive else "a finite non-negative number"
-        raise ConfigError(f"{where} must be {need}, got {value!r}")
-    return float(value)
-
-
-@dataclass(frozen=True, eq=False)
-class StoppingModel:
-    """How far and how long the robot takes to stop from a speed (stop category 2 from the controller's
-    command).
-
-    Attributes:
-        speeds: ``(K,)`` speeds of the robot point, m/s, strictly ascending from 0.
-        times: ``(K,)`` stopping times ``T_s`` from each speed, s (usually 0 at speed 0).
-        distances: ``(K,)`` stopping distances ``S_s`` from each speed, m (usually 0 at speed 0).
-        reaction_time_s: ``T_r``, s: sensing + filtering + control latency before braking starts.
-
-    Between the table's speeds times and distances are interpolated linearly; beyond the last speed
-    they are extrapolated with the last segment's slope (never below the last entry).
-    """
-
-    speeds: FloatArray
-    times: FloatArray
-    distances: FloatArray
-    reaction_time_s: float
-
-    def __post_init__(self) -> None:
-        s, t, d = (_table(n, getattr(self, n)) for n in ("speeds", "times", "distances"))
-        if not (s.size >= 2 and s.size == t.size == d.size):
-            raise ConfigError("stopping model: speeds, times and distances need the same length, at least 2")
-        if s[0] != 0 or np.any(np.diff(s) <= 0):
-            raise ConfigError("stopping model: speeds must start at 0 and be strictly ascending (m/s)")
-        if np.any(np.diff(t) < 0) or np.any(np.diff(d) < 0):
-            raise ConfigError("stopping model: times and distances must not decrease with speed")
-        object.__setattr__(self, "speeds", s)
-        object.__setattr__(self, "times", t)
-        object.__setattr__(self, "distances", d)
-        # per segment y = c + k v (the last segment carries on beyond the table)
-        k_t, k_d = np.diff(t) / np.diff(s), np.diff(d) / np.diff(s)
-        object.__setattr__(self, "_coef", (t[:-1] - k_t * s[:-1], k_t, d[:-1] - k_d * s[:-1], k_d))
-        object.__setattr__(self, "reaction_time_s", _number("stopping model: reaction_time_s", self.reaction_time_s))
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, StoppingModel):
-            return NotImplemented
-        return self.reaction_time_s == other.reaction_time_s and all(
-            np.array_equal(getattr(self, f), getattr(other, f)) for f in ("speeds", "times", "distances")
-        )
-
-    def __hash__(self) -> int:
-        return hash((self.reaction_time_s, self.speeds.tobytes(), self.times.tobytes(), self.distances.tobytes()))
-
-    def segments(self, v: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-        """``(v, c_t, k_t, c_d, k_d)``: speeds ``v`` clipped at 0 and the affine pieces of the table at them,
-        ``T_s = c_t + k_t v``, ``S_s = c_d + k_d v`` (the segment holding ``v``; the last one beyond it)."""
-        v = np.maximum(np.asarray(v, dtype=float), 0.0)
-        j = np.clip(np.searchsorted(self.speeds, v, side="right") - 1, 0, self.speeds.size - 2)
-        c_t, k_t, c_d, k_d = self._coef  # type: ignore[attr-defined]
-        return v, c_t[j], k_t[j], c_d[j], k_d[j]
-
-    def stopping_time(self, v: ArrayLike) -> FloatArray:
-        """``T_s`` (s) from speeds ``v`` m/s (any shape; negative speeds count as 0)."""
-        v, c, k, _, _ = self.segments(v)
-        return c + k * v
-
-    def stopping_distance(self, v: ArrayLike) -> FloatArray:
-        """``S_s`` (m) from speeds ``v`` m/s (any shape; negative speeds count as 0)."""
-        v, _, _, c, k = self.segments(v)
-        return c + k * v
-
-    @classmethod
-    def constant_deceleration(
-        cls, decel_mps2: float, reaction_time_s: float, v_max: float = 3.0, n: int = 16
-    ) -> StoppingModel:
-        """The table of braking at a constant ``decel_mps2`` m/s^2: ``T_s = v / a``, ``S_s = v^2 / (2 a)``
-        at ``n`` speeds from 0 to ``v_max`` m/s."""
-        a = _number("stopping model: decel_mps2", decel_mps2, positive=True)
-        if int(n) != n or n < 2:
-            raise ConfigError(f"stopping model: n must be an integer >= 2, got {n!r}")
-        v = np.linspace(0.0, _number("stopping model: v_max", v_max, positive=True), int(n))
-        return cls(v, v / a, v**2 / (2 * a), reaction_time_s)
-
-    def to_dict(self) -> dict:
-        """JSON-ready: ``{"speeds_mps": [...], "times_s": [...], "distances_m": [...], "reaction_time_s": T_r}``."""
-        return {
-            "speeds_mps": self.speeds.tolist(),
-            "times_s": self.times.tolist(),
-            "distances_m": self.distances.tolist(),
-            "reaction_time_s": self.reaction_time_s,
-        }
-
-    @classmethod
-    def from_dict(cls, d: Any) -> StoppingModel:
-        """The model of :meth:`to_dict`'s form; a one-line :class:`ConfigError` on anything else."""
-        keys = ("speeds_mps", "times_s", "distances_m", "reaction_time_s")
-        if not isinstance(d, dict):
-            raise ConfigError("stopping model must be a mapping with " + ", ".join(keys))
-        missing = [k for k in keys if k not in d]
-        extra = sorted(printable(str(k)) for k in d if k not in keys)
-        if missing or extra:
-            what = f"missing {', '.join(missing)}" if missing else f"unknown field(s) {', '.join(extra)}"
-            raise ConfigError(f"stopping model: {what} (fields: {', '.join(keys)})")
-        return cls(d["speeds_mps"], d["times_s"], d["distances_m"], d["reaction_time_s"])
-
-
-def default_stopping() -> StoppingModel:
-    """A placeholder stopping model: 4 m/s^2 braking of the robot point, ``T_r = 0.05 s`` (a 50 Hz
-    reading, the 3-reading median's lag and 1 ms control). Measure the robot's own with
-    :func:`skincal.workflows.stopping.measure_stopping`."""
-    return StoppingModel.constant_deceleration(4.0, 0.05)
 
 
 @dataclass(frozen=True)
@@ -197,7 +73,7 @@ class SeparationParams:
 
     def __post_init__(self) -> None:
         for name in ("human_speed_mps", "intrusion_m", "robot_position_uncertainty_m", "sigma_level"):
-            object.__setattr__(self, name, _number(f"separation: {name}", getattr(self, name)))
+            object.__setattr__(self, name, finite_number(f"separation: {name}", getattr(self, name)))
         if not isinstance(self.stopping, StoppingModel):
             raise ConfigError(f"separation: stopping must be a StoppingModel, got {type(self.stopping).__name__}")
 

@@ -7,7 +7,7 @@ them into one :class:`ImuCalibration` and writes them from it, under the same ke
 optional (``None``: the method did not estimate it, ``null`` or absent in the file); a unit whose
 entry has none of the keys gets ``imu = None``.
 
-Frames and the model the numbers belong to (:mod:`skincal.calib.mle.model`): vectors are in the unit
+Frames and the model the numbers belong to (:mod:`skincal.calib.model`): vectors are in the unit
 frame ``su``; the accelerometer reads ``a = A f + b + c (t - t_b)`` for the unit frame's specific
 force ``f``; the sample stamped ``t`` measured the motion at
 ``t - time_offset_s - 1e-6 clock_drift_ppm (t - time_reference_s)``.

@@ -506,11 +506,11 @@ def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[
         if unit.link_confidence is not None:
             entry[LINK_CONFIDENCE] = _to_json(unit.link_confidence, source, f"{where}.{LINK_CONFIDENCE}")
         entry.update(_to_json(unit.extras, source, f"{where}"))
-        if unit.notes:
-            entry[NOTES] = list(_notes(unit.notes, f"{source}: {where}.{NOTES}"))
         if unit.pose_covariance is not None:
             cov = check_pose_covariance(unit.pose_covariance, f"{source}: {where}.{POSE_COVARIANCE}")
             entry[POSE_COVARIANCE] = _to_json(cov, source, f"{where}.{POSE_COVARIANCE}")
+        if unit.notes:
+            entry[NOTES] = list(_notes(unit.notes, f"{source}: {where}.{NOTES}"))
         if unit.moved_at_s:
             entry[MOVED_AT] = _to_json(list(unit.moved_at_s), source, f"{where}.{MOVED_AT}")
         units[name] = entry

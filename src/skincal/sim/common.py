@@ -114,7 +114,7 @@ def simulate_units(
             tof[name] = TofStream(t=t_tof, range=tof_model.measure(tof_truth(u, t_tof), unit_rng))
         clock, t_stamp, keep = unit_clock_stamps(clock_model, unit_rng, t_stamp, t_true, t0)
         imu[name] = ImuStream(t=t_stamp, accel=accel[keep], gyro=gyro[keep])
-        truth_sensor[name] = sensor_truth(errors, clock)
+        truth_sensor[name] = sensor_truth(errors, clock, t0)
         if progress is not None:
             progress(u + 1, len(placements))
     joints = apply_joint_state_model(joint_model or JointStateModel(), joint_motion, trajectory.t, rng.spawn(1)[0])
@@ -140,20 +140,28 @@ def unit_clock_stamps(
 ) -> tuple[UnitClock, np.ndarray, np.ndarray]:
     """One unit's clock, drawn from a child of ``unit_rng`` (so the unit's other draws are untouched),
     and its stamps of samples at physical instants ``t_true`` ``(M,)`` s with perfect-clock stamps
-    ``t_nominal``: ``(clock, t_stamp (K,), keep (M,) bool)`` (:func:`skincal.skin.clock.stamp_samples`)."""
+    ``t_nominal``: ``(clock, t_stamp (K,), keep (M,) bool)`` (:func:`skincal.skin.clock.stamp_samples`).
+    A clock with gaps draws them over ``[t0, max(t_true)]``."""
     model = clock_model or ClockModel()
     clock_rng = unit_rng.spawn(1)[0]
-    clock = draw_clock(model, clock_rng)
+    duration = float(np.max(t_true)) - t0 if np.size(t_true) else 0.0
+    clock = draw_clock(model, clock_rng, duration)
     t_stamp, keep = stamp_samples(model, clock, t_nominal, t_true, t0, clock_rng)
     return clock, t_stamp, keep
 
 
-def sensor_truth(errors: ImuErrors, clock: UnitClock | None = None) -> dict[str, np.ndarray | float]:
+def sensor_truth(
+    errors: ImuErrors, clock: UnitClock | None = None, session_t0: float = 0.0
+) -> dict[str, np.ndarray | float]:
     """The ``Dataset.truth_sensor`` entry of one unit's drawn IMU errors and clock.
 
-    ``time_offset_s`` = latency + clock offset (the stamp error right after a re-sync, or at the
-    session start of a free-running clock); ``clock_drift_ppm``; ``clock_resync_period_s`` only
-    when the clock is re-synced (a dataset attribute must be finite).
+    ``time_offset_s`` = latency + clock offset + the host's mean reception delay (the stamp error
+    right after a re-sync, or at the session start of a free-running clock, before any gap's step);
+    ``clock_drift_ppm``; ``clock_resync_period_s`` only when the clock is re-synced (a dataset
+    attribute must be finite); only when the clock has gaps, ``clock_gap_start_s`` and
+    ``clock_gap_end_s`` ``(G,)`` (physical instants, s) and ``clock_step_s`` ``(G,)`` (the stamp
+    error changes by ``clock_step_s[j]`` from ``clock_gap_end_s[j]`` on), and only with host
+    reception stamps ``clock_host_delay_mean_s``.
     """
     clock = clock or UnitClock()
     truth: dict[str, np.ndarray | float] = {
@@ -161,11 +169,19 @@ def sensor_truth(errors: ImuErrors, clock: UnitClock | None = None) -> dict[str,
         "accel_scale": errors.accel_scale,
         "accel_misalignment": errors.accel_misalignment,
         "gyro_bias": errors.gyro_bias,
-        "time_offset_s": float(errors.latency_s) + clock.offset_s,
+        "time_offset_s": float(errors.latency_s) + clock.offset_s + clock.delay_mean_s,
         "clock_drift_ppm": clock.drift_ppm,
     }
     if np.isfinite(clock.resync_period_s):
         truth["clock_resync_period_s"] = clock.resync_period_s
+    if clock.gaps.size:
+        t0 = session_t0
+        truth["clock_gap_start_s"] = t0 + clock.gaps[:, 0]
+        truth["clock_gap_end_s"] = t0 + clock.gaps[:, 0] + clock.gaps[:, 1]
+        truth["clock_step_s"] = np.array(clock.gaps[:, 2])
+    if clock.delay_mean_s:
+        truth["clock_host_delay_mean_s"] = clock.delay_mean_s
+    truth.update(errors.gyro_truth())
     return truth
 
 

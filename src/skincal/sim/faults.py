@@ -16,6 +16,12 @@ Time ``t`` is the IMU stream's own stamp (s); the session is ``[t0, t1]``, the j
   from ``t_s``; truth: the pose at the majority of the session, both poses and ``knock_t_s``.
 * :func:`declare_gravity`, wrong gravity in the file: the ``gravity`` field replaced; truth
   ``gravity_true_mps2``.
+* :func:`misstate_units`, a stream in the wrong unit (:data:`UNIT_MISTAKES`): ``x' = round(k x)``
+  (rounded only for raw counts) with ``k`` the factor from SI to the unit the stream really is in:
+  ``gyro-deg`` (a gyroscope in deg/s stored as rad/s: ``w' = (180 / pi) w``, 57.3x), ``accel-g``
+  (an accelerometer in g stored as m/s^2: ``a' = a / 9.80665``), ``raw-counts`` (both as 16-bit
+  register counts of a +-4 g / +-2000 deg/s part: ``a' = round(a / lsb_a)``, ``w' = round(w / lsb_g)``,
+  clipped to +-32767); truth ``accel_unit_factor`` and ``gyro_unit_factor`` = ``k`` (1 when untouched).
 
 The pose truth (``Dataset.truth``) a calibration is judged against is the unit's pose, unchanged by
 every fault but the knock; for a knocked unit it is the pose it had over the larger part of the
@@ -32,6 +38,7 @@ from numpy.typing import ArrayLike
 
 from skincal.data.dataset import Dataset, ImuStream
 from skincal.errors import ConfigError
+from skincal.skin.imu import STANDARD_GRAVITY
 from skincal.skin.pose import SkinUnitPose
 
 GRAVITY_TRUE_MPS2 = 9.796
@@ -270,3 +277,49 @@ def simulate_gravity_mismatch(
     """
     simulated = simulate(np.array([0.0, 0.0, -float(g_true)]))
     return declare_gravity(simulated, np.array([0.0, 0.0, -float(g_declared)]))
+
+
+RAW_ACCEL_LSB_MPS2 = 4.0 * STANDARD_GRAVITY / 2**15
+"""Accelerometer LSB of :data:`UNIT_MISTAKES` ``raw-counts``, m/s^2 (+-4 g at 16 bit, 8192 counts per g)."""
+RAW_GYRO_LSB_RPS = np.radians(2000.0) / 2**15
+"""Gyroscope LSB of ``raw-counts``, rad/s (+-2000 deg/s at 16 bit, 16.4 counts per deg/s)."""
+RAW_COUNT_LIMIT = 2**15 - 1
+
+UNIT_MISTAKES: dict[str, tuple[float, float, bool]] = {
+    "gyro-deg": (1.0, 180.0 / np.pi, False),
+    "accel-g": (1.0 / STANDARD_GRAVITY, 1.0, False),
+    "raw-counts": (1.0 / RAW_ACCEL_LSB_MPS2, 1.0 / RAW_GYRO_LSB_RPS, True),
+}
+"""Unit mistake name -> ``(accel factor, gyro factor, rounded to counts)``: the stream is ``factor x``
+the SI value (:func:`misstate_units`)."""
+
+
+def misstate_units(ds: Dataset, mistake: str, units: Iterable[str] | None = None) -> Dataset:
+    """The streams of ``units`` (default all) written in another unit than the file says (SI).
+
+    ``a' = k_a a``, ``w' = k_g w`` with ``(k_a, k_g)`` of :data:`UNIT_MISTAKES`; ``raw-counts`` rounds
+    to whole counts and clips to ``+-32767`` (``a' = clip(round(a / lsb_a))``). Stamps, poses and
+    ToF are unchanged. Truth: ``accel_unit_factor`` and ``gyro_unit_factor`` multiplied by ``k``
+    (a unit of factor 1 is in SI); a unit without a gyroscope records only the accelerometer's.
+    """
+    try:
+        k_a, k_g, counts = UNIT_MISTAKES[mistake]
+    except KeyError:
+        raise ConfigError(f"unknown unit mistake '{mistake}' (known: {', '.join(UNIT_MISTAKES)})") from None
+
+    def convert(x: np.ndarray, k: float) -> np.ndarray:
+        y = np.asarray(x, dtype=float) * k
+        return np.clip(np.round(y), -RAW_COUNT_LIMIT, RAW_COUNT_LIMIT) if counts else y
+
+    streams, truth = {}, {}
+    for name in _units(ds, units):
+        s = ds.imu[name]
+        before = ds.truth_sensor.get(name, {})
+        entry = {"accel_unit_factor": float(before.get("accel_unit_factor", 1.0)) * k_a}
+        gyro = None
+        if s.gyro is not None:
+            gyro = convert(s.gyro, k_g)
+            entry["gyro_unit_factor"] = float(before.get("gyro_unit_factor", 1.0)) * k_g
+        streams[name] = replace(s, accel=convert(s.accel, k_a), gyro=gyro)
+        truth[name] = entry
+    return _with_streams(ds, streams, truth)

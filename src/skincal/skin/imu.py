@@ -10,13 +10,16 @@ measures the angular rate in its own frame, ``w_su = R_base_su^T w_base``.
 Measurement model (:func:`apply_imu_model`), per sample, SI units throughout:
 
     a_m = D_s M f_su + b_a + n_a,   D_s = diag(1 + s),  M = I + S (S symmetric, zero diagonal)
-    w_m = w_su + b_g + n_g
+    w_m = D_g M_g w_su + b_g + n_g, D_g = diag(1 + s_g), M_g = I + S_g (S_g zero diagonal, general)
 
 then quantisation to the LSB and saturation at the full-scale range. ``n_a, n_g`` are white,
 Gaussian, independent per axis with std = noise density * sqrt(bandwidth). Only a *symmetric*
 misalignment is modelled: the unit frame is defined by the accelerometer axes (polar factor), so
 an antisymmetric part would be indistinguishable from the unit's orientation (a small rotation
-``R (I + [phi]x)`` and a skew misalignment ``I + [phi]x`` give the same readings).
+``R (I + [phi]x)`` and a skew misalignment ``I + [phi]x`` give the same readings). The gyroscope's
+misalignment ``S_g`` is relative to those accelerometer axes, so all six off-diagonal entries are
+its own (a small rotation of the gyroscope die against the accelerometer's is its antisymmetric
+part); to first order a rate ``w`` reads ``w + diag(s_g) w + S_g w``.
 
 Timing: :func:`sample_instants` gives the unit's own time stamps (nominal ``k / rate_hz`` with a
 random phase, Gaussian jitter and random drops). The sample stamped ``t`` measures the physical
@@ -103,6 +106,9 @@ class ImuModel:
         misalignment_std: off-diagonal entries of the symmetric ``S`` in ``M = I + S``,
             ``S_ij = S_ji ~ N(0, std^2)``, rad (small-angle).
         gyro_bias_std: per-unit constant gyroscope bias, ``N(0, std^2)`` per axis, rad/s.
+        gyro_scale_std: per-axis gyroscope scale ``1 + s_g``, ``s_g ~ N(0, std^2)``, dimensionless.
+        gyro_misalignment_std: each of the six off-diagonal entries of ``S_g`` in ``M_g = I + S_g``,
+            ``N(0, std^2)`` independently, rad (small-angle).
         accel_range: accelerometer full scale, output clipped to ``[-range, range]``, m/s^2.
         accel_lsb: accelerometer quantisation step, m/s^2.
         gyro_range: gyroscope full scale, rad/s.
@@ -129,6 +135,8 @@ class ImuModel:
     latency_std_s: float = 0.0
     jitter_s: float = 0.0
     drop_probability: float = 0.0
+    gyro_scale_std: float = 0.0
+    gyro_misalignment_std: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -223,8 +231,31 @@ IMU_PRESETS: dict[str, ImuModel] = {
         latency_s=0.015,
         drop_probability=0.01,
     ),
+    # A consumer IMU board (MPU9150 / MPU6050 class) on an industrial robot's tool, read by a PC (the
+    # stamps are the clock preset ``host`` / ``host-gaps``). Measured on those recordings: 100 Hz
+    # steady rate, +-4 g at 16 bit (LSB 1.197e-3 m/s^2), +-2000 deg/s at 16 bit (LSB 1.064e-3
+    # rad/s). Stated for those parts: scale errors of a few percent, gyroscope scale 3-6 % off.
+    # Chosen: ``real``'s noise densities and biases, accelerometer scale 2 % std, gyroscope scale
+    # 4.5 % std (|s_g| 3.6 % on average), 1 % cross-axis on both; no latency (the host clock
+    # preset holds the lag) and no drops (its gaps hold the losses).
+    "real-consumer": ImuModel(
+        rate_hz=100.0,
+        bandwidth_hz=50.0,
+        accel_noise_density=0.014,
+        gyro_noise_density=2.0e-3,
+        accel_bias_std=0.35,
+        accel_scale_std=0.02,
+        misalignment_std=0.01,
+        gyro_bias_std=12.0 * _DPS,
+        gyro_scale_std=0.045,
+        gyro_misalignment_std=0.01,
+        accel_range=4.0 * STANDARD_GRAVITY,
+        accel_lsb=4.0 * STANDARD_GRAVITY / 2**15,
+        gyro_range=2000.0 * _DPS,
+        gyro_lsb=2000.0 * _DPS / 2**15,
+    ),
 }
-"""IMU presets by name: ``none``, ``datasheet``, ``realistic``, ``real``."""
+"""IMU presets by name: ``none``, ``datasheet``, ``realistic``, ``real``, ``real-consumer``."""
 
 
 def get_imu_model(name: str) -> ImuModel:
@@ -245,6 +276,8 @@ class ImuErrors:
         accel_misalignment: ``(3, 3)`` ``M = I + S``, ``S`` symmetric with zero diagonal.
         gyro_bias: ``(3,)`` gyroscope bias ``b_g``, rad/s, SU frame.
         latency_s: delay between the physical instant and the time stamp, s.
+        gyro_scale: ``(3,)`` gyroscope scale ``1 + s_g`` (``None``: ones).
+        gyro_misalignment: ``(3, 3)`` ``M_g = I + S_g``, unit diagonal (``None``: identity).
     """
 
     accel_bias: FloatArray
@@ -252,9 +285,18 @@ class ImuErrors:
     accel_misalignment: FloatArray
     gyro_bias: FloatArray
     latency_s: float = 0.0
+    gyro_scale: FloatArray | None = None
+    gyro_misalignment: FloatArray | None = None
 
     def __post_init__(self) -> None:
-        shapes = {"accel_bias": (3,), "accel_scale": (3,), "accel_misalignment": (3, 3), "gyro_bias": (3,)}
+        if self.gyro_scale is None:
+            object.__setattr__(self, "gyro_scale", np.ones(3))
+        if self.gyro_misalignment is None:
+            object.__setattr__(self, "gyro_misalignment", np.eye(3))
+        shapes = {
+            "accel_bias": (3,), "accel_scale": (3,), "accel_misalignment": (3, 3), "gyro_bias": (3,),
+            "gyro_scale": (3,), "gyro_misalignment": (3, 3),
+        }  # fmt: skip
         for name, shape in shapes.items():
             arr = np.array(getattr(self, name), dtype=float)
             if arr.shape != shape or not np.all(np.isfinite(arr)):
@@ -263,6 +305,8 @@ class ImuErrors:
             object.__setattr__(self, name, arr)
         if not np.allclose(self.accel_misalignment, self.accel_misalignment.T, atol=1e-12):
             raise ConfigError("ImuErrors.accel_misalignment must be symmetric (M = I + S, S symmetric)")
+        if not np.allclose(np.diag(self.gyro_misalignment), 1.0, atol=1e-12):
+            raise ConfigError("ImuErrors.gyro_misalignment must have a unit diagonal (M_g = I + S_g)")
         object.__setattr__(self, "latency_s", float(self.latency_s))
 
     @classmethod
@@ -275,15 +319,43 @@ class ImuErrors:
         """``(3, 3)`` linear part ``D_s M`` of the accelerometer model."""
         return self.accel_scale[:, None] * self.accel_misalignment
 
+    @property
+    def gyro_matrix(self) -> FloatArray:
+        """``(3, 3)`` linear part ``D_g M_g`` of the gyroscope model."""
+        assert self.gyro_scale is not None and self.gyro_misalignment is not None
+        return self.gyro_scale[:, None] * self.gyro_misalignment
+
+    @property
+    def gyro_is_ideal(self) -> bool:
+        """True when ``D_g M_g`` is the identity (no gyroscope scale or misalignment)."""
+        return bool(np.array_equal(self.gyro_matrix, np.eye(3)))
+
+    def gyro_truth(self) -> dict[str, FloatArray]:
+        """``{"gyro_scale", "gyro_misalignment"}`` for a dataset's truth, empty when ideal (so that
+        the truth of IMU models without them is unchanged)."""
+        if self.gyro_is_ideal:
+            return {}
+        assert self.gyro_scale is not None and self.gyro_misalignment is not None
+        return {"gyro_scale": np.array(self.gyro_scale), "gyro_misalignment": np.array(self.gyro_misalignment)}
+
 
 def draw_imu_errors(model: ImuModel, rng: np.random.Generator) -> ImuErrors:
-    """Draw one unit's constant errors: Gaussian bias, scale, symmetric misalignment and delay."""
+    """Draw one unit's constant errors: Gaussian bias, scale, symmetric misalignment and delay, then
+    (only when the model has them, so that the other presets' draws are unchanged) the gyroscope
+    scale ``1 + N(0, gyro_scale_std^2)`` per axis and misalignment ``I + S_g``, off-diagonal
+    ``N(0, gyro_misalignment_std^2)``."""
     bias = rng.normal(0.0, model.accel_bias_std, 3)
     scale = 1.0 + rng.normal(0.0, model.accel_scale_std, 3)
     upper = np.triu(rng.normal(0.0, model.misalignment_std, (3, 3)), k=1)
     gyro_bias = rng.normal(0.0, model.gyro_bias_std, 3)
     latency = model.latency_s + (rng.normal(0.0, model.latency_std_s) if model.latency_std_s > 0 else 0.0)
-    return ImuErrors(bias, scale, np.eye(3) + upper + upper.T, gyro_bias, latency)
+    gyro_scale, gyro_mis = np.ones(3), np.eye(3)
+    if model.gyro_scale_std > 0 or model.gyro_misalignment_std > 0:
+        gyro_scale = 1.0 + rng.normal(0.0, model.gyro_scale_std, 3)
+        off = rng.normal(0.0, model.gyro_misalignment_std, (3, 3))
+        np.fill_diagonal(off, 0.0)
+        gyro_mis = np.eye(3) + off
+    return ImuErrors(bias, scale, np.eye(3) + upper + upper.T, gyro_bias, latency, gyro_scale, gyro_mis)
 
 
 def sample_instants(model: ImuModel, t_start: float, t_end: float, rng: np.random.Generator) -> FloatArray:
@@ -337,7 +409,8 @@ def apply_imu_model(
     In this order, per sample (all in the SU frame):
 
     1. ``a = diag(accel_scale) @ accel_misalignment @ f_true + accel_bias + n_a`` and
-       ``w = w_true + gyro_bias + n_g``, noise std = density * sqrt(bandwidth);
+       ``w = diag(gyro_scale) @ gyro_misalignment @ w_true + gyro_bias + n_g``, noise std =
+       density * sqrt(bandwidth);
     2. quantisation: ``round(x / lsb) * lsb`` (skipped when the LSB is 0);
     3. saturation: clip to ``[-range, range]`` (to whole LSB counts when quantised).
 
@@ -366,7 +439,7 @@ def apply_imu_model(
     w = _as_vectors(w_true, "w_true")
     if w.shape != f.shape:
         raise ConfigError(f"w_true must have the shape of f_true {f.shape}, got {w.shape}")
-    gyro = w + errors.gyro_bias
+    gyro = (w if errors.gyro_is_ideal else w @ errors.gyro_matrix.T) + errors.gyro_bias
     if model.gyro_noise_std > 0 and rng is not None:
         gyro = gyro + rng.normal(0.0, model.gyro_noise_std, gyro.shape)
     return accel, _digitise(gyro, model.gyro_lsb, model.gyro_range)

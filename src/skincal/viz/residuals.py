@@ -1,11 +1,11 @@
 """Accelerometer residuals of a calibration result and the data coverage, for plots and reports.
 
-The model is the one ``mle`` fits, evaluated by the same code (:mod:`skincal.calib.mle.model`): the
+The model is the one ``mle`` fits, evaluated by the same code (:mod:`skincal.calib.model`): the
 sample stamped ``t`` measured the motion at ``s = t - tau - d (t - t_ref)``, and
 
     f_pred = A R_link_su^T (u(s) + K(s) p_link_su + k u_g(s)) + b + c (s - t_b),
 
-with ``u``, ``K``, ``u_g`` the link signals of :func:`skincal.calib.mle.signals.link_signals` and the
+with ``u``, ``K``, ``u_g`` the link signals of :func:`skincal.calib.signals.link_signals` and the
 unit's :class:`~skincal.data.imu_calibration.ImuCalibration` (``UnitResult.imu``; what it does not
 give takes the neutral value: ``A`` identity, ``b``, ``c``, ``k``, ``tau``, ``d`` zero). Residual
 ``e = f_meas - f_pred`` in the unit frame, m/s^2. (``mle`` measures the bias drift's time from its
@@ -20,9 +20,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from skincal.calib.links import discover_link
-from skincal.calib.mle.model import calibrated_instants, predict_calibrated
-from skincal.calib.mle.signals import link_signals
+from skincal.calib.model import calibrated_instants, predict_calibrated
 from skincal.calib.preprocess import JointInterpolator, unit_samples
+from skincal.calib.signals import link_signals
 from skincal.data.dataset import Dataset
 from skincal.data.result import UnitResult
 from skincal.kinematics.transforms import FloatArray

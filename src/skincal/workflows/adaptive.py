@@ -2,7 +2,7 @@
 
 :func:`adaptive_loop` is the loop itself, for any robot that can execute a segment
 (:class:`~skincal.protocol.Trajectory`) and feed its data to the streaming calibrator. It asks
-:func:`skincal.calib.online.design.next_motion` for the segment with the most expected information per
+:func:`skincal.protocol.design.next_motion` for the segment with the most expected information per
 second, hands it to ``execute``, and stops when every unit's std reached the target (or at the
 motion budget).
 
@@ -29,7 +29,11 @@ from typing import Any
 import numpy as np
 
 from skincal.calib.online import OnlineCalibrator, UnitStatus
-from skincal.calib.online.design import (
+from skincal.data.dataset import Dataset
+from skincal.errors import ConfigError
+from skincal.kinematics.chain import SerialChain
+from skincal.protocol import Trajectory, concatenate_trajectories
+from skincal.protocol.design import (
     Candidate,
     DesignOptions,
     calibrator_target,
@@ -39,10 +43,6 @@ from skincal.calib.online.design import (
     segment_config,
     unit_weights,
 )
-from skincal.data.dataset import Dataset
-from skincal.errors import ConfigError
-from skincal.kinematics.chain import SerialChain
-from skincal.protocol import Trajectory, concatenate_trajectories
 from skincal.workflows.live import Target, all_reached, make_calibrator
 
 MAX_MOTION_S = 300.0

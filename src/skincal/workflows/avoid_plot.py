@@ -82,7 +82,7 @@ def plot_run(
 
 
 def _separation_panel(ax, log: RunLog, body: RobotBody) -> None:
-    from skincal.workflows.avoid_metrics import clearance, margin_of
+    from skincal.workflows.experiment import clearance, margin_of
 
     clear = clearance(log, body)
     sp = margin_of(log)

@@ -27,7 +27,7 @@ While the nearest perceived point is within the protective separation ``S_p`` of
 ``resume_band`` (m), the clock's rate ramps down to 0 (the reference stops where it is and its
 velocity feed-forward with it; the controller keeps the distance, backing away when the person keeps
 coming); once free it ramps back to 1, each ramp taking ``RAMP_S``. The task time lost is then how far
-the clock lags behind the run without a person (:func:`skincal.workflows.avoid_metrics.task_time_lost`).
+the clock lags behind the run without a person (:func:`skincal.control.iso_metrics.task_time_lost`).
 Without ``resume`` the reference runs on ``t`` (the legacy loop, unchanged).
 """
 
@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from skincal.control.iso_metrics import TERMS
 from skincal.control.qp import AvoidanceController, ControllerConfig
 from skincal.control.separation import separation_speed
 from skincal.errors import ConfigError
@@ -51,9 +52,9 @@ from skincal.perception.points import PerceptionConfig
 from skincal.perception.tracker import ProximityTracker
 from skincal.perception.uncertainty import SkinUncertainty
 from skincal.sim.mujoco_model import SensorIndex, build_model, link_body_ids, require_mujoco
+from skincal.sim.scenarios import Scenario
 from skincal.skin.pose import SkinUnitPose
 from skincal.skin.tof import TofModel, cone_directions, get_tof_model
-from skincal.workflows.scenarios import Scenario
 
 RAMP_S = 0.2
 """Time the task clock takes to stop or to get back to full rate, s."""
@@ -287,10 +288,6 @@ def run_scenario(
     )
 
 
-TERMS = ("S_h", "S_r", "S_s", "C", "Z_d", "Z_r")
-"""The parts of ISO/TS 15066's protective separation distance ``S_p``, in its order."""
-
-
 def _binding(parts, res) -> int:
     """Index of the point whose terms the step's margin is: the one whose ``S_p`` is the step's margin."""
     total = np.asarray(parts.total, dtype=float).reshape(-1)
@@ -348,7 +345,7 @@ def believed_skin(true_poses: dict, result: Path | None, degrade: str | None, bl
         poses = {u: r.pose for u, r in res.units.items()}
         return poses, f"result {result.name} ({res.method})", SkinUncertainty.from_result(res)
     if degrade is not None:
-        from skincal.workflows.scenarios import degrade_poses
+        from skincal.sim.scenarios import degrade_poses
 
         try:
             pos, ang = (float(x) for x in degrade.split(","))
@@ -359,31 +356,3 @@ def believed_skin(true_poses: dict, result: Path | None, degrade: str | None, bl
         poses = degrade_poses(true_poses, pos, ang, np.random.default_rng(seed + 1))
         return poses, f"truth degraded {pos} m/{ang} deg", degraded_uncertainty(poses, pos, ang)
     return dict(true_poses), "truth", None
-
-
-_STOPPING: dict = {}
-
-
-def stopping_model(chain: SerialChain):
-    """The robot's measured stopping model (:func:`skincal.workflows.stopping.measure_stopping`, cached per
-    chain for the process); the separation module's placeholder when the measurement is unavailable."""
-    key = (chain.name, chain.n_joints, chain.link_frames(np.zeros(chain.n_joints)).tobytes())
-    if key not in _STOPPING:
-        try:
-            from skincal.workflows.stopping import measure_stopping
-        except ImportError:  # pragma: no cover - the dynamics are a separate module
-            from skincal.control.separation import default_stopping
-
-            _STOPPING[key] = default_stopping()
-        else:
-            _STOPPING[key] = measure_stopping(chain)
-    return _STOPPING[key]
-
-
-def separation_for(chain: SerialChain, scenario: Scenario, human_speed: float | None = None):
-    """ISO/TS 15066 separation parameters for a run: ``v_h`` from the scenario (or ``human_speed``), the
-    robot's measured stopping model, the other terms the separation module's defaults."""
-    from skincal.control.separation import SeparationParams
-
-    v_h = scenario.human_speed if human_speed is None else float(human_speed)
-    return SeparationParams(human_speed_mps=v_h, stopping=stopping_model(chain))

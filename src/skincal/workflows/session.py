@@ -28,6 +28,11 @@ IDEAL_NOISE = ("none", "datasheet")
 DRIVER_CLOCK_NOISE = ("real",)
 """IMU presets whose units default to the measured driver clock (``clock="auto"``)."""
 
+REAL_RECORDING_NOISE = ("real-consumer",)
+"""IMU presets whose sessions default to a real recording's timing (``auto``): the controller's
+host-stamped ~14 Hz reports (joints ``report14``) and host-stamped IMU samples with gaps and clock
+steps (clock ``host-gaps``)."""
+
 PLACEMENTS = ("paper", "random", "ring")
 MUJOCO_MODES = ("kinematic", "dynamic")
 
@@ -35,16 +40,17 @@ MUJOCO_MODES = ("kinematic", "dynamic")
 def resolve_timing(noise: str, joints: str = "auto", clock: str = "auto") -> tuple[str, str]:
     """The joint-state and clock preset names for ``joints``/``clock`` (``auto`` resolved).
 
-    ``auto``: joints ``ideal`` for the IMU presets none/datasheet and ``controller`` otherwise
-    (realistic, real); clock ``driver`` for real and ``ideal`` otherwise.
+    ``auto``: joints ``ideal`` for the IMU presets none/datasheet, ``report14`` for real-consumer
+    and ``controller`` otherwise (realistic, real); clock ``driver`` for real, ``host-gaps`` for
+    real-consumer and ``ideal`` otherwise.
     """
     from skincal.sim.joint_states import get_joint_model
     from skincal.skin.clock import get_clock_model
 
     if joints == "auto":
-        joints = "ideal" if noise in IDEAL_NOISE else "controller"
+        joints = "ideal" if noise in IDEAL_NOISE else "report14" if noise in REAL_RECORDING_NOISE else "controller"
     if clock == "auto":
-        clock = "driver" if noise in DRIVER_CLOCK_NOISE else "ideal"
+        clock = "driver" if noise in DRIVER_CLOCK_NOISE else "host-gaps" if noise in REAL_RECORDING_NOISE else "ideal"
     get_joint_model(joints)
     get_clock_model(clock)
     return joints, clock

@@ -7,7 +7,7 @@ Measurement model (unit frame ``su``, link frame ``n``; ``R = R_link_su``, ``p =
     physical instant of the sample stamped t_i:  s_i = t_i - tau - d (t_i - t_c)
 
 ``u``, ``K``, ``w`` (link-frame specific force of the origin, rigid-body matrix, angular velocity)
-come from :mod:`skincal.calib.mle.signals`; at rest ``K = 0``, ``w = 0``. Parameters:
+come from :mod:`skincal.calib.signals`; at rest ``K = 0``, ``w = 0``. Parameters:
 
 * ``b`` accelerometer bias; ``c`` its drift rate (m/s^2 per s, optional); ``b_g`` gyroscope bias;
 * ``A = I + E``: ``E`` symmetric (6) when only the accelerometer is used (an antisymmetric part
@@ -42,7 +42,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from skincal.calib.mle.model import accelerometer, link_specific_force
+from skincal.calib.model import accelerometer, link_specific_force
+from skincal.calib.robust import huber_weights, pinv, pinv_step, residual_correlation, robust_sigma
 from skincal.kinematics.transforms import FloatArray, skew
 
 PRIOR_STD = {"e": 0.05, "d": 1e-3, "c": 1e-3, "k": 0.002}
@@ -55,12 +56,6 @@ value. Gravity 0.2 %: the spread of the local gravity magnitude over the Earth's
 from its position then carries that uncertainty honestly in its position std."""
 MAX_STEP = {"theta": 0.5, "p": 0.5}
 """Largest Gauss-Newton step of the rotation (rad) and position (m); a larger one is scaled down."""
-HUBER_K = 3.0
-"""Huber threshold in robust standard deviations of the residual norm."""
-NULL_RATIO = 1e-12
-"""Eigenvalues of the scaled normal matrix below this fraction of the largest are unobservable
-(exactly unobservable directions sit at ~1e-16, round-off; a direction that only a prior
-determines sits far above, ~1e-10 for noise-free data, and is kept with the prior's uncertainty)."""
 SIGMA_FLOOR = 1e-3
 """Smallest residual std the weights assume, m/s^2 (0.1 mg, below any real accelerometer's noise;
 a tenth of it for the gyroscope, rad/s): noise-free data must not make the data's information so
@@ -209,7 +204,7 @@ def _accel_rows(
     sl = blocks.slices()
     R, A = state.R, state.A
     S = len(rows.static_u)
-    # static rows are pure gravity: u_s = u_g, K = 0 (the model: skincal.calib.mle.model)
+    # static rows are pure gravity: u_s = u_g, K = 0 (the model: skincal.calib.model)
     v = link_specific_force(rows.static_u, None, state.p, gravity_scale=state.k)
     if lin is not None:
         dtau = (state.tau - lin.tau_k) + (state.d - lin.d_k) * rows.moving_t  # s_k - s per sample
@@ -329,19 +324,6 @@ def _limit_step(delta: FloatArray, blocks: Blocks) -> FloatArray:
     return delta / ratio if ratio > 1.0 else delta
 
 
-def _robust_sigma(r_norm: FloatArray) -> float:
-    """Robust std of one residual component from the norms of 3-vectors (MAD-based)."""
-    if r_norm.size == 0:
-        return 0.0
-    # For 3-D Gaussian residuals the median norm is 1.5382 sigma.
-    return float(np.median(r_norm) / 1.5382)
-
-
-def _huber(norm: FloatArray, sigma: float) -> FloatArray:
-    scaled = norm / (HUBER_K * sigma)
-    return np.where(scaled <= 1.0, 1.0, 1.0 / np.maximum(scaled, 1e-300))
-
-
 def solve(
     state: State,
     blocks: Blocks,
@@ -382,15 +364,15 @@ def solve(
             r, J = _accel_rows(state, blocks, lin, rows)
             base = np.concatenate([sw_static, np.ones(len(r) - S)])
             norm = np.linalg.norm(r, axis=1) * base
-            sigma = max(_robust_sigma(norm[S:] if len(r) > S else norm), sigma_floor)
-            w = (base**2) * _huber(norm, sigma) / sigma**2
+            sigma = max(robust_sigma(norm[S:] if len(r) > S else norm), sigma_floor)
+            w = (base**2) * huber_weights(norm, sigma) / sigma**2
             H, g = _normal_equations(J, r, w)
             cost = float(np.sum(w * np.sum(r * r, axis=1)))
             if use_gyro:
                 r_g, J_g, cols_g = _gyro_rows_compact(state, blocks, lin, rows)
                 norm_g = np.linalg.norm(r_g, axis=1) * base
-                sigma_g = max(_robust_sigma(norm_g[S:] if len(r_g) > S else norm_g), 0.1 * sigma_floor)
-                w_g = (base**2) * _huber(norm_g, sigma_g) / sigma_g**2
+                sigma_g = max(robust_sigma(norm_g[S:] if len(r_g) > S else norm_g), 0.1 * sigma_floor)
+                w_g = (base**2) * huber_weights(norm_g, sigma_g) / sigma_g**2
                 H_g_c, g_g = _normal_equations(J_g, r_g, w_g)
                 H_gyro = np.zeros_like(H)
                 H_gyro[np.ix_(cols_g, cols_g)] = H_g_c
@@ -399,7 +381,7 @@ def solve(
                 cost += float(np.sum(w_g * np.sum(r_g * r_g, axis=1)))
             H_p, g_p = _prior(state, blocks)
             H, g = H + H_p, g + g_p
-            delta, null = _pinv_step(H, g)
+            delta, null = pinv_step(H, g)
             state = _apply(state, blocks, _limit_step(delta, blocks))
             if float(delta @ H @ delta) < tol:  # the step moves less than 1e-3 std in every direction
                 break
@@ -411,14 +393,14 @@ def solve(
         lin = linearise(state.tau, state.d)
     # Covariance from the last iteration's normal matrix (the final step changes it negligibly),
     # each sensor's information divided by its residuals' autocorrelation factor.
-    rho = _residual_correlation(r[S:])
+    rho = residual_correlation(r[S:])
     H_p, _ = _prior(state, blocks)
     if use_gyro:
-        rho_g = _residual_correlation(r_g[S:])
+        rho_g = residual_correlation(r_g[S:])
         info = (H - H_gyro - H_p) / rho + H_gyro / rho_g + H_p
     else:
         info = (H - H_p) / rho + H_p
-    cov = _pinv(info)
+    cov = pinv(info)
     return Fit(state, cov, sigma, null, blocks, cost, iterations, max(rho, rho_g), sigma_g if use_gyro else 0.0, r)
 
 
@@ -429,49 +411,3 @@ def _normal_equations(J: FloatArray, r: FloatArray, w: FloatArray) -> tuple[Floa
     return Jw.T @ Jw, Jw.T @ (r[:, :, None] * sw).reshape(-1)
 
 
-def _scaled_eig(H: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Eigen-decomposition of ``D^-1 H D^-1`` with ``D = sqrt(diag H)`` floored at ``1e-7`` of its
-    largest entry (a parameter without information must not be divided by ~0)."""
-    diag = np.maximum(np.diag(H), 0.0)
-    d = np.sqrt(np.maximum(diag, 1e-14 * max(diag.max(), 1e-300)))
-    Hs = H / np.outer(d, d)
-    lam, V = np.linalg.eigh(Hs)
-    return d, lam, V
-
-
-def _pinv(H: FloatArray) -> FloatArray:
-    d, lam, V = _scaled_eig(H)
-    keep = lam > NULL_RATIO * lam.max()
-    inv = (V[:, keep] / lam[keep]) @ V[:, keep].T
-    return inv / np.outer(d, d)
-
-
-def _pinv_step(H: FloatArray, g: FloatArray) -> tuple[FloatArray, FloatArray]:
-    d, lam, V = _scaled_eig(H)
-    keep = lam > NULL_RATIO * lam.max()
-    step = -(V[:, keep] @ ((V[:, keep].T @ (g / d)) / lam[keep])) / d
-    null = V[:, ~keep] / d[:, None]
-    if null.size:
-        null = null / np.linalg.norm(null, axis=0)
-    return step, null
-
-
-def _residual_correlation(r: FloatArray, max_lag: int = 20) -> float:
-    """Integrated autocorrelation ``1 + 2 sum_k rho_k`` of the moving residuals (>= 1).
-
-    Residuals of neighbouring samples are correlated when the error is not white (estimated
-    joint accelerations, unmodelled dynamics); the covariance is inflated by this factor.
-    """
-    if len(r) < 10 * max_lag:
-        return 1.0
-    x = r - r.mean(axis=0)
-    var = np.sum(x * x)
-    if var <= 0:
-        return 1.0
-    total = 0.0
-    for k in range(1, max_lag + 1):
-        rho = float(np.sum(x[k:] * x[:-k]) / var)
-        if rho <= 0.05:
-            break
-        total += rho
-    return 1.0 + 2.0 * total

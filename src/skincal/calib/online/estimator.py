@@ -35,37 +35,49 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from skincal.calib import rest
 from skincal.calib.online import stats
 from skincal.calib.preprocess import JointInterpolator
-from skincal.calib.timing import coarse_time_offset, motion_profile
+from skincal.calib.rest import link_moving
+from skincal.calib.signals import frame_signals, hermite
+from skincal.calib.timing import (
+    ClockSteps,
+    coarse_time_offset,
+    compose_clock,
+    find_clock_steps,
+    motion_instants,
+    motion_profile,
+)
 from skincal.data.dataset import Dataset, JointStates
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.result import CalibrationResult, UnitResult, with_events
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
-from skincal.kinematics.transforms import FloatArray, skew
+from skincal.kinematics.transforms import FloatArray
 from skincal.names import name_problem
 from skincal.skin.pose import SkinUnitPose
 
-MOVING_RPS = 0.02
-"""A sample whose link turns faster than this (rad/s)..."""
-MOVING_RPS2 = 0.2
-"""...or accelerates its rotation faster than this (rad/s^2) counts as moving. Rest and moving samples
-are two classes with their own noise level (a resting unit's residual is its sensor noise; a moving
-one's adds the errors of the joint-derived accelerations), so the Grams are kept per class."""
 REST, MOVING = 0, 1
+"""Rest and moving samples are two classes with their own noise level (a resting unit's residual is its sensor
+noise; a moving one's adds the errors of the joint-derived accelerations), so the Grams are kept per class
+(:func:`~skincal.calib.rest.link_moving`)."""
 ALIGN_SHARPNESS = 0.1
 """A unit's clock is aligned once the cross-correlation peak stands out by this much (correlation units)...
 """
 ALIGN_WAIT_FRACTION = 0.8
 """...or once its pending stream spans this fraction of the history (then with a warning in the result)."""
 REALIGN_S = 0.004
-"""A decided unit whose residual time offset ``tau`` exceeds this (s) is re-aligned (``offset - tau``) and
-its statistics restarted: the first-order offset model holds for a few ms only."""
+"""A decided unit whose residual clock error (offset and drift, at either end of its data) exceeds this (s)
+is re-aligned (its clock mapping composed with the residual, :func:`~skincal.calib.timing.compose_clock`)
+and its statistics restarted: the first-order clock model holds for a few ms only."""
 ALIGN_RETRY_S = 2.0
 """A unit not yet aligned tries again after this much more of its stream, s."""
-MAX_REALIGN = 3
+MAX_REALIGN = 6
 """Re-alignments allowed per unit."""
+DRIFT_UNDETERMINED_PPM = 100.0
+"""A residual clock drift whose std exceeds this (ppm) is not determined yet: the result says so."""
+DRIFT_NOTE_SIGMAS, DRIFT_NOTE_PPM = 4.0, 20.0
+"""A drift beyond this many std and ppm is named in the result (``mle``'s rule)."""
 SCALE_STD_LIMIT = 0.01
 """The accelerometer's scale/misalignment is estimated only when each of its 9 elements is determined to
 this std (else held at the identity: a weakly determined scale absorbs what the pose should explain)."""
@@ -181,6 +193,26 @@ class UnitStatus:
     aligned: bool
 
 
+@dataclass(frozen=True)
+class _Grid:
+    """The link signals of every link on the streaming calibrator's uniform grid.
+
+    Attributes:
+        t: ``(G,)`` grid instants on the joint clock, s.
+        y: ``(G, n, 18)`` per link ``[u (3), K (9, row-major), w (3), u_g (3)]``
+            (:func:`~skincal.calib.signals.frame_signals`, link frame).
+        dy: ``(G, n, 18)`` their time derivatives (per block: only ``dw`` ``(G, n, 3)``, exact).
+        ok: ``(G,)`` the joint accelerations are reliable there.
+        speed: ``(G, n)`` ``sum_{j <= k} |qd_j|``, rad/s (the clock search without a gyroscope).
+    """
+
+    t: FloatArray
+    y: FloatArray
+    dy: FloatArray
+    ok: np.ndarray
+    speed: FloatArray
+
+
 @dataclass
 class _Unit:
     links: list[int]
@@ -217,6 +249,11 @@ class _Unit:
     raw: deque = field(default_factory=deque)  # absorbed (stamps, accel, gyro) within the history, for _realign
     realigned: int = 0
     scale_estimated: bool = False
+    # the clock mapping s = t' - offset - drift (t' - t_ref), t' the stamps less their re-sync steps
+    drift: float = 0.0
+    t_ref: float = 0.0
+    steps: ClockSteps | None = None
+    t_seen: float = float("-inf")  # newest stamp searched for re-sync steps
 
 
 class OnlineCalibrator:
@@ -264,8 +301,8 @@ class OnlineCalibrator:
         self._jqd: list[FloatArray | None] = []
         self._joints: tuple[FloatArray, FloatArray, FloatArray] | None = None
         self._frontier: float | None = None  # end of the processed joint blocks
-        self._grid: list[tuple[FloatArray, ...]] = []  # per block: t, u, K, w, du, dw, ok, speed (all links)
-        self._grid_cat: tuple[FloatArray, ...] | None = None
+        self._grid: list[_Grid] = []  # per block, every link
+        self._grid_cat: _Grid | None = None
         self.q_now: FloatArray | None = None
         self.late = 0
         self.joint_active_s = np.zeros(chain.n_joints)
@@ -391,7 +428,7 @@ class OnlineCalibrator:
         if not keep.all():
             self._joints = (t[keep], q[keep], qd[keep])
         horizon = self._frontier - o.history_s
-        while self._grid and self._grid[0][0][-1] < horizon:
+        while self._grid and self._grid[0].t[-1] < horizon:
             self._grid.pop(0)
             self._grid_cat = None
 
@@ -409,34 +446,25 @@ class OnlineCalibrator:
         if tg.size < 2:
             return
         qg, qdg, qddg = interp(tg)
-        motion = self.chain.link_motion(qg, qdg, qddg)
-        R = motion.T_base_link[:, 1:, :3, :3]  # (G, n, 3, 3) links 1..n
-        Rt = np.swapaxes(R, -1, -2)
-        u = np.einsum("gnij,gnj->gni", Rt, motion.a_origin[:, 1:] - self.gravity)
-        w = np.einsum("gnij,gnj->gni", Rt, motion.omega[:, 1:])
-        dw = np.einsum("gnij,gnj->gni", Rt, motion.omega_dot[:, 1:])
-        W = skew(w)
-        K = skew(dw) + W @ W
-        ok = interp.reliable(tg)
-        speed = np.cumsum(np.abs(qdg), axis=1)
+        u, K, w, dw, ug = frame_signals(self.chain.link_motion(qg, qdg, qddg), self.gravity)  # (G, n, ...) links 1..n
+        y = np.concatenate([u, K.reshape(*K.shape[:2], 9), w, ug], axis=2)
         self.joint_active_s += (np.abs(qdg) > JOINT_ACTIVE_RPS).sum(axis=0) * dt
-        ug = -np.einsum("gnji,j->gni", R, self.gravity)  # gravity's part of u, link frame
-        self._grid.append((tg, u, K, w, dw, ok, speed, ug))
+        self._grid.append(_Grid(tg, y, dw, interp.reliable(tg), np.cumsum(np.abs(qdg), axis=1)))
         self._grid_cat = None
 
-    def _grid_arrays(self) -> tuple[FloatArray, ...] | None:
+    def _grid_arrays(self) -> _Grid | None:
+        """The kept grid blocks as one :class:`_Grid` whose ``dy`` holds the time derivatives of the
+        table (central differences along the whole grid, continuous across blocks; ``w``'s exact)."""
         if not self._grid:
             return None
         if self._grid_cat is None:
-            parts = list(zip(*self._grid, strict=True))
-            tg = np.concatenate(parts[0])
-            u, K, w, dw = (np.concatenate(p) for p in parts[1:5])
-            ok, speed, ug = np.concatenate(parts[5]), np.concatenate(parts[6]), np.concatenate(parts[7])
-            # derivatives along the whole grid (continuous across blocks)
-            du = np.gradient(u, tg, axis=0) if tg.size > 1 else np.zeros_like(u)
-            ddw = np.gradient(w, tg, axis=0) if tg.size > 1 else np.zeros_like(w)
-            dK = np.gradient(K, tg, axis=0) if tg.size > 1 else np.zeros_like(K)
-            self._grid_cat = (tg, u, K, w, dw, ok, speed, du, ddw, dK, ug)
+            tg = np.concatenate([b.t for b in self._grid])
+            y = np.concatenate([b.y for b in self._grid])
+            dy = np.gradient(y, tg, axis=0) if tg.size > 1 else np.zeros_like(y)
+            dy[..., 12:15] = np.concatenate([b.dy for b in self._grid])  # dw/ds from the kinematics
+            self._grid_cat = _Grid(
+                tg, y, dy, np.concatenate([b.ok for b in self._grid]), np.concatenate([b.speed for b in self._grid])
+            )
         return self._grid_cat
 
     def _take_pending(self, st: _Unit) -> tuple[FloatArray, FloatArray, FloatArray | None]:
@@ -446,16 +474,16 @@ class OnlineCalibrator:
         order = np.argsort(t, kind="stable")
         return t[order], a[order], None if g is None else g[order]
 
-    def _align(self, name: str, st: _Unit, grid: tuple[FloatArray, ...], t: FloatArray, a: FloatArray,
+    def _align(self, name: str, st: _Unit, grid: _Grid, t: FloatArray, a: FloatArray,
                g: FloatArray | None) -> None:  # fmt: skip
-        tg, w, speed = grid[0], grid[3], grid[6]
+        tg, w, speed = grid.t, grid.y[..., 12:15], grid.speed
         o = self.options
         inside = (t >= tg[0]) & (t <= tg[-1])
         if inside.sum() < 20 or t[inside][-1] - t[inside][0] < o.align_s:
             return
         lo, hi = np.searchsorted(tg, [t[inside][0], t[inside][-1]])
         ang = np.linalg.norm(w[lo:hi], axis=2)
-        if ang.shape[0] < 20 or float(ang.max()) < 5 * MOVING_RPS:
+        if ang.shape[0] < 20 or float(ang.max()) < 5 * rest.MOVING_RPS:
             return  # no motion to align on yet
         profile = motion_profile(tg[lo:hi], ang, speed[lo:hi])
         search = coarse_time_offset(profile, t[inside], a[inside], None if g is None else g[inside])
@@ -463,6 +491,9 @@ class OnlineCalibrator:
         if search.sharpness < ALIGN_SHARPNESS and span < ALIGN_WAIT_FRACTION * o.history_s:
             return  # the peak is not distinct yet: wait for more motion (the samples stay pending)
         st.offset, st.offset_sharpness = float(search.offset_s), float(search.sharpness)
+        st.t_ref = float(t[inside][0])
+        st.steps = find_clock_steps(t)
+        st.t_seen = float(t[-1])
 
     def _absorb_unit(self, name: str, final: bool = False) -> int:
         st = self._u[name]
@@ -482,8 +513,8 @@ class OnlineCalibrator:
                     self._keep(st, t, a, g)
                     return 0
         assert st.offset is not None
-        s = t - st.offset
-        tg = grid[0]
+        s = self._instants(st, t)
+        tg = grid.t
         late = s < tg[0]
         self.late += int(late.sum())
         ready = (s >= tg[0]) & (s <= tg[-1])
@@ -492,16 +523,33 @@ class OnlineCalibrator:
         if not ready.any():
             return 0
         st.raw.append((t[ready], a[ready], None if g is None else g[ready]))
-        while st.raw and st.raw[0][0][-1] - st.offset < tg[0]:
+        while st.raw and self._instants(st, st.raw[0][0][-1:])[0] < tg[0]:
             st.raw.popleft()  # its part of the grid is gone: it could not be absorbed again
         return self._absorb(name, st, grid, s[ready], a[ready], None if g is None else g[ready])
 
-    def _realign(self, st: _Unit, tau: float) -> None:
-        """Move the unit's offset by the residual ``tau`` (s) and absorb its kept raw samples again from scratch."""
+    @staticmethod
+    def _instants(st: _Unit, t: FloatArray) -> FloatArray:
+        """Joint-clock instants of the unit's stamps ``t`` under its clock mapping (:mod:`skincal.calib.timing`:
+        re-sync steps removed, then offset and drift); newer stamps are searched for re-sync steps first."""
         assert st.offset is not None
-        st.offset -= tau
+        if st.steps is not None:
+            new = t > st.t_seen
+            if new.any():
+                st.steps = st.steps.extend(st.t_seen, t[new])
+                st.t_seen = float(t[new][-1])
+            t = st.steps.correct(t)
+        return motion_instants(t, st.offset, st.drift, st.t_ref)
+
+    def _realign(self, st: _Unit, tau: float, drift: float) -> None:
+        """Compose the unit's clock mapping with the residual offset ``tau`` (s) and drift and absorb its kept
+        raw samples again from scratch."""
+        assert st.offset is not None
+        st.offset, st.drift = compose_clock(st.offset, st.drift, tau, drift)
         st.realigned += 1
         raw = list(st.raw)
+        if st.steps is None and raw:  # re-sync steps seen since the alignment
+            st.steps = find_clock_steps(np.concatenate([r[0] for r in raw]))
+            st.t_seen = float(raw[-1][0][-1])
         st.raw = deque()
         L = len(st.links)
         st.Za, st.Zg, st.moving = np.zeros_like(st.Za), np.zeros_like(st.Zg), np.zeros(L)
@@ -521,36 +569,20 @@ class OnlineCalibrator:
             st.pending_a.append(a)
             st.pending_g.append(g)
 
-    def _signals_at(self, grid: tuple[FloatArray, ...], s: FloatArray, links: Sequence[int]):
-        """Link signals of ``links`` at instants ``s`` (M,) from the grid, as ``mle``'s signal table does:
-        cubic Hermite for ``u``, ``K`` and ``w`` with their derivatives (``w``'s exact from the
-        kinematics, ``u``'s and ``K``'s by central differences), linear for the derivatives. Returns
-        u, K, w, dw_dt, du_dt, dK_dt, u_g (each ``(L, M, ...)``) and ok ``(M,)``."""
-        tg, u, K, w, dw, ok, _, du, _, dK, ug = grid
-        i = np.clip(np.searchsorted(tg, s) - 1, 0, tg.size - 2)
-        h = tg[i + 1] - tg[i]
-        f = (s - tg[i]) / h
-        idx = np.asarray(links) - 1
-
-        def shaped(c: FloatArray, ndim: int) -> FloatArray:
-            return c.reshape((-1,) + (1,) * (ndim - 1))
-
-        def lerp(x: FloatArray) -> FloatArray:
-            x0, x1 = x[i][:, idx], x[i + 1][:, idx]  # (M, L, ...)
-            ff = shaped(f, x0.ndim)
-            return np.moveaxis((1 - ff) * x0 + ff * x1, 1, 0)
-
-        f2, f3 = f * f, f * f * f
-        h00, h10, h01, h11 = 2 * f3 - 3 * f2 + 1, (f3 - 2 * f2 + f) * h, -2 * f3 + 3 * f2, (f3 - f2) * h
-
-        def hermite(x: FloatArray, dx: FloatArray) -> FloatArray:
-            x0, x1, d0, d1 = x[i][:, idx], x[i + 1][:, idx], dx[i][:, idx], dx[i + 1][:, idx]
-            n = x0.ndim
-            y = shaped(h00, n) * x0 + shaped(h10, n) * d0 + shaped(h01, n) * x1 + shaped(h11, n) * d1
-            return np.moveaxis(y, 1, 0)
-
-        sig = (hermite(u, du), hermite(K, dK), hermite(w, dw), lerp(dw), lerp(du), lerp(dK), lerp(ug))
-        return (*sig, ok[i] & ok[i + 1])
+    @staticmethod
+    def _signals_at(grid: _Grid, s: FloatArray, links: Sequence[int]):
+        """Link signals of ``links`` at instants ``s`` (M,) from the grid, as ``mle``'s signal table does
+        (:func:`~skincal.calib.signals.hermite`: cubic Hermite for the values with their derivatives,
+        linear for the derivatives). Returns u, K, w, dw_dt, du_dt, dK_dt, u_g (each ``(L, M, ...)``)
+        and ok ``(M,)``."""
+        y, dy, i = hermite(grid.t, grid.y, grid.dy, s, np.asarray(links) - 1)  # (M, L, 18)
+        y, dy = np.moveaxis(y, 1, 0), np.moveaxis(dy, 1, 0)
+        L, M = y.shape[:2]
+        sig = (
+            y[..., :3], y[..., 3:12].reshape(L, M, 3, 3), y[..., 12:15], dy[..., 12:15],
+            dy[..., :3], dy[..., 3:12].reshape(L, M, 3, 3), y[..., 15:18],
+        )  # fmt: skip
+        return (*sig, grid.ok[i] & grid.ok[i + 1])
 
     @staticmethod
     def _unsaturated(st: _Unit, a: FloatArray, g: FloatArray | None) -> np.ndarray:
@@ -573,7 +605,7 @@ class OnlineCalibrator:
         st.saturated += int((~keep).sum())
         return keep
 
-    def _absorb(self, name: str, st: _Unit, grid: tuple[FloatArray, ...], s: FloatArray, a: FloatArray,
+    def _absorb(self, name: str, st: _Unit, grid: _Grid, s: FloatArray, a: FloatArray,
                 g: FloatArray | None) -> int:  # fmt: skip
         unsat = self._unsaturated(st, a, g)
         if not unsat.all():
@@ -585,10 +617,10 @@ class OnlineCalibrator:
             g = None if g is None else g[ok]
         if s.size == 0:
             return 0
-        moving = (np.linalg.norm(w, axis=-1) > MOVING_RPS) | (np.linalg.norm(dw, axis=-1) > MOVING_RPS2)  # (L, M)
+        moving = link_moving(w, dw)  # (L, M)
         sol = st.solutions.get(st.links[0]) if st.decided else None
         if sol is not None:
-            r = self._residuals(sol, a, u[0], K[0], du[0], dK[0], ug[0])
+            r = self._residuals(sol, a, u[0], K[0], du[0], dK[0], ug[0], s - st.t_ref)
             sig = st.sigmas[st.links[0]]
             rn = r / np.maximum(np.where(moving[0], sig[1], sig[0]), 1e-9)[:, None]
             settled = st.status is not None and _settled(st.status)
@@ -606,10 +638,11 @@ class OnlineCalibrator:
             return 0
         L, M = u.shape[0], s.size
         cls = np.stack([~moving, moving], axis=1)[..., None, None]  # (L, 2, M, 1, 1)
-        rows_a = stats.accel_rows(np.broadcast_to(a, (L, M, 3)), u, K, du, dK, ug)[:, None] * cls
+        elapsed = s - st.t_ref
+        rows_a = stats.accel_rows(np.broadcast_to(a, (L, M, 3)), u, K, du, dK, ug, elapsed)[:, None] * cls
         Za = stats.gram(rows_a)
         if g is not None:
-            Zg = stats.gram(stats.gyro_rows(np.broadcast_to(g, (L, M, 3)), w, dw)[:, None] * cls)
+            Zg = stats.gram(stats.gyro_rows(np.broadcast_to(g, (L, M, 3)), w, dw, elapsed)[:, None] * cls)
         else:
             Zg = np.zeros_like(st.Zg)
         n_moving = moving.sum(axis=1).astype(float)
@@ -634,12 +667,15 @@ class OnlineCalibrator:
         du: FloatArray,
         dK: FloatArray,
         ug: FloatArray,
+        elapsed: FloatArray,
     ) -> FloatArray:
-        """``(M, 3)`` residuals of equation (1) of :mod:`~skincal.calib.online.stats` at ``sol``, m/s^2."""
+        """``(M, 3)`` residuals of equation (1) of :mod:`~skincal.calib.online.stats` at ``sol``, m/s^2
+        (``elapsed`` ``(M,)`` = ``s - t_ref``, s)."""
         G = sol.R @ np.linalg.inv(sol.A)
         h = G @ sol.b
-        Kp = np.einsum("mij,j->mi", (1.0 + sol.gravity_scale) * K + sol.tau * dK, sol.p)
-        return a @ G.T - h - Kp - du * sol.tau - sol.gravity_scale * (u - ug) - u
+        T = (sol.tau + sol.drift * elapsed)[:, None]  # residual clock error per sample, s
+        Kp = np.einsum("mij,j->mi", (1.0 + sol.gravity_scale) * K, sol.p) + T * np.einsum("mij,j->mi", dK, sol.p)
+        return a @ G.T - h - Kp - du * T - sol.gravity_scale * (u - ug) - u
 
     # ---------------------------------------------------------------- estimates
     @staticmethod
@@ -812,12 +848,8 @@ class OnlineCalibrator:
         pos_std, rot_std = std[:3], np.degrees(std[3:])
         determined = bool(np.all(pos_std < UNDETERMINED_M) and np.all(rot_std < UNDETERMINED_DEG))
         undecided = len(ambiguous) > 1
-        tau_std = float(np.sqrt(max(sol.cov[21, 21], 0.0)))
-        if (
-            determined and not undecided and abs(sol.tau) > REALIGN_S and tau_std < 0.25 * abs(sol.tau)
-            and st.realigned < MAX_REALIGN
-        ):  # fmt: skip
-            self._realign(st, sol.tau)
+        if determined and not undecided and st.realigned < MAX_REALIGN and self._clock_off(st, sol):
+            self._realign(st, sol.tau, sol.drift)
             self._absorb_unit(name)  # the kept samples again, at once: the status (and a result) never shows the gap
             return self._status(name, advise)
         if not undecided and not st.decided and len(st.links) > 1 and st.moving[k] > MIN_MOVING and determined:
@@ -847,6 +879,19 @@ class OnlineCalibrator:
                             missing, best_joint, reached, st.t_last, True)  # fmt: skip
         st.status = status
         return status
+
+    @staticmethod
+    def _clock_off(st: _Unit, sol: stats.Solution) -> bool:
+        """The residual clock error ``tau + d (s - t_ref)`` at either end of the unit's data exceeds
+        :data:`REALIGN_S` and is determined (its std below a quarter of it)."""
+        i = [stats.TAU, stats.DRIFT]
+        C = sol.cov[np.ix_(i, i)]
+        for s in (st.t_first, st.t_last):
+            e = np.array([1.0, s - st.t_ref])
+            T = sol.tau + sol.drift * e[1]
+            if abs(T) > REALIGN_S and np.sqrt(max(float(e @ C @ e), 0.0)) < 0.25 * abs(T):
+                return True
+        return False
 
     def _keep_only(self, st: _Unit, link: int) -> None:
         k = st.links.index(link)
@@ -898,17 +943,9 @@ class OnlineCalibrator:
     def _design_normal(
         self, sol: stats.Solution, sig: FloatArray, link: int, q, qd, qdd, dt: float, gyro: bool
     ) -> FloatArray:
-        motion = self.chain.link_motion(q, qd, qdd, upto=link)
-        R = motion.T_base_link[:, link, :3, :3]
-        Rt = np.swapaxes(R, 1, 2)
-        u = np.einsum("mij,mj->mi", Rt, motion.a_origin[:, link] - self.gravity)
-        w = np.einsum("mij,mj->mi", Rt, motion.omega[:, link])
-        dw = np.einsum("mij,mj->mi", Rt, motion.omega_dot[:, link])
-        W = skew(w)
-        K = skew(dw) + W @ W
+        u, K, w, dw, ug = frame_signals(self.chain.link_motion(q, qd, qdd, upto=link), self.gravity, link)
         du = np.gradient(u, dt, axis=0) if u.shape[0] > 1 else np.zeros_like(u)
         dK = np.gradient(K, dt, axis=0) if u.shape[0] > 1 else np.zeros_like(K)
-        ug = -np.einsum("mji,j->mi", R, self.gravity)
         f = ug + (1.0 + sol.gravity_scale) * (u - ug + np.einsum("mij,j->mi", K, sol.p))
         a = (f @ sol.R) @ sol.A.T + sol.b
         Za = stats.gram(stats.accel_rows(a, u, K, du, dK, ug))
@@ -978,12 +1015,21 @@ class OnlineCalibrator:
             G = sol.R @ np.linalg.inv(sol.A)
             Ginv = np.linalg.inv(G)
             cov_b = Ginv @ sol.cov[idx_b, idx_b] @ Ginv.T * kappa
+            # the clock: the mapping composed with the residual (stats: the samples saw s + tau + d (s - t_ref))
+            offset, drift = compose_clock(st.offset or 0.0, st.drift, sol.tau, sol.drift)
+            drift_std_ppm = 1e6 * float(np.sqrt(max(sol.cov[stats.DRIFT, stats.DRIFT] * kappa, 0.0)))
             imu = ImuCalibration(
                 accel_bias_mps2=sol.b,
                 accel_bias_std_mps2=np.sqrt(np.clip(np.diag(cov_b), 0, None)),
                 accel_scale_misalignment=sol.A,
-                time_offset_s=float((st.offset or 0.0) - sol.tau),  # stats: the samples saw s + tau
-                time_offset_std_s=float(np.sqrt(max(sol.cov[21, 21] * kappa, 0.0))),
+                time_offset_s=offset,
+                time_offset_std_s=float(np.sqrt(max(sol.cov[stats.TAU, stats.TAU] * kappa, 0.0))),
+                time_reference_s=st.t_ref,
+                clock_drift_ppm=1e6 * drift + (st.steps.drift_ppm if st.steps is not None else 0.0),
+                clock_drift_std_ppm=drift_std_ppm,
+                clock_resync_steps=None if st.steps is None else st.steps.n_steps,
+                clock_resync_period_s=None if st.steps is None else st.steps.period_s,
+                clock_resync_step_s=None if st.steps is None else st.steps.mean_step_s,
                 gyro_bias_rps=sol.gyro_bias if st.has_gyro else None,
                 gravity_mps2=float(np.linalg.norm(self.gravity) / (1.0 + sol.gravity_scale)),
                 gravity_std_mps2=float(np.linalg.norm(self.gravity) * np.sqrt(max(sol.cov[22, 22] * kappa, 0.0))),
@@ -991,7 +1037,17 @@ class OnlineCalibrator:
             warnings: list[str] = []
             if np.isfinite(st.offset_sharpness) and st.offset_sharpness < ALIGN_SHARPNESS:
                 warnings.append("time offset uncertain (no motion to align the unit's clock on)")
-            extras = {
+            notes: list[str] = []
+            if drift_std_ppm > DRIFT_UNDETERMINED_PPM:
+                notes.append(
+                    f"clock drift not determined yet (std {drift_std_ppm:.0f} ppm over {st.t_last - st.t_first:.0f} s"
+                    " of data): the time offset holds near the data's start"
+                )
+            elif abs(drift) * 1e6 > max(DRIFT_NOTE_SIGMAS * drift_std_ppm, DRIFT_NOTE_PPM):
+                notes.append(
+                    f"clock drifts: {drift * 1e6:+.0f} ppm relative to the robot's clock (estimated and corrected)"
+                )
+            extras: dict[str, Any] = {
                 "link_name": self.chain.link_names[s.link] if self.chain.link_names else f"link{s.link}",
                 "link_margin": s.link_margin if np.isfinite(s.link_margin) else None,
                 "samples": s.samples,
@@ -1006,7 +1062,7 @@ class OnlineCalibrator:
             }
             units[name] = UnitResult(
                 pose=s.pose, observable=True, position_std_m=s.position_std_m, rotation_std_deg=s.rotation_std_deg,
-                warnings=tuple(warnings), extras=extras, imu=imu, pose_covariance=cov,
+                warnings=tuple(warnings), extras=extras, imu=imu, pose_covariance=cov, notes=tuple(notes),
             )  # fmt: skip
         top: dict[str, Any] = {"late_samples": self.late, "cpu_s": self.cpu_s}
         result = CalibrationResult("online", self.chain.name, dataset_sha256, time.perf_counter() - self._t_start,

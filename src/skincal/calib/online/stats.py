@@ -1,26 +1,30 @@
 """Sufficient statistics of the streaming calibrator and the pose solve from them.
 
-The accelerometer model of :mod:`skincal.calib.mle.model` (``a = A R^T v(s) + b`` with
+The accelerometer model of :mod:`skincal.calib.model` (``a = A R^T v(s) + b`` with
 ``v = u + K p`` in link frame, ``R = R_link_su``) is rearranged to be *linear* in its unknowns::
 
-    G a - h - K p - du * tau - dK (tau p) - k (u - u_g) - K (k p) = u,    G = R A^-1 ~ R (I + E),  h = G b   (1)
+    G a - h - K p - du T - dK (T p) - k (u - u_g) - K (k p) = u,    G = R A^-1 ~ R (I + E),  h = G b   (1)
+    T = tau + d (s - t_ref)
 
-(``du``, ``dK`` = d/ds: the samples measured the motion at ``s + tau``, a small residual offset after
-the coarse alignment, to first order; the unit's time offset is then the coarse one MINUS ``tau``;
+(``du``, ``dK`` = d/ds: the samples measured the motion at ``s + T``, a small residual clock error
+after the unit's clock mapping (:mod:`skincal.calib.timing`: coarse offset, drift, re-sync steps), to
+first order: a residual offset ``tau`` at the unit's reference instant ``t_ref`` and a residual drift
+``d`` (dimensionless, 1e-6 per ppm; ``s - t_ref`` is given per sample); the unit's time offset is then
+the mapping's MINUS ``tau``;
 ``u_g = -R_base_link^T g`` the part of ``u`` due to gravity and ``k`` the relative error of the
 motion's accelerations against gravity (``v = u_g + (1 + k) (u - u_g + K p)``: the IMU's own
 filtering of the motion or a gravity that is not the dataset's, which the accelerometer's scale
 cannot absorb because it scales both; ``mle``'s gravity scale is ``-k`` to first order; ``k p`` is
 kept as 3 unknowns of its own like ``tau p``), and the gyroscope's ``g = R^T w + b_g`` likewise::
 
-    R g - c - dw * tau = w,            c = R b_g                                                (2)
+    R g - c - dw T = w,            c = R b_g                                                    (2)
 
-``u``, ``K``, ``w`` are :func:`skincal.calib.mle.signals.link_signals` of the unit's link at its
+``u``, ``K``, ``w`` are :func:`skincal.calib.signals.link_signals` of the unit's link at its
 sample instants (link frame), ``a`` and ``g`` its readings (unit frame). Each sample adds one
 3-row block ``Phi x - y`` to a linear least-squares problem, so everything the data say about the
-unknowns is the Gram matrix ``Z = sum [Phi y]^T [Phi y]`` of each equation (24 x 24 for (1) with
-``x_a = [vec(G) (9, row-major), h, p, tau, tau p, k, k p]`` (the product ``tau p`` kept as 3 unknowns of
-its own, so the rows stay linear), 14 x 14 for (2) with ``x_g = [vec(R), c, tau]``):
+unknowns is the Gram matrix ``Z = sum [Phi y]^T [Phi y]`` of each equation (28 x 28 for (1) with
+``x_a = [vec(G) (9, row-major), h, p, tau, tau p, k, k p, d, d p]`` (the products ``tau p``, ``k p``,
+``d p`` kept as 3 unknowns each, so the rows stay linear), 15 x 15 for (2) with ``x_g = [vec(R), c, tau, d]``):
 no re-linearisation is ever needed, because (1) and (2) are exact in ``G``, ``R`` and the offsets
 (only ``tau`` is first order). The pose then follows from minimising, over ``R`` in SO(3), ``E``,
 ``h``, ``p``, ``c``, ``tau``::
@@ -28,7 +32,7 @@ no re-linearisation is ever needed, because (1) and (2) are exact in ``G``, ``R`
     C = J_a(vec(R (I + E)), h, p, tau) / sigma_a^2 + J_g(vec(R), c, tau) / sigma_g^2 + |E|^2 / sigma_E^2
 
 with ``J(x) = [x; -1]^T Z [x; -1]`` the residual sum of squares: a Gauss-Newton over
-``delta = [dtheta (3, R <- R Exp(dtheta)), dE (9), dh, dp, dc, dtau, dk]`` (:func:`solve`), started from
+``delta = [dtheta (3, R <- R Exp(dtheta)), dE (9), dh, dp, dc, dtau, dk, dd]`` (:func:`solve`), started from
 the unconstrained linear solution of (2) (or of (1) without a gyroscope). The covariance is the
 inverse of its normal matrix; ``sigma_a``, ``sigma_g`` are the residual std of the fit.
 """
@@ -42,20 +46,24 @@ from scipy.spatial.transform import Rotation
 
 from skincal.kinematics.transforms import FloatArray, skew
 
-NA = 24
-"""Columns of the accelerometer Gram: ``[vec(G) 9, h 3, p 3, tau 1, tau p 3, k 1, k p 3]`` and the right-hand
-side."""
-NG = 14
-"""Columns of the gyroscope Gram: ``[vec(R) 9, c 3, tau 1]`` and the right-hand side."""
-NP = 23
-"""Gauss-Newton unknowns: ``[dtheta 3, dE 9, h 3, p 3, c 3, tau 1, k 1]``."""
+NA = 28
+"""Columns of the accelerometer Gram: ``[vec(G) 9, h 3, p 3, tau 1, tau p 3, k 1, k p 3, d 1, d p 3]`` and the
+right-hand side."""
+NG = 15
+"""Columns of the gyroscope Gram: ``[vec(R) 9, c 3, tau 1, d 1]`` and the right-hand side."""
+NP = 24
+"""Gauss-Newton unknowns: ``[dtheta 3, dE 9, h 3, p 3, c 3, tau 1, k 1, d 1]``."""
 SCALE_PRIOR = 0.02
 """Prior std of each element of ``E`` (the accelerometer's scale/misalignment relative to 1)."""
 SCALE_FIXED = 1e-6
 """``scale_prior`` that holds ``E`` at zero (scale/misalignment not estimated)."""
 TAU_PRIOR_S = 0.01
 """Prior std of the residual time offset after the coarse alignment, s."""
-_TH, _E, _H, _P, _C, _T, _K = slice(0, 3), slice(3, 12), slice(12, 15), slice(15, 18), slice(18, 21), 21, 22
+_TH, _E, _H, _P, _C, _T, _K, _D = slice(0, 3), slice(3, 12), slice(12, 15), slice(15, 18), slice(18, 21), 21, 22, 23
+TAU, DRIFT = _T, _D
+"""Indices of the residual time offset and clock drift among the Gauss-Newton unknowns (``Solution.cov``)."""
+DRIFT_PRIOR = 1e-3
+"""Prior std of the residual clock drift ``d`` (1000 ppm: ``mle``'s, far wider than any real clock's)."""
 GRAVITY_PRIOR = 0.001
 """Prior std of ``k``, the motion's accelerations' relative error against gravity (``mle``: 0.2 %, the
 spread of the local gravity). 0.1 % here, measured (`benchmarks/bench_online.py --accuracy`): 0.2 %
@@ -71,11 +79,12 @@ def accel_rows(
     du: FloatArray,
     dK: FloatArray | None = None,
     ug: FloatArray | None = None,
+    elapsed: FloatArray | None = None,
 ) -> FloatArray:
     """``(..., M, 3, NA)`` rows ``[Phi y]`` of equation (1) for readings ``a`` ``(..., M, 3)`` and link
     signals ``u`` ``(..., M, 3)``, ``K`` ``(..., M, 3, 3)``, their derivatives ``du`` ``(..., M, 3)`` and
-    ``dK`` ``(..., M, 3, 3)`` and the gravity part ``ug`` ``(..., M, 3)`` of ``u`` (None: zero) (module
-    docstring)."""
+    ``dK`` ``(..., M, 3, 3)``, the gravity part ``ug`` ``(..., M, 3)`` of ``u`` (None: zero) and
+    ``elapsed = s - t_ref`` ``(M,)`` s (None: no drift column) (module docstring)."""
     Z = np.zeros((*u.shape[:-1], 3, NA))
     for i in range(3):  # vec(G) row-major: (G a)_i = sum_j G_ij a_j
         Z[..., i, 3 * i : 3 * i + 3] = a
@@ -87,19 +96,26 @@ def accel_rows(
     if ug is not None:
         Z[..., 19] = ug - u
         Z[..., 20:23] = -K
-    Z[..., 23] = u
+    if elapsed is not None:
+        e = np.asarray(elapsed, dtype=float)[:, None]
+        Z[..., 23] = -du * e
+        if dK is not None:
+            Z[..., 24:27] = -dK * e[..., None]
+    Z[..., 27] = u
     return Z
 
 
-def gyro_rows(g: FloatArray, w: FloatArray, dw: FloatArray) -> FloatArray:
-    """``(..., M, 3, NG)`` rows of equation (2) for rates ``g`` ``(..., M, 3)`` (unit frame) and the
-    link's ``w``, ``dw`` ``(..., M, 3)`` (link frame)."""
+def gyro_rows(g: FloatArray, w: FloatArray, dw: FloatArray, elapsed: FloatArray | None = None) -> FloatArray:
+    """``(..., M, 3, NG)`` rows of equation (2) for rates ``g`` ``(..., M, 3)`` (unit frame), the link's
+    ``w``, ``dw`` ``(..., M, 3)`` (link frame) and ``elapsed = s - t_ref`` ``(M,)`` s (None: no drift)."""
     Z = np.zeros((*w.shape[:-1], 3, NG))
     for i in range(3):
         Z[..., i, 3 * i : 3 * i + 3] = g
     Z[..., 9:12] = -np.eye(3)
     Z[..., 12] = -dw
-    Z[..., 13] = w
+    if elapsed is not None:
+        Z[..., 13] = -dw * np.asarray(elapsed, dtype=float)[:, None]
+    Z[..., 14] = w
     return Z
 
 
@@ -122,7 +138,8 @@ class Solution:
     Attributes:
         R: ``(3, 3)`` ``R_link_su``; ``p``: ``(3,)`` ``p_link_su``, m.
         A: ``(3, 3)`` accelerometer scale/misalignment (``a = A f + b``); ``b``: ``(3,)`` its bias, m/s^2.
-        gyro_bias: ``(3,)`` rad/s (zeros without a gyroscope); ``tau``: residual time offset, s.
+        gyro_bias: ``(3,)`` rad/s (zeros without a gyroscope); ``tau``: residual time offset at the
+            unit's ``t_ref``, s; ``drift``: residual clock drift (dimensionless).
         cov: ``(NP, NP)`` covariance of the Gauss-Newton unknowns at the solution (rotation about the
             UNIT axes, ``R <- R Exp(dtheta)``), not yet inflated for correlated residuals.
         sigma_a, sigma_g: residual std of equations (1) (m/s^2) and (2) (rad/s; nan: no gyroscope).
@@ -142,6 +159,7 @@ class Solution:
     gyro_bias: FloatArray
     tau: float
     gravity_scale: float
+    drift: float
     cov: FloatArray
     sigma_a: float
     sigma_g: float
@@ -188,7 +206,7 @@ def _nearest_rotation(M: FloatArray) -> FloatArray:
 
 
 def linearise(R: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The unknowns of (1) and (2) at ``R`` and ``x = [0 (3), E, h, p, c, tau, k]`` ``(NP,)`` and their
+    """The unknowns of (1) and (2) at ``R`` and ``x = [0 (3), E, h, p, c, tau, k, d]`` ``(NP,)`` and their
     Jacobians with respect to ``delta`` (module docstring): ``x_a`` ``(NA - 1,)``, ``J_a``
     ``(NA - 1, NP)``, ``x_g`` ``(NG - 1,)``, ``J_g`` ``(NG - 1, NP)``."""
     F = np.eye(3) + x[_E].reshape(3, 3)
@@ -198,10 +216,14 @@ def linearise(R: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, Flo
     Ja[16:19, _T], Ja[16:19, _P] = x[_P], x[_T] * np.eye(3)  # d(tau p)
     Ja[19, _K] = 1.0
     Ja[20:23, _K], Ja[20:23, _P] = x[_P], x[_K] * np.eye(3)  # d(k p)
-    xa = np.concatenate([(R @ F).reshape(9), x[_H], x[_P], [x[_T]], x[_T] * x[_P], [x[_K]], x[_K] * x[_P]])
+    Ja[23, _D] = 1.0
+    Ja[24:27, _D], Ja[24:27, _P] = x[_P], x[_D] * np.eye(3)  # d(d p)
+    xa = np.concatenate([
+        (R @ F).reshape(9), x[_H], x[_P], [x[_T]], x[_T] * x[_P], [x[_K]], x[_K] * x[_P], [x[_D]], x[_D] * x[_P]
+    ])  # fmt: skip
     Jg = np.zeros((NG - 1, NP))
-    Jg[:9, _TH], Jg[9:12, _C], Jg[12, _T] = JR, np.eye(3), 1.0
-    xg = np.concatenate([R.reshape(9), x[_C], [x[_T]]])
+    Jg[:9, _TH], Jg[9:12, _C], Jg[12, _T], Jg[13, _D] = JR, np.eye(3), 1.0, 1.0
+    xg = np.concatenate([R.reshape(9), x[_C], [x[_T]], [x[_D]]])
     return xa, Ja, xg, Jg
 
 
@@ -224,12 +246,13 @@ def solve(
     R0: FloatArray | None = None,
     iterations: int = 12,
     scale_prior: float = SCALE_PRIOR,
+    drift_prior: float = DRIFT_PRIOR,
 ) -> Solution | None:
     """Gauss-Newton minimiser of ``C`` (module docstring) from the Grams ``Za`` ``(NA, NA)`` and ``Zg``
     ``(NG, NG)`` (None: no gyroscope) with noise levels ``sigma_a`` (m/s^2), ``sigma_g`` (rad/s); ``R0``
     a start rotation (default: the linear solution); ``scale_prior`` the prior std of each element of ``E``
-    (tiny: the accelerometer's scale/misalignment held at the identity). None when the data determine
-    nothing yet."""
+    (tiny: the accelerometer's scale/misalignment held at the identity), ``drift_prior`` that of the
+    residual clock drift. None when the data determine nothing yet."""
     have_g = Zg is not None and Zg[0, 0] > 0
     if R0 is None:
         start = _linear_start(Zg, NG - 1) if have_g else None
@@ -238,12 +261,13 @@ def solve(
         else:
             start_a = _linear_start(Za, NA - 1)
             R0 = np.eye(3) if start_a is None else _nearest_rotation(start_a[:9].reshape(3, 3))
-    R, x = np.array(R0, dtype=float), np.zeros(NP)  # x holds E, h, p, c, tau (dtheta always 0 at the current R)
+    R, x = np.array(R0, dtype=float), np.zeros(NP)  # x holds E, h, p, c, tau, k, d (dtheta always 0 at the current R)
     wa, wg = 1.0 / sigma_a**2, (1.0 / sigma_g**2 if have_g else 0.0)
     prior = np.zeros(NP)
     prior[_E] = 1.0 / scale_prior**2
     prior[_T] = 1.0 / TAU_PRIOR_S**2
     prior[_K] = 1.0 / GRAVITY_PRIOR**2
+    prior[_D] = 1.0 / drift_prior**2
     H = np.eye(NP)
     for it in range(iterations):
         xa, Ja, xg, Jg = linearise(R, x)
@@ -283,7 +307,8 @@ def solve(
     sa = float(np.sqrt(rss_a / max(3.0 * Za[9, 9] - 16.0, 1.0)))
     sg = float(np.sqrt(rss_g / max(3.0 * Zg[9, 9] - 13.0, 1.0))) if have_g and Zg is not None else float("nan")
     return Solution(
-        R=R, p=x[_P].copy(), A=A, b=b, gyro_bias=gyro_bias, tau=float(x[_T]), gravity_scale=float(x[_K]),
+        R=R, p=x[_P].copy(), A=A, b=b, gyro_bias=gyro_bias, tau=float(x[_T]),
+        gravity_scale=float(x[_K]), drift=float(x[_D]),
         cov=cov, sigma_a=sa, sigma_g=sg,
         cost=rss_a * wa + rss_g * wg, rss_a=rss_a, information=H, x_a=xa, x_g=xg, state=x.copy(),
     )  # fmt: skip

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
+from skincal.bench.table1 import Table1Config, jobs, run_dask, run_job, run_local, summarise
 from skincal.cli import main
-from skincal.workflows.table1 import Table1Config, jobs, run_dask, run_job, run_local, summarise
 
 
 @pytest.fixture(scope="module")

@@ -10,16 +10,8 @@ import pytest
 
 from skincal.errors import ConfigError
 from skincal.kinematics import get_robot, panda
-from skincal.workflows.scenarios import (
-    Q_START,
-    PickPlace,
-    get_scenario,
-    load_scenario,
-    parse_scenario,
-    robot_points,
-    shipped_scenarios,
-    start_configuration,
-)
+from skincal.kinematics.points import Q_START, robot_points
+from skincal.sim.scenarios import get_scenario, load_scenario, parse_scenario, shipped_scenarios
 
 # The legacy (issue 7) scenario geometry on the Panda, as the former Python definitions had it
 SU6 = (np.array([0.466, -0.22, 0.686]), np.array([0.408, -0.898, 0.164]))
@@ -74,20 +66,6 @@ def test_speed_override_changes_the_approach_not_the_withdrawal():
     assert quick.t_leave == pytest.approx(slow.t_leave)  # arrival fixed, withdrawal at its own 0.5 m/s
 
 
-@pytest.mark.parametrize("robot", ["panda", "ur5e", "iiwa14", "xarm7"])
-def test_start_configuration_is_in_front_within_limits_and_well_conditioned(robot):
-    chain = get_robot(robot)
-    q0 = start_configuration(chain)
-    if chain.joint_lower is not None:
-        assert np.all(q0 >= chain.joint_lower + 0.05) and np.all(q0 <= chain.joint_upper - 0.05)
-    pts = robot_points(chain, q0)
-    x = pts["flange"]
-    assert x[0] > 0.3 and abs(x[1]) < 1e-3 and x[2] > pts["shoulder"][2]  # in front, above the shoulder
-    J = chain.point_jacobian(q0, chain.n_joints, chain.T_link_flange[:3, 3])[:3]
-    assert np.linalg.svd(J, compute_uv=False).min() > 0.1  # the 0.1 m circle is trackable
-    np.testing.assert_array_equal(start_configuration(chain), q0)  # deterministic
-
-
 def test_relative_positions_follow_the_robot_point():
     """A file relative to the elbow puts the hand at the same offset from each robot's elbow."""
     hand = {"name": "h", "shape": "sphere", "radius": 0.05, "relative_to": "elbow"}
@@ -101,18 +79,6 @@ def test_relative_positions_follow_the_robot_point():
     sc = parse_scenario({"people": [joint]}, "mem", panda())
     c = panda().joint_axes(panda().link_frames(Q_START))[0][0, 3]
     np.testing.assert_allclose(sc.scene.obstacles[0].p_base_obs, c + [0.1, 0.2, 0.3], atol=1e-12)
-
-
-def test_pick_place_cycle_is_smooth_periodic_and_its_velocity_is_the_derivative():
-    task = PickPlace.around([0.5, 0.0, 0.5])
-    t = np.linspace(0, 2 * task.period, 20001)
-    x, v = task.at(t)
-    np.testing.assert_allclose(x[0], [0.5, 0.0, 0.5], atol=1e-12)
-    np.testing.assert_allclose(task.at(task.period)[0][0], [0.5, 0.0, 0.5], atol=1e-12)
-    np.testing.assert_allclose(np.gradient(x, t, axis=0)[1:-1], v[1:-1], atol=2e-3)
-    assert np.abs(np.diff(x, axis=0)).max() < 1e-3  # continuous
-    assert x[:, 2].min() == pytest.approx(0.4) and x[:, 1].min() == pytest.approx(-0.15)
-    assert np.linalg.norm(v, axis=1).max() == pytest.approx(0.25, rel=1e-3)
 
 
 def _person(**over):
@@ -200,7 +166,7 @@ def test_a_huge_scenario_file_is_refused_before_parsing(tmp_path):
     """A YAML parser needs minutes for tens of MB: a scenario file over 1 MiB is refused in one line."""
     from skincal.errors import ConfigError
     from skincal.kinematics import panda
-    from skincal.workflows.scenarios import load_scenario
+    from skincal.sim.scenarios import load_scenario
 
     path = tmp_path / "big.yaml"
     path.write_text("name: big\ndescription: " + "x" * (1 << 20) + "\n")

@@ -23,9 +23,12 @@ True errors are :func:`skincal.calib.metrics.evaluate` against the session's tru
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from skincal.bench.harness import RunInfo
+from skincal.bench.options import ADAPTIVE
 from skincal.workflows.live import Target, all_reached, make_calibrator
 
 
@@ -128,3 +131,86 @@ def run_case(robot: str, seed: int, noise: str = "realistic", target: Target = T
     rpos, rrot = (None, None) if fixed["at_reach"] is None else worst(fixed["at_reach"])[:2]
     return Row(robot, seed, run.motion_s, run.loop.reached, len(run.loop.segments), pos, rot, links, wall, true_s,
                fixed["duration_s"], fixed["reached_s"], rpos, rrot, fpos, frot, fixed["true_s"])  # fmt: skip
+
+
+@dataclass(frozen=True)
+class AdaptiveConfig:
+    """Robots x seeds of :func:`run_case` (the options of ``benchmarks/bench_adaptive.py``)."""
+
+    robots: tuple[str, ...] = ("panda", "sawyer", "ur5e")
+    seeds: tuple[int, ...] = (0,)
+    noise: str = "realistic"
+    target: Target = Target()
+    max_motion_s: float = 180.0
+    std_factor: float = 1.0
+
+
+@dataclass(frozen=True)
+class AdaptiveJob:
+    """One robot and seed of an :class:`AdaptiveConfig`."""
+
+    config: AdaptiveConfig
+    robot: str
+    seed: int
+
+
+def run_adaptive_job(job: AdaptiveJob) -> Row:
+    """:func:`run_case` of one job."""
+    c = job.config
+    return run_case(job.robot, job.seed, c.noise, c.target, c.max_motion_s, std_factor=c.std_factor)
+
+
+def _f(x: float | None, fmt: str = ".1f") -> str:
+    return "-" if x is None else format(x, fmt)
+
+
+class AdaptiveHarness:
+    """The adaptive-vs-fixed benchmark as a :class:`~skincal.bench.harness.Harness`: a :class:`Row` per
+    robot and seed."""
+
+    options = ADAPTIVE
+    run_job = staticmethod(run_adaptive_job)
+
+    def config(self, values: Mapping[str, Any]) -> AdaptiveConfig:
+        """The configuration of the parsed options (``target`` as :func:`skincal.workflows.live.parse_target`)."""
+        from skincal.workflows.live import parse_target
+
+        v = values
+        return AdaptiveConfig(tuple(v["robots"]), tuple(v["seeds"]), v["noise"], parse_target(v["target"]),
+                              v["max_motion"], v["std_factor"])  # fmt: skip
+
+    def jobs(self, config: AdaptiveConfig) -> list[AdaptiveJob]:
+        """Robot-major, then seed."""
+        return [AdaptiveJob(config, robot, seed) for robot in config.robots for seed in config.seeds]
+
+    def summary(self, config: AdaptiveConfig, records: list[Row], run: RunInfo) -> dict[str, Any]:
+        """``{"rows": the records}``."""
+        return {"rows": records}
+
+    def report(self, config: AdaptiveConfig, doc: Mapping[str, Any], run: RunInfo) -> list[Any]:
+        """The table of motion times and true errors."""
+        from rich.table import Table
+
+        title = f"motion time to {config.target.text()} std, 6 units, {config.noise} IMUs, controller joint states"
+        if config.std_factor != 1.0:
+            title += f" (the adaptive loop to {config.std_factor:g} x that std)"
+        table = Table(title=title)
+        for col in ("robot", "seed", "adaptive [s]", "segments", "reached", "true err [mm / deg]", "links",
+                    "true err in target at [s]", "fast [s]", "fast std at target [s]", "fast err there",
+                    "fast true err in target at [s]", "fast err at end"):  # fmt: skip
+            table.add_column(col)
+        for r in doc["rows"]:
+            table.add_row(
+                r.robot, str(r.seed), f"{r.adaptive_s:.1f}", str(r.adaptive_segments),
+                "yes" if r.adaptive_reached else "NO",
+                f"{r.adaptive_pos_mm:.3f} / {r.adaptive_rot_deg:.4f}", "ok" if r.adaptive_links_ok else "WRONG",
+                _f(r.adaptive_true_s), f"{r.fixed_s:.1f}", _f(r.fixed_reached_s),
+                "-" if r.fixed_reached_pos_mm is None else
+                f"{r.fixed_reached_pos_mm:.3f} / {r.fixed_reached_rot_deg:.4f}",
+                _f(r.fixed_true_s),
+                f"{r.fixed_end_pos_mm:.3f} / {r.fixed_end_rot_deg:.4f}",
+            )  # fmt: skip
+        return [table]
+
+
+HARNESS = AdaptiveHarness()

@@ -20,6 +20,11 @@ brisk +-2 g, stuck axis, bias drift, knock, gravity). Placements, trajectories a
 the same for every fault of a ``(robot, seed)`` (paired comparison); the unit with the stuck axis
 and the knocked unit are two different units drawn from the seed.
 
+The faults of real recordings (issue 24): ``report14`` joint states, ``host`` and ``host-gaps``
+unit clocks (the clock cells' 1 mm target), gyroscope scale and misalignment, the three unit
+mistakes of :func:`skincal.sim.faults.misstate_units` and ``real-recording`` (``real-consumer`` IMUs
+with ``report14`` joints and ``host-gaps`` clocks); those but the clock cells have no mean target yet.
+
 **Truth.** Each unit's simulated pose; for the knocked unit the pose before the knock, held for
 2/3 of the session (:func:`skincal.sim.faults.splice_knock`).
 
@@ -45,6 +50,8 @@ from typing import Any
 
 import numpy as np
 
+from skincal.bench.harness import RunInfo
+from skincal.bench.options import ROBUSTNESS
 from skincal.errors import ConfigError
 from skincal.skin.clock import ClockModel, get_clock_model
 
@@ -104,6 +111,10 @@ class Fault:
         knock: one unit knocked at :data:`KNOCK_AT` (:func:`~skincal.sim.faults.simulate_knock`).
         gravity_true_mps2: simulated ``|g|`` while the dataset states 9.81, or ``None``.
         target_mean_mm: the cell's target on the mean position error, mm, or ``None``.
+        joints: joint-state preset (:data:`skincal.sim.joint_states.JOINT_PRESETS`; ``controller``
+            gets ``velocity_noise``).
+        imu_options: ``(field, value)`` pairs replaced in the IMU preset (e.g. gyroscope scale).
+        unit_mistake: a stream in the wrong unit (:data:`skincal.sim.faults.UNIT_MISTAKES`), or ``None``.
     """
 
     name: str
@@ -119,6 +130,9 @@ class Fault:
     knock: bool = False
     gravity_true_mps2: float | None = None
     target_mean_mm: float | None = None
+    joints: str = "controller"
+    imu_options: tuple[tuple[str, float], ...] = ()
+    unit_mistake: str | None = None
 
     def clock_model(self) -> ClockModel:
         if self.clock == "drift":
@@ -188,7 +202,20 @@ def _faults() -> dict[str, Fault]:
             knock=True,
             gravity_true_mps2=GRAVITY_TRUE_MPS2,
         ),
-    ]
+        Fault("joints-report14", "joints report14: 13.6 Hz host-stamped reports, 8 % lost, central-difference qd",
+              joints="report14"),
+        Fault("clock-host", "clock host: host-stamped, 80-100 ms lag, spacing 2.5-17.5 ms", clock="host",
+              target_mean_mm=1.0),
+        Fault("clock-gaps", "clock host-gaps: host with 0.3-0.7 s gaps, a clock step after each", clock="host-gaps",
+              target_mean_mm=1.0),
+        Fault("gyro-scale", "gyroscope scale 4.5 % std and 1 % misalignment per axis",
+              imu_options=(("gyro_scale_std", 0.045), ("gyro_misalignment_std", 0.01))),
+        Fault("units-gyro-deg", "gyroscope in deg/s stored as rad/s (x 57.3)", unit_mistake="gyro-deg"),
+        Fault("units-accel-g", "accelerometer in g stored as m/s^2 (/ 9.81)", unit_mistake="accel-g"),
+        Fault("units-raw", "raw 16-bit counts (+-4 g, +-2000 deg/s) stored as SI", unit_mistake="raw-counts"),
+        Fault("real-recording", "like a real recording: real-consumer IMUs, report14 joints, host-gaps clocks",
+              imu="real-consumer", joints="report14", clock="host-gaps"),
+    ]  # fmt: skip
     return {x.name: x for x in f}
 
 
@@ -311,9 +338,12 @@ def build_dataset(job: Job):
     directions = dict(zip(names, F.random_directions(len(names), pick), strict=True))
     knocked = F.knocked_pose(placements[affected.knocked_unit], KNOCK_TRANSLATION_M, KNOCK_ROTATION_DEG, pick)
 
-    imu_model = get_imu_model(fault.imu)
+    imu_model = replace(get_imu_model(fault.imu), **dict(fault.imu_options))
+    joint_model = get_joint_model(fault.joints)
     timing = {
-        "joint_model": replace(get_joint_model("controller"), velocity_noise_std=fault.velocity_noise),
+        "joint_model": replace(joint_model, velocity_noise_std=fault.velocity_noise)
+        if fault.joints == "controller"
+        else joint_model,
         "clock_model": fault.clock_model(),
     }
     g_true = GRAVITY_DECLARED_MPS2 if fault.gravity_true_mps2 is None else fault.gravity_true_mps2
@@ -342,6 +372,8 @@ def build_dataset(job: Job):
         ds = F.stick_axis(ds, affected.stuck_unit, affected.stuck_axis, t0 + STUCK_AT * (t1 - t0))
     if fault.stamp_offset_s:
         ds = F.shift_imu_stamps(ds, fault.stamp_offset_s)
+    if fault.unit_mistake:
+        ds = F.misstate_units(ds, fault.unit_mistake)
     return ds, affected
 
 
@@ -591,25 +623,13 @@ def run_benchmark(
     dask: Any = None,
     progress: Callable[[dict[str, Any]], None] | None = None,
 ) -> dict[str, Any]:
-    """Run every job (:func:`run`) and summarise.
+    """Run every job and summarise (:func:`~skincal.bench.harness.run_harness`).
 
     Returns ``{"config", "cells", "records", "wall_time_s", "workers", "dask"}`` (the ``--out`` document).
     """
-    import time
+    from skincal.bench.harness import run_harness
 
-    if workers < 1:
-        raise ConfigError(f"--workers must be at least 1, got {workers}")
-    start = time.perf_counter()
-    records = run(config, workers=workers, dask=dask, progress=progress)
-    wall = time.perf_counter() - start
-    return {
-        "config": config_dict(config),
-        "cells": summarise(config, records),
-        "records": records,
-        "wall_time_s": wall,
-        "workers": None if dask else workers,
-        "dask": dask,
-    }
+    return run_harness(HARNESS, config, workers=workers, dask=dask, progress=progress)[0]
 
 
 def _num(x: float | None, digits: int) -> str:
@@ -671,3 +691,37 @@ def report(config: RobustnessConfig, doc: Mapping[str, Any]) -> list[Any]:
         f"wall ({where(doc['workers'] or 1, doc['dask'])})"
     )
     return [robustness_table(config, cells), LEGEND, line]
+
+
+
+
+class RobustnessHarness:
+    """The robustness benchmark as a :class:`~skincal.bench.harness.Harness`."""
+
+    options = ROBUSTNESS
+    jobs = staticmethod(jobs)
+    run_job = staticmethod(run_job)
+
+    def config(self, values: Mapping[str, Any]) -> RobustnessConfig:
+        """:func:`config_from_options` of the parsed options."""
+        v = values
+        return config_from_options(v["robots"], v["backends"], v["faults"], v["seeds"], v["quick"], v["protocol"],
+                                   v["seed"])  # fmt: skip
+
+    def summary(self, config: RobustnessConfig, records: list[dict[str, Any]], run: RunInfo) -> dict[str, Any]:
+        """The ``--out`` document: ``{"config", "cells", "records", "wall_time_s", "workers", "dask"}``."""
+        return {
+            "config": config_dict(config),
+            "cells": summarise(config, records),
+            "records": records,
+            "wall_time_s": run.wall_time_s,
+            "workers": None if run.dask else run.workers,
+            "dask": run.dask,
+        }
+
+    def report(self, config: RobustnessConfig, doc: Mapping[str, Any], run: RunInfo) -> list[Any]:
+        """:func:`report`."""
+        return report(config, doc)
+
+
+HARNESS = RobustnessHarness()

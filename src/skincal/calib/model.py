@@ -11,7 +11,7 @@ Unit frame ``su``, link frame ``n`` (``R = R_link_su``, ``p = p_link_su`` in m):
     link frame:     v(s) = u(s) + K(s) p + k u_g(s)           (specific force at the unit, m/s^2)
     accelerometer:  a = A R^T v(s) + b + c (s - t_b)          (m/s^2, unit frame)
 
-``u``, ``K`` are the link signals of :func:`skincal.calib.mle.signals.link_signals` (specific force of
+``u``, ``K`` are the link signals of :func:`skincal.calib.signals.link_signals` (specific force of
 the link origin and the rigid-body matrix, link frame), ``u_g = -R_base_link^T g`` the part of ``u``
 due to the dataset's gravity ``g`` and ``k`` its relative error (the unit's data support gravity
 ``|g| (1 + k)``). ``A`` is the scale/misalignment matrix, ``b`` the bias (at ``t_b``), ``c`` its
@@ -23,19 +23,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from skincal.calib.timing import find_clock_steps
+from skincal.calib.timing import find_clock_steps, motion_instants
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.kinematics.transforms import FloatArray
 from skincal.skin.pose import SkinUnitPose
-
-
-def motion_instants(t: FloatArray, time_offset_s: float, drift: float = 0.0, t_ref: float = 0.0) -> FloatArray:
-    """``(M,)`` instants ``s = t - tau - d (t - t_ref)`` (s) at which samples stamped ``t`` measured the
-    motion (``drift`` dimensionless: 1e-6 per ppm)."""
-    t = np.asarray(t, dtype=float)
-    if drift:
-        return t - drift * (t - t_ref) - time_offset_s
-    return t - time_offset_s
 
 
 def link_specific_force(

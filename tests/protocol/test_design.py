@@ -1,4 +1,4 @@
-"""The next best motion (skincal.calib.online.design) and the segment pieces it builds on (protocol)."""
+"""The next best motion (skincal.protocol.design) and the segment pieces it builds on (protocol)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from skincal.calib.online.design import (
+from skincal.errors import ConfigError
+from skincal.kinematics import get_robot
+from skincal.protocol import build_trajectory, concatenate_trajectories
+from skincal.protocol.design import (
     DesignOptions,
     build_segment,
     candidate_poses,
@@ -15,9 +18,6 @@ from skincal.calib.online.design import (
     excitable,
     segment_config,
 )
-from skincal.errors import ConfigError
-from skincal.kinematics import get_robot
-from skincal.protocol import build_trajectory, concatenate_trajectories
 from skincal.protocol.limits import check_limits, position_bounds
 
 
@@ -144,7 +144,7 @@ def test_d_optimal_gain_refuses_a_singular_information():
 
 
 def test_realized_gain_is_the_log_det_change_of_units_on_the_same_link():
-    from skincal.calib.online.design import realized_gain
+    from skincal.protocol.design import realized_gain
 
     rng = np.random.default_rng(11)
     A, B = rng.normal(size=(6, 8)), rng.normal(size=(6, 3))

@@ -1,7 +1,7 @@
 """Benchmark of the avoidance controller (issue 7; ``benchmarks/bench_avoid.py``): scenarios x calibrations,
 and the QP step time.
 
-For every scenario the MuJoCo closed loop (:func:`skincal.workflows.avoidance.run_scenario`) runs with
+For every scenario the MuJoCo closed loop (:func:`skincal.workflows.experiment.run_experiment`) runs with
 the controller believing
 
 * ``truth``: the true unit poses of the simulated skin (the dense ring skin,
@@ -39,12 +39,15 @@ from typing import Any
 
 import numpy as np
 
+from skincal.bench.options import ISO_ROBOTS
 from skincal.control import AvoidanceController, ControllerConfig
+from skincal.control.iso_metrics import AvoidMetrics
 from skincal.kinematics import panda
-from skincal.perception import ObstaclePoints, RobotBody
-from skincal.workflows.avoid_metrics import AvoidMetrics, summarize
-from skincal.workflows.avoidance import RunLog, run_scenario, simulated_skin
-from skincal.workflows.scenarios import Q_START, degrade_poses, get_scenario
+from skincal.kinematics.points import Q_START
+from skincal.perception import ObstaclePoints
+from skincal.sim.scenarios import degrade_poses, get_scenario
+from skincal.workflows.avoidance import RunLog, simulated_skin
+from skincal.workflows.experiment import ExperimentConfig, StoppingModels, run_experiment, separation_for
 from skincal.workflows.session import simulate_dataset
 
 
@@ -126,21 +129,19 @@ def run_avoid_benchmark(
     ``truth`` and the beliefs ``believed`` (:func:`beliefs`), in order; ``on_run(scenario, belief, seed,
     metrics, log)`` after each run."""
     chain = panda()
-    body = RobotBody.of(chain)
     rows = []
     for name in scenarios:
         sc = get_scenario(name, chain)
         for (label, poses), seed in itertools.product(believed.items(), seeds):
-            log = run_scenario(chain, sc, truth, poses, np.random.default_rng(seed))
-            m = summarize(log, body, label)
+            run = run_experiment(ExperimentConfig(chain, sc, truth, poses, label, seed=seed))
+            m = run.metrics
             rows.append(m.to_dict() | {"seed": seed, "placement": placement})
             if on_run is not None:
-                on_run(name, label, seed, m, log)
+                on_run(name, label, seed, m, run.log)
     return rows
 
 
 # ---------------------------------------------------------------------------------------------- issue 17
-ISO_ROBOTS = ("panda", "ur5e", "iiwa14")
 ISO_BELIEFS = ("mle", "degraded 5cm/5deg")
 DEGRADE = (0.05, 5.0)
 """The degradation of the issue: 5 cm, 5 deg per unit."""
@@ -181,21 +182,22 @@ def run_iso_benchmark(
     seed: int = 0,
     report: Callable[[str], None] = print,
     on_run: Callable[[dict, RunLog], None] | None = None,
+    stopping: StoppingModels | None = None,
 ) -> list[dict[str, Any]]:
     """The issue-17 matrix (module docstring): one row (metrics dict plus ``robot``, ``mode``, ``v_h``, the
-    degraded std) per (robot, scenario, belief, mode); ``duration`` shortens every run (tests)."""
+    degraded std) per (robot, scenario, belief, mode); ``duration`` shortens every run (tests). ``stopping``:
+    the stopping models measured so far (each robot's is measured once per call without it)."""
     from skincal.control.separation import protective_separation
-    from skincal.workflows.avoid_metrics import summarize
-    from skincal.workflows.avoidance import separation_for, stopping_model
-    from skincal.workflows.scenarios import get_scenario, shipped_scenarios
+    from skincal.sim.scenarios import shipped_scenarios
+
+    stopping = stopping if stopping is not None else StoppingModels()
 
     # fast is hand at another speed: at the ISO speed both are the same run
     names = list(scenarios) if scenarios else [s for s in shipped_scenarios() if s not in ("none", "fast")]
     rows = []
     for robot in robots:
         chain, truth, believed = iso_beliefs(robot, labels, quick, report)
-        body = RobotBody.of(chain)
-        stop = stopping_model(chain)
+        stop = stopping(chain)
         report(
             f"{robot}: {len(truth)} units; stopping model T_r {stop.reaction_time_s:.3f} s, "
             + ", ".join(
@@ -211,20 +213,20 @@ def run_iso_benchmark(
         # nobody near: the separation model never acts, so one reference run (the longest) serves all
         longest = replace(runs[0].without_people(), duration=max(sc.duration for sc in runs))
         refs = {
-            mode: run_scenario(chain, longest, truth, truth, np.random.default_rng(seed), resume=True, mode=mode)
+            mode: run_experiment(
+                ExperimentConfig(chain, longest, truth, truth, resume=True, mode=mode, seed=seed, reference=False)
+            ).log
             for mode in modes
         }
         for sc in runs:
-            sep = separation_for(chain, sc)
-            config = ControllerConfig(separation=sep)
+            sep = separation_for(chain, sc, stopping=stopping)
             still = float(protective_separation(sep, np.zeros(1), None, np.zeros(1)).total[0])
             for mode in modes:
-                kw = dict(controller=config, resume=True, mode=mode)
-                ref = refs[mode]
                 for label, (poses, unc) in believed.items():
-                    log = run_scenario(chain, sc, truth, poses, np.random.default_rng(seed), uncertainty=unc, **kw)
-                    m = summarize(log, body, label, ref)
-                    row = m.to_dict() | {
+                    config = ExperimentConfig(chain, sc, truth, poses, label, unc, "iso", True, mode, seed)
+                    run = run_experiment(config, stopping=stopping, reference=refs[mode])
+                    log = run.log
+                    row = run.metrics.to_dict() | {
                         "robot": robot,
                         "v_h": sc.human_speed,
                         "units": len(truth),

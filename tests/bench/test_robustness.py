@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from skincal.bench import robustness as rb
 from skincal.cli import app, main
 from skincal.data.result import UnitResult
 from skincal.skin.pose import SkinUnitPose
-from skincal.workflows import robustness as rb
 from skincal.workflows.sweep import map_local
 
 CELL_FIELDS = {

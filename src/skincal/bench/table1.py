@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from skincal.bench.harness import RunInfo
+from skincal.bench.options import TABLE1
 from skincal.errors import ConfigError
 from skincal.protocol import ProtocolConfig, get_protocol
 
@@ -280,18 +282,13 @@ def run_benchmark(
     dask: Any = None,
     progress: Callable[[dict[str, Any]], None] | None = None,
 ) -> dict[str, Any]:
-    """Run every job (on Dask when a scheduler is given) and summarise.
+    """Run every job (on Dask when a scheduler is given) and summarise (:func:`~skincal.bench.harness.run_harness`).
 
     Returns ``{"config", "summary", "records", "wall_time_s"}`` (the ``--json`` document; records by set, run).
     """
-    if workers < 1:
-        raise ConfigError(f"--workers must be at least 1, got {workers}")
-    start = time.perf_counter()
-    records = run_dask(config, dask, progress) if dask is not None else run_local(config, workers, progress)
-    wall = time.perf_counter() - start
-    records.sort(key=lambda r: (r["set"], r["run"]))
-    return {"config": config_dict(config), "summary": summarise(config, records), "records": records,
-            "wall_time_s": wall}  # fmt: skip
+    from skincal.bench.harness import run_harness
+
+    return run_harness(HARNESS, config, workers=workers, dask=dask, progress=progress)[0]
 
 
 def _cell(stat: list[float] | None, scale: float = 1.0, digits: int = 2) -> str:
@@ -342,3 +339,31 @@ def report(config: Table1Config, doc: dict[str, Any], workers: int = 1, dask: An
     where = f"dask {dask}" if dask else f"{workers} local process(es)"
     line = f"{len(doc['records'])} jobs in {doc['wall_time_s']:.1f} s wall ({where})"
     return [table1_table(config, doc["summary"]), line]
+
+
+
+
+class Table1Harness:
+    """The Table I benchmark as a :class:`~skincal.bench.harness.Harness`."""
+
+    options = TABLE1
+    jobs = staticmethod(jobs)
+    run_job = staticmethod(run_job)
+
+    def config(self, values: Mapping[str, Any]) -> Table1Config:
+        """:func:`config_from_options` of the parsed options."""
+        v = values
+        return config_from_options(v["quick"], v["runs"], v["sets"], v["methods"], v["seed"])
+
+    def summary(self, config: Table1Config, records: list[dict[str, Any]], run: RunInfo) -> dict[str, Any]:
+        """The ``--json`` document: ``{"config", "summary", "records", "wall_time_s"}``, records by set, run."""
+        records = sorted(records, key=lambda r: (r["set"], r["run"]))
+        return {"config": config_dict(config), "summary": summarise(config, records), "records": records,
+                "wall_time_s": run.wall_time_s}  # fmt: skip
+
+    def report(self, config: Table1Config, doc: Mapping[str, Any], run: RunInfo) -> list[Any]:
+        """:func:`report`."""
+        return report(config, dict(doc), run.workers, run.dask)
+
+
+HARNESS = Table1Harness()

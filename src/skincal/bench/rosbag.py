@@ -15,12 +15,15 @@ Both are evaluated against the simulation truth.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
-from dataclasses import replace
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from skincal.bench.harness import RunInfo
+from skincal.bench.options import ROSBAG
 
 ERROR_KEYS = ("mean_position_error_mm", "mean_rotation_error_deg")
 
@@ -96,3 +99,84 @@ def summarise(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, float]]:
         bag = float(np.mean([r["bag"][key] for r in rows]))
         out[key] = {"hdf5": h5, "bag": bag, "ratio": bag / h5}
     return out
+
+
+@dataclass(frozen=True)
+class RosbagConfig:
+    """The seeds and the session/bag settings of :func:`run_seed` (the options of ``benchmarks/bench_rosbag.py``)."""
+
+    seeds: tuple[int, ...] = (0, 1, 2)
+    joint_rate: float = 200.0
+    protocol: str = "paper-sim"
+    noise: str = "realistic"
+    ros: int = 2
+    storage: str = "mcap"
+
+
+@dataclass(frozen=True)
+class RosbagJob:
+    """One seed of a :class:`RosbagConfig`."""
+
+    config: RosbagConfig
+    seed: int
+
+
+def run_rosbag_job(job: RosbagJob) -> dict[str, Any]:
+    """:func:`run_seed` of one job in a folder of its own (removed afterwards)."""
+    import tempfile
+
+    c = job.config
+    with tempfile.TemporaryDirectory() as tmp:
+        return run_seed(job.seed, Path(tmp), joint_rate=c.joint_rate, protocol=c.protocol, noise=c.noise, ros=c.ros,
+                        storage=c.storage)  # fmt: skip
+
+
+class RosbagHarness:
+    """The bag-vs-HDF5 benchmark as a :class:`~skincal.bench.harness.Harness`: one job per seed."""
+
+    options = ROSBAG
+    run_job = staticmethod(run_rosbag_job)
+
+    def config(self, values: Mapping[str, Any]) -> RosbagConfig:
+        """The configuration of the parsed options."""
+        v = values
+        return RosbagConfig(tuple(v["seeds"]), v["joint_rate"], v["protocol"], v["noise"], v["ros"], v["storage"])
+
+    def jobs(self, config: RosbagConfig) -> list[RosbagJob]:
+        """One job per seed, in order."""
+        return [RosbagJob(config, seed) for seed in config.seeds]
+
+    def summary(self, config: RosbagConfig, records: list[dict[str, Any]], run: RunInfo) -> dict[str, Any]:
+        """``{"runs": per-seed records, "summary": :func:`summarise`}``."""
+        return {"runs": records, "summary": summarise(records)}
+
+    def report(self, config: RosbagConfig, doc: Mapping[str, Any], run: RunInfo) -> list[Any]:
+        """The per-seed table and one verdict line per error kind (bag within 10 % of HDF5)."""
+        from rich.table import Table
+
+        c = config
+        table = Table(
+            title=f"bag (ROS {c.ros}{'' if c.ros == 1 else ' ' + c.storage}) vs HDF5, mle, "
+            f"{c.protocol}, {c.noise} IMU, joints at {c.joint_rate:g} Hz"
+        )
+        for col in ("seed", "msgs", "segments true/found/rej.", "pos err h5 [mm]", "pos err bag [mm]", "rot h5 [deg]",
+                    "rot bag [deg]", "links h5/bag", "write/read/seg/cal [s]"):  # fmt: skip
+            table.add_column(col)
+        for r in doc["runs"]:
+            h, b, ts = r["hdf5"], r["bag"], r["time_s"]
+            table.add_row(
+                str(r["seed"]), str(r["messages"]), f"{r['segments_true']}/{r['segments_found']}/{r['rejected']}",
+                f"{h['mean_position_error_mm']:.3f}", f"{b['mean_position_error_mm']:.3f}",
+                f"{h['mean_rotation_error_deg']:.4f}", f"{b['mean_rotation_error_deg']:.4f}",
+                f"{h['links_correct']}/{b['links_correct']} of {r['units_total']}",
+                f"{ts['bag_write']:.1f}/{ts['bag_read']:.1f}/{ts['segment']:.2f}/{ts['bag_calibrate']:.1f}",
+            )  # fmt: skip
+        out: list[Any] = [table]
+        for key, s in doc["summary"].items():
+            h5, bag = s["hdf5"], s["bag"]
+            verdict = "within 10 %" if bag <= 1.1 * h5 else "NOT within 10 %"
+            out.append(f"{key}: HDF5 {h5:.4g}, bag {bag:.4g}, ratio {bag / h5:.3f} ({verdict})")
+        return out
+
+
+HARNESS = RosbagHarness()

@@ -1,24 +1,14 @@
 """Human-approach scenarios for the avoidance controller: the robot's start, its task, and who comes close.
 
 A scenario is a YAML/JSON file (format below); the shipped ones live in
-``skincal/workflows/scenario_files/`` and are named by their stem (``skincal avoid --scenario hand``),
+``skincal/sim/scenario_files/`` (package data) and are named by their stem (``skincal avoid --scenario hand``),
 any other file by its path (``--scenario my.yaml``). Positions are given in the robot's base axes,
 either absolute or relative to a point of the robot at its start configuration (``relative_to``), so one
 file works on every robot.
 
-Robot and start (:func:`start_configuration`): the Panda preset starts at ``Q_START`` (the legacy
-configuration, flange about 0.47 m in front of the base and 0.52 m high, the tool pointing down). Any
-other chain gets a configuration computed from its kinematics alone: the flange at ``0.5 R`` in front of
-its shoulder (joint 2) and ``0.2 R`` above it (``R`` the chain's reach from the shoulder), the tool
-pointing down where the chain allows it, the elbow above the shoulder-flange line, inside the joint
-limits less 0.15 rad, and of the solutions from 24 seeded starts the one with the best-conditioned
-position Jacobian (largest smallest singular value).
-
-Task (paper Sec. V-C): the flange tracks a circle of radius 0.1 m in the vertical y-z plane in front of
-the robot starting where the flange is at the start (period 5 s, 0.126 m/s), or a pick-and-place cycle
-(:class:`PickPlace`: down to a pick point 0.1 m below and 0.15 m to the right, up, across, down to the
-place point 0.15 m to the left, up, back; minimum-jerk legs at 0.25 m/s peak, 0.3 s dwell at pick and
-place).
+The robot's named points and its start configuration are :mod:`skincal.kinematics.points`
+(:func:`~skincal.kinematics.points.robot_points`, :func:`~skincal.kinematics.points.start_configuration`);
+the flange's task (``circle`` or ``pick-place``) is :mod:`skincal.protocol.flange`.
 
 Scenario file (every key optional unless said; lengths m, times s, speeds m/s)::
 
@@ -63,19 +53,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
+from skincal.kinematics.points import robot_points, start_configuration
 from skincal.kinematics.transforms import FloatArray
 from skincal.names import name_problem, printable
+from skincal.protocol.flange import Circle, PickPlace, make_task
 from skincal.sim.scene import Obstacle, Primitive, Scene, TimeTable, human
-
-Q_START = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
-"""Start configuration of the Panda, rad (flange about 0.47 m in front of the base, 0.52 m high)."""
 
 MAX_FILE_BYTES = 1 << 20
 """Largest scenario file, bytes (16 people x 256 waypoints fit in 0.3 MB; a YAML parser needs ~100 s for 16 MB)."""
@@ -89,195 +78,6 @@ control step it has no step at all)."""
 MAX_COORD = 100.0
 MAX_SPEED = 10.0
 MAX_SIZE = 5.0
-TASKS = ("circle", "pick-place")
-
-
-# ---------------------------------------------------------------------------------------------- tasks
-class Task(Protocol):
-    """A flange reference: ``at(t) -> (position (M, 3) m, velocity (M, 3) m/s)`` at instants ``t`` ``(M,)`` s."""
-
-    def at(self, t: ArrayLike) -> tuple[FloatArray, FloatArray]: ...
-
-
-@dataclass(frozen=True)
-class Circle:
-    """Flange reference ``x(t) = center + radius (u cos(w t) + v sin(w t))``, ``w = 2 pi / period``.
-
-    ``center``, ``u``, ``v``: ``(3,)`` base frame (``u``, ``v`` orthonormal), m; ``period`` s.
-    """
-
-    center: FloatArray
-    radius: float
-    u: FloatArray
-    v: FloatArray
-    period: float
-
-    @classmethod
-    def through(cls, start: ArrayLike, radius: float = 0.1, period: float = 5.0, plane: str = "yz") -> Circle:
-        """The circle whose ``t = 0`` point is ``start`` ``(3,)`` m, in the vertical ``yz`` or flat ``xy`` plane."""
-        axes = {
-            "yz": (np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])),
-            "xy": (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])),
-        }
-        if plane not in axes:
-            raise ConfigError(f"circle plane must be 'yz' or 'xy', got '{plane}'")
-        if radius <= 0 or period <= 0:
-            raise ConfigError(f"circle needs radius > 0 m and period > 0 s, got {radius}, {period}")
-        u, v = axes[plane]
-        return cls(np.asarray(start, dtype=float) - radius * u, float(radius), u, v, float(period))
-
-    def at(self, t: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """Position ``(M, 3)`` m and velocity ``(M, 3)`` m/s at instants ``t`` ``(M,)`` s."""
-        t = np.atleast_1d(np.asarray(t, dtype=float))[:, None]
-        w = 2 * np.pi / self.period
-        c, s = np.cos(w * t), np.sin(w * t)
-        return self.center + self.radius * (c * self.u + s * self.v), self.radius * w * (-s * self.u + c * self.v)
-
-
-@dataclass(frozen=True)
-class PickPlace:
-    """A pick-and-place cycle through ``points`` ``(K, 3)`` (base frame, m; the first is the start and the
-    cycle returns to it), each leg a minimum-jerk (quintic) move of ``durations`` ``(K,)`` s, with
-    ``dwell`` s at the points flagged in ``dwell_at`` ``(K,)`` (after arriving). Periodic."""
-
-    points: FloatArray
-    durations: FloatArray
-    dwell_at: np.ndarray
-    dwell: float
-
-    @classmethod
-    def around(
-        cls, start: ArrayLike, width: float = 0.15, depth: float = 0.1, peak_speed: float = 0.25, dwell: float = 0.3
-    ) -> PickPlace:
-        """The cycle of the module docstring around ``start`` ``(3,)`` m: pick at ``-width`` in y, place at
-        ``+width``, both ``depth`` below; leg durations from ``peak_speed`` (a quintic's peak speed is
-        1.875 times its mean)."""
-        s = np.asarray(start, dtype=float)
-        dy, dz = np.array([0.0, width, 0.0]), np.array([0.0, 0.0, depth])
-        pts = np.array([s, s - dy, s - dy - dz, s - dy, s + dy, s + dy - dz, s + dy])
-        nxt = np.roll(pts, -1, axis=0)
-        L = np.linalg.norm(nxt - pts, axis=1)
-        dur = np.maximum(1.875 * L / peak_speed, 0.2)
-        return cls(pts, dur, np.array([False, False, True, False, False, True, False]), float(dwell))
-
-    @property
-    def period(self) -> float:
-        """Length of one cycle, s."""
-        return float(self.durations.sum() + self.dwell * self.dwell_at.sum())
-
-    def at(self, t: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """Position ``(M, 3)`` m and velocity ``(M, 3)`` m/s at instants ``t`` ``(M,)`` s."""
-        t = np.mod(np.atleast_1d(np.asarray(t, dtype=float)), self.period)
-        seg = self.durations + self.dwell * self.dwell_at  # each point's dwell, then its leg
-        starts = np.concatenate([[0.0], np.cumsum(seg)[:-1]])
-        k = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(seg) - 1)
-        tau = t - starts[k] - self.dwell * self.dwell_at[k]
-        s = np.clip(tau / self.durations[k], 0.0, 1.0)
-        blend = s**3 * (10 - 15 * s + 6 * s * s)
-        rate = np.where((s > 0) & (s < 1), 30 * s * s * (1 - s) ** 2 / self.durations[k], 0.0)
-        a, b = self.points[k], self.points[(k + 1) % len(self.points)]
-        return a + blend[:, None] * (b - a), rate[:, None] * (b - a)
-
-
-def make_task(kind: str, start: ArrayLike) -> Circle | PickPlace:
-    """The task ``circle`` or ``pick-place`` starting at the flange position ``start`` ``(3,)`` m."""
-    if kind == "circle":
-        return Circle.through(start)
-    if kind == "pick-place":
-        return PickPlace.around(start)
-    raise ConfigError(f"unknown task '{printable(str(kind))}' (use {' or '.join(TASKS)})")
-
-
-# ---------------------------------------------------------------------------------------------- robot
-def _limits(chain: SerialChain, margin: float = 0.15) -> tuple[FloatArray, FloatArray]:
-    n = chain.n_joints
-    lo = np.full(n, -np.pi) if chain.joint_lower is None else np.maximum(chain.joint_lower, -np.pi)
-    hi = np.full(n, np.pi) if chain.joint_upper is None else np.minimum(chain.joint_upper, np.pi)
-    m = np.minimum(margin, 0.25 * (hi - lo))
-    return lo + m, hi - m
-
-
-def robot_points(chain: SerialChain, q: ArrayLike) -> dict[str, FloatArray]:
-    """Named points ``(3,)`` of the robot at ``q`` (base frame, m): ``base``, ``flange``, ``shoulder``
-    (joint 2's point), ``wrist`` (joint ``n - 1``'s), ``elbow`` (the point of the link axes' polyline
-    between them farthest from the shoulder-wrist line), ``upper_arm`` and ``forearm`` (midpoints)."""
-    q = np.asarray(q, dtype=float)
-    n = chain.n_joints
-    T = chain.link_frames(q)[0]
-    c = chain.joint_axes(T[None])[0][0]
-    shoulder = c[min(1, n - 1)]
-    wrist = c[max(n - 2, 0)]
-    from skincal.kinematics.geometry import link_capsules
-
-    cand = [T[cp.link, :3, :3] @ p + T[cp.link, :3, 3] for cp in link_capsules(chain) for p in (cp.p0, cp.p1)]
-    cand += list(c)
-    cand = np.array(cand)
-    axis = wrist - shoulder
-    L = float(np.linalg.norm(axis))
-    if L > 1e-9:
-        rel = cand - shoulder
-        s = np.clip(rel @ axis / L**2, 0.0, 1.0)
-        # only points beside the middle of the shoulder-wrist segment count as the elbow
-        d = np.where((s > 0.05) & (s < 0.95), np.linalg.norm(rel - s[:, None] * axis, axis=1), -1.0)
-        elbow = cand[int(np.argmax(d))] if d.max() > 0 else 0.5 * (shoulder + wrist)
-    else:
-        elbow = shoulder.copy()
-    flange = (T[n] @ chain.T_link_flange)[:3, 3]
-    return {
-        "base": np.zeros(3),
-        "flange": flange,
-        "shoulder": shoulder,
-        "elbow": elbow,
-        "wrist": wrist,
-        "upper_arm": 0.5 * (shoulder + elbow),
-        "forearm": 0.5 * (elbow + wrist),
-    }
-
-
-def _is_panda(chain: SerialChain) -> bool:
-    from skincal.kinematics import panda
-
-    return chain.n_joints == 7 and chain.same_motion(panda())
-
-
-def start_configuration(chain: SerialChain) -> FloatArray:
-    """The start configuration ``(n,)`` rad of ``chain`` (module docstring): ``Q_START`` on the Panda,
-    else computed (seeded, deterministic)."""
-    if _is_panda(chain):
-        return Q_START.copy()
-    from scipy.optimize import least_squares
-
-    n = chain.n_joints
-    if n < 3:
-        raise ConfigError(f"robot '{chain.name}': an avoidance task needs at least 3 joints, got {n}")
-    rng = np.random.default_rng(0)
-    lo, hi = _limits(chain)
-    mid = 0.5 * (lo + hi)
-    shoulder = chain.joint_axes(chain.link_frames(mid))[0][0][1]
-    reach = float(np.linalg.norm(chain.flange_pose(rng.uniform(lo, hi, (2000, n)))[:, :3, 3] - shoulder, axis=1).max())
-    target = shoulder + np.array([0.5 * reach, 0.0, 0.2 * reach])
-    down = np.array([0.0, 0.0, -1.0])
-
-    def residual(q: FloatArray) -> FloatArray:
-        T = chain.flange_pose(q)[0]
-        return np.concatenate([10.0 * (T[:3, 3] - target), 0.5 * (T[:3, 2] - down), 0.05 * (q - mid) / (hi - lo)])
-
-    best, best_score = None, -np.inf
-    for q_init in rng.uniform(lo, hi, size=(24, n)):
-        q = least_squares(residual, q_init, bounds=(lo, hi)).x
-        if np.linalg.norm(chain.flange_pose(q)[0, :3, 3] - target) > 1e-3:
-            continue
-        pts = robot_points(chain, q)
-        line = pts["wrist"] - pts["shoulder"]
-        s = float(np.clip((pts["elbow"] - pts["shoulder"]) @ line / max(line @ line, 1e-12), 0, 1))
-        elbow_up = pts["elbow"][2] > pts["shoulder"][2] + s * line[2]
-        J = chain.point_jacobian(q, n, chain.T_link_flange[:3, 3])[:3]
-        score = float(np.linalg.svd(J, compute_uv=False).min()) + (1.0 if elbow_up else 0.0)
-        if score > best_score:
-            best, best_score = q, score
-    if best is None:
-        raise ConfigError(f"robot '{chain.name}': found no start configuration with the flange in front of the base")
-    return best
 
 
 # ---------------------------------------------------------------------------------------------- scenarios
@@ -320,7 +120,7 @@ class Scenario:
 
 def scenario_dir() -> Path:
     """The folder of the shipped scenario files."""
-    return Path(str(resources.files("skincal.workflows") / "scenario_files"))
+    return Path(str(resources.files("skincal.sim") / "scenario_files"))
 
 
 def shipped_scenarios() -> tuple[str, ...]:

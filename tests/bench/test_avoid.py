@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from skincal.workflows.bench_avoid import run_iso_benchmark
+from skincal.bench.avoid import run_iso_benchmark
 
 pytest.importorskip("mujoco")
 

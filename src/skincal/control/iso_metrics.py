@@ -1,4 +1,5 @@
-"""Metrics of a closed-loop run: clearance, contacts, tracking error and recovery, QP timing.
+"""Metrics of a closed-loop avoidance run as functions of arrays: clearance, contacts, tracking error and
+recovery, ISO/TS 15066 margins, QP timing.
 
 Clearance at each control instant is the smallest surface-to-surface distance between the robot's
 TRUE link capsules (no padding) and the obstacle solids, in closed form: capsule-capsule
@@ -11,10 +12,15 @@ critical distance for the legacy controller; >= 0 at every step is the standard'
 parts of ``S_p`` at that step, the time in protective stop (steps where the controller commanded its
 safe stop), the time the person is within ``S_p + 0.5 m`` (``NEAR_BAND``), and the task time lost
 against the same run without a person (:func:`task_time_lost`).
+
+Every function takes arrays (instants ``t`` ``(S,)`` s, configurations ``q`` ``(S, n)`` rad, errors m) and
+the obstacle solids as a function of time (``solids_at(t) -> [skin.tof solids]``, base frame): no
+simulator. A run of the MuJoCo experiment is summarised by :func:`skincal.workflows.experiment.summarize`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -23,24 +29,28 @@ from skincal.errors import ConfigError
 from skincal.kinematics.transforms import FloatArray
 from skincal.perception.body import RobotBody, segment_distance
 from skincal.skin import tof
-from skincal.workflows.avoidance import TERMS, RunLog
 
 RECOVERY_THRESHOLD = 0.005
 """Tracking error below which the task counts as recovered, m."""
 NEAR_BAND = 0.5
 """The person counts as near while the clearance is below ``S_p`` plus this, m."""
+TERMS = ("S_h", "S_r", "S_s", "C", "Z_d", "Z_r")
+"""The parts of ISO/TS 15066's protective separation distance ``S_p``, in its order."""
+
+SolidsAt = Callable[[FloatArray], Sequence[object]]
+"""``solids_at(t)``: the obstacle solids (:mod:`skincal.skin.tof` spheres and capsules, end points
+``(M, 3)``) at instants ``t`` ``(M,)`` s."""
 
 _CHUNK = 2000
 
 
-def obstacle_segments(log: RunLog, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Obstacle solids at instants ``t`` ``(M,)`` as segments: ends ``(M, P, 3)`` each and radii ``(P,)``, m.
+def obstacle_segments(solids: Sequence[object], M: int) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Obstacle ``solids`` at ``M`` instants as segments: ends ``(M, P, 3)`` each and radii ``(P,)``, m.
 
     Spheres are zero-length segments; other solids (boxes, planes) are not supported here.
     """
-    prims = log.scenario.scene.tof_primitives(t) if log.scenario.scene.obstacles else []
     a, b, r = [], [], []
-    for p in prims:
+    for p in solids:
         if isinstance(p, tof.Sphere):
             a.append(p.center)
             b.append(p.center)
@@ -50,23 +60,25 @@ def obstacle_segments(log: RunLog, t: FloatArray) -> tuple[FloatArray, FloatArra
         else:
             raise ConfigError(f"clearance: obstacle solid {type(p).__name__} is not supported (spheres and capsules)")
         r.append(float(np.asarray(p.radius)))
-    M = np.atleast_1d(t).size
     if not a:
         return np.zeros((M, 0, 3)), np.zeros((M, 0, 3)), np.zeros(0)
     stack = lambda xs: np.stack([np.broadcast_to(x, (M, 3)) for x in xs], axis=1)  # noqa: E731
     return stack(a), stack(b), np.array(r)
 
 
-def clearance(log: RunLog, body: RobotBody) -> FloatArray:
-    """``(S,)`` smallest distance between the robot capsules and the obstacle solids at each step, m (inf: none)."""
-    S = log.t.size
+def clearance(t: FloatArray, q: FloatArray, body: RobotBody, solids_at: SolidsAt | None) -> FloatArray:
+    """``(S,)`` smallest distance between the robot capsules of ``body`` at ``q`` ``(S, n)`` and the obstacle
+    solids at ``t`` ``(S,)``, m (inf: none; ``solids_at`` None: no obstacles)."""
+    S = t.size
     out = np.full(S, np.inf)
+    if solids_at is None:
+        return out
     for k0 in range(0, S, _CHUNK):
         sl = slice(k0, min(S, k0 + _CHUNK))
-        oa, ob, orad = obstacle_segments(log, log.t[sl])
+        oa, ob, orad = obstacle_segments(solids_at(t[sl]), t[sl].size)
         if orad.size == 0:
             continue
-        ra, rb = body.segments(body.chain.link_frames(log.q[sl]))  # (M, C, 3)
+        ra, rb = body.segments(body.chain.link_frames(q[sl]))  # (M, C, 3)
         d = segment_distance(ra[:, :, None], rb[:, :, None], oa[:, None], ob[:, None])  # (M, C, P)
         d = d - body.radius[None, :, None] - orad[None, None, :]
         out[sl] = d.reshape(d.shape[0], -1).min(axis=1)
@@ -93,30 +105,31 @@ def recovery_time(t: FloatArray, error: FloatArray, t_leave: float, threshold: f
     return float(t[last + 1] - t_leave)
 
 
-def margin_of(log: RunLog) -> FloatArray:
-    """``(S,)`` the protective separation ``S_p`` of each step, m."""
-    return log.margin if log.margin is not None else np.full(log.t.size, np.nan)
-
-
-def task_time_lost(log: RunLog, reference: RunLog) -> float:
-    """Task time lost by ``log`` against ``reference`` (the same run without a person), s.
+def task_time_lost(
+    t: FloatArray,
+    tracking_error: FloatArray,
+    task_time: FloatArray | None,
+    ref_t: FloatArray,
+    ref_tracking_error: FloatArray,
+    ref_task_time: FloatArray | None,
+) -> float:
+    """Task time lost by a run (``t`` ``(S,)`` s, ``tracking_error`` ``(S,)`` m, its task clock ``task_time``
+    ``(S,)`` s or None) against a reference (the same run without a person, at least ``S`` steps), s.
 
     With the task clock (``resume``): how far the clock lags the reference's at the end. Without it
     (the reference runs on ``t``, so the task never waits): the extra time the flange is off its
     reference by more than :data:`RECOVERY_THRESHOLD`.
     """
-    if reference.t.size < log.t.size:
-        raise ConfigError(
-            f"task time lost: a reference of {reference.t.size} steps is shorter than the run's {log.t.size}"
-        )
-    dt = float(log.t[1] - log.t[0]) if log.t.size > 1 else 0.0
-    clock = log.task_time if log.task_time is not None else log.t
-    S = log.t.size  # a longer reference (the same run without a person, run longer) is cut to the run
-    ref_clock = (reference.task_time if reference.task_time is not None else reference.t)[:S]
-    if not np.array_equal(clock, log.t):  # the clock paused somewhere
+    if ref_t.size < t.size:
+        raise ConfigError(f"task time lost: a reference of {ref_t.size} steps is shorter than the run's {t.size}")
+    dt = float(t[1] - t[0]) if t.size > 1 else 0.0
+    clock = task_time if task_time is not None else t
+    S = t.size  # a longer reference (the same run without a person, run longer) is cut to the run
+    ref_clock = (ref_task_time if ref_task_time is not None else ref_t)[:S]
+    if not np.array_equal(clock, t):  # the clock paused somewhere
         return float(max(ref_clock[-1] - clock[-1], 0.0))
-    ref_off = np.sum(reference.tracking_error[:S] > RECOVERY_THRESHOLD)
-    off = np.sum(log.tracking_error > RECOVERY_THRESHOLD) - ref_off
+    ref_off = np.sum(ref_tracking_error[:S] > RECOVERY_THRESHOLD)
+    off = np.sum(tracking_error > RECOVERY_THRESHOLD) - ref_off
     return float(max(off, 0) * dt)
 
 
@@ -162,23 +175,39 @@ class AvoidMetrics:
         return {k: plain(v) for k, v in asdict(self).items()}
 
 
-def summarize(log: RunLog, body: RobotBody, poses: str = "", reference: RunLog | None = None) -> AvoidMetrics:
-    """All metrics of a run; ``body`` is the TRUE robot geometry (as simulated); ``reference`` the same
-    run without a person (for the task time lost; NaN without it)."""
-    clear = clearance(log, body)
-    sp = margin_of(log)
-    gap = clear - sp
+def summarize_run(
+    *,
+    scenario: str,
+    poses: str,
+    t: FloatArray,
+    clear: FloatArray,
+    margin: FloatArray,
+    terms: Mapping[str, FloatArray],
+    tracking_error: FloatArray,
+    t_leave: float,
+    protective_stop: np.ndarray,
+    feasible: np.ndarray,
+    n_obstacles: np.ndarray,
+    solve_time_s: FloatArray,
+    step_time_s: FloatArray,
+    loop_time_s: FloatArray,
+    task_time_lost_s: float = float("nan"),
+    mode: str = "kinematic",
+) -> AvoidMetrics:
+    """All metrics of a run from its arrays (each ``(S,)``): the clearance (:func:`clearance`), the
+    protective separation ``margin`` ``S_p`` and its ``terms`` per step (m), the flange's tracking error
+    (m), the steps in protective stop, with a feasible QP, with obstacle rows, and the timings (s)."""
+    gap = clear - margin
     finite = np.isfinite(gap)
     worst = int(np.argmin(np.where(finite, gap, np.inf))) if np.any(finite) else -1
-    terms = None
-    if worst >= 0 and log.terms:
-        terms = {name: float(log.terms[name][worst]) for name in TERMS if name in log.terms}
-    stop = log.protective_stop if log.protective_stop is not None else ~log.feasible
-    err = log.tracking_error
-    dt = float(log.t[1] - log.t[0]) if log.t.size > 1 else 0.0
+    parts = None
+    if worst >= 0 and terms:
+        parts = {name: float(terms[name][worst]) for name in TERMS if name in terms}
+    err = tracking_error
+    dt = float(t[1] - t[0]) if t.size > 1 else 0.0
     ms = 1e3
     return AvoidMetrics(
-        scenario=log.scenario.name,
+        scenario=scenario,
         poses=poses,
         min_clearance_m=float(clear.min()),
         contacts=count_contacts(clear),
@@ -186,22 +215,22 @@ def summarize(log: RunLog, body: RobotBody, poses: str = "", reference: RunLog |
         max_tracking_error_m=float(err.max()),
         rms_tracking_error_m=float(np.sqrt(np.mean(err**2))),
         final_tracking_error_m=float(err[-1]),
-        recovery_s=recovery_time(log.t, err, log.scenario.t_leave),
-        active_time_s=float(np.sum(log.n_obstacles > 0) * dt),
-        infeasible_steps=int(np.sum(~log.feasible)),
-        qp_median_ms=float(np.median(log.solve_time_s) * ms),
-        qp_p95_ms=float(np.percentile(log.solve_time_s, 95) * ms),
-        step_median_ms=float(np.median(log.step_time_s) * ms),
-        loop_median_ms=float(np.median(log.loop_time_s) * ms),
-        loop_p95_ms=float(np.percentile(log.loop_time_s, 95) * ms),
-        steps=int(log.t.size),
+        recovery_s=recovery_time(t, err, t_leave),
+        active_time_s=float(np.sum(n_obstacles > 0) * dt),
+        infeasible_steps=int(np.sum(~feasible)),
+        qp_median_ms=float(np.median(solve_time_s) * ms),
+        qp_p95_ms=float(np.percentile(solve_time_s, 95) * ms),
+        step_median_ms=float(np.median(step_time_s) * ms),
+        loop_median_ms=float(np.median(loop_time_s) * ms),
+        loop_p95_ms=float(np.percentile(loop_time_s, 95) * ms),
+        steps=int(t.size),
         min_clearance_minus_sp_m=float(gap[worst]) if worst >= 0 else float("inf"),
         steps_below_sp=int(np.sum(finite & (gap < 0))),
-        margin_m=float(sp[worst]) if worst >= 0 else float("nan"),
-        margin_max_m=float(np.nanmax(sp)) if np.any(np.isfinite(sp)) else float("nan"),
-        margin_terms=terms,
-        protective_stop_s=float(np.sum(stop) * dt),
+        margin_m=float(margin[worst]) if worst >= 0 else float("nan"),
+        margin_max_m=float(np.nanmax(margin)) if np.any(np.isfinite(margin)) else float("nan"),
+        margin_terms=parts,
+        protective_stop_s=float(np.sum(protective_stop) * dt),
         near_time_s=float(np.sum(finite & (gap < NEAR_BAND)) * dt),
-        task_time_lost_s=task_time_lost(log, reference) if reference is not None else float("nan"),
-        mode=log.mode,
+        task_time_lost_s=task_time_lost_s,
+        mode=mode,
     )

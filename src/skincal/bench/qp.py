@@ -22,8 +22,8 @@ import numpy as np
 from skincal.control import AvoidanceController, ControllerConfig, SeparationParams
 from skincal.errors import ConfigError
 from skincal.kinematics import panda
+from skincal.kinematics.points import Q_START
 from skincal.perception import ObstaclePoints, RobotBody, SkinUncertainty, body_proximity, point_covariance
-from skincal.workflows.scenarios import Q_START
 
 
 def benchmark_points(chain, n_points: int, seed: int = 0) -> ObstaclePoints:

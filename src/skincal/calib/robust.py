@@ -1,0 +1,81 @@
+"""Robust least-squares pieces shared by the calibrators (``mle``, the IMU-only fit): Huber weights, a
+MAD-based residual scale, a scaled pseudo-inverse of normal matrices that names its null space, and the
+integrated autocorrelation of residuals that inflates a covariance."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from skincal.kinematics.transforms import FloatArray
+
+HUBER_K = 3.0
+"""Huber threshold in robust standard deviations of the residual norm."""
+NULL_RATIO = 1e-12
+"""Eigenvalues of the scaled normal matrix below this fraction of the largest are unobservable
+(exactly unobservable directions sit at ~1e-16, round-off; a direction that only a prior
+determines sits far above, ~1e-10 for noise-free data, and is kept with the prior's uncertainty)."""
+
+
+def robust_sigma(r_norm: FloatArray) -> float:
+    """Robust std of one residual component from the norms of 3-vectors (MAD-based)."""
+    if r_norm.size == 0:
+        return 0.0
+    # For 3-D Gaussian residuals the median norm is 1.5382 sigma.
+    return float(np.median(r_norm) / 1.5382)
+
+
+def huber_weights(norm: FloatArray, sigma: float) -> FloatArray:
+    """Huber weights ``min(1, k sigma / |r|)`` of residual norms ``norm`` (``k`` = :data:`HUBER_K`)."""
+    scaled = norm / (HUBER_K * sigma)
+    return np.where(scaled <= 1.0, 1.0, 1.0 / np.maximum(scaled, 1e-300))
+
+
+def scaled_eig(H: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Eigen-decomposition of ``D^-1 H D^-1`` with ``D = sqrt(diag H)`` floored at ``1e-7`` of its
+    largest entry (a parameter without information must not be divided by ~0)."""
+    diag = np.maximum(np.diag(H), 0.0)
+    d = np.sqrt(np.maximum(diag, 1e-14 * max(diag.max(), 1e-300)))
+    Hs = H / np.outer(d, d)
+    lam, V = np.linalg.eigh(Hs)
+    return d, lam, V
+
+
+def pinv(H: FloatArray) -> FloatArray:
+    """Pseudo-inverse of a normal matrix in its scaled eigenbasis (:func:`scaled_eig`), the directions below
+    :data:`NULL_RATIO` dropped."""
+    d, lam, V = scaled_eig(H)
+    keep = lam > NULL_RATIO * lam.max()
+    inv = (V[:, keep] / lam[keep]) @ V[:, keep].T
+    return inv / np.outer(d, d)
+
+
+def pinv_step(H: FloatArray, g: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Gauss-Newton step ``-H^+ g`` (:func:`pinv`) and the unit null-space directions it leaves out."""
+    d, lam, V = scaled_eig(H)
+    keep = lam > NULL_RATIO * lam.max()
+    step = -(V[:, keep] @ ((V[:, keep].T @ (g / d)) / lam[keep])) / d
+    null = V[:, ~keep] / d[:, None]
+    if null.size:
+        null = null / np.linalg.norm(null, axis=0)
+    return step, null
+
+
+def residual_correlation(r: FloatArray, max_lag: int = 20) -> float:
+    """Integrated autocorrelation ``1 + 2 sum_k rho_k`` of the moving residuals (>= 1).
+
+    Residuals of neighbouring samples are correlated when the error is not white (estimated
+    joint accelerations, unmodelled dynamics); the covariance is inflated by this factor.
+    """
+    if len(r) < 10 * max_lag:
+        return 1.0
+    x = r - r.mean(axis=0)
+    var = np.sum(x * x)
+    if var <= 0:
+        return 1.0
+    total = 0.0
+    for k in range(1, max_lag + 1):
+        rho = float(np.sum(x[k:] * x[:-k]) / var)
+        if rho <= 0.05:
+            break
+        total += rho
+    return 1.0 + 2.0 * total

@@ -1,0 +1,183 @@
+"""The closed-loop avoidance experiment from one config: ``skincal avoid`` and the avoidance benchmark
+(:mod:`skincal.bench.avoid`) both call :func:`run_experiment`.
+
+One experiment: the simulated skin at its TRUE poses, the poses the controller BELIEVES (and their
+covariance), a scenario on a robot, the controller's margin (``fixed``: the legacy critical distance;
+``iso``: ISO/TS 15066's ``S_p`` with the scenario's ``v_h`` and the robot's measured stopping model), the
+task clock that waits (``resume``) and the robot mode; run in MuJoCo by
+:func:`skincal.workflows.avoidance.run_scenario` with the sensor noise seeded by ``seed``. With ``resume``
+the same run without anybody is made too (or given), for the task time lost. The metrics are
+:mod:`skincal.control.iso_metrics`' of the run's arrays, the clearance against the TRUE robot geometry.
+
+Stopping models are measured on the torque robot (:func:`skincal.workflows.stopping.measure_stopping`,
+a few seconds per robot); a :class:`StoppingModels` passed along measures each robot once for all the
+runs that share it (a benchmark), and nothing is kept between calls otherwise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from skincal.control import iso_metrics
+from skincal.control.iso_metrics import AvoidMetrics
+from skincal.control.qp import ControllerConfig
+from skincal.control.separation import SeparationParams, StoppingModel
+from skincal.errors import ConfigError
+from skincal.kinematics.chain import SerialChain
+from skincal.kinematics.transforms import FloatArray
+from skincal.perception.body import RobotBody
+from skincal.perception.uncertainty import SkinUncertainty
+from skincal.sim.scenarios import Scenario
+from skincal.skin.pose import SkinUnitPose
+from skincal.workflows.avoidance import MODES, RunLog, run_scenario
+
+MARGINS = ("fixed", "iso")
+
+
+class StoppingModels:
+    """Measured stopping models per robot, each measured once for the life of this object (a cache the
+    caller owns and passes along; the separation module's placeholder when the measurement is unavailable)."""
+
+    def __init__(self) -> None:
+        self._models: dict[tuple, StoppingModel] = {}
+
+    def __call__(self, chain: SerialChain) -> StoppingModel:
+        """The stopping model of ``chain`` (:func:`skincal.workflows.stopping.measure_stopping`)."""
+        key = (chain.name, chain.n_joints, chain.link_frames(np.zeros(chain.n_joints)).tobytes())
+        if key not in self._models:
+            try:
+                from skincal.workflows.stopping import measure_stopping
+            except ImportError:  # pragma: no cover - the dynamics need MuJoCo
+                from skincal.control.separation import default_stopping
+
+                self._models[key] = default_stopping()
+            else:
+                self._models[key] = measure_stopping(chain)
+        return self._models[key]
+
+
+def separation_for(
+    chain: SerialChain, scenario: Scenario, human_speed: float | None = None, stopping: StoppingModels | None = None
+) -> SeparationParams:
+    """ISO/TS 15066 separation parameters for a run: ``v_h`` from the scenario (or ``human_speed``), the
+    robot's measured stopping model (from ``stopping``, or measured now), the other terms the separation
+    module's defaults."""
+    v_h = scenario.human_speed if human_speed is None else float(human_speed)
+    models = stopping if stopping is not None else StoppingModels()
+    return SeparationParams(human_speed_mps=v_h, stopping=models(chain))
+
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    """One closed-loop experiment (module docstring).
+
+    Attributes:
+        chain: the robot.
+        scenario: start, task, people and duration (:mod:`skincal.sim.scenarios`).
+        true_poses: the simulated skin (unit name -> pose).
+        believed_poses: what perception believes (may lack units; ``{}``: blind).
+        label: the beliefs' name in the metrics (``poses``).
+        uncertainty: the believed poses' covariances (perception's default when None).
+        margin: ``fixed`` or ``iso``.
+        resume: the task clock that waits while a person is near.
+        mode: ``kinematic`` or ``torque``.
+        seed: seed of the sensor noise.
+        reference: also run the scenario without anybody (default: with ``resume``).
+    """
+
+    chain: SerialChain
+    scenario: Scenario
+    true_poses: Mapping[str, SkinUnitPose]
+    believed_poses: Mapping[str, SkinUnitPose]
+    label: str = "truth"
+    uncertainty: SkinUncertainty | None = None
+    margin: str = "fixed"
+    resume: bool = False
+    mode: str = "kinematic"
+    seed: int = 0
+    reference: bool | None = None
+
+    def __post_init__(self) -> None:
+        if self.margin not in MARGINS:
+            raise ConfigError(f"unknown margin '{self.margin}' (use {' or '.join(MARGINS)})")
+        if self.mode not in MODES:
+            raise ConfigError(f"unknown mode '{self.mode}' (use {' or '.join(MODES)})")
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """What :func:`run_experiment` made: the run, its reference without anybody (or None), its metrics,
+    the controller configuration used and the true robot geometry the metrics are taken against."""
+
+    config: ExperimentConfig
+    controller: ControllerConfig
+    log: RunLog
+    reference: RunLog | None
+    metrics: AvoidMetrics
+    body: RobotBody
+
+
+def run_experiment(
+    config: ExperimentConfig, *, stopping: StoppingModels | None = None, reference: RunLog | None = None
+) -> Experiment:
+    """Run ``config`` (module docstring); ``stopping`` the cache of stopping models (``margin="iso"``),
+    ``reference`` a run without anybody made before (then not run again)."""
+    c = config
+    controller = ControllerConfig()
+    if c.margin == "iso":
+        controller = replace(controller, separation=separation_for(c.chain, c.scenario, stopping=stopping))
+    kw = dict(controller=controller, uncertainty=c.uncertainty, resume=c.resume, mode=c.mode)
+    log = run_scenario(c.chain, c.scenario, c.true_poses, c.believed_poses, np.random.default_rng(c.seed), **kw)
+    wanted = c.resume if c.reference is None else c.reference
+    if reference is None and wanted:
+        nobody = c.scenario.without_people()
+        reference = run_scenario(
+            c.chain, nobody, c.true_poses, c.believed_poses, np.random.default_rng(c.seed), **kw
+        )  # fmt: skip
+    body = RobotBody.of(c.chain)
+    return Experiment(c, controller, log, reference, summarize(log, body, c.label, reference), body)
+
+
+# ---------------------------------------------------------------------------------------------- a run's metrics
+def clearance(log: RunLog, body: RobotBody) -> FloatArray:
+    """``(S,)`` :func:`skincal.control.iso_metrics.clearance` of a run against the robot geometry ``body``, m."""
+    scene = log.scenario.scene
+    return iso_metrics.clearance(log.t, log.q, body, scene.tof_primitives if scene.obstacles else None)
+
+
+def margin_of(log: RunLog) -> FloatArray:
+    """``(S,)`` the protective separation ``S_p`` of each step, m (NaN without a logged margin)."""
+    return log.margin if log.margin is not None else np.full(log.t.size, np.nan)
+
+
+def task_time_lost(log: RunLog, reference: RunLog) -> float:
+    """:func:`skincal.control.iso_metrics.task_time_lost` of ``log`` against ``reference``, s."""
+    return iso_metrics.task_time_lost(
+        log.t, log.tracking_error, log.task_time, reference.t, reference.tracking_error, reference.task_time
+    )
+
+
+def summarize(log: RunLog, body: RobotBody, poses: str = "", reference: RunLog | None = None) -> AvoidMetrics:
+    """All metrics of a run; ``body`` is the TRUE robot geometry (as simulated); ``reference`` the same
+    run without a person (for the task time lost; NaN without it)."""
+    return iso_metrics.summarize_run(
+        scenario=log.scenario.name,
+        poses=poses,
+        t=log.t,
+        clear=clearance(log, body),
+        margin=margin_of(log),
+        terms=log.terms,
+        tracking_error=log.tracking_error,
+        t_leave=log.scenario.t_leave,
+        protective_stop=log.protective_stop if log.protective_stop is not None else ~log.feasible,
+        feasible=log.feasible,
+        n_obstacles=log.n_obstacles,
+        solve_time_s=log.solve_time_s,
+        step_time_s=log.step_time_s,
+        loop_time_s=log.loop_time_s,
+        task_time_lost_s=task_time_lost(log, reference) if reference is not None else float("nan"),
+        mode=log.mode,
+    )
