@@ -650,3 +650,19 @@ def test_a_bad_typed_unit_field_in_a_file_is_one_line(tmp_path: Path, key: str, 
     with pytest.raises(DatasetError) as info:
         read_result(path)
     assert str(info.value).startswith(f"{path}: {message}") and "\n" not in str(info.value)
+
+
+def test_a_computed_covariance_with_rounding_asymmetry_is_accepted(tmp_path: Path) -> None:
+    """Asymmetry is measured against ``sqrt(C_ii C_jj)``: an off-diagonal element near zero that differs from
+    its transpose by rounding (1e-24 against a 1e-9 variance; relatively 1e-8 of itself) is a covariance;
+    an asymmetry of 1e-6 of the std product is not."""
+    pose = SkinUnitPose.from_quaternion(3, [0.05, 0.0, 0.12], [1, 0, 0, 0])
+    cov = np.diag([1e-9] * 6)
+    cov[0, 1], cov[1, 0] = 1e-16, 1e-16 + 1e-24
+    write_result(CalibrationResult("online", "panda", "", 0.1, {"su1": UnitResult(pose, pose_covariance=cov)}),
+                 tmp_path / "r.json")  # fmt: skip
+    np.testing.assert_array_equal(read_result(tmp_path / "r.json").units["su1"].pose_covariance, cov)
+    cov[1, 0] = 1e-16 + 1e-15
+    with pytest.raises(DatasetError, match=r"units\.su1\.pose_covariance must be symmetric"):
+        write_result(CalibrationResult("online", "panda", "", 0.1, {"su1": UnitResult(pose, pose_covariance=cov)}),
+                     tmp_path / "r.json")  # fmt: skip
