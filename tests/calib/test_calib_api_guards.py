@@ -41,8 +41,8 @@ def test_segments_without_a_static_one_fall_back_to_the_joint_data(session):
     )
     result = calibrate(replace(session, segments=only_dynamic), "mle")
     ev = evaluate(result, session)
-    assert ev["links_correct"] == 3
-    assert ev["mean_position_error_mm"] < 1.0
+    assert ev.links_correct == 3
+    assert ev.mean_position_error_mm < 1.0
     assert all(u.extras["rest_source"] == "joint positions" for u in result.units.values())
 
 
@@ -61,4 +61,49 @@ def test_a_foreign_error_in_one_unit_is_that_units_failure(session, monkeypatch)
     monkeypatch.setitem(api.METHODS, "flaky", replace(spec, run_unit=flaky))
     result = calibrate(session, "flaky", workers=1)
     assert sorted(result.units) == sorted(session.units[1:])
-    assert result.extras["failed_units"] == {session.units[0]: "internal error (KeyError: 'boom')"}
+    assert result.failed_units == {session.units[0]: "internal error (KeyError: 'boom')"}
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_foreign_error_in_every_unit_is_a_calibration_error_from_it(session, monkeypatch, workers):
+    """Every unit failing with a foreign exception: one CalibrationError out of the door, raised from the
+    first unit's, which is raised from the method's own exception where it ran in this process."""
+    from skincal.calib import api
+
+    def broken(problem):
+        return {}[problem.samples.unit]  # a KeyError, a bug of the method
+
+    monkeypatch.setitem(api.METHODS, "broken", replace(api.METHODS["mle"], run_unit=broken))
+    with pytest.raises(CalibrationError, match=r"^no unit could be calibrated \(.*internal error \(KeyError: ") as info:
+        calibrate(session, "broken", workers=workers)
+    first = info.value.__cause__
+    assert isinstance(first, CalibrationError) and str(first) == f"internal error (KeyError: '{session.units[0]}')"
+    if workers == 1:  # a forked worker sends back the CalibrationError, not the traceback it came from
+        assert isinstance(first.__cause__, KeyError)
+
+
+def test_a_foreign_error_preparing_the_dataset_is_a_calibration_error_from_it(session, monkeypatch):
+    from skincal.calib import api
+
+    def prepare(dataset, interpolator):
+        raise ZeroDivisionError("float division by zero")
+
+    monkeypatch.setitem(api.METHODS, "broken", replace(api.METHODS["mle"], prepare=prepare))
+    with pytest.raises(CalibrationError) as info:
+        calibrate(session, "broken")
+    assert str(info.value) == (
+        "method 'broken', preparing the dataset: internal error (ZeroDivisionError: float division by zero)"
+    )
+    assert isinstance(info.value.__cause__, ZeroDivisionError)
+
+
+def test_skincal_errors_in_a_method_pass_unwrapped(session, monkeypatch):
+    """A usage or data error raised inside a method concerns every unit: it leaves the door as it is."""
+    from skincal.calib import api
+
+    def refuses(problem):
+        raise ConfigError("bad option value")
+
+    monkeypatch.setitem(api.METHODS, "refuses", replace(api.METHODS["mle"], run_unit=refuses))
+    with pytest.raises(ConfigError, match="^bad option value$"):
+        calibrate(session, "refuses", workers=1)

@@ -131,7 +131,7 @@ def within_sigma(result, truth: Truth, name: str) -> tuple[bool, str]:
 
 def report(result, truth: Truth) -> str:
     lines = [within_sigma(result, truth, u)[1] for u in truth.units if u in result.units]
-    failed = result.extras.get("failed_units", {})
+    failed = result.failed_units
     lines += [f"{u}: FAILED ({why})" for u, why in failed.items()]
     return "\n".join(lines)
 
@@ -146,7 +146,7 @@ def check_calibration(result, truth: Truth, *, fault_keywords: tuple[str, ...] |
       ``fault_keywords``: a warning containing one of them, i.e. naming the problem).
     """
     problems = []
-    failed = result.extras.get("failed_units", {})
+    failed = result.failed_units
     for name in truth.units:
         if name not in result.units:
             problems.append(f"{name}: no result ({failed.get(name, 'missing')})")
@@ -356,7 +356,7 @@ def test_d_unit_on_link1_result_file(cases, tmp_path):
     result = case.result()
     l1 = [u for u, ut in case.truth.units.items() if ut.link == 1]
     assert l1 == ["u1"]
-    assert "u1" in result.units, result.extras.get("failed_units")
+    assert "u1" in result.units, result.failed_units
     unit = result.units["u1"]
     assert unit.pose.link == 1
     assert unit.observable is False
@@ -392,7 +392,7 @@ def test_d_unit_on_link1_partial_pose(cases):
     plausible best guess (no coordinate beyond 2 m)."""
     case = cases("d_arm6")
     result = case.result()
-    assert "u1" in result.units, result.extras.get("failed_units")
+    assert "u1" in result.units, result.failed_units
     est, ut = result.units["u1"].pose, case.truth.units["u1"]
     radius_err = 1e3 * abs(np.linalg.norm(est.p_link_su[:2]) - np.linalg.norm(ut.position[:2]))
     z_est, z_true = est.R_link_su.T @ [0, 0, 1.0], ut.R.T @ [0, 0, 1.0]

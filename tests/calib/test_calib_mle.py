@@ -63,9 +63,9 @@ def test_noise_free_recovery_without_given_links(robot):
     ds = session(robot(), "none", seed=2)
     result = calibrate(ds, "mle")
     ev = evaluate(result, ds)
-    assert ev["links_correct"] == 6
-    assert ev["mean_position_error_mm"] < 0.01
-    assert ev["mean_rotation_error_deg"] < 0.001
+    assert ev.links_correct == 6
+    assert ev.mean_position_error_mm < 0.01
+    assert ev.mean_rotation_error_deg < 0.001
     for u in result.units.values():
         assert abs(u.imu.time_offset_s) < 1e-5
         np.testing.assert_allclose(u.imu.accel_bias_mps2, 0.0, atol=1e-4)
@@ -78,9 +78,9 @@ def test_realistic_sensor_errors_are_estimated(realistic_panda):
     and 0.002-0.003 deg; this shorter protocol (8 poses, 2 s per joint) is less precise."""
     ds, result = realistic_panda
     ev = evaluate(result, ds)
-    assert ev["links_correct"] == 6
-    assert ev["mean_position_error_mm"] < 0.35
-    assert ev["mean_rotation_error_deg"] < 0.01
+    assert ev.links_correct == 6
+    assert ev.mean_position_error_mm < 0.35
+    assert ev.mean_rotation_error_deg < 0.01
     for name, unit in result.units.items():
         truth = ds.truth_sensor[name]
         assert unit.imu.time_offset_s == pytest.approx(truth["time_offset_s"], abs=1e-4)
@@ -142,17 +142,17 @@ def test_bad_units_are_reported_and_the_rest_calibrated():
     imu[names[1]] = ImuStream(imu[names[1]].t, stuck, imu[names[1]].gyro)
     bad = replace(ds, imu=imu)
     result = calibrate(bad, "mle")
-    failed = result.extras.get("failed_units", {})
+    failed = result.failed_units
     assert names[0] in failed and "excite" in failed[names[0]]
     assert names[2] in result.units and names[3] in result.units
     ev = evaluate(result, bad)
-    good = [ev["units"][n]["position_error_mm"] for n in names[2:]]
+    good = [ev.units[n].position_error_mm for n in names[2:]]
     assert max(good) < 0.01
     assert names[1] in failed and "x axis is stuck" in failed[names[1]]
     # the same with two worker processes: identical results, failures reported the same way, in order
     seen: list[str] = []
     parallel = calibrate(bad, "mle", workers=2, progress=seen.append)
-    assert seen == names and parallel.extras["failed_units"] == failed
+    assert seen == names and parallel.failed_units == failed
     for name, unit in result.units.items():
         np.testing.assert_array_equal(parallel.units[name].pose.p_link_su, unit.pose.p_link_su)
         np.testing.assert_array_equal(parallel.units[name].pose.R_link_su, unit.pose.R_link_su)
@@ -173,7 +173,7 @@ def test_saturated_samples_are_dropped_with_a_warning():
     result = calibrate(ds, "mle")
     unit = result.units["far"]
     assert any("saturates" in w for w in unit.warnings)
-    assert evaluate(result, ds)["units"]["far"]["position_error_mm"] < 0.05
+    assert evaluate(result, ds).units["far"].position_error_mm < 0.05
 
 
 def test_too_few_static_orientations():
@@ -184,7 +184,7 @@ def test_too_few_static_orientations():
     rng = np.random.default_rng(6)
     ds = simulate(chain, random_placement(chain, 2, rng), build_trajectory(chain, cfg, rng), get_imu_model("none"), rng)
     result = calibrate(ds, "mle")
-    assert list(result.units) == ds.units and not result.extras.get("failed_units")
+    assert list(result.units) == ds.units and not result.failed_units
     for unit in result.units.values():
         assert any("only 1 distinct static orientation" in w for w in unit.warnings), unit.warnings
 

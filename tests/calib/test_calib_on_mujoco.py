@@ -44,9 +44,9 @@ def test_method_runs_on_mujoco_data(method, mujoco_dataset):
     options = {} if method == "mle" else {"maxeval_static": 300, "maxeval_dynamic": 300, "maxeval_joint": 600}
     result = calibrate(mujoco_dataset, method, seed=1, **options)
     ev = evaluate(result, mujoco_dataset)
-    assert ev["units_total"] == 2 and not ev["units_failed"]
-    assert ev["links_correct"] == 2, {u: (v["link_true"], v["link_estimated"]) for u, v in ev["units"].items()}
-    pos = max(u["position_error_mm"] for u in ev["units"].values())
-    rot = max(u["rotation_error_deg"] for u in ev["units"].values())
+    assert ev.units_total == 2 and not ev.units_failed
+    assert ev.links_correct == 2, {u: (v.link_true, v.link_estimated) for u, v in ev.units.items()}
+    pos = max(u.position_error_mm for u in ev.units.values())
+    rot = max(u.rotation_error_deg for u in ev.units.values())
     max_pos, max_rot = BOUNDS[method]
     assert pos < max_pos and rot < max_rot, (pos, rot)

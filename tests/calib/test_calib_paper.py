@@ -115,7 +115,7 @@ def test_static_error_vanishes_at_truth(two_units):
 # ---------------------------------------------------------------------------- pose recovery
 def _errors(result, truth):
     ev = evaluate(result, truth)
-    return np.array([[u["position_error_mm"], u["rotation_error_deg"]] for u in ev["units"].values()])
+    return np.array([[u.position_error_mm, u.rotation_error_deg] for u in ev.units.values()])
 
 
 def test_methods_registered():
@@ -160,7 +160,7 @@ def test_link_discovery_on_random_placements():
         assert discover_link(unit_samples(ds, name), 7).link == ds.truth[name].link, name
     r = calibrate(ds, "om", seed=0, units=["su3"], maxeval_dynamic=300)  # no links given: discovered
     assert r.units["su3"].pose.link == ds.truth["su3"].link
-    assert 0.0 <= r.units["su3"].extras["link_confidence"] <= 1.0
+    assert 0.0 <= r.units["su3"].link_confidence <= 1.0
 
 
 # ---------------------------------------------------------------------------- bad input
@@ -168,7 +168,7 @@ def test_unit_without_dynamic_segments_fails_alone():
     ds = small_dataset(5, [3, 7], excited_joints=(0, 1, 2), n_poses=3)
     r = calibrate(ds, "om", seed=0, use_truth_links=True, maxeval_dynamic=300)
     assert set(r.units) == {"su1"}
-    reason = r.extras["failed_units"]["su2"]
+    reason = r.failed_units["su2"]
     assert "no dynamic samples" in reason and "\n" not in reason
 
 

@@ -57,9 +57,9 @@ def test_a_fixed_time_offset_is_found(realistic, shift):
     ds, _ = realistic
     late = _with_stamps(ds, lambda t: t + shift)
     result = calibrate(late, "mle")
-    assert not result.extras.get("failed_units")
+    assert not result.failed_units
     ev = evaluate(result, ds)
-    assert ev["mean_position_error_mm"] <= TARGET_MM
+    assert ev.mean_position_error_mm <= TARGET_MM
     for name, unit in result.units.items():
         expected = shift + ds.truth_sensor[name]["time_offset_s"]  # + the 15 ms latency
         assert unit.imu.time_offset_s == pytest.approx(expected, abs=1e-3), name
@@ -77,7 +77,7 @@ def test_wifi_like_clock_offsets_drawn_per_unit_are_found():
     result = calibrate(ds, "mle")
     for name, unit in result.units.items():
         assert unit.imu.time_offset_s == pytest.approx(ds.truth_sensor[name]["time_offset_s"], abs=1e-3), name
-    assert evaluate(result, ds)["mean_position_error_mm"] <= TARGET_MM
+    assert evaluate(result, ds).mean_position_error_mm <= TARGET_MM
 
 
 # ---------------------------------------------------------------------------- (b) clock drift
@@ -91,12 +91,12 @@ def test_a_clock_drift_is_estimated_and_reported(realistic):
         return mid + (t - mid) * (1 + 100e-6)
 
     result = calibrate(_with_stamps(ds, fast), "mle")
-    assert evaluate(result, ds)["mean_position_error_mm"] <= TARGET_MM
+    assert evaluate(result, ds).mean_position_error_mm <= TARGET_MM
     for name, unit in result.units.items():
         assert unit.imu.clock_drift_ppm == pytest.approx(100.0, abs=20.0), name
         assert unit.imu.clock_drift_std_ppm < 5.0
         # found and corrected: a note, not a warning
-        assert any(w.startswith("clock drifts") for w in unit.extras["notes"]), unit.extras.get("notes")
+        assert any(w.startswith("clock drifts") for w in unit.notes), unit.notes
         assert not any("clock drifts" in w for w in unit.warnings)
         # the offset is given at time_reference_s: away from the stamps' middle the drift adds to it
         t = ds.imu[name].t
@@ -153,9 +153,9 @@ def test_a_rest_segment_in_which_the_unit_was_bumped_is_dropped(realistic):
         if other != name:
             assert result.units[other].extras["n_static_dropped"] == 0
     ev, ev_clean = evaluate(result, ds), evaluate(clean, ds)
-    err = ev["units"][name]["position_error_mm"]
+    err = ev.units[name].position_error_mm
     assert err <= TARGET_MM
-    assert abs(err - ev_clean["units"][name]["position_error_mm"]) < 0.05
+    assert abs(err - ev_clean.units[name].position_error_mm) < 0.05
 
 
 # ---------------------------------------------------------------------------- (e) with / without /segments
@@ -178,8 +178,8 @@ def test_rests_from_segments_or_from_joint_data_give_the_same_poses(controller_s
         assert 1e3 * np.linalg.norm(a.p_link_su - b.p_link_su) < 0.1, name
     for result in (with_seg, without):
         ev = evaluate(result, ds)
-        assert ev["mean_position_error_mm"] <= 0.3  # the benchmark's target for controller joints
-        assert max(u["position_error_mm"] for u in ev["units"].values()) < 0.3
+        assert ev.mean_position_error_mm <= 0.3  # the benchmark's target for controller joints
+        assert max(u.position_error_mm for u in ev.units.values()) < 0.3
 
 
 # ---------------------------------------------------------------------------- (f) a unit on link 1
@@ -225,7 +225,7 @@ def test_unit_on_link_one_writes_null_std_where_undetermined(tmp_path):
     assert None not in doc["units"][other]["position_std_m"] + doc["units"][other]["rotation_std_deg"]
     unit = back.units[other]
     assert unit.observable and np.all(np.isfinite(unit.position_std_m)) and np.all(np.isfinite(unit.rotation_std_deg))
-    assert evaluate(back, ds)["units"][other]["position_error_mm"] < 0.3
+    assert evaluate(back, ds).units[other].position_error_mm < 0.3
 
 
 # ---------------------------------------------------------------------------- (g) paper protocol, controller
@@ -236,8 +236,8 @@ def test_paper_session_with_controller_joints_and_realistic_imus():
     ds = simulate_dataset("panda", "paper", None, "realistic", "paper-sim", 0, "analytic", joints="controller")
     result = calibrate(ds, "mle")
     ev = evaluate(result, ds)
-    assert ev["links_correct"] == len(ds.units) and not ev["units_failed"]
-    assert ev["mean_position_error_mm"] <= 0.3
+    assert ev.links_correct == len(ds.units) and not ev.units_failed
+    assert ev.mean_position_error_mm <= 0.3
     for name, unit in result.units.items():
         z = (unit.pose.p_link_su - ds.truth[name].p_link_su) / unit.position_std_m
         silent = np.any(np.abs(z) > 3) or float(np.sum(z**2)) > 14.16
@@ -267,7 +267,7 @@ def test_velocities_a_driver_differentiates_from_encoder_counts():
     conditioning = JointInterpolator(ds.joints).conditioning
     assert conditioning.source == "positions" and np.all(conditioning.velocity_noise > 1e-3)
     result = calibrate(ds, "mle")
-    assert evaluate(result, ds)["mean_position_error_mm"] <= 0.3
+    assert evaluate(result, ds).mean_position_error_mm <= 0.3
     for unit in result.units.values():
         assert unit.observable
         assert unit.imu.time_offset_s == pytest.approx(0.015 - 0.004, abs=1.5e-3)

@@ -157,9 +157,9 @@ def test_calibrate_ignores_the_samples_after_an_axis_sticks():
     unit, t_s = ds.units[2], t0 + 0.5 * (t1 - t0)
     faulted = stick_axis(ds, unit, 0, t_s)
     result = calibrate(faulted, "mle", workers=1)
-    errors = evaluate(result, faulted)["units"]
-    assert errors[unit]["position_error_mm"] < 1.0
-    assert all(errors[u]["position_error_mm"] < 1.0 for u in faulted.units)
+    errors = evaluate(result, faulted).units
+    assert errors[unit].position_error_mm < 1.0
+    assert all(errors[u].position_error_mm < 1.0 for u in faulted.units)
     (warning,) = [w for w in result.units[unit].warnings if "stuck" in w]
     value = faulted.truth_sensor[unit]["accel_stuck_value_mps2"]
     assert warning.startswith(f"accelerometer x axis stuck at {value:.4g} m/s^2 from ")

@@ -44,7 +44,7 @@ def _errors(unit: UnitResult) -> tuple[float, float]:
 def test_recovers_the_pose_of_a_unit_on_the_same_body(seed):
     ds = _dataset(seed)
     result = calibrate_relative(ds, "su1", units=["su1", "su2"])
-    assert result.extras["reference"] == "su1" and result.method == "imu-only"
+    assert result.reference == "su1" and result.method == "imu-only"
     ref = result.units["su1"]
     assert ref.pose.link == 0 and np.array_equal(ref.pose.R_link_su, np.eye(3)) and not ref.pose.p_link_su.any()
     unit = result.units["su2"]
@@ -56,7 +56,7 @@ def test_recovers_the_pose_of_a_unit_on_the_same_body(seed):
 def test_unit_on_another_body_is_reported_not_forced():
     result = calibrate_relative(_dataset(0), "su1")
     assert "su3" not in result.units and set(result.units) == {"su1", "su2"}
-    assert "another rigid body" in result.extras["failed_units"]["su3"]
+    assert "another rigid body" in result.failed_units["su3"]
 
 
 def test_rotation_about_one_axis_names_the_unobservable_direction():
@@ -120,7 +120,7 @@ def test_comparison_with_a_joint_based_result():
         "su1": UnitResult(SkinUnitPose(0, np.eye(3), np.zeros(3))),
         "su2": UnitResult(SkinUnitPose(0, T_J[:3, :3], T_J[:3, 3])),
         "su3": UnitResult(SkinUnitPose(0, np.eye(3), np.zeros(3))),
-    }, {"reference": "su1"})  # fmt: skip
+    }, reference="su1")  # fmt: skip
     diff = compare_with_joint_result(relative, joint)
     assert set(diff) == {"su2"}  # su3 is on another link
     assert diff["su2"][0] == pytest.approx(2.0, abs=1e-9) and diff["su2"][1] == pytest.approx(0.0, abs=1e-6)
@@ -135,7 +135,7 @@ def test_cli_calibrate_with_reference(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "another rigid body" in printed and "su3" in printed
     result = read_result(out)
-    assert result.extras["reference"] == "su1" and "su3" in result.extras["failed_units"]
+    assert result.reference == "su1" and "su3" in result.failed_units
     assert _errors(result.units["su2"])[0] < 2.0
     assert data.read_bytes() == before
     assert main(["calibrate", str(data), "--reference", "su1", "-o", str(out)]) == 2  # not clobbered
@@ -158,7 +158,7 @@ def test_real_preset_without_rests_keeps_the_reference_gauge():
         assert np.linalg.norm(e["position_std_m"]) > 0.01 * np.linalg.norm(ds.truth_body["su2"].T_body_su[:3, 3])
         assert np.degrees(np.linalg.norm(e["rotation_error_rad"])) < 0.1
         assert np.all(np.abs(np.degrees(e["rotation_error_rad"])) < 4 * e["rotation_std_deg"])
-    notes = result.units["su2"].extras["notes"]
+    notes = result.units["su2"].notes
     assert "scale of su1's accelerometer" in notes[0]
     assert "0 rest(s)" in notes[1] and "in 12 more" in notes[1]
     assert result.extras["accel_scale_fit"]["model"] == "none" and result.units["su2"].imu is None
@@ -175,7 +175,7 @@ def test_too_few_orientations_say_how_many_more():
     fit = result.extras["accel_scale_fit"]
     assert fit["model"] == "none" and fit["rests"] == 4 and fit["orientations"] == 4
     assert "4 rest(s) in 4 distinct orientation(s)" in fit["note"] and "in 8 more" in fit["note"]
-    assert result.units["su2"].extras["notes"][1] == fit["note"]
+    assert result.units["su2"].notes[1] == fit["note"]
     r = np.linalg.norm(result.units["su2"].pose.p_link_su)
     assert (
         np.linalg.norm(result.units["su2"].position_std_m)
@@ -200,7 +200,7 @@ def test_real_imus_with_rests_meet_the_targets(seed):
     assert np.all(errors["position_std_m"] < 1e-3)  # the 3 % given for the reference is not used
     fit = result.extras["accel_scale_fit"]
     assert fit["model"] == "symmetric" and fit["rests"] == fit["orientations"] == 11
-    assert "position in metres" in result.units["su2"].extras["notes"][0]
+    assert "position in metres" in result.units["su2"].notes[0]
     # each unit's accelerometer, fitted to the rests, against the truth
     for name in ("su1", "su2"):
         truth, imu = ds.truth_sensor[name], result.units[name].imu
@@ -306,7 +306,7 @@ def test_handheld_session_with_a_second_body():
     ds = handheld_dataset(units=2, duration_s=10.0, imu="datasheet", clock="ideal", seed=1, other_body=1)
     assert ds.truth_body["su3"].body == "other" and ds.truth_body["su2"].body == "hand"
     result = calibrate_relative(ds, "su2")
-    assert set(result.units) == {"su1", "su2"} and "another rigid body" in result.extras["failed_units"]["su3"]
+    assert set(result.units) == {"su1", "su2"} and "another rigid body" in result.failed_units["su3"]
 
 
 @pytest.mark.slow
@@ -441,7 +441,7 @@ def test_a_body_that_never_moves_is_named_not_called_another_body():
     ds = simulate_rigid_bodies({"su1": ("hand", np.eye(4)), "su2": ("hand", T_J)}, {"hand": motion}, 10.0,
                                get_imu_model("real"), rng)  # fmt: skip
     result = calibrate_relative(ds, "su1")
-    assert "did not turn" in result.extras["failed_units"]["su2"]
+    assert "did not turn" in result.failed_units["su2"]
     fit = result.extras["accel_scale_fit"]
     assert fit["rests"] == 1 and fit["orientations"] == 1 and "in 11 more" in fit["note"]
 

@@ -92,7 +92,7 @@ def test_calibrate_table_with_an_undetermined_std_and_a_failed_unit():
     pose = SkinUnitPose.from_quaternion(1, [0.05, 0.0, 0.12], [1, 0, 0, 0])
     su1 = UnitResult(pose, observable=False, position_std_m=[0.00016, 0.00066, np.nan],
                      rotation_std_deg=[0.02, np.nan, np.nan], warnings=("yaw about joint 1 undetermined",))
-    result = CalibrationResult("mle", "panda", "", 1.0, {"su1": su1}, extras={"failed_units": {"su2": "diverged"}})
+    result = CalibrationResult("mle", "panda", "", 1.0, {"su1": su1}, failed_units={"su2": "diverged"})
     console = Console(width=250, record=True)
     console.print(unit_table(result, "t"))
     text = console.export_text()

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from skincal.data import CalibrationResult, UnitResult, read_result, result_to_dict, sha256_file, write_result
+from skincal.data.events import MoveEvent
 from skincal.data.imu_calibration import IMU_KEYS, IMU_SHAPES, ImuCalibration
 from skincal.errors import DatasetError
 from skincal.kinematics import rotation_angle
@@ -41,13 +43,14 @@ def make_result() -> CalibrationResult:
                 rotation_std_deg=np.array([0.01, 0.01, 0.02]),
                 warnings=(),
                 extras={
-                    "link_confidence": 0.987654321,
                     "accel_scale": np.array([1.001, 0.999, 1.0]),
                     "dh6": su1.dh6(),
                     "iterations": np.int64(17),
                     "note": "converged",
                 },
                 imu=ImuCalibration(accel_bias_mps2=np.array([0.01, -0.02, np.nan]), time_offset_s=np.float64(0.0042)),
+                link_confidence=0.987654321,
+                notes=("clock re-synced 3 times",),
             ),
             "base_unit": UnitResult(
                 pose=su0,
@@ -439,8 +442,8 @@ def _with_undetermined_and_failed() -> CalibrationResult:
     pose = SkinUnitPose.from_quaternion(1, [0.05, 0.0, 0.12], [1, 0, 0, 0])
     su1 = UnitResult(pose, observable=False, position_std_m=np.array([0.00016, 0.00066, np.nan]),
                      rotation_std_deg=np.array([0.01, np.nan, np.nan]), warnings=("yaw about joint 1 undetermined",))
-    return CalibrationResult("mle", "panda", "", 1.0, {"su1": su1},
-                             extras={"seed": 0, "failed_units": {"su2": "no motion excited it", "su3": "diverged"}})
+    return CalibrationResult("mle", "panda", "", 1.0, {"su1": su1}, extras={"seed": 0},
+                             failed_units={"su2": "no motion excited it", "su3": "diverged"})
 
 
 def test_undetermined_std_components_write_as_null_and_read_back_as_nan(tmp_path: Path) -> None:
@@ -481,7 +484,8 @@ def test_failed_units_are_listed_under_units(tmp_path: Path) -> None:
     assert doc["failed_units"] == {"su2": "no motion excited it", "su3": "diverged"}  # kept (backwards compatible)
     back = read_result(path)
     assert list(back.units) == ["su1"]  # units in result.units always have a pose
-    assert back.extras == original.extras
+    assert back.extras == original.extras == {"seed": 0}
+    assert back.failed_units == original.failed_units
 
 
 def test_hand_written_units_without_a_pose(tmp_path: Path) -> None:
@@ -495,12 +499,12 @@ def test_hand_written_units_without_a_pose(tmp_path: Path) -> None:
     path.write_text(json.dumps(doc))
     result = read_result(path)
     assert list(result.units) == ["su1"]
-    assert result.extras == {"failed_units": {"su2": "no data; IMU silent",
-                                              "su3": "no pose (the result file gives no reason)"}}
+    assert result.extras == {}
+    assert result.failed_units == {"su2": "no data; IMU silent", "su3": "no pose (the result file gives no reason)"}
     # A top-level failed_units is merged (the unit entries' warnings win for units they list).
     doc["failed_units"] = {"su2": "old reason", "su9": "elsewhere"}
     path.write_text(json.dumps(doc))
-    assert read_result(path).extras["failed_units"] == {
+    assert read_result(path).failed_units == {
         "su2": "no data; IMU silent", "su9": "elsewhere", "su3": "no pose (the result file gives no reason)"}
     doc["failed_units"] = ["su2"]
     path.write_text(json.dumps(doc))
@@ -516,12 +520,149 @@ def test_old_file_with_only_top_level_failed_units_reads_unchanged(tmp_path: Pat
     path = tmp_path / "r.json"
     path.write_text(json.dumps(doc))
     result = read_result(path)
-    assert list(result.units) == ["su1"] and result.extras == {"failed_units": {"su2": "diverged"}}
+    assert list(result.units) == ["su1"] and result.extras == {} and result.failed_units == {"su2": "diverged"}
+    # a hand-written list of names (no unit entry without a pose): each "not calibrated"
+    doc["failed_units"] = ["su2", "su3"]
+    path.write_text(json.dumps(doc))
+    assert read_result(path).failed_units == {"su2": "not calibrated", "su3": "not calibrated"}
+    doc["failed_units"] = 3
+    path.write_text(json.dumps(doc))
+    with pytest.raises(DatasetError, match=r"failed_units must be an object of unit name -> reason, got 3$"):
+        read_result(path)
 
 
 def test_a_failed_unit_that_also_has_a_pose_is_written_once() -> None:
     result = _with_undetermined_and_failed()
-    result.extras["failed_units"]["su1"] = "partly failed"
+    result = replace(result, failed_units={**result.failed_units, "su1": "partly failed"})
     doc = result_to_dict(result)
     assert doc["units"]["su1"]["link"] == 1 and doc["units"]["su1"]["observable"] is False
     assert doc["failed_units"]["su1"] == "partly failed"
+
+
+# ---------------------------------------------------------------------- the facts every method gives: typed fields
+def _old_document() -> dict:
+    """A result as skincal wrote it before these facts had fields: the same keys in the same places
+    (top level: ``reference``, ``failed_units``, ``notes``, ``events``; per unit: ``link_confidence``,
+    ``notes``, ``pose_covariance``, ``moved_at_s``) next to method-specific extras."""
+    doc = _doc()
+    cov = (np.diag([1e-8, 2e-8, 3e-8, 1e-6, 2e-6, 3e-6]) + 1e-10 * np.ones((6, 6))).tolist()
+    cov[2] = [None] * 6  # undetermined z: null row and column
+    for row in cov:
+        row[2] = None
+    T_after = np.eye(4)
+    T_after[:3, 3] = [0.05, 0.001, 0.12]
+    doc["units"]["su1"].update(link_confidence=0.93, link_residual_mps2={"3": 0.01, "4": 0.2}, iterations=7,
+                               notes=["clock drifts +40 ppm; stamps corrected"], pose_covariance=cov,
+                               moved_at_s=[12.5])  # fmt: skip
+    doc["units"]["su2"] = {"link": None, "position_m": None, "quaternion_wxyz": None, "observable": False,
+                           "position_std_m": None, "rotation_std_deg": None, "warnings": ["diverged"]}  # fmt: skip
+    doc.update(seed=0, failed_units={"su2": "diverged"}, notes=["no segments in the dataset: 3 static found"],
+               events=[{"unit": "su1", "t_change_s": 12.5, "t_detected_s": 13.0, "statistic": 14.2, "threshold": 10.0,
+                        "link": 3, "t_recalibrated_s": 20.0, "T_link_su_before": np.eye(4).tolist(),
+                        "T_link_su_after": T_after.tolist(), "source": "monitor"}])  # fmt: skip
+    return doc
+
+
+def test_a_file_written_before_reads_into_the_typed_fields_and_writes_back_identically(tmp_path: Path) -> None:
+    doc = _old_document()
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps(doc))
+    result = read_result(path)
+    assert result.extras == {"seed": 0}  # only the method's own output stays in extras
+    assert result.failed_units == {"su2": "diverged"} and result.notes == tuple(doc["notes"])
+    assert result.reference is None
+    (event,) = result.events
+    assert (event.unit, event.t_change_s, event.t_detected_s, event.link) == ("su1", 12.5, 13.0, 3)
+    assert event.extra == {"source": "monitor"} and event.T_link_su_after.shape == (4, 4)
+    unit = result.units["su1"]
+    assert set(unit.extras) == {"link_residual_mps2", "iterations"}
+    assert unit.link_confidence == 0.93 and unit.notes == tuple(doc["units"]["su1"]["notes"])
+    assert unit.moved_at_s == (12.5,)
+    assert unit.pose_covariance.shape == (6, 6) and np.isnan(unit.pose_covariance[2]).all()
+    assert unit.pose_covariance[0, 0] == doc["units"]["su1"]["pose_covariance"][0][0]
+    write_result(result, tmp_path / "again.json")
+    assert json.loads((tmp_path / "again.json").read_text()) == doc
+
+
+def test_a_relative_result_reads_its_reference_into_the_field(tmp_path: Path) -> None:
+    doc = _doc()
+    doc["reference"] = "su1"
+    doc["units"]["su1"].update(link=0, position_m=[0.0, 0.0, 0.0])
+    path = tmp_path / "rel.json"
+    path.write_text(json.dumps(doc))
+    result = read_result(path)
+    assert result.reference == "su1" and "reference" not in result.extras
+    write_result(result, tmp_path / "again.json")
+    assert json.loads((tmp_path / "again.json").read_text()) == doc
+
+
+def test_typed_fields_round_trip_from_memory(tmp_path: Path) -> None:
+    pose = SkinUnitPose.from_quaternion(3, [0.05, 0.0, 0.12], [1, 0, 0, 0])
+    cov = np.diag([1e-8, 2e-8, 3e-8, 1e-6, 2e-6, 3e-6])
+    unit = UnitResult(pose, link_confidence=np.float64(np.nan), pose_covariance=cov, notes=["a"], moved_at_s=[1])
+    original = CalibrationResult("mle", "panda", "", 0.1, {"su1": unit}, failed_units={"su2": "no data"},
+                                 notes=("n",), events=(MoveEvent("su1", 1, 2.5, link=3),))  # fmt: skip
+    write_result(original, tmp_path / "r.json")
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc["units"]["su1"]["link_confidence"] is None  # NaN: null, kept as NaN on read
+    assert doc["events"] == [{"unit": "su1", "t_change_s": 1.0, "t_detected_s": 2.5, "link": 3}]
+    back = read_result(tmp_path / "r.json")
+    got = back.units["su1"]
+    assert np.isnan(got.link_confidence) and got.notes == ("a",) and got.moved_at_s == (1.0,)
+    np.testing.assert_array_equal(got.pose_covariance, cov)
+    assert not got.pose_covariance.flags.writeable
+    assert (back.failed_units, back.notes, back.events[0].t_detected_s) == ({"su2": "no data"}, ("n",), 2.5)
+
+
+@pytest.mark.parametrize(
+    ("top", "key"),
+    [(True, "failed_units"), (True, "notes"), (True, "events"), (True, "reference"), (False, "link_confidence"),
+     (False, "notes"), (False, "pose_covariance"), (False, "moved_at_s")],
+)  # fmt: skip
+def test_a_typed_fact_in_extras_is_refused_on_write(tmp_path: Path, top: bool, key: str) -> None:
+    """Each fact has one place, its field: a writer that still puts it in ``extras`` is refused."""
+    pose = SkinUnitPose.from_quaternion(3, [0.05, 0.0, 0.12], [1, 0, 0, 0])
+    unit = UnitResult(pose, extras={} if top else {key: 1})
+    result = CalibrationResult("mle", "panda", "", 0.1, {"su1": unit}, extras={key: 1} if top else {})
+    owner = "CalibrationResult" if top else "UnitResult"
+    with pytest.raises(DatasetError, match=rf"may not hold {key}: they go in {owner}\.{key}$"):
+        write_result(result, tmp_path / "r.json")
+    assert not (tmp_path / "r.json").exists()
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("link_confidence", 1.5, "units.su1.link_confidence must be a number in [0, 1] or null"),
+        ("link_confidence", "high", "units.su1.link_confidence must be a number in [0, 1] or null"),
+        ("notes", "one note", "units.su1.notes must be a list of strings"),
+        ("notes", [1], "units.su1.notes must be a list of strings"),
+        ("pose_covariance", [[1.0] * 6] * 5, "units.su1.pose_covariance must be a 6x6 matrix"),
+        ("pose_covariance", (-np.eye(6)).tolist(), "units.su1.pose_covariance must be symmetric"),
+    ],
+)
+def test_a_bad_typed_unit_field_in_a_file_is_one_line(tmp_path: Path, key: str, value: object, message: str) -> None:
+    doc = _doc()
+    doc["units"]["su1"][key] = value
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(DatasetError) as info:
+        read_result(path)
+    assert str(info.value).startswith(f"{path}: {message}") and "\n" not in str(info.value)
+
+
+def test_a_computed_covariance_with_rounding_asymmetry_is_accepted(tmp_path: Path) -> None:
+    """Asymmetry is measured against ``sqrt(C_ii C_jj)``: an off-diagonal element near zero that differs from
+    its transpose by rounding (1e-24 against a 1e-9 variance; relatively 1e-8 of itself) is a covariance;
+    an asymmetry of 1e-6 of the std product is not."""
+    pose = SkinUnitPose.from_quaternion(3, [0.05, 0.0, 0.12], [1, 0, 0, 0])
+    cov = np.diag([1e-9] * 6)
+    cov[0, 1], cov[1, 0] = 1e-16, 1e-16 + 1e-24
+    write_result(CalibrationResult("online", "panda", "", 0.1, {"su1": UnitResult(pose, pose_covariance=cov)}),
+                 tmp_path / "r.json")  # fmt: skip
+    np.testing.assert_array_equal(read_result(tmp_path / "r.json").units["su1"].pose_covariance, cov)
+    cov[1, 0] = 1e-16 + 1e-15
+    with pytest.raises(DatasetError, match=r"units\.su1\.pose_covariance must be symmetric"):
+        write_result(CalibrationResult("online", "panda", "", 0.1, {"su1": UnitResult(pose, pose_covariance=cov)}),
+                     tmp_path / "r.json")  # fmt: skip

@@ -208,7 +208,7 @@ def test_exports_of_a_result_with_undetermined_std_and_failed_units(tmp_path, ca
     su1 = result.units["su1"]
     units = {**result.units, "su1": UnitResult(su1.pose, observable=False, position_std_m=[1e-4, 6e-4, np.nan],
                                                rotation_std_deg=[0.01, np.nan, np.nan], warnings=("yaw undetermined",))}
-    result = CalibrationResult("mle", "panda", "", 0.1, units, extras={"failed_units": {"su3": "diverged"}})
+    result = CalibrationResult("mle", "panda", "", 0.1, units, failed_units={"su3": "diverged"})
     write_result(result, tmp_path / "r.json")
     capsys.readouterr()
     for fmt, name in (("urdf", "s.urdf"), ("xacro", "s.xacro"), ("yaml", "s.yaml"), ("json", "s.json"),

@@ -331,7 +331,7 @@ def test_cli_prints_names_and_reasons_without_markup(tmp_path, capsys):
     """Names and reasons in the export summary are shown as written (rich markup not interpreted:
     a '[/x]' in a reason used to crash the command with a MarkupError)."""
     result = _result(["[red]su1"])
-    result = replace(result, extras={"failed_units": {"[bold]su2": "diverged [/x] \x1b[31m"}})
+    result = replace(result, failed_units={"[bold]su2": "diverged [/x] \x1b[31m"})
     _write_doc(tmp_path / "r.json", result_to_dict(result))
     capsys.readouterr()
     assert main(["export", str(tmp_path / "r.json"), "-f", "csv", "-o", str(tmp_path / "s.csv")]) == 0

@@ -381,7 +381,7 @@ def test_covariance_is_symmetric_with_the_variances_on_its_diagonal(tmp_path):
     full = np.diag(np.arange(1.0, 7.0)) * 1e-6
     full[0, 4] = full[4, 0] = 2e-7
     res = result.units["su3_0"]
-    units = {"a": UnitResult(res.pose, extras={"pose_covariance": full}), "b": UnitResult(res.pose)}
+    units = {"a": UnitResult(res.pose, pose_covariance=full), "b": UnitResult(res.pose)}
     _, frames = export_text(CalibrationResult("mle", "panda", "", 0.1, units), "json")
     assert frames[0].covariance_source == "full" and frames[1].covariance_source == "none"
     np.testing.assert_allclose(frames[0].covariance, full, atol=1e-22)
@@ -434,12 +434,18 @@ def test_cli_urdf_robot_range_frames_and_one_line_errors(tmp_path, capsys):
     ids=range(6),
 )
 def test_a_bad_full_covariance_in_the_result_is_one_line(tmp_path, capsys, bad):
+    """Refused when the result file is read (the covariance is a typed field, checked on read), one line
+    naming the file and the field."""
+    import json
+
     result = _result("panda", 2, per_link=1)
-    res = result.units["su2_0"]
-    units = {**result.units, "su2_0": UnitResult(res.pose, extras={"pose_covariance": bad})}
-    write_result(CalibrationResult("mle", "panda", "", 0.1, units), tmp_path / "r.json")
+    write_result(result, tmp_path / "r.json")
+    doc = json.loads((tmp_path / "r.json").read_text())
+    doc["units"]["su2_0"]["pose_covariance"] = bad
+    (tmp_path / "r.json").write_text(json.dumps(doc))
     capsys.readouterr()
     assert main(["export", str(tmp_path / "r.json"), "-f", "yaml", "-o", str(tmp_path / "o.yaml")]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("error: result: units.su2_0.pose_covariance must be") and err.count("\n") == 1, err
+    assert err.startswith(f"error: {tmp_path / 'r.json'}: units.su2_0.pose_covariance must be"), err
+    assert err.count("\n") == 1, err
     assert not (tmp_path / "o.yaml").exists()

@@ -122,10 +122,10 @@ def test_bag_then_mle_matches_hdf5_accuracy(sim, tmp_path):
     ev_ref = evaluate(calibrate(read_dataset(tmp_path / "ref.h5"), "mle"), sim)
     shifted = replace(sim, joints=replace(sim.joints, t=sim.joints.t - sim.joints.t[0]))  # same time origin
     ev_bag = evaluate(calibrate(imported, "mle"), shifted)
-    assert ev_bag["links_correct"] == ev_ref["links_correct"] == 3
+    assert ev_bag.links_correct == ev_ref.links_correct == 3
     for key in ("mean_position_error_mm", "mean_rotation_error_deg"):
         assert ev_bag[key] <= 1.1 * ev_ref[key] + 1e-6, (key, ev_bag[key], ev_ref[key])
-    assert ev_ref["mean_position_error_mm"] < 2.0
+    assert ev_ref.mean_position_error_mm < 2.0
 
 
 # ---------------------------------------------------------------- small hand-made bags

@@ -132,9 +132,9 @@ def test_point_covariance_without_joint_noise_is_pose_and_range_only(rng):
     np.testing.assert_allclose(c_r, 1e-4 * np.outer(ray, ray), atol=1e-18)
 
 
-def _unit(pos_std, rot_std, **extras) -> UnitResult:
+def _unit(pos_std, rot_std, pose_covariance=None) -> UnitResult:
     pose = SkinUnitPose(3, np.eye(3), [0.0, 0.0, 0.1])
-    return UnitResult(pose, True, pos_std, rot_std, extras=extras)
+    return UnitResult(pose, True, pos_std, rot_std, pose_covariance=pose_covariance)
 
 
 def test_result_std_becomes_the_pose_covariance_and_missing_std_the_assumed_one():
@@ -151,7 +151,7 @@ def test_result_std_becomes_the_pose_covariance_and_missing_std_the_assumed_one(
     # no std at all, or no result: never zero
     np.testing.assert_allclose(unit_pose_covariance(_unit(None, None), cfg), assumed_pose_covariance(cfg))
     np.testing.assert_allclose(unit_pose_covariance(None, cfg), assumed_pose_covariance(cfg))
-    # a full covariance extra wins over the std
+    # a full covariance wins over the std
     full = np.diag([1.0, 2, 3, 4, 5, 6]) * 1e-6
     np.testing.assert_allclose(unit_pose_covariance(_unit([1e-3] * 3, [0.1] * 3, pose_covariance=full), cfg), full)
 

@@ -143,7 +143,7 @@ def _mle_error_mm(robot: str, protocol: str) -> float:
     name = str(registry_urdf("kinova")) if robot == "kinova-urdf" else robot
     ds = simulate_dataset(name, "random", 2, "none", protocol, seed=1)
     report = evaluate(calibrate(ds, "mle"), ds)
-    return max(u["position_error_mm"] for u in report["units"].values())
+    return max(u.position_error_mm for u in report.units.values())
 
 
 @pytest.mark.parametrize(("robot", "protocol"), [("ur5e", "fast"), ("kinova-urdf", "fast")])

@@ -193,7 +193,7 @@ def test_simulate_real_recording_like_dataset_that_calibrate_accepts(tmp_path, c
     ],
 )
 def test_robustness_cells_build_their_fault(fault, key):
-    from skincal.workflows import robustness as rb
+    from skincal.bench import robustness as rb
 
     assert fault in rb.FAULTS and fault in rb.RobustnessConfig().faults
     ds, _ = rb.build_dataset(rb.Job("panda", "analytic", fault, 0, "fast"))

@@ -118,7 +118,7 @@ def test_html_report_is_self_contained_and_shows_the_numbers(calibrated, page: s
     assert len(images) == 3 + len(result.units)
     assert all(base64.b64decode(img)[:8] == PNG_MAGIC for img in images)
     ev = evaluate(result, ds)
-    assert f"{ev['mean_position_error_mm']:.3f}" in page
+    assert f"{ev.mean_position_error_mm:.3f}" in page
     for n, u in result.units.items():
         assert f">{n}<" in page
         assert " ".join(f"{x:+.4f}" for x in u.pose.quaternion_wxyz) in page
@@ -149,7 +149,7 @@ def test_markdown_summary_tables(calibrated):
         row = next(line for line in lines if line.startswith(f"| {n} | {u.pose.link} |"))
         assert " ".join(f"{x:+.4f}" for x in u.pose.p_link_su) in row
         err_row = next(line for line in lines if line.startswith(f"| {n} | {u.pose.link}/"))
-        assert f"{ev['units'][n]['position_error_mm']:.3f}" in err_row
+        assert f"{ev.units[n].position_error_mm:.3f}" in err_row
     # Coverage: paper placement puts unit k on link k + 1 -> joints 1..k+1 move it.
     cov = [line for line in lines if line.startswith("| su")][-len(result.units):]
     for line in cov:
@@ -217,10 +217,10 @@ def test_report_of_a_result_with_undetermined_std_and_failed_units(tmp_path: Pat
     undetermined = dataclasses.replace(unit, position_std_m=np.array([1.6e-4, 6.6e-4, np.nan]),
                                        rotation_std_deg=np.array([0.02, np.nan, np.nan]))
     partial = dataclasses.replace(result, units={names[0]: result.units[names[0]], names[1]: undetermined},
-                                  extras={**result.extras, "failed_units": {names[2]: "diverged <badly>"}})
+                                  failed_units={names[2]: "diverged <badly>"})
     write_result(partial, tmp_path / "r.json")
     back = read_result(tmp_path / "r.json")
-    assert list(back.units) == names[:2] and back.extras["failed_units"] == {names[2]: "diverged <badly>"}
+    assert list(back.units) == names[:2] and back.failed_units == {names[2]: "diverged <badly>"}
     page = render_html(collect(back, ds))
     text = re.sub(r'src="data:[^"]*"', "", page)
     assert not re.search(r"\bnan\b", text, re.IGNORECASE)
@@ -240,7 +240,7 @@ def test_worst_units_on_top_and_residual_plots_only_for_them(calibrated):
     ds, result = calibrated
     ev = evaluate(result, ds)
     content = collect(result, ds, shown=2)
-    expected = sorted(result.units, key=lambda u: -ev["units"][u]["position_error_mm"])
+    expected = sorted(result.units, key=lambda u: -ev.units[u].position_error_mm)
     assert content.ranking.figure == "position error against the truth [mm]"
     assert list(content.ranking.values) == expected
     assert list(content.residuals) == expected[:2]
@@ -254,7 +254,7 @@ def test_worst_units_on_top_and_residual_plots_only_for_them(calibrated):
     assert "<h2>Worst units</h2>" in top and "The 2 worst of 6 unit(s)" in top
     cells = re.findall(r'<td class="l">(\d+)</td><td class="l">([^<]+)</td><td>([^<]+)</td>', top)
     assert [(int(i), n) for i, n, _ in cells] == [(1, expected[0]), (2, expected[1])]
-    assert float(cells[0][2]) == pytest.approx(ev["units"][expected[0]]["position_error_mm"], rel=1e-3)
+    assert float(cells[0][2]) == pytest.approx(ev.units[expected[0]].position_error_mm, rel=1e-3)
     assert re.findall(r"<h3>([^<]+)</h3>", page) == expected[:2]
     assert "Shown for the 2 worst of 6 units" in page
     assert len(re.findall(r'src="data:image/png', page)) == 3 + 2
@@ -321,8 +321,10 @@ def test_figures_stay_page_sized_for_many_units():
 
     rng = np.random.default_rng(2)
     names = [f"unit{i}" for i in range(200)]
-    ev = {"units": {u: {"position_error_mm": float(rng.uniform()), "rotation_error_deg": 0.1, "observable": i % 7 > 0}
-                    for i, u in enumerate(names)}}
+    from skincal.calib.metrics import Evaluation, UnitEvaluation
+
+    units = {u: UnitEvaluation(1, 1, i % 7 > 0, float(rng.uniform()), 0.1, 0.001) for i, u in enumerate(names)}
+    ev = Evaluation(units, None, None, None, len(units), len(units))
     for fig in (plots.activity_figure(rng.uniform(0.01, 30, (200, 7)), names),
                 plots.bias_figure(names, rng.normal(size=(200, 3)), rng.normal(size=(200, 3))),
                 plots.error_figure(ev)):

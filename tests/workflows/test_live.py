@@ -134,9 +134,9 @@ def test_follow_stops_at_the_target_before_the_data_end(fast_ds):
     result = outcome.result
     assert result.method == "online" and sorted(result.units) == sorted(fast_ds.units)
     doc = evaluate(result, fast_ds)
-    assert doc["links_correct"] == 6
-    for unit in doc["units"].values():  # the std is honest: the error is within a few std of the target
-        assert unit["position_error_mm"] < 1.5 and unit["rotation_error_deg"] < 0.1
+    assert doc.links_correct == 6
+    for unit in doc.units.values():  # the std is honest: the error is within a few std of the target
+        assert unit.position_error_mm < 1.5 and unit.rotation_error_deg < 0.1
 
 
 def test_follow_without_stop_runs_to_the_end_and_unit_selection(fast_ds):

@@ -84,7 +84,7 @@ def test_online_calibrator_restarts_only_the_moved_unit():
     (event,) = run.events
     assert 200.0 < event["t_detected_s"] <= 201.0 and abs(event["t_change_s"] - 200.0) <= 1.0
     assert event["link"] == ds.truth["su4"].link and len(event["T_link_su_before"]) == 4
-    assert run.result.extras["events"][0]["unit"] == "su4"
+    assert run.result.events[0].unit == "su4"
     before = pose_errors(event["T_link_su_before"], _truth(ds, "su4", "before"))
     assert before[1] < 0.5  # the pose it had: the turn is 2 deg
 
@@ -117,27 +117,27 @@ def _event(ds, **over):
 
 
 def test_events_round_trip_in_dataset_and_result(small, tmp_path):
+    from skincal.data.events import move_event
     from skincal.data.hdf5 import read_dataset, write_dataset
-    from skincal.data.result import CalibrationResult, UnitResult, read_result, write_result
-    from skincal.workflows.monitoring import with_events
+    from skincal.data.result import CalibrationResult, UnitResult, read_result, with_events, write_result
 
     event = _event(small)
-    write_dataset(replace(small, events=(event,)), tmp_path / "a.h5")
+    write_dataset(replace(small, events=(move_event(event, "event"),)), tmp_path / "a.h5")
     (back,) = read_dataset(tmp_path / "a.h5").events
-    assert back["unit"] == "su1" and back["link"] == event["link"] and back["t_change_s"] == 12.5
-    np.testing.assert_array_equal(back["T_link_su_after"], event["T_link_su_after"])
+    assert back.unit == "su1" and back.link == event["link"] and back.t_change_s == 12.5
+    np.testing.assert_array_equal(back.T_link_su_after, event["T_link_su_after"])
     write_dataset(small, tmp_path / "old.h5")  # no events: as every older file
     assert read_dataset(tmp_path / "old.h5").events == ()
 
     result = CalibrationResult("mle", "panda", "", 0.1, {"su1": UnitResult(pose=small.truth["su1"])})
     recorded = with_events(result, [event])
-    assert result.extras == {} and "moved_at_s" not in result.units["su1"].extras  # the input is kept
+    assert result.events == () and result.units["su1"].moved_at_s == ()  # the input is kept
     write_result(recorded, tmp_path / "r.json")
     again = read_result(tmp_path / "r.json")
-    (ev,) = again.extras["events"]
-    assert ev["unit"] == "su1" and ev["t_detected_s"] == 13.0
-    np.testing.assert_allclose(ev["T_link_su_before"], event["T_link_su_before"], atol=1e-15)
-    np.testing.assert_array_equal(again.units["su1"].extras["moved_at_s"], [12.5])
+    (ev,) = again.events
+    assert ev.unit == "su1" and ev.t_detected_s == 13.0
+    np.testing.assert_allclose(ev.T_link_su_before, event["T_link_su_before"], atol=1e-15)
+    np.testing.assert_array_equal(again.units["su1"].moved_at_s, [12.5])
 
 
 @pytest.mark.adversarial
@@ -154,16 +154,23 @@ def test_events_round_trip_in_dataset_and_result(small, tmp_path):
 def test_bad_events_are_refused_in_both_files(small, tmp_path, over, message):
     import h5py
 
+    from skincal.data.events import check_events
     from skincal.data.hdf5 import read_dataset, write_dataset
-    from skincal.data.result import CalibrationResult, UnitResult, result_from_dict, result_to_dict, write_result
+    from skincal.data.result import (
+        CalibrationResult,
+        UnitResult,
+        result_from_dict,
+        result_to_dict,
+        with_events,
+        write_result,
+    )
     from skincal.errors import DatasetError
-    from skincal.workflows.monitoring import with_events
 
-    with pytest.raises(DatasetError, match=message):
-        write_dataset(replace(small, events=(_event(small, **over),)), tmp_path / "w.h5")
+    with pytest.raises(DatasetError, match=message):  # a bad event is refused when built, a stray unit on write
+        write_dataset(replace(small, events=check_events([_event(small, **over)], "events")), tmp_path / "w.h5")
     assert not (tmp_path / "w.h5").exists()
     # a file written by someone else with the bad event: refused on read, one line naming it
-    write_dataset(replace(small, events=(_event(small),)), tmp_path / "a.h5")
+    write_dataset(replace(small, events=check_events([_event(small)], "events")), tmp_path / "a.h5")
     with h5py.File(tmp_path / "a.h5", "r+") as f:
         for key, value in over.items():
             f["events/0"].attrs[key] = value
@@ -185,10 +192,11 @@ def test_bad_events_are_refused_in_both_files(small, tmp_path, over, message):
 def test_events_group_with_a_stray_member_is_refused(small, tmp_path):
     import h5py
 
+    from skincal.data.events import check_events
     from skincal.data.hdf5 import read_dataset, write_dataset
     from skincal.errors import DatasetError
 
-    write_dataset(replace(small, events=(_event(small),)), tmp_path / "a.h5")
+    write_dataset(replace(small, events=check_events([_event(small)], "events")), tmp_path / "a.h5")
     with h5py.File(tmp_path / "a.h5", "r+") as f:
         f["events"].create_group("x")
     with pytest.raises(DatasetError, match="/events must hold groups 0, 1, ... in order"):

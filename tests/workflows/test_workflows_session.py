@@ -102,3 +102,25 @@ def test_core_benchmark_reports_every_step():
     assert [c[0] for c in calls] == [0, 1, 2, 3, 4] and all(c[1] == 4 for c in calls)
     assert calls[3][2] == "simulating 1 unit(s)"
     assert doc["simulation"][0]["imu_samples"] > 0
+
+
+def test_simulator_options_are_one_frozen_dataclass():
+    """``simulate(session, backend, options=SimOptions(...))``: the ToF scene reaches the simulator (every unit
+    gets a range stream); an option of the mujoco backend only is refused by the analytic one, in one line."""
+    import dataclasses
+    from dataclasses import replace
+
+    from skincal.sim import SimOptions
+    from skincal.sim.scene import Scene, wall
+
+    session = replace(make_session("panda", "random", 2, "none", "fast", seed=1), rng=np.random.default_rng(3))
+    plain = simulate(session)
+    assert plain.tof == {}
+    scene = Scene((wall(distance=1.5, yaw=np.pi / 2),)).tof_primitives()
+    with_tof = simulate(replace(session, rng=np.random.default_rng(3)), options=SimOptions(scene=scene))
+    assert set(with_tof.tof) == set(with_tof.units) and same_streams(plain, with_tof)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        SimOptions().mode = "dynamic"  # type: ignore[misc]
+    for bad in (SimOptions(mode="dynamic"), SimOptions(position_gain=5.0), SimOptions(model_options={"r": 1})):
+        with pytest.raises(ConfigError, match="^mode, position_gain and model_options are options of the mujoco"):
+            simulate(session, "analytic", options=bad)

@@ -96,18 +96,18 @@ def run_fixed(robot: str, seed: int, noise: str, target: Target, joints: str = "
         if "t" not in seen and all_reached(cal.status()):
             probe = copy.deepcopy(cal)
             seen["t"] = t - t0
-            seen["errors"] = evaluate(probe.result(), ds)
+            seen["errors"] = evaluate(probe.result(), ds).to_dict()
         seen["chunks"] = seen.get("chunks", 0) + 1
         if "true" not in seen and seen["chunks"] % 4 == 0:  # the true error every 2 s of data
             done = copy.deepcopy(cal).result()
             if done.units:
-                history.append((t - t0, evaluate(done, ds)))
+                history.append((t - t0, evaluate(done, ds).to_dict()))
                 if first_within(history[-1:], target) is not None:
                     seen["true"] = t - t0
         return False
 
     replay(ds, cal, chunk_s=0.5, on_chunk=on_chunk)
-    end = evaluate(cal.result(), ds)
+    end = evaluate(cal.result(), ds).to_dict()
     return {"duration_s": session.trajectory.duration, "reached_s": seen.get("t"), "at_reach": seen.get("errors"),
             "true_s": seen.get("true"), "end": end}  # fmt: skip
 

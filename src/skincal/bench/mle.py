@@ -56,14 +56,14 @@ def _summary(ds, result) -> dict[str, Any]:
             ddrift.append(abs(imu.clock_drift_ppm - truth["clock_drift_ppm"]))
     z = [v for v in z if np.isfinite(v)]
     return {
-        "mean_position_error_mm": ev["mean_position_error_mm"],
-        "max_position_error_mm": max(u["position_error_mm"] for u in ev["units"].values()),
-        "mean_rotation_error_deg": ev["mean_rotation_error_deg"],
+        "mean_position_error_mm": ev.mean_position_error_mm,
+        "max_position_error_mm": max(u.position_error_mm for u in ev.units.values()),
+        "mean_rotation_error_deg": ev.mean_rotation_error_deg,
         "mean_position_std_mm": 1e3 * float(np.mean(std)) if std else None,
         "max_time_offset_error_ms": 1e3 * max(dtau) if dtau else None,
         "max_clock_drift_error_ppm": max(ddrift) if ddrift else None,
-        "links_correct": ev["links_correct"],
-        "units_total": ev["units_total"],
+        "links_correct": ev.links_correct,
+        "units_total": ev.units_total,
         "units_warned": sum(1 for u in result.units.values() if u.warnings),
         "runtime_s": result.runtime_s,
         "z_rms": float(np.sqrt(np.mean(np.square(z)))) if z else None,

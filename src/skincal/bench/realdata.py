@@ -125,7 +125,6 @@ def calibrate_recording(
     failure with its reason, never an exception."""
     from skincal.calib import calibrate
     from skincal.data.hdf5 import read_dataset
-    from skincal.data.result import failed_units
 
     record: dict[str, Any] = {"recording": recording.name, "path": str(recording.path), "error": None}
     try:
@@ -149,7 +148,7 @@ def calibrate_recording(
         except SkincalError as exc:
             units = {u: {"calibrated": False, "reason": str(exc)} for u in ds.units}
         else:
-            failed = failed_units(result)
+            failed = dict(result.failed_units)
             for u in ds.units:
                 if u in result.units:
                     units[u] = _unit_record(result.units[u])

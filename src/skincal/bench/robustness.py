@@ -352,11 +352,11 @@ def build_dataset(job: Job):
     text = f"robustness: robot={job.robot} backend={job.backend} fault={job.fault} seed={job.seed}"
 
     def simulate(pl: Mapping[str, Any]):
-        from skincal.sim import Session, simulate
+        from skincal.sim import Session, SimOptions, simulate
 
         rng = np.random.default_rng([job.seed, 1])
         session = Session(chain, pl, trajectory, imu_model, rng, gravity=gravity, description=text, **timing)
-        return simulate(session, simulator, **({"mode": mode} if simulator == "mujoco" else {}))
+        return simulate(session, simulator, options=SimOptions(mode=mode) if simulator == "mujoco" else None)
 
     t0, t1 = float(trajectory.t[0]), float(trajectory.t[-1])
     if fault.knock:
@@ -452,14 +452,14 @@ def run_job(job: Job) -> dict[str, Any]:
         start = time.perf_counter()
         try:
             result = calibrate(ds, "mle", workers=1)
-            ev = evaluate(result, ds)
+            ev = evaluate(result, ds).to_dict()
         except Exception as exc:  # noqa: BLE001 - one broken cell must not end a long benchmark
             record["calibrate_s"] = time.perf_counter() - start
             record["error"] = f"{type(exc).__name__}: {exc}"
             record["units"] = {u: {"calibrated": False, "failure": record["error"]} for u in ds.units}
             return record
         record["calibrate_s"] = time.perf_counter() - start
-    failed = dict(result.extras.get("failed_units", {}))
+    failed = dict(result.failed_units)
     units: dict[str, Any] = {}
     for name in ds.units:
         if name in result.units:

@@ -78,9 +78,9 @@ def run_seed(
         "segments_true": len(ds.segments),
         "segments_found": len(seg.segments),
         "rejected": len(seg.rejected),
-        "hdf5": {k: ev_ref[k] for k in keys},
-        "bag": {k: ev_bag[k] for k in keys},
-        "units_total": ev_ref["units_total"],
+        "hdf5": {k: getattr(ev_ref, k) for k in keys},
+        "bag": {k: getattr(ev_bag, k) for k in keys},
+        "units_total": ev_ref.units_total,
         "time_s": {
             "hdf5_total": t_h5,
             "bag_write": t_write,

@@ -180,14 +180,14 @@ def run_job(job: Job) -> dict[str, Any]:
             "runtime_s": runtime,
             "units": {
                 name: {
-                    "link": u["link_true"],
-                    "position_cm": u["position_error_mm"] / 10.0,
-                    "quaternion_distance": u["quaternion_distance"],
-                    "rotation_deg": u["rotation_error_deg"],
+                    "link": u.link_true,
+                    "position_cm": u.position_error_mm / 10.0,
+                    "quaternion_distance": u.quaternion_distance,
+                    "rotation_deg": u.rotation_error_deg,
                 }
-                for name, u in ev["units"].items()
+                for name, u in ev.units.items()
             },
-            "failed": dict(result.extras.get("failed_units", {})),
+            "failed": dict(result.failed_units),
         }
     return out
 

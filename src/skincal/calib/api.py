@@ -13,6 +13,7 @@ import os
 import time
 from collections.abc import Callable, Generator, Iterator, Mapping
 from concurrent.futures import Executor, ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
@@ -133,9 +134,9 @@ class UnitDataError(CalibrationError):
     written) rather than a calibration that found nothing."""
 
 
-_Outcome = tuple[str, UnitResult | None, str | None, bool]
-"""A unit's outcome in :func:`calibrate`: name, result or None, the failure's reason, and whether
-that failure is a :class:`UnitDataError`."""
+_Outcome = tuple[str, UnitResult | None, CalibrationError | None]
+"""A unit's outcome in :func:`calibrate`: name, result or None, and its failure (a
+:class:`UnitDataError` when its data could not be used at all)."""
 
 
 def calibrate(
@@ -154,11 +155,15 @@ def calibrate(
     **options: Any,
 ) -> CalibrationResult:
     """Calibrate the units of ``dataset`` with ``method``; units that fail are reported in
-    ``result.extras["failed_units"]`` (name -> reason) while the others are calibrated. When every
+    ``result.failed_units`` (name -> reason) while the others are calibrated. When every
     unit fails the result is still returned (``units`` empty, every unit in ``failed_units``): a
     calibration that ran and could determine nothing is an answer, not an error (usage and data
     errors that concern every unit still raise, and so does a run in which every unit's data was
     unusable: :class:`UnitDataError`).
+
+    A foreign exception raised in the method (its ``prepare``, ``align`` or ``run_unit``: a bug, not
+    bad input) is a :class:`CalibrationError` naming its type, with the exception as its cause
+    (:func:`method_errors`): in one unit, that unit's failure; in ``prepare`` or in every unit, raised.
 
     Args:
         dataset: a validated dataset with segments.
@@ -197,23 +202,23 @@ def calibrate(
     interpolator = JointInterpolator(
         dataset.joints, use_dataset_qdd=use_dataset_qdd, qdd_window_s=qdd_window_s or DEFAULT_QDD_WINDOW_S
     )
-    shared = spec.prepare(dataset, interpolator) if spec.prepare is not None else None
+    shared = None
+    if spec.prepare is not None:
+        with method_errors(f"method '{method}', preparing the dataset: "):
+            shared = spec.prepare(dataset, interpolator)
     results: dict[str, UnitResult] = {}
     failed: dict[str, str] = {}
+    errors: list[CalibrationError] = []
 
     def one(k: int, name: str) -> _Outcome:
-        try:
+        try:  # a usage or data error (another SkincalError) concerns every unit: it propagates
             unit = calibrate_unit(
                 tagged, name, spec, link=given.get(name), rng=np.random.default_rng([seed, k]),
                 interpolator=interpolator, shared=shared, options=parsed,
             )
-            return name, unit, None, False
-        except CalibrationError as exc:
-            return name, None, str(exc), isinstance(exc, UnitDataError)
-        except SkincalError:
-            raise  # a usage or data error concerns every unit
-        except Exception as exc:  # noqa: BLE001 - a foreign error in one unit never stops the others
-            return name, None, f"internal error ({type(exc).__name__}: {exc})", False
+            return name, unit, None
+        except CalibrationError as exc:  # a foreign error in one unit too: it never stops the others
+            return name, None, exc
 
     n_workers = max(1, min(int(workers), len(names), os.cpu_count() or 1))  # more would only oversubscribe
     pool: Executor | None = None
@@ -242,12 +247,13 @@ def calibrate(
         outcomes = pool.map(one, range(len(names)), names)
     unusable = 0  # units whose data could not be used at all (UnitDataError)
     try:
-        for name, unit, error, data_error in outcomes:
+        for name, unit, error in outcomes:
             if unit is not None:
                 results[name] = unit
             else:
                 failed[name] = str(error)
-                unusable += int(data_error)
+                errors.append(error)
+                unusable += int(isinstance(error, UnitDataError))
             if progress is not None:
                 progress(name)
     finally:
@@ -259,18 +265,17 @@ def calibrate(
     failed = {name: failed[name] for name in names if name in failed}
     if not results and unusable == len(names):  # the data, not the calibration: one error for the run
         reasons = "; ".join(f"{u}: {m}" for u, m in failed.items())
-        raise CalibrationError(f"no unit could be calibrated ({reasons})")
+        raise CalibrationError(f"no unit could be calibrated ({reasons})") from (errors[0] if errors else None)
     # every unit failed otherwise: still a result (each unit listed with its reason, observable: false)
-    extras: dict[str, Any] = {"failed_units": failed, "seed": seed} if failed else {"seed": seed}
-    if notes:
-        extras["notes"] = notes
     result = CalibrationResult(
         method=method,
         robot=dataset.chain.name,
         dataset_sha256=dataset_sha256,
         runtime_s=time.perf_counter() - start,
         units=results,
-        extras=extras,
+        extras={"seed": seed},
+        failed_units=failed,
+        notes=tuple(notes),
     )
     if getattr(parsed, "consistency", False):  # the split check (skincal.calib.consistency)
         from skincal.calib.consistency import check
@@ -283,6 +288,20 @@ def calibrate(
 
         result = check(tagged, result, refit)
     return result
+
+
+@contextmanager
+def method_errors(context: str = "") -> Iterator[None]:
+    """Run a calibration method's code: skincal's own errors pass; a foreign exception (a bug in the
+    method, or a library failing inside it) becomes a :class:`CalibrationError` ``"<context>internal
+    error (<type>: <message>)"`` raised from it (``__cause__``), so callers see one error family and
+    the traceback is kept."""
+    try:
+        yield
+    except SkincalError:
+        raise
+    except Exception as exc:
+        raise CalibrationError(f"{context}internal error ({type(exc).__name__}: {exc})") from exc
 
 
 JOINT_LIMIT_MARGIN_RAD = 0.25
@@ -374,68 +393,69 @@ def calibrate_unit(
 ) -> UnitResult:
     """Calibrate one unit (see :func:`calibrate`); ``options``: the method's parsed options
     (default: the method's defaults)."""
-    if interpolator is None:
-        interpolator = JointInterpolator(dataset.joints)
-    if shared is None and spec.prepare is not None:
-        shared = spec.prepare(dataset, interpolator)
-    options = parse_options(spec.options, {}, "") if options is None else options
-    alignment, offset = None, 0.0
-    _check_overlap(dataset, unit)
-    motion = sees_motion(dataset, unit)
-    skipped = None  # why the coarse clock search did not run
-    if spec.align is not None and not getattr(options, "time_offset", True):
-        skipped = "time offset not estimated (time_offset=false): no clock search, the stamps taken as they are"
-    elif spec.align is not None and not motion:
-        skipped = (
-            "coarse clock search skipped: the unit's samples hold no motion (static poses only), so nothing "
-            "determines the clock offset; the stamps taken as they are"
+    with method_errors():  # a foreign exception: this unit's CalibrationError, raised from it
+        if interpolator is None:
+            interpolator = JointInterpolator(dataset.joints)
+        if shared is None and spec.prepare is not None:
+            shared = spec.prepare(dataset, interpolator)
+        options = parse_options(spec.options, {}, "") if options is None else options
+        alignment, offset = None, 0.0
+        _check_overlap(dataset, unit)
+        motion = sees_motion(dataset, unit)
+        skipped = None  # why the coarse clock search did not run
+        if spec.align is not None and not getattr(options, "time_offset", True):
+            skipped = "time offset not estimated (time_offset=false): no clock search, the stamps taken as they are"
+        elif spec.align is not None and not motion:
+            skipped = (
+                "coarse clock search skipped: the unit's samples hold no motion (static poses only), so nothing "
+                "determines the clock offset; the stamps taken as they are"
+            )
+        if spec.align is not None and skipped is None:
+            alignment = spec.align(shared, dataset.imu[unit])
+            offset = float(alignment.offset_s)
+            stamps = getattr(alignment, "stamps", None)  # the unit's stamps corrected by the alignment
+            if stamps is not None:
+                dataset = replace(dataset, imu={**dataset.imu, unit: replace(dataset.imu[unit], t=stamps)})
+        samples = unit_samples(
+            dataset, unit, time_offset_s=offset, interpolator=interpolator, exact_joint_states=spec.exact_joint_states
         )
-    if spec.align is not None and skipped is None:
-        alignment = spec.align(shared, dataset.imu[unit])
-        offset = float(alignment.offset_s)
-        stamps = getattr(alignment, "stamps", None)  # the unit's stamps corrected by the alignment
-        if stamps is not None:
-            dataset = replace(dataset, imu={**dataset.imu, unit: replace(dataset.imu[unit], t=stamps)})
-    samples = unit_samples(
-        dataset, unit, time_offset_s=offset, interpolator=interpolator, exact_joint_states=spec.exact_joint_states
-    )
-    if spec.needs_segments and not np.any(samples.kind == 0):
-        raise CalibrationError(f"unit '{unit}': no samples in static segments")
-    assignment = None
-    if link is None and not spec.discovers_links:
-        assignment = discover_link(samples, dataset.chain.n_joints, use_gyro=spec.use_gyro_for_links)
-        if assignment.link == 0:
-            raise CalibrationError(f"unit '{unit}': {'; '.join(assignment.warnings)}")
-        link = assignment.link
-    problem = UnitProblem(
-        chain=dataset.robot,
-        gravity=np.asarray(dataset.gravity, dtype=float),
-        samples=samples,
-        link=0 if link is None else int(link),
-        link_assignment=assignment,
-        rng=rng,
-        interpolator=interpolator,
-        shared=shared,
-        options=options,
-        time_offset_s=offset,
-        alignment=alignment,
-    )
-    result = spec.run_unit(problem)
-    _, screening = screen_readings(unit, dataset.imu[unit].accel, dataset.imu[unit].t)
-    if screening:
-        result = replace(result, warnings=tuple(screening) + tuple(result.warnings))
-    extras = dict(result.extras)
-    if skipped is not None:
-        extras["notes"] = [*extras.get("notes", []), skipped]
-    std = result.position_std_m
-    rests_only = not motion or result.extras.get("n_moving_samples") == 0  # rests never tell a position
-    if rests_only and not result.observable and std is not None and bool(np.all(np.isnan(std))):
-        extras[POSITION_DETERMINED] = False
-        said = "static poses only" if not motion else "no moving sample used: rests only"
-        result = replace(result, warnings=(*result.warnings, f"position not determined ({said}): written as null; "
-                                           "the rotation and link come from the rests"))  # fmt: skip
-    # the link by name as well as index (a URDF robot's own link name; link<i> for a DH robot)
-    return replace(result, extras={**extras, "link_name": dataset.chain.link_name(result.pose.link)})
+        if spec.needs_segments and not np.any(samples.kind == 0):
+            raise CalibrationError(f"unit '{unit}': no samples in static segments")
+        assignment = None
+        if link is None and not spec.discovers_links:
+            assignment = discover_link(samples, dataset.chain.n_joints, use_gyro=spec.use_gyro_for_links)
+            if assignment.link == 0:
+                raise CalibrationError(f"unit '{unit}': {'; '.join(assignment.warnings)}")
+            link = assignment.link
+        problem = UnitProblem(
+            chain=dataset.robot,
+            gravity=np.asarray(dataset.gravity, dtype=float),
+            samples=samples,
+            link=0 if link is None else int(link),
+            link_assignment=assignment,
+            rng=rng,
+            interpolator=interpolator,
+            shared=shared,
+            options=options,
+            time_offset_s=offset,
+            alignment=alignment,
+        )
+        result = spec.run_unit(problem)
+        _, screening = screen_readings(unit, dataset.imu[unit].accel, dataset.imu[unit].t)
+        if screening:
+            result = replace(result, warnings=tuple(screening) + tuple(result.warnings))
+        extras = dict(result.extras)
+        if skipped is not None:
+            result = replace(result, notes=(*result.notes, skipped))
+        std = result.position_std_m
+        rests_only = not motion or result.extras.get("n_moving_samples") == 0  # rests never tell a position
+        if rests_only and not result.observable and std is not None and bool(np.all(np.isnan(std))):
+            extras[POSITION_DETERMINED] = False
+            said = "static poses only" if not motion else "no moving sample used: rests only"
+            result = replace(result, warnings=(*result.warnings, f"position not determined ({said}): written as null; "
+                                               "the rotation and link come from the rests"))  # fmt: skip
+        # the link by name as well as index (a URDF robot's own link name; link<i> for a DH robot)
+        return replace(result, extras={**extras, "link_name": dataset.chain.link_name(result.pose.link)})
 
 
 def sees_motion(dataset: Dataset, unit: str) -> bool:

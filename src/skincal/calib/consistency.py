@@ -175,7 +175,7 @@ def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> Calibrat
             for u in links:
                 got = None if part is None else part.units.get(u)
                 if part is not None and got is None:
-                    reason = (part.extras.get("failed_units") or {}).get(u, "not calibrated")
+                    reason = part.failed_units.get(u, "not calibrated")
                     errors[u].append(f"{split} part {side + 1}: {reason}")
                 outcomes[u].setdefault(split, []).append(got)
     units = dict(result.units)
@@ -196,9 +196,10 @@ def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> Calibrat
         pos = None if unit.position_std_m is None else np.asarray(unit.position_std_m, dtype=float) * fp
         rot = None if unit.rotation_std_deg is None else np.asarray(unit.rotation_std_deg, dtype=float) * fr
         extras = {**unit.extras, "consistency": c.to_json()}
-        cov = extras.get("pose_covariance")
+        cov = unit.pose_covariance
         if cov is not None and (fp > 1.0 or fr > 1.0):
             T = np.diag([fp] * 3 + [fr] * 3)
-            extras["pose_covariance"] = T @ np.asarray(cov, dtype=float) @ T
-        units[name] = replace(unit, position_std_m=pos, rotation_std_deg=rot, warnings=tuple(warnings), extras=extras)
+            cov = T @ cov @ T
+        units[name] = replace(unit, position_std_m=pos, rotation_std_deg=rot, warnings=tuple(warnings), extras=extras,
+                              pose_covariance=cov)  # fmt: skip
     return replace(result, units=units)

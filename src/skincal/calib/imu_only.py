@@ -35,7 +35,7 @@ disagree with the reference's beyond ``other_body_ratio`` of their RMS after the
 another rigid body and is reported as failed; rotation about fewer than two axes leaves the rotation
 about, and the position along, the one axis undetermined (``observable = False``, named).
 
-Result convention (``docs/interfaces.md``): ``extras["reference"]`` names the reference unit, every
+Result convention (``docs/interfaces.md``): ``CalibrationResult.reference`` names the reference unit, every
 unit's pose is ``T_ref_su`` with ``link = 0`` meaning "the reference unit's frame" (the reference
 itself: identity, std 0).
 """
@@ -57,7 +57,7 @@ from skincal.calib.rest import imu_still_mask, runs
 from skincal.calib.robust import huber_weights, pinv, residual_correlation, robust_sigma
 from skincal.data.dataset import Dataset, ImuStream
 from skincal.data.imu_calibration import ImuCalibration
-from skincal.data.result import REFERENCE, REFERENCE_LINK, CalibrationResult, UnitResult
+from skincal.data.result import REFERENCE_LINK, CalibrationResult, UnitResult
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.transforms import FloatArray, nearest_rotation, skew
 from skincal.names import name_problem, printable
@@ -532,10 +532,10 @@ def calibrate_relative(
     the diagonal fit (6-8 orientations) only ``reference_misalignment_std`` is added.
 
     Returns a :class:`~skincal.data.result.CalibrationResult` with ``method = "imu-only"``,
-    ``extras["reference"] = reference``, ``extras["accel_scale_fit"]`` (the rests' fit of the reference's
+    ``reference``, ``extras["accel_scale_fit"]`` (the rests' fit of the reference's
     accelerometer: model, rests, distinct orientations, a note) and per unit ``T_ref_su`` at ``link = 0``
     (with ``imu``: its accelerometer fitted to the rests, when they allow it); units on another rigid
-    body (or without a gyroscope) are in ``extras["failed_units"]`` with the reason.
+    body (or without a gyroscope) are in ``failed_units`` with the reason.
     """
     start = time.perf_counter()
     problem = name_problem(reference)
@@ -599,16 +599,16 @@ def calibrate_relative(
         fit = replace(fit, position_cov=fit.position_cov + extra)
         out[name] = _unit_result(fit, reference, gauge, imu)
     robot = dataset.robot.name if dataset.robot is not None else "none"
-    extras: dict = {REFERENCE: reference}
-    extras["accel_scale_fit"] = {
+    accel_scale_fit = {
         "model": ref_fit.model if ref_fit is not None else "none",
         "rests": int(len(rests)),
         "orientations": int(ref_distinct),
         "note": gauge[-1],
     }
-    if failed:
-        extras["failed_units"] = failed
-    return CalibrationResult(METHOD, robot, dataset_sha256, time.perf_counter() - start, out, extras)
+    return CalibrationResult(
+        METHOD, robot, dataset_sha256, time.perf_counter() - start, out, {"accel_scale_fit": accel_scale_fit},
+        failed_units=failed, reference=reference,
+    )  # fmt: skip
 
 
 def _gauge_notes(reference: str, fit: AccelFit | None, rests: int, distinct: int, gravity: float) -> list[str]:
@@ -673,7 +673,6 @@ def _unit_result(fit: RelativeFit, reference: str, notes: list[str], imu: ImuCal
         "residual_std_mps2": fit.accel_sigma,
         "gyro_residual_std_rps": fit.gyro_sigma,
         "residual_correlation": fit.correlation,
-        "notes": list(notes),
     }
     return UnitResult(
         SkinUnitPose(REFERENCE_LINK, nearest_rotation(fit.R), fit.r),
@@ -683,6 +682,7 @@ def _unit_result(fit: RelativeFit, reference: str, notes: list[str], imu: ImuCal
         warnings=tuple(warnings),
         extras=extras,
         imu=imu,
+        notes=tuple(notes),
     )
 
 
@@ -690,8 +690,8 @@ def compare_with_joint_result(relative: CalibrationResult, joint: CalibrationRes
     """Disagreement of an IMU-only result with a joint-based one (e.g. ``mle``) of the same units:
     unit -> ``(position mm, rotation deg)`` of ``T_ref_su`` against ``T_link_ref^-1 T_link_su`` from
     ``joint``, for the units that ``joint`` puts on the reference unit's link (others: not comparable)."""
-    reference = relative.extras.get(REFERENCE)
-    if not isinstance(reference, str) or reference not in joint.units:
+    reference = relative.reference
+    if reference is None or reference not in joint.units:
         return {}
     ref_pose = joint.units[reference].pose
     out: dict[str, tuple[float, float]] = {}
@@ -711,8 +711,8 @@ def evaluate_relative(result: CalibrationResult, dataset: Dataset) -> dict:
     """Errors of a relative result against a simulated dataset's truth: per unit on the reference's body
     (``truth_body``) or link (``truth``), ``position_error_mm`` and ``rotation_error_deg`` of ``T_ref_su``;
     means over observable units. Units whose truth is on another body or link are listed as such."""
-    reference = result.extras.get(REFERENCE)
-    if not isinstance(reference, str):
+    reference = result.reference
+    if reference is None:
         raise ConfigError("evaluate_relative: the result has no reference unit (not an IMU-only result)")
     truth: dict[str, tuple[str, FloatArray]] = {}
     for name, body in dataset.truth_body.items():

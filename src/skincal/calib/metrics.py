@@ -9,6 +9,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -38,8 +40,57 @@ def pose_errors(chain, q0: np.ndarray, est: SkinUnitPose, true: SkinUnitPose) ->
     return pos_mm, rot_deg, qd
 
 
-def evaluate(result: CalibrationResult, truth: Dataset) -> dict[str, Any]:
-    """The evaluation document of ``docs/interfaces.md`` for ``result`` against ``truth``."""
+@dataclass(frozen=True)
+class UnitEvaluation:
+    """One unit's errors against the truth (``docs/interfaces.md``, "Evaluation").
+
+    Attributes:
+        link_true, link_estimated: the unit's true and estimated 1-based link.
+        observable: whether the result could determine the unit's full pose.
+        position_error_mm: ``|p_est - p_true|``, mm (in the link frame; the base frame at the first
+            sample when the links differ).
+        rotation_error_deg: the angle of ``R_true^T R_est``, deg.
+        quaternion_distance: ``min(|q1 - q2|, |q1 + q2|)``.
+    """
+
+    link_true: int
+    link_estimated: int
+    observable: bool
+    position_error_mm: float
+    rotation_error_deg: float
+    quaternion_distance: float
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """A calibration result's errors against the truth (``skincal evaluate``; :meth:`to_dict`: its JSON).
+
+    Attributes:
+        units: per calibrated unit, its :class:`UnitEvaluation`.
+        mean_position_error_mm, mean_rotation_error_deg, mean_quaternion_distance: means over the
+            observable units, None when there is none.
+        links_correct: units whose estimated link is the true one.
+        units_total: units evaluated (the calibrated ones).
+        units_failed: names of the units the result could not calibrate, sorted.
+    """
+
+    units: Mapping[str, UnitEvaluation]
+    mean_position_error_mm: float | None
+    mean_rotation_error_deg: float | None
+    mean_quaternion_distance: float | None
+    links_correct: int
+    units_total: int
+    units_failed: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        """The evaluation document of ``docs/interfaces.md`` (plain JSON values)."""
+        doc = asdict(self)
+        doc["units_failed"] = list(self.units_failed)
+        return doc
+
+
+def evaluate(result: CalibrationResult, truth: Dataset) -> Evaluation:
+    """The :class:`Evaluation` of ``result`` against ``truth`` (its JSON: ``docs/interfaces.md``)."""
     if not truth.truth:
         raise DatasetError("the truth dataset has no /truth group (only simulated datasets carry truth)")
     missing = [u for u in result.units if u not in truth.truth]
@@ -47,29 +98,22 @@ def evaluate(result: CalibrationResult, truth: Dataset) -> dict[str, Any]:
         raise DatasetError(f"the truth dataset has no truth for unit(s) {', '.join(missing)}")
     check_links(result, truth.robot, "result")
     q0 = np.asarray(truth.joint_states.q[0], dtype=float)
-    units: dict[str, Any] = {}
+    units: dict[str, UnitEvaluation] = {}
     for name, unit in result.units.items():
         true = truth.truth[name]
         pos_mm, rot_deg, qdist = pose_errors(truth.robot, q0, unit.pose, true)
-        units[name] = {
-            "link_true": true.link,
-            "link_estimated": unit.pose.link,
-            "observable": bool(unit.observable),
-            "position_error_mm": pos_mm,
-            "rotation_error_deg": rot_deg,
-            "quaternion_distance": qdist,
-        }
-    observable = [u for u in units.values() if u["observable"]]
+        units[name] = UnitEvaluation(true.link, unit.pose.link, bool(unit.observable), pos_mm, rot_deg, qdist)
+    observable = [u for u in units.values() if u.observable]
 
     def mean(key: str) -> float | None:
-        return float(np.mean([u[key] for u in observable])) if observable else None
+        return float(np.mean([getattr(u, key) for u in observable])) if observable else None
 
-    return {
-        "units": units,
-        "mean_position_error_mm": mean("position_error_mm"),
-        "mean_rotation_error_deg": mean("rotation_error_deg"),
-        "mean_quaternion_distance": mean("quaternion_distance"),
-        "links_correct": int(sum(u["link_true"] == u["link_estimated"] for u in units.values())),
-        "units_total": len(units),
-        "units_failed": sorted(result.extras.get("failed_units", {})),
-    }
+    return Evaluation(
+        units=units,
+        mean_position_error_mm=mean("position_error_mm"),
+        mean_rotation_error_deg=mean("rotation_error_deg"),
+        mean_quaternion_distance=mean("quaternion_distance"),
+        links_correct=int(sum(u.link_true == u.link_estimated for u in units.values())),
+        units_total=len(units),
+        units_failed=tuple(sorted(result.failed_units)),
+    )

@@ -44,13 +44,12 @@ def paper_unit_result(problem: UnitProblem, fit: Fit) -> UnitResult:
         "n_evals_per_stage": dict(fit.n_evals),
         "nlopt_status": dict(fit.status),
     }
-    if problem.link_assignment is not None:
-        extras["link_confidence"] = problem.link_assignment.confidence
     return UnitResult(
         pose=SkinUnitPose.from_dh6(problem.link, fit.params),
         observable=observable,
         warnings=tuple(warnings),
         extras=extras,
+        link_confidence=None if problem.link_assignment is None else problem.link_assignment.confidence,
     )
 
 

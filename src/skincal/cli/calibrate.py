@@ -45,7 +45,7 @@ def unit_table(result, title: str):
     notes are shown escaped (:func:`skincal.cli.app.shown`)."""
     from rich.table import Table
 
-    from skincal.data.result import failed_units, has_position
+    from skincal.data.result import has_position
 
     table = Table(title=shown(title))
     for col in ("unit", "link", "position (m)", "quaternion (w,x,y,z)", "pos std (mm)", "rot std (deg)", "notes"):
@@ -63,7 +63,7 @@ def unit_table(result, title: str):
             std_r,
             shown(notes or ""),
         )
-    for name, reason in failed_units(result).items():
+    for name, reason in result.failed_units.items():
         if name not in result.units:
             table.add_row(shown(name), "-", "-", "-", "-", "-", shown(f"not calibrated: {reason}"))
     return table
@@ -164,9 +164,9 @@ def calibrate(
         )
     write_result(result, out)
     console.print(unit_table(result, f"{method}: {len(result.units)} units in {result.runtime_s:.2f} s"))
-    for note in result.extras.get("notes", []):
+    for note in result.notes:
         console.print(f"note: {shown(note)}", highlight=False)
-    for name, reason in result.extras.get("failed_units", {}).items():
+    for name, reason in result.failed_units.items():
         console.print(f"[yellow]warning[/]: unit {shown(name)} not calibrated: {shown(reason)}", highlight=False)
     console.print(f"wrote {shown(out)}", highlight=False)
     if not result.units:  # a result, not an error: written, each unit's reason in it; exit NO_UNIT_EXIT
@@ -235,7 +235,7 @@ def _calibrate_follow(
             live.stop()
     write_result(outcome.result, out)
     if watch:
-        events = outcome.result.extras.get("events", [])
+        events = outcome.result.events
         console.print(f"watched to the data's end: {len(events)} unit move(s) recorded in the result", highlight=False)
     elif outcome.reached:
         console.print(f"target {target.text()} reached by every unit after {outcome.t_data:.1f} s of data "
@@ -275,7 +275,7 @@ def _calibrate_relative(
     console.print(unit_table(result, title))
     if "accel_scale_fit" in result.extras:  # the positions' scale: fitted from rests, or what is missing
         console.print(f"note: {shown(result.extras['accel_scale_fit']['note'])}", highlight=False)
-    for name, reason in result.extras.get("failed_units", {}).items():
+    for name, reason in result.failed_units.items():
         console.print(f"[yellow]warning[/]: unit {shown(name)} not calibrated: {shown(reason)}", highlight=False)
     if joint is not None:
         differences = compare_with_joint_result(result, joint)
@@ -365,35 +365,35 @@ def evaluate(
     from skincal.data.result import read_result
 
     res, ds = read_result(result), read_dataset(truth)
-    if res.extras.get("reference") is not None:
+    if res.reference is not None:
         _evaluate_relative(res, result, ds, truth, as_json, allow_other)
         return
     ds.require_joints("evaluate (a wrong link is measured at the first joint sample)", source=str(truth))
     for warning in check_result_dataset(res, result, ds, truth, allow_other=allow_other)[1]:
         console_warning(warning)
-    doc = run(res, ds)
+    ev = run(res, ds)
     if as_json:
-        typer.echo(json.dumps(doc, indent=2))
+        typer.echo(json.dumps(ev.to_dict(), indent=2))
         return
     table = Table(title=f"{shown(result.name)} vs truth")
     for col in ("unit", "link true/est", "position error (mm)", "rotation error (deg)", "quat. distance"):
         table.add_column(col, justify="right")
-    for name, u in doc["units"].items():
-        mark = "" if u["observable"] else " (unobservable)"
+    for name, u in ev.units.items():
+        mark = "" if u.observable else " (unobservable)"
         table.add_row(
             shown(name) + mark,
-            f"{u['link_true']}/{u['link_estimated']}",
-            f"{u['position_error_mm']:.3f}",
-            f"{u['rotation_error_deg']:.4f}",
-            f"{u['quaternion_distance']:.5f}",
+            f"{u.link_true}/{u.link_estimated}",
+            f"{u.position_error_mm:.3f}",
+            f"{u.rotation_error_deg:.4f}",
+            f"{u.quaternion_distance:.5f}",
         )
-    if doc["mean_position_error_mm"] is not None:
+    if ev.mean_position_error_mm is not None:
         table.add_row(
             "mean",
-            f"{doc['links_correct']}/{doc['units_total']} ok",
-            f"{doc['mean_position_error_mm']:.3f}",
-            f"{doc['mean_rotation_error_deg']:.4f}",
-            f"{doc['mean_quaternion_distance']:.5f}",
+            f"{ev.links_correct}/{ev.units_total} ok",
+            f"{ev.mean_position_error_mm:.3f}",
+            f"{ev.mean_rotation_error_deg:.4f}",
+            f"{ev.mean_quaternion_distance:.5f}",
             style="bold",
         )
     console.print(table)

@@ -22,7 +22,6 @@ def demo(
 
     from skincal.calib import calibrate, evaluate
     from skincal.cli.calibrate import std_cell
-    from skincal.data.result import failed_units
     from skincal.workflows.session import simulate_dataset
 
     console.print(
@@ -36,26 +35,26 @@ def demo(
     console.print(f"simulated {ds.duration:.0f} s of robot motion in {t_sim:.2f} s")
     with console.status(f"calibrating with '{method}' (links found from the data)..."):
         result = calibrate(ds, method, seed=seed, workers=2)
-    doc = evaluate(result, ds)
+    ev = evaluate(result, ds)
     table = Table(title=f"{method}: calibrated {len(result.units)} units in {result.runtime_s:.2f} s")
     for col in ("unit", "link true/found", "pos. err (mm)", "rot. err (deg)", "std (mm)", "notes"):
         table.add_column(col, justify="right" if "[" in col else "left")
-    for name, u in doc["units"].items():
+    for name, u in ev.units.items():
         unit = result.units[name]
         std = std_cell(unit.position_std_m, 1e3)
         table.add_row(
             name,
-            f"{u['link_true']}/{u['link_estimated']}",
-            f"{u['position_error_mm']:.3f}",
-            f"{u['rotation_error_deg']:.4f}",
+            f"{u.link_true}/{u.link_estimated}",
+            f"{u.position_error_mm:.3f}",
+            f"{u.rotation_error_deg:.4f}",
             std,
             escape("; ".join(unit.warnings)),
         )
     # the means are None when no calibrated unit is observable
-    mean_p = "-" if doc["mean_position_error_mm"] is None else f"{doc['mean_position_error_mm']:.3f}"
-    mean_r = "-" if doc["mean_rotation_error_deg"] is None else f"{doc['mean_rotation_error_deg']:.4f}"
+    mean_p = "-" if ev.mean_position_error_mm is None else f"{ev.mean_position_error_mm:.3f}"
+    mean_r = "-" if ev.mean_rotation_error_deg is None else f"{ev.mean_rotation_error_deg:.4f}"
     table.add_row(
-        "mean", f"{doc['links_correct']}/{doc['units_total']} correct", mean_p, mean_r, "", "", style="bold",
+        "mean", f"{ev.links_correct}/{ev.units_total} correct", mean_p, mean_r, "", "", style="bold",
     )
     console.print(table)
     console.print(
@@ -63,6 +62,6 @@ def demo(
         f"this run: {mean_p} mm, {mean_r} deg in "
         f"{result.runtime_s:.2f} s with '{noise}' sensors"
     )
-    for name, reason in failed_units(result).items():
+    for name, reason in result.failed_units.items():
         console.print(f"[yellow]warning[/]: unit {shown(name)} not calibrated: {shown(reason)}", highlight=False)
     console.print(f"total {time.perf_counter() - start:.1f} s")

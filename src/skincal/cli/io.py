@@ -228,7 +228,7 @@ def export_cmd(
     from rich.markup import escape
 
     from skincal.data.export import export_result
-    from skincal.data.result import failed_units, read_result
+    from skincal.data.result import read_result
     from skincal.io.atomic import check_output
     from skincal.kinematics import PRESETS
     from skincal.names import printable
@@ -248,7 +248,7 @@ def export_cmd(
         if chain is not None and chain.name != res.robot:
             shown = printable(f"the result is for robot '{res.robot}', exported onto '{chain.name}' ({robot})")
             console.print("[yellow]warning[/]: " + escape(shown), highlight=False)
-    for name, reason in failed_units(res).items():
+    for name, reason in res.failed_units.items():
         if name not in res.units:
             console.print("[yellow]warning[/]: " + escape(printable(f"unit {name} not exported (not calibrated: "
                                                                      f"{reason})")), highlight=False)

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from skincal.data.events import MoveEvent
 from skincal.errors import DatasetError
 from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
 from skincal.kinematics.transforms import FloatArray
@@ -100,8 +101,8 @@ class Dataset:
             ``time_offset_s`` (float, s); stored as extra attrs of ``/truth/<unit>``.
         truth_body: true unit poses on named rigid bodies (IMU-only simulations; may be empty),
             stored as ``/truth/<unit>`` attrs ``body`` and ``T_body_su``.
-        events: moved-unit events noticed while recording (``unit``, ``t_change_s``, ``t_detected_s``,
-            ...: :func:`skincal.data.result.check_event`), stored as ``/events/<k>`` attrs; may be empty.
+        events: moved-unit events noticed while recording (:class:`~skincal.data.events.MoveEvent`:
+            ``unit``, ``t_change_s``, ``t_detected_s``, ...), stored as ``/events/<k>`` attrs; may be empty.
     """
 
     robot: SerialChain | None
@@ -114,7 +115,7 @@ class Dataset:
     description: str = ""
     truth_sensor: dict[str, dict[str, FloatArray | float]] = field(default_factory=dict)
     truth_body: dict[str, BodyPose] = field(default_factory=dict)
-    events: tuple[dict, ...] = ()
+    events: tuple[MoveEvent, ...] = ()
 
     @property
     def has_joints(self) -> bool:

@@ -61,7 +61,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from skincal.data.provenance import result_robot
-from skincal.data.result import CalibrationResult, UnitResult
+from skincal.data.result import POSE_COVARIANCE, CalibrationResult, UnitResult, check_pose_covariance
 from skincal.errors import ConfigError, DatasetError
 from skincal.io.atomic import write_bytes_atomic
 from skincal.io.jsonio import load_yaml
@@ -79,8 +79,6 @@ T_SU_RANGE.setflags(write=False)
 COVARIANCE_ORDER = ("x", "y", "z", "rx", "ry", "rz")
 UNKNOWN_VARIANCE = -1.0
 """Diagonal covariance entry of an axis the data do not determine (its row and column are 0)."""
-FULL_COVARIANCE_EXTRA = "pose_covariance"
-"""Per-unit result extra read when present: ``(6, 6)`` covariance of ``(p, rotation)`` in link axes."""
 
 
 @dataclass(frozen=True)
@@ -249,27 +247,15 @@ def pose_covariance(unit: UnitResult, R_frame_link: FloatArray, name: str = "uni
     """``(6, 6)`` covariance of ``(x, y, z, rx, ry, rz)`` (m^2, rad^2) of a unit in a parent frame
     whose axes are ``R_frame_link`` of the link's, and its source (``full``, ``std``, ``none``).
 
-    From the unit extra :data:`FULL_COVARIANCE_EXTRA` when the result holds one (link axes), else
+    From ``unit.pose_covariance`` when the result holds one (link axes; result field ``pose_covariance``), else
     ``diag(position_std_m^2, rotation_std^2)``; rotated by ``blockdiag(R, R)`` (position and small
     rotations about the link axes both turn with the frame). An undetermined axis (NaN) gets
     :data:`UNKNOWN_VARIANCE` on the diagonal and 0 elsewhere in its row and column; an offset
     frame that mixes it into other axes marks those too. No uncertainty at all: ``[0][0] = -1``."""
-    full = unit.extras.get(FULL_COVARIANCE_EXTRA)
     cov = None
-    if full is not None:
-        try:
-            arr = None if isinstance(full, str) else np.array(full, dtype=float)
-        except (TypeError, ValueError):
-            arr = None
-        where = f"result: units.{_shown(name)}.{FULL_COVARIANCE_EXTRA}"
-        if arr is None or arr.shape != (6, 6):
-            raise DatasetError(f"{where} must be a 6x6 matrix of numbers (null where undetermined)")
-        known = np.isfinite(arr)
-        if np.any(np.diag(arr)[np.diag(known)] < 0) or not np.allclose(
-            np.where(known & known.T, arr, 0), np.where(known & known.T, arr.T, 0), rtol=1e-9, atol=0.0
-        ):
-            raise DatasetError(f"{where} must be symmetric with a non-negative diagonal")
-        cov, source = arr, "full"
+    if unit.pose_covariance is not None:
+        where = f"result: units.{_shown(name)}.{POSE_COVARIANCE}"
+        cov, source = check_pose_covariance(unit.pose_covariance, where), "full"
     elif unit.position_std_m is not None and unit.rotation_std_deg is not None:
         std = np.concatenate([np.asarray(unit.position_std_m, float), np.radians(unit.rotation_std_deg)])
         cov, source = np.diag(std**2), "std"

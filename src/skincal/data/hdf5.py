@@ -52,7 +52,7 @@ import h5py
 import numpy as np
 
 from skincal.data.dataset import BodyPose, Dataset, ImuStream, JointStates, Segments, TofStream
-from skincal.data.result import check_events
+from skincal.data.events import MoveEvent, check_events
 from skincal.data.validate import TRUTH_BODY_ATTRS, check_unit_name, shown, validate_dataset
 from skincal.data.writer import FORMAT, JOINT_TYPE_CODES, VERSION, DatasetWriter
 from skincal.errors import ConfigError, DatasetError
@@ -465,9 +465,9 @@ class _Reader:
                 sensor[unit] = extra
         return poses, sensor, bodies
 
-    def events(self, units: list[str]) -> tuple[dict[str, Any], ...]:
-        """Moved-unit events (``/events/<k>``, k = 0, 1, ... in order; absent: none), each checked by
-        :func:`~skincal.data.result.check_event`, its unit one of ``units``."""
+    def events(self, units: list[str]) -> tuple[MoveEvent, ...]:
+        """Moved-unit events (``/events/<k>``, k = 0, 1, ... in order; absent: none), each a checked
+        :class:`~skincal.data.events.MoveEvent`, its unit one of ``units``."""
         grp = self.group("/events", required=False)
         if grp is None:
             return ()

@@ -13,27 +13,30 @@ named by ``link_name`` too; quaternions are (w, x, y, z). The IMU calibration of
 (``accel_bias_mps2``, ``accel_scale_misalignment``, ``time_offset_s``, ``clock_drift_ppm``,
 ``gyro_bias_rps``, their std, ...: :data:`~skincal.data.imu_calibration.IMU_KEYS`) is written next to
 the contract fields from ``UnitResult.imu`` and read back into it (a unit with none of those fields
-gets ``imu = None``; a malformed one is refused). Other fields beyond the
-contract (per unit, e.g. ``link_confidence``, ``dh6``; at the top level, e.g.
-``options``) are written next to the contract fields and read back into ``extras``. In extras,
+gets ``imu = None``; a malformed one is refused).
+
+The facts every method gives have typed fields, under the file's keys (checked on write and read):
+``CalibrationResult.failed_units`` (``failed_units``), ``.notes`` (``notes``), ``.events`` (``events``,
+:class:`~skincal.data.events.MoveEvent`), ``.reference`` (``reference``); ``UnitResult.link_confidence``,
+``.pose_covariance`` (6x6, ``null`` -> NaN), ``.notes``, ``.moved_at_s``. Other fields beyond the
+contract (per unit, e.g. ``dh6``; at the top level, e.g. ``seed``) are the method's own: written next to
+the contract fields and read back into ``extras`` (which may not hold a typed fact). In extras,
 NumPy arrays become JSON lists (non-finite numbers become ``null``) and numeric lists come back as
 float64 arrays (``null`` -> NaN). Floats are written with full (round-trip) precision.
 
 Undetermined std components: a NaN component of ``position_std_m`` / ``rotation_std_deg`` is written
 as ``null`` and read back as NaN (the other components must be finite and >= 0).
 
-Units without a pose ("never lose a result"): each unit of ``extras["failed_units"]`` (name ->
-reason) that is not in ``units`` is also written under ``units`` as ``{"link": null, "position_m":
-null, "quaternion_wxyz": null, "observable": false, "position_std_m": null, "rotation_std_deg":
-null, "warnings": [reason]}``; the top-level ``failed_units`` is written as before. On read, a unit
-entry with a ``null`` ``position_m`` or ``quaternion_wxyz`` must have ``observable: false``; it is
-returned in ``extras["failed_units"]`` (name -> its warnings joined with ``"; "``), not in
-``CalibrationResult.units``, so every unit in ``units`` has a pose.
+Units without a pose ("never lose a result"): each unit of ``failed_units`` (name -> reason) that is
+not in ``units`` is also written under ``units`` as ``{"link": null, "position_m": null,
+"quaternion_wxyz": null, "observable": false, "position_std_m": null, "rotation_std_deg": null,
+"warnings": [reason]}``; the top-level ``failed_units`` is written as before. On read, a unit entry
+with a ``null`` ``position_m`` or ``quaternion_wxyz`` must have ``observable: false``; it is returned
+in ``failed_units`` (name -> its warnings joined with ``"; "``), not in ``CalibrationResult.units``,
+so every unit in ``units`` has a pose.
 
-Moved units (``docs/interfaces.md``): a top-level ``events`` list (each event checked by
-:func:`check_event`: ``unit``, ``t_change_s``, ``t_detected_s``, the poses before and after ...) and a
-per-unit ``moved_at_s`` list are optional; they are checked on write and read, and read back into
-``extras`` (the events' poses as ``(4, 4)`` arrays).
+Moved units (``docs/interfaces.md``): a top-level ``events`` list and a per-unit ``moved_at_s`` list are
+optional; they are checked on write and read (:func:`~skincal.data.events.check_events`).
 
 Relative results (``skincal.calib.imu_only``): a top-level ``reference`` names a unit of ``units``; every
 pose is then ``T_ref_su`` in that unit's frame and ``link`` may be 0 (:data:`REFERENCE_LINK`), which
@@ -45,13 +48,14 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from skincal.data.events import MAX_POSITION_M, MoveEvent, check_events
 from skincal.data.imu_calibration import IMU_KEYS, IMU_SHAPES, INTEGER_KEYS, ImuCalibration, imu_to_fields
 from skincal.errors import ConfigError, DatasetError
 from skincal.io.atomic import write_bytes_atomic
@@ -71,90 +75,58 @@ _NO_REASON = "no pose (the result file gives no reason)"
 _TOP_KEYS = ("format", "version", "method", "robot", "dataset_sha256", "runtime_s", "units")
 _UNIT_KEYS = ("link", "position_m", "quaternion_wxyz", "observable", "position_std_m", "rotation_std_deg", "warnings")
 _QUAT_NORM_TOL = 1e-3
-MAX_POSITION_M = 1e3
-"""Largest accepted position component, m: a skin unit sits on a robot link, and numbers like
-``1e308`` overflow every distance computed from them."""
 EVENTS = "events"
-"""Top-level field: the moved-unit events of the session, a list of objects (:func:`check_event`)."""
+"""Top-level field: the moved-unit events of the session, a list of objects (:class:`MoveEvent`)."""
 MOVED_AT = "moved_at_s"
 """Per-unit field: the change times of the unit's moved-unit events, s (a list of numbers)."""
-EVENT_TIMES = ("t_change_s", "t_detected_s")
-EVENT_POSES = ("T_link_su_before", "T_link_su_after")
-EVENT_NUMBERS = ("statistic", "threshold", "t_recalibrated_s")
-_RIGID_TOL = 1e-6
-
-
-def check_event(event: Any, where: str) -> dict[str, Any]:
-    """A moved-unit event checked and normalised (``docs/interfaces.md``, moved-unit events): ``unit`` a
-    valid unit name, ``t_change_s <= t_detected_s`` finite (s), optional ``link`` (integer >= 0),
-    ``T_link_su_before`` / ``T_link_su_after`` (rigid ``(4, 4)``, returned as float arrays),
-    ``statistic``, ``threshold``, ``t_recalibrated_s`` (finite numbers); further keys with string or
-    number values are kept. ``where`` starts the one-line :class:`DatasetError`."""
-    if not isinstance(event, Mapping):
-        raise DatasetError(f"{where} must be an object, got {_short(event)}")
-    unit = event.get("unit")
-    problem = name_problem(unit) if isinstance(unit, str) else "is not a string"
-    if problem is not None:
-        raise DatasetError(f"{where}.unit {_short(unit)} is not a valid unit name: it {problem}")
-    out: dict[str, Any] = {"unit": unit}
-    for key in EVENT_TIMES + EVENT_NUMBERS:
-        value = event.get(key)
-        if value is None and key not in EVENT_TIMES:
-            continue
-        if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-            raise DatasetError(f"{where}.{key} must be a number, got {_short(value)}")
-        if not math.isfinite(float(value)):
-            raise DatasetError(f"{where}.{key} must be finite, got {value}")
-        out[key] = float(value)
-    if out["t_change_s"] > out["t_detected_s"]:
-        raise DatasetError(f"{where}: t_change_s {out['t_change_s']} is after t_detected_s {out['t_detected_s']}")
-    if event.get("link") is not None:
-        link = event["link"]
-        if isinstance(link, bool) or not isinstance(link, int | np.integer | float) or link != int(link) or link < 0:
-            raise DatasetError(f"{where}.link must be an integer >= 0, got {_short(link)}")
-        out["link"] = int(link)
-    for key in EVENT_POSES:
-        if event.get(key) is None:
-            continue
-        try:
-            T = np.array(event[key], dtype=float)
-        except (TypeError, ValueError):
-            raise DatasetError(f"{where}.{key} must be a (4, 4) array of numbers") from None
-        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise DatasetError(f"{where}.{key} must be a finite (4, 4) array, got shape {T.shape}")
-        R = T[:3, :3]
-        rigid = np.allclose(T[3], [0, 0, 0, 1]) and np.allclose(R.T @ R, np.eye(3), atol=_RIGID_TOL)
-        if not rigid or np.linalg.det(R) < 0 or np.abs(T[:3, 3]).max() > MAX_POSITION_M:
-            raise DatasetError(f"{where}.{key} is not a rigid transform of a unit on a link")
-        out[key] = T
-    for key, value in event.items():
-        if key in out or key in ("link", *EVENT_POSES) or value is None:
-            continue
-        if not isinstance(key, str) or not (isinstance(value, str) or (
-            isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool))):  # fmt: skip
-            raise DatasetError(f"{where}.{key} must be a string or a number, got {_short(value)}")
-        out[key] = value
-    return out
-
-
-def check_events(events: Any, where: str, units: Any = None) -> list[dict[str, Any]]:
-    """A list of moved-unit events, each :func:`check_event`; with ``units``, each event's unit must be one."""
-    if not isinstance(events, list | tuple):
-        raise DatasetError(f"{where} must be a list of events, got {_short(events)}")
-    out = [check_event(e, f"{where}[{i}]") for i, e in enumerate(events)]
-    if units is not None:
-        for i, e in enumerate(out):
-            if e["unit"] not in units:
-                raise DatasetError(f"{where}[{i}].unit '{e['unit']}' is not a unit of this file")
-    return out
+NOTES = "notes"
+"""Top-level and per-unit field: what was found in the data and done about it (a list of strings)."""
+LINK_CONFIDENCE = "link_confidence"
+"""Per-unit field: the link discovery's confidence in [0, 1]."""
+POSE_COVARIANCE = "pose_covariance"
+"""Per-unit field: the 6x6 covariance of ``(x, y, z, rx, ry, rz)`` in the link frame's axes, m^2 and rad^2."""
+_TYPED_TOP = (REFERENCE, FAILED_UNITS, NOTES, EVENTS)
+_TYPED_UNIT = (LINK_CONFIDENCE, NOTES, POSE_COVARIANCE, MOVED_AT)
 
 
 def _check_moved_at(value: Any, where: str) -> None:
     items = value.tolist() if isinstance(value, np.ndarray) else value
-    if not isinstance(items, list) or not all(
+    if not isinstance(items, list | tuple) or not all(
         isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in items
     ):
         raise DatasetError(f"{where}.{MOVED_AT} must be a list of finite numbers (s), got {_short(value)}")
+
+
+def check_pose_covariance(value: Any, where: str) -> FloatArray:
+    """``value`` as a ``(6, 6)`` float covariance (NaN/``null`` where undetermined), symmetric (to 1e-9 of
+    ``sqrt(C_ii C_jj)``) with a non-negative diagonal where known; else a one-line :class:`DatasetError`
+    starting with ``where``."""
+    try:
+        arr = None if isinstance(value, str) else np.array(_none_to_nan(value), dtype=float)
+    except (TypeError, ValueError):
+        arr = None
+    if arr is None or arr.shape != (6, 6):
+        raise DatasetError(f"{where} must be a 6x6 matrix of numbers (null where undetermined)")
+    known = np.isfinite(arr)
+    both = known & known.T
+    diag = np.abs(np.where(np.isfinite(np.diag(arr)), np.diag(arr), 0.0))
+    scale = np.sqrt(np.outer(diag, diag))  # asymmetry measured against the std product: rounding, not data
+    asym = np.abs(np.where(both, arr - arr.T, 0.0))
+    if np.any(np.diag(arr)[np.diag(known)] < 0) or np.any(asym > 1e-9 * scale):
+        raise DatasetError(f"{where} must be symmetric with a non-negative diagonal")
+    return arr
+
+
+def _notes(value: Any, where: str) -> tuple[str, ...]:
+    if not isinstance(value, list | tuple) or not all(isinstance(n, str) for n in value):
+        raise DatasetError(f"{where} must be a list of strings, got {_short(value)}")
+    return tuple(value)
+
+
+def _readonly(value: Any) -> FloatArray:
+    arr = np.array(value, dtype=float)
+    arr.setflags(write=False)
+    return arr
 
 
 @dataclass(frozen=True)
@@ -169,11 +141,18 @@ class UnitResult:
         rotation_std_deg: ``(3,)`` standard deviation of the rotation about the link axes, deg, or
             None; NaN in an undetermined component.
         warnings: human-readable notes (which part is unobservable and why, poor fit, ...).
-        extras: further per-unit fields written next to the contract fields (numbers, strings,
-            lists, arrays, nested dicts), e.g. ``link_confidence``, ``dh6``; not the fields of
-            ``imu`` (:data:`~skincal.data.imu_calibration.IMU_KEYS`).
+        extras: further per-unit fields of the method written next to the contract fields (numbers,
+            strings, lists, arrays, nested dicts), e.g. ``dh6``; not the fields of ``imu``
+            (:data:`~skincal.data.imu_calibration.IMU_KEYS`) nor the typed fields below.
         imu: the unit's IMU calibration (bias, scale/misalignment, time offset, clock drift, ...),
             or None where the method estimates none.
+        link_confidence: the link discovery's confidence in [0, 1] (``link_confidence``), None where the
+            link was given (NaN: written ``null``).
+        pose_covariance: ``(6, 6)`` covariance of ``(x, y, z, rx, ry, rz)`` in the link frame's axes,
+            m^2 and rad^2 (``pose_covariance``; NaN where undetermined), or None (only the std).
+        notes: what was found in the unit's data and corrected (``notes``); unlike ``warnings``,
+            nothing the estimate or its std has to answer for.
+        moved_at_s: change times of the unit's moved-unit events, s (``moved_at_s``).
     """
 
     pose: SkinUnitPose
@@ -183,15 +162,21 @@ class UnitResult:
     warnings: tuple[str, ...] = ()
     extras: dict[str, Any] = field(default_factory=dict)
     imu: ImuCalibration | None = None
+    link_confidence: float | None = None
+    pose_covariance: FloatArray | None = None
+    notes: tuple[str, ...] = ()
+    moved_at_s: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        for name in ("position_std_m", "rotation_std_deg"):
+        for name in ("position_std_m", "rotation_std_deg", "pose_covariance"):
             value = getattr(self, name)
             if value is not None:
-                arr = np.array(value, dtype=float)
-                arr.setflags(write=False)
-                object.__setattr__(self, name, arr)
+                object.__setattr__(self, name, _readonly(value))
+        if self.link_confidence is not None:
+            object.__setattr__(self, "link_confidence", float(self.link_confidence))
         object.__setattr__(self, "warnings", tuple(self.warnings))
+        object.__setattr__(self, "notes", tuple(self.notes))
+        object.__setattr__(self, "moved_at_s", tuple(float(t) for t in self.moved_at_s))
 
 
 @dataclass(frozen=True)
@@ -199,14 +184,20 @@ class CalibrationResult:
     """Result of one calibration run.
 
     Attributes:
-        method: method name (``mle``, ``om``, ``mmm``, ``mm``).
+        method: method name (``mle``, ``om``, ``mmm``, ``mm``, ``online``, ``imu-only``).
         robot: robot name of the dataset.
         dataset_sha256: SHA-256 hex digest of the dataset file (:func:`sha256_file`), or ``""``.
         runtime_s: wall-clock time of the calibration, s.
         units: per-unit results keyed by unit name (every one has a pose).
-        extras: further top-level fields (e.g. ``options``, ``skincal_version``); ``failed_units``
-            (unit name -> reason) lists units without a pose, which the JSON file also lists under
-            ``units`` with ``null`` pose fields and ``observable: false``.
+        extras: further top-level fields of the method (e.g. ``seed``, ``cpu_s``, ``accel_scale_fit``);
+            not the typed fields below.
+        failed_units: units that could not be calibrated, name -> reason (``failed_units``); the JSON
+            file also lists each one not in ``units`` under ``units`` with ``null`` pose fields and
+            ``observable: false``.
+        notes: what was done to the whole dataset (``notes``), e.g. segments found automatically.
+        events: the session's moved-unit events (``events``).
+        reference: the unit whose frame every pose is given in (a relative, IMU-only result:
+            ``reference``; poses at link :data:`REFERENCE_LINK`), or None (poses in link frames).
     """
 
     method: str
@@ -215,6 +206,15 @@ class CalibrationResult:
     runtime_s: float
     units: dict[str, UnitResult]
     extras: dict[str, Any] = field(default_factory=dict)
+    failed_units: Mapping[str, str] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+    events: tuple[MoveEvent, ...] = ()
+    reference: str | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "failed_units", {str(k): str(v) for k, v in self.failed_units.items()})
+        object.__setattr__(self, "notes", tuple(self.notes))
+        object.__setattr__(self, "events", tuple(self.events))
 
 
 POSITION_DETERMINED = "position_determined"
@@ -228,15 +228,15 @@ def has_position(unit: UnitResult) -> bool:
     return unit.observable or unit.extras.get(POSITION_DETERMINED, True) is not False
 
 
-def failed_units(result: CalibrationResult) -> dict[str, str]:
-    """Units of ``result`` that could not be calibrated, name -> reason (``extras["failed_units"]``;
-    a hand-written list of names gives reason ``"not calibrated"``; anything else gives ``{}``)."""
-    listed = result.extras.get(FAILED_UNITS)
-    if isinstance(listed, Mapping):
-        return {str(k): str(v) for k, v in listed.items()}
-    if isinstance(listed, list | tuple):
-        return {str(k): "not calibrated" for k in listed}
-    return {}
+def with_events(result: CalibrationResult, events: Sequence[MoveEvent | Mapping[str, Any]]) -> CalibrationResult:
+    """``result`` with the moved-unit events recorded (``docs/interfaces.md``): ``events`` (each checked,
+    :func:`~skincal.data.events.move_event`) and each moved unit's ``moved_at_s`` (the input is kept)."""
+    typed = check_events(list(events), EVENTS)
+    units = dict(result.units)
+    for name in dict.fromkeys(e.unit for e in typed):
+        if name in units:
+            units[name] = replace(units[name], moved_at_s=tuple(e.t_change_s for e in typed if e.unit == name))
+    return replace(result, units=units, events=typed)
 
 
 def sha256_file(path: str | Path) -> str:
@@ -483,20 +483,23 @@ def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[
         "dataset_sha256": result.dataset_sha256,
         "runtime_s": _to_json(result.runtime_s, source, "runtime_s"),
     }
-    clash = sorted(set(result.extras) & set(_TOP_KEYS))
-    if clash:
-        raise DatasetError(f"{source}: extras may not redefine contract field(s) {', '.join(clash)}")
-    if EVENTS in result.extras:  # before the JSON conversion turns a non-finite time into null
-        check_events(result.extras[EVENTS], f"{source}: {EVENTS}")
+    _no_clash(result.extras, _TOP_KEYS, _TYPED_TOP, source, "extras", "CalibrationResult")
+    if result.reference is not None:
+        doc[REFERENCE] = result.reference
     doc.update(_to_json(result.extras, source, "extras"))
+    if result.failed_units:
+        doc[FAILED_UNITS] = dict(result.failed_units)
+    if result.notes:
+        doc[NOTES] = list(_notes(result.notes, f"{source}: {NOTES}"))
+    if result.events:
+        events = check_events(result.events, f"{source}: {EVENTS}")
+        doc[EVENTS] = _to_json([e.fields() for e in events], source, EVENTS)
     units: dict[str, Any] = {}
     for name, unit in result.units.items():
         where = f"units.{name}"
         if not isinstance(unit, UnitResult):
             raise DatasetError(f"{source}: {where} must be a UnitResult, got {type(unit).__name__}")
-        clash = sorted(set(unit.extras) & set(_UNIT_KEYS))
-        if clash:
-            raise DatasetError(f"{source}: {where} extras may not redefine contract field(s) {', '.join(clash)}")
+        _no_clash(unit.extras, _UNIT_KEYS, _TYPED_UNIT, source, f"{where} extras", "UnitResult")
         clash = sorted(set(unit.extras) & set(IMU_KEYS))
         if clash:
             raise DatasetError(
@@ -513,43 +516,98 @@ def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[
         }
         if unit.imu is not None:
             entry.update(_to_json(imu_to_fields(unit.imu), source, where))
+        if unit.link_confidence is not None:
+            entry[LINK_CONFIDENCE] = _to_json(unit.link_confidence, source, f"{where}.{LINK_CONFIDENCE}")
         entry.update(_to_json(unit.extras, source, f"{where}"))
+        if unit.pose_covariance is not None:
+            cov = check_pose_covariance(unit.pose_covariance, f"{source}: {where}.{POSE_COVARIANCE}")
+            entry[POSE_COVARIANCE] = _to_json(cov, source, f"{where}.{POSE_COVARIANCE}")
+        if unit.notes:
+            entry[NOTES] = list(_notes(unit.notes, f"{source}: {where}.{NOTES}"))
+        if unit.moved_at_s:
+            entry[MOVED_AT] = _to_json(list(unit.moved_at_s), source, f"{where}.{MOVED_AT}")
         units[name] = entry
-    failed = result.extras.get(FAILED_UNITS)
-    if isinstance(failed, Mapping):  # units without a pose are listed too (never lose a unit)
-        for name, reason in failed.items():
-            if isinstance(name, str) and name not in units:
-                units[name] = {
-                    "link": None,
-                    "position_m": None,
-                    "quaternion_wxyz": None,
-                    "observable": False,
-                    "position_std_m": None,
-                    "rotation_std_deg": None,
-                    "warnings": [str(reason)],
-                }
+    for name, reason in result.failed_units.items():  # units without a pose are listed too (never lose a unit)
+        if name not in units:
+            units[name] = {
+                "link": None,
+                "position_m": None,
+                "quaternion_wxyz": None,
+                "observable": False,
+                "position_std_m": None,
+                "rotation_std_deg": None,
+                "warnings": [reason],
+            }
     doc["units"] = units
     _Checker(source).document(doc)
     _check_event_fields(doc, source)
     return doc
 
 
-def _check_event_fields(doc: dict[str, Any], source: str) -> list[dict[str, Any]] | None:
+def _no_clash(
+    extras: Mapping[str, Any], contract: tuple[str, ...], typed: tuple[str, ...], source: str, where: str, owner: str
+) -> None:
+    """Refuse extras that redefine a contract field or hold a typed field (its one place is ``owner``'s field)."""
+    clash = sorted(set(extras) & set(contract))
+    if clash:
+        raise DatasetError(f"{source}: {where} may not redefine contract field(s) {', '.join(clash)}")
+    clash = sorted(set(extras) & set(typed))
+    if clash:
+        fields = ", ".join(f"{owner}.{k}" for k in clash)
+        raise DatasetError(f"{source}: {where} may not hold {', '.join(clash)}: they go in {fields}")
+
+
+def _check_event_fields(doc: dict[str, Any], source: str) -> tuple[MoveEvent, ...]:
     """The moved-unit fields of a result document: top-level ``events`` (units of the document) and
-    per-unit ``moved_at_s``; returns the normalised events (None without any)."""
+    per-unit ``moved_at_s``; returns the events (none without ``events``)."""
     for name, entry in doc["units"].items():
         if MOVED_AT in entry:
             _check_moved_at(entry[MOVED_AT], f"{source}: units.{name}")
     if EVENTS not in doc:
-        return None
+        return ()
     return check_events(doc[EVENTS], f"{source}: {EVENTS}", units=set(doc["units"]))
+
+
+def _failed_units(doc: dict[str, Any], source: str, unposed: bool) -> dict[str, str]:
+    """The top-level ``failed_units``: an object of unit name -> reason, or (hand-written, in a file
+    without ``null``-pose unit entries) a list of names, each then ``"not calibrated"``."""
+    listed = doc.get(FAILED_UNITS)
+    if listed is None:
+        return {}
+    if isinstance(listed, dict):
+        return {k: str(v) for k, v in listed.items()}
+    if not unposed and isinstance(listed, list) and all(isinstance(k, str) for k in listed):
+        return dict.fromkeys(listed, "not calibrated")
+    raise DatasetError(f"{source}: {FAILED_UNITS} must be an object of unit name -> reason, got {_short(listed)}")
+
+
+def _unit_fields(entry: dict[str, Any], source: str, where: str) -> dict[str, Any]:
+    """The typed per-unit fields of a unit entry (those it has), checked."""
+    out: dict[str, Any] = {}
+    if LINK_CONFIDENCE in entry:
+        value = entry[LINK_CONFIDENCE]
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        if value is not None and not (number and 0.0 <= value <= 1.0):
+            raise DatasetError(
+                f"{source}: {where}.{LINK_CONFIDENCE} must be a number in [0, 1] or null, got {_short(value)}"
+            )
+        out["link_confidence"] = math.nan if value is None else float(value)
+    if entry.get(POSE_COVARIANCE) is not None:
+        out["pose_covariance"] = check_pose_covariance(entry[POSE_COVARIANCE], f"{source}: {where}.{POSE_COVARIANCE}")
+    if entry.get(NOTES) is not None:
+        out["notes"] = _notes(entry[NOTES], f"{source}: {where}.{NOTES}")
+    if MOVED_AT in entry:
+        out["moved_at_s"] = tuple(float(t) for t in entry[MOVED_AT])
+    return out
 
 
 def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
     """Validate a parsed JSON document and build the :class:`CalibrationResult`."""
     _Checker(source).document(doc)
+    events = _check_event_fields(doc, source)
     units = {}
     unposed: dict[str, str] = {}
+    skip = (*_UNIT_KEYS, *IMU_KEYS, *_TYPED_UNIT)
     for name, entry in doc["units"].items():
         rotation_only = entry["position_m"] is None and entry["link"] is not None  # no position (has_position)
         if entry["quaternion_wxyz"] is None or (entry["position_m"] is None and not rotation_only):
@@ -561,36 +619,31 @@ def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
         except ConfigError as exc:
             raise DatasetError(f"{source}: units.{name} is not a valid pose: {exc}") from None
         stds = {k: None if entry[k] is None else np.array(_none_to_nan(entry[k]), dtype=float) for k in _UNIT_KEYS[4:6]}
-        extras = {k: _from_json(v) for k, v in entry.items() if k not in _UNIT_KEYS and k not in IMU_KEYS}
+        extras_pos: dict[str, Any] = {}
         if rotation_only:
             stds["position_std_m"] = np.full(3, np.nan)
-            extras[POSITION_DETERMINED] = False
+            extras_pos[POSITION_DETERMINED] = False
         units[name] = UnitResult(
             pose=pose,
             observable=entry["observable"],
             warnings=tuple(entry["warnings"]),
-            extras=extras,
+            extras={**{k: _from_json(v) for k, v in entry.items() if k not in skip}, **extras_pos},
             imu=_Checker(source).imu(entry, f"units.{name}"),
             **stds,
+            **_unit_fields(entry, source, f"units.{name}"),
         )
-    extras = {k: _from_json(v) for k, v in doc.items() if k not in _TOP_KEYS}
-    events = _check_event_fields(doc, source)
-    if events is not None:
-        extras[EVENTS] = events
-    if unposed:
-        listed = extras.get(FAILED_UNITS, {})
-        if not isinstance(listed, dict):
-            raise DatasetError(
-                f"{source}: {FAILED_UNITS} must be an object of unit name -> reason, got {_short(doc[FAILED_UNITS])}"
-            )
-        extras[FAILED_UNITS] = {**listed, **unposed}
+    listed = _failed_units(doc, source, bool(unposed))
     return CalibrationResult(
         method=doc["method"],
         robot=doc["robot"],
         dataset_sha256=doc["dataset_sha256"],
         runtime_s=float(doc["runtime_s"]),
         units=units,
-        extras=extras,
+        extras={k: _from_json(v) for k, v in doc.items() if k not in _TOP_KEYS and k not in _TYPED_TOP},
+        failed_units={**listed, **unposed},
+        notes=_notes(doc[NOTES], f"{source}: {NOTES}") if doc.get(NOTES) is not None else (),
+        events=events,
+        reference=doc.get(REFERENCE),
     )
 
 

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from skincal.data.dataset import Dataset
-from skincal.data.result import check_events
+from skincal.data.events import check_events
 from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
 
 FORMAT = "skincal-dataset"
@@ -204,7 +204,7 @@ class DatasetWriter:
             events = f.create_group("events", track_order=True)
             for k, event in enumerate(check_events(list(ds.events), "events", units=set(ds.imu))):
                 g = events.create_group(str(k))
-                for key, value in event.items():
+                for key, value in event.fields().items():
                     g.attrs[key] = value if isinstance(value, str) else np.asarray(value, dtype=np.float64)
-                if "link" in event:
-                    g.attrs["link"] = np.int64(event["link"])
+                if event.link is not None:
+                    g.attrs["link"] = np.int64(event.link)

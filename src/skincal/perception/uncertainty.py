@@ -10,7 +10,7 @@ A reading ``r`` of unit ``su`` on link ``l`` at joint angles ``q`` is the base-f
 ``covariance``): ``(x, y, z, rx, ry, rz)`` in the link frame's axes; the position error adds,
 ``p_ls = p_ls_est + dp``, and the rotation error is about the link's fixed axes (a left
 perturbation), ``R_ls = Exp(dtheta) R_ls_est``. ``position_std_m`` / ``rotation_std_deg`` are the std of
-``dp`` / ``dtheta``; a result extra ``pose_covariance`` (6x6, same order, m^2 and rad^2) is used when
+``dp`` / ``dtheta``; a unit's ``pose_covariance`` (6x6, same order, m^2 and rad^2) is used when
 present (:func:`skincal.data.export.pose_covariance`).
 
 **Jacobians** at the estimate (``[u]_x`` the cross-product matrix)::
@@ -61,7 +61,7 @@ def unit_pose_covariance(
 ) -> FloatArray:
     """``(6, 6)`` pose covariance of a calibrated unit in its link axes (module docstring), m^2 and rad^2.
 
-    From the result's ``pose_covariance`` extra or ``position_std_m`` / ``rotation_std_deg``; an axis the
+    From the unit's ``pose_covariance`` or ``position_std_m`` / ``rotation_std_deg``; an axis the
     result leaves undetermined, or a unit without any (``unit`` None or no std), gets the assumed std
     of ``config`` (:func:`assumed_pose_covariance`) there.
     """

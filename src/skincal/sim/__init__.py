@@ -8,7 +8,7 @@ the obstacles, ``faults`` the faults of real sessions.
 
 from skincal.sim.joint_states import JOINT_PRESETS, JointStateModel, get_joint_model
 from skincal.sim.scene import Obstacle, Primitive, Scene, TimeTable
-from skincal.sim.session import BACKENDS, Session, register_backend, simulate
+from skincal.sim.session import BACKENDS, Session, SimOptions, register_backend, simulate
 
 __all__ = [
     "BACKENDS",
@@ -18,6 +18,7 @@ __all__ = [
     "Primitive",
     "Scene",
     "Session",
+    "SimOptions",
     "TimeTable",
     "get_joint_model",
     "register_backend",

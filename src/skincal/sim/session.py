@@ -2,14 +2,14 @@
 
 Both simulators take the same session: the robot, the true unit poses, the protocol motion, the IMU,
 joint-state and clock models and the random generator. The backend registry maps a name to a
-function ``(session, progress=None, **options) -> Dataset``; ``options`` are the backend's own
-(``mujoco``: ``mode``, ``position_gain``, ``model_options``, ``scene``, ``tof_model``).
+function ``(session, options, progress) -> Dataset``; :class:`SimOptions` says how (the ToF scene and
+model; for ``mujoco`` also ``mode``, ``position_gain``, ``model_options``).
 ``progress(done, total)`` is called after each unit.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -23,6 +23,7 @@ from skincal.sim.joint_states import JointStateModel
 from skincal.skin.clock import ClockModel
 from skincal.skin.imu import ImuModel
 from skincal.skin.pose import SkinUnitPose
+from skincal.skin.tof import TofModel
 
 Progress = Callable[[int, int], None]
 """``progress(done, total)``: units simulated so far out of all."""
@@ -55,9 +56,31 @@ class Session:
     description: str = ""
 
 
-Backend = Callable[..., Dataset]
+@dataclass(frozen=True)
+class SimOptions:
+    """How a simulator runs a :class:`Session` (the session says what is simulated).
+
+    Attributes:
+        scene: obstacle primitives in the base frame; when given, every unit also gets a ToF stream.
+        tof_model: the time-of-flight model (``None``: :class:`skincal.skin.tof.TofModel` defaults).
+        mode: ``mujoco`` only: ``"kinematic"`` (imposed motion) or ``"dynamic"`` (velocity servos
+            under gravity).
+        position_gain: ``mujoco`` only: ``kp`` of the dynamic mode's velocity command, 1/s (``None``:
+            :data:`skincal.sim.mujoco_backend.POSITION_GAIN`).
+        model_options: ``mujoco`` only: extra keyword arguments of
+            :func:`skincal.sim.mujoco_model.build_model` (e.g. ``link_radius``).
+    """
+
+    scene: Sequence[Any] | None = None
+    tof_model: TofModel | None = None
+    mode: str = "kinematic"
+    position_gain: float | None = None
+    model_options: Mapping[str, Any] | None = None
+
+
+Backend = Callable[[Session, SimOptions, "Progress | None"], Dataset]
 BACKENDS: dict[str, Backend] = {}
-"""Simulator name -> ``fn(session, progress=None, **options) -> Dataset``."""
+"""Simulator name -> ``fn(session, options, progress) -> Dataset``."""
 
 
 def register_backend(name: str) -> Callable[[Backend], Backend]:
@@ -70,32 +93,39 @@ def register_backend(name: str) -> Callable[[Backend], Backend]:
     return add
 
 
-def _run(run: Callable[..., Dataset], s: Session, progress: Progress | None, options: dict[str, Any]) -> Dataset:
-    """Call a simulator function with the session's parts (both share this signature)."""
-    return run(
-        s.chain, s.placements, s.trajectory, s.imu_model, s.rng, gravity=s.gravity, description=s.description,
-        joint_model=s.joint_model, clock_model=s.clock_model, progress=progress, **options,
+@register_backend("analytic")
+def _analytic(s: Session, options: SimOptions, progress: Progress | None) -> Dataset:
+    from skincal.sim.analytic import simulate
+
+    if options.mode != "kinematic" or options.position_gain is not None or options.model_options is not None:
+        raise ConfigError("mode, position_gain and model_options are options of the mujoco backend only")
+    return simulate(
+        s.chain, s.placements, s.trajectory, s.imu_model, s.rng, tof_model=options.tof_model, scene=options.scene,
+        gravity=s.gravity, description=s.description, joint_model=s.joint_model, clock_model=s.clock_model,
+        progress=progress,
     )  # fmt: skip
 
 
-@register_backend("analytic")
-def _analytic(session: Session, progress: Progress | None = None, **options: Any) -> Dataset:
-    from skincal.sim.analytic import simulate
-
-    return _run(simulate, session, progress, options)
-
-
 @register_backend("mujoco")
-def _mujoco(session: Session, progress: Progress | None = None, **options: Any) -> Dataset:
-    from skincal.sim.mujoco_backend import simulate_mujoco
+def _mujoco(s: Session, options: SimOptions, progress: Progress | None) -> Dataset:
+    from skincal.sim.mujoco_backend import POSITION_GAIN, simulate_mujoco
 
-    return _run(simulate_mujoco, session, progress, options)
+    gain = POSITION_GAIN if options.position_gain is None else options.position_gain
+    return simulate_mujoco(
+        s.chain, s.placements, s.trajectory, s.imu_model, s.rng, mode=options.mode, scene=options.scene,
+        tof_model=options.tof_model, gravity=s.gravity, description=s.description,
+        position_gain=gain, model_options=options.model_options, joint_model=s.joint_model,
+        clock_model=s.clock_model, progress=progress,
+    )  # fmt: skip
 
 
-def simulate(session: Session, backend: str = "analytic", progress: Progress | None = None, **options: Any) -> Dataset:
-    """Simulate ``session`` with the simulator ``backend`` (a name in :data:`BACKENDS`)."""
+def simulate(
+    session: Session, backend: str = "analytic", progress: Progress | None = None, options: SimOptions | None = None
+) -> Dataset:
+    """Simulate ``session`` with the simulator ``backend`` (a name in :data:`BACKENDS`) and its ``options``
+    (default: :class:`SimOptions` defaults)."""
     try:
         run = BACKENDS[backend]
     except KeyError:
         raise ConfigError(f"unknown backend '{backend}' (use {' or '.join(BACKENDS)})") from None
-    return run(session, progress=progress, **options)
+    return run(session, SimOptions() if options is None else options, progress)

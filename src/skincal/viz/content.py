@@ -5,15 +5,14 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
-from typing import Any
 
 import numpy as np
 
-from skincal.calib.metrics import evaluate
+from skincal.calib.metrics import Evaluation, evaluate
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.residuals import PLOT_POINTS, UnitResiduals, unit_activity, unit_residuals
 from skincal.data.dataset import Dataset, ImuStream
-from skincal.data.result import CalibrationResult, failed_units
+from skincal.data.result import CalibrationResult
 from skincal.errors import DatasetError
 from skincal.kinematics.transforms import FloatArray
 from skincal.parallel import can_fork, imap
@@ -79,7 +78,7 @@ class ReportContent:
             :meth:`UnitResiduals.thinned`) of the units the report plots: the worst ``shown`` units of
             ``ranking``, worst first. The full residual RMS of every unit is in ``rows``.
         activity: ``(units, n)`` data coverage (:func:`activity_matrix`), rows in ``rows`` order.
-        evaluation: the ``skincal evaluate`` document when the dataset has truth for every unit, else None.
+        evaluation: the ``skincal evaluate`` errors when the dataset has truth for every unit, else None.
         failed: units the method could not calibrate, with the reason.
         ranking: every calibrated unit, worst first by the key figure (:class:`Ranking`).
     """
@@ -89,7 +88,7 @@ class ReportContent:
     rows: list[UnitRow]
     residuals: dict[str, UnitResiduals]
     activity: FloatArray
-    evaluation: dict[str, Any] | None
+    evaluation: Evaluation | None
     failed: dict[str, str]
     ranking: Ranking = field(default_factory=lambda: Ranking("", {}))
 
@@ -125,7 +124,7 @@ def collect(
     ranking = None
     keep: set[str] = set()
     if evaluation is not None:  # the key figure is known before the residuals: keep only the shown units' traces
-        ranking = rank_units({u: evaluation["units"][u]["position_error_mm"] for u in result.units},
+        ranking = rank_units({u: evaluation.units[u].position_error_mm for u in result.units},
                              "position error against the truth [mm]")
         keep = set(ranking.worst(shown))
     keep_all = ranking is None
@@ -172,7 +171,7 @@ def collect(
                 warnings=unit.warnings,
             )
         )
-    return ReportContent(result, dataset, rows, residuals, activity, evaluation, failed_units(result), ranking)
+    return ReportContent(result, dataset, rows, residuals, activity, evaluation, dict(result.failed_units), ranking)
 
 
 def _per_unit(

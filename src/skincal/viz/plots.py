@@ -16,6 +16,7 @@ from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
+from skincal.calib.metrics import Evaluation
 from skincal.calib.residuals import PLOT_POINTS, UnitResiduals
 from skincal.data.dataset import Segments
 from skincal.kinematics.transforms import FloatArray
@@ -170,19 +171,19 @@ def bias_figure(units: list[str], bias_mps2: FloatArray, bias_true_mps2: FloatAr
     return fig
 
 
-def error_figure(evaluation: dict) -> Figure:
-    """Position error (mm) and rotation error (deg) per unit from an evaluation document (grey:
-    unobservable units); bars up to :data:`LABELLED_UNITS` units, markers beyond."""
-    names = list(evaluation["units"])
-    pos = [evaluation["units"][u]["position_error_mm"] for u in names]
-    rot = [evaluation["units"][u]["rotation_error_deg"] for u in names]
+def error_figure(evaluation: Evaluation) -> Figure:
+    """Position error (mm) and rotation error (deg) per unit of an evaluation (grey: unobservable
+    units); bars up to :data:`LABELLED_UNITS` units, markers beyond."""
+    names = list(evaluation.units)
+    pos = [evaluation.units[u].position_error_mm for u in names]
+    rot = [evaluation.units[u].rotation_error_deg for u in names]
     many = len(names) > LABELLED_UNITS
     fig = Figure(figsize=(10 if many else 1.5 + 1.6 * len(names), 2.6), layout="constrained")
     ax_p, ax_r = fig.subplots(1, 2)
     x = np.arange(len(names)) + (1 if many else 0)
     for ax, vals, label, color in ((ax_p, pos, "position error [mm]", "#1f77b4"), (ax_r, rot, "rotation error [deg]",
                                                                                  "#ff7f0e")):
-        colors = [color if evaluation["units"][u]["observable"] else "0.6" for u in names]
+        colors = [color if evaluation.units[u].observable else "0.6" for u in names]
         if many:
             ax.scatter(x, vals, s=6, c=colors)
         else:

@@ -99,10 +99,10 @@ def _worst_section(content: ReportContent, n: int) -> str:
         notes = ([] if r.observable else ['<b class="warn">unobservable</b>']) + [_e(w) for w in r.warnings]
         link = str(r.link)
         if ev is not None:
-            u = ev["units"][name]
-            if u["link_true"] != u["link_estimated"]:
-                link += f' <b class="warn">(true {u["link_true"]})</b>'
-            extra = [f"{u['rotation_error_deg']:.4f}"]
+            u = ev.units[name]
+            if u.link_true != u.link_estimated:
+                link += f' <b class="warn">(true {u.link_true})</b>'
+            extra = [f"{u.rotation_error_deg:.4f}"]
         else:
             extra = []
         extra += [_vec(r.position_std_m, ".3f", 1e3), _vec(r.rotation_std_deg, ".3f")]
@@ -139,16 +139,16 @@ def _errors_section(content: ReportContent) -> str:
     if ev is None:
         return '<p class="muted">The dataset has no truth (a real recording): no errors to show.</p>'
     rows = []
-    for name, u in ev["units"].items():
-        link = f"{u['link_true']}" + ("" if u["link_true"] == u["link_estimated"] else
-                                      f' <b class="warn">(est. {u["link_estimated"]})</b>')
-        mark = "" if u["observable"] else ' <span class="muted">(unobservable)</span>'
-        rows.append([_e(name) + mark, link, f"{u['position_error_mm']:.3f}", f"{u['rotation_error_deg']:.4f}",
-                     f"{u['quaternion_distance']:.5f}"])
-    if ev["mean_position_error_mm"] is not None:
-        rows.append(["<b>mean (observable)</b>", f"{ev['links_correct']}/{ev['units_total']} links ok",
-                     f"<b>{ev['mean_position_error_mm']:.3f}</b>", f"<b>{ev['mean_rotation_error_deg']:.4f}</b>",
-                     f"<b>{ev['mean_quaternion_distance']:.5f}</b>"])
+    for name, u in ev.units.items():
+        link = f"{u.link_true}" + ("" if u.link_true == u.link_estimated else
+                                      f' <b class="warn">(est. {u.link_estimated})</b>')
+        mark = "" if u.observable else ' <span class="muted">(unobservable)</span>'
+        rows.append([_e(name) + mark, link, f"{u.position_error_mm:.3f}", f"{u.rotation_error_deg:.4f}",
+                     f"{u.quaternion_distance:.5f}"])
+    if ev.mean_position_error_mm is not None:
+        rows.append(["<b>mean (observable)</b>", f"{ev.links_correct}/{ev.units_total} links ok",
+                     f"<b>{ev.mean_position_error_mm:.3f}</b>", f"<b>{ev.mean_rotation_error_deg:.4f}</b>",
+                     f"<b>{ev.mean_quaternion_distance:.5f}</b>"])
     table = _table(["unit", "true link", "position error [mm]", "rotation error [deg]", "quaternion distance"], rows)
     return table + f'<img alt="pose errors" src="{plots.png_data_uri(plots.error_figure(ev))}">'
 
@@ -211,11 +211,11 @@ def _render_html(content: ReportContent, dataset_sha256: str | None, worst: int,
         f"dataset: {_e(ds.description or '(no description)')}; {ds.duration:.1f} s, "
         f"{len(ds.segments) if ds.segments is not None else 0} segments",
     ]
-    if content.evaluation is not None and content.evaluation["mean_position_error_mm"] is not None:
+    if content.evaluation is not None and content.evaluation.mean_position_error_mm is not None:
         ev = content.evaluation
-        summary.append(f"mean error against truth: <b>{ev['mean_position_error_mm']:.3f} mm</b>, "
-                       f"<b>{ev['mean_rotation_error_deg']:.4f} deg</b>; links {ev['links_correct']}/"
-                       f"{ev['units_total']} correct")
+        summary.append(f"mean error against truth: <b>{ev.mean_position_error_mm:.3f} mm</b>, "
+                       f"<b>{ev.mean_rotation_error_deg:.4f} deg</b>; links {ev.links_correct}/"
+                       f"{ev.units_total} correct")
     failed = "".join(f"<li><b>{_e(k)}</b>: {_e(v)}</li>" for k, v in content.failed.items())
     from skincal.viz import plots
 

@@ -69,13 +69,13 @@ def render_markdown(content: ReportContent, worst: int = WORST_SHOWN) -> str:
     ev = content.evaluation
     if ev is not None:
         out += ["", "## Errors against truth", ""]
-        erows = [[name, f"{u['link_true']}/{u['link_estimated']}", f"{u['position_error_mm']:.3f}",
-                  f"{u['rotation_error_deg']:.4f}", f"{u['quaternion_distance']:.5f}"]
-                 for name, u in ev["units"].items()]
-        if ev["mean_position_error_mm"] is not None:
-            erows.append(["**mean**", f"{ev['links_correct']}/{ev['units_total']} ok",
-                          f"**{ev['mean_position_error_mm']:.3f}**", f"**{ev['mean_rotation_error_deg']:.4f}**",
-                          f"**{ev['mean_quaternion_distance']:.5f}**"])
+        erows = [[name, f"{u.link_true}/{u.link_estimated}", f"{u.position_error_mm:.3f}",
+                  f"{u.rotation_error_deg:.4f}", f"{u.quaternion_distance:.5f}"]
+                 for name, u in ev.units.items()]
+        if ev.mean_position_error_mm is not None:
+            erows.append(["**mean**", f"{ev.links_correct}/{ev.units_total} ok",
+                          f"**{ev.mean_position_error_mm:.3f}**", f"**{ev.mean_rotation_error_deg:.4f}**",
+                          f"**{ev.mean_quaternion_distance:.5f}**"])
         out += _table(["unit", "link true/est", "position error [mm]", "rotation error [deg]", "quat. distance"], erows)
     out += ["", "## Data coverage", "", "Joints whose motion moved each unit (activity >= threshold; `.` = no, "
             "`?` = joint never excited).", ""]

@@ -278,14 +278,14 @@ def run_simulated(
             return record
         done = settled["now"].result()
         assert sim.dataset is not None
-        return replace(record, true_errors=evaluate(done, sim.dataset) if done.units else {"units": {}})
+        return replace(record, true_errors=evaluate(done, sim.dataset).to_dict() if done.units else {"units": {}})
 
     loop = adaptive_loop(cal, chain, q0, sim.execute, rng, max_motion_s=max_motion_s, options=options,
                          settled=settle, on_segment=on_segment, record_hook=with_truth)  # fmt: skip
     cal.finish()
     result = cal.result()
     assert sim.dataset is not None and sim.trajectory is not None
-    errors = evaluate(result, sim.dataset) if result.units else {"units": {}}
+    errors = evaluate(result, sim.dataset).to_dict() if result.units else {"units": {}}
     return SimulatedRun(loop, loop.motion_s, result, errors, sim.dataset, sim.trajectory)
 
 

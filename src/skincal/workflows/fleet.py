@@ -46,7 +46,7 @@ def calibrate_file(job: FleetJob) -> FleetRecord:
     """Calibrate one dataset file into its result file (module docstring)."""
     from skincal.calib import calibrate
     from skincal.data.hdf5 import read_dataset
-    from skincal.data.result import failed_units, sha256_file, write_result
+    from skincal.data.result import sha256_file, write_result
 
     try:
         ds = read_dataset(job.dataset)
@@ -58,7 +58,7 @@ def calibrate_file(job: FleetJob) -> FleetRecord:
         write_result(result, job.out)
     except SkincalError as exc:
         return FleetRecord(str(job.dataset), str(job.out), error=str(exc))
-    failed = len([u for u in failed_units(result) if u not in result.units])
+    failed = len([u for u in result.failed_units if u not in result.units])
     return FleetRecord(str(job.dataset), str(job.out), len(result.units), failed, result.runtime_s)
 
 

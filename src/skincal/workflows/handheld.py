@@ -85,7 +85,7 @@ def handheld_dataset(
 def relative_errors(result: CalibrationResult, dataset: Dataset) -> dict[str, dict[str, Any]]:
     """Per unit on the reference's body: position error (m, ``(3,)`` in the reference frame), rotation
     error (rad, ``(3,)`` rotation vector of ``R_true^T R_est``), and the reported std (m, deg)."""
-    reference = result.extras["reference"]
+    reference = result.reference
     truth = dataset.truth_body
     ref = truth[reference]
     out: dict[str, dict[str, Any]] = {}

@@ -25,7 +25,7 @@ import numpy as np
 
 from skincal.calib.online.monitor import Alarm, MonitorOptions, MovedUnitMonitor
 from skincal.data.dataset import Dataset, ImuStream, JointStates, Segments
-from skincal.data.result import CalibrationResult, UnitResult
+from skincal.data.result import CalibrationResult, UnitResult, with_events
 from skincal.errors import ConfigError
 from skincal.kinematics.transforms import FloatArray, rotation_angle
 from skincal.skin.pose import SkinUnitPose
@@ -151,7 +151,7 @@ class MonitorRun:
         poses: the final pose of every unit (after re-calibration for a moved one).
         thresholds: per unit, the CUSUM threshold of its last warm-up (None: never left warm-up).
         watched_s: per unit, the time span watched (after the warm-up), s.
-        result: the final calibration with the events recorded (:func:`with_events`).
+        result: the final calibration with the events recorded (:func:`~skincal.data.result.with_events`).
     """
 
     initial: CalibrationResult | None
@@ -230,19 +230,6 @@ def monitor_batch(
         final[name] = unit
     run.result = with_events(replace(initial, units={**initial.units, **final}), run.events)
     return run
-
-
-def with_events(result: CalibrationResult, events: Sequence[dict[str, Any]]) -> CalibrationResult:
-    """``result`` with the moved-unit events recorded (``docs/interfaces.md``): the top-level ``events`` and
-    each moved unit's ``moved_at_s`` (the input is not modified)."""
-    from skincal.data.result import EVENTS, MOVED_AT
-
-    units = dict(result.units)
-    for name in {e["unit"] for e in events}:
-        if name in units:
-            moved = [float(e["t_change_s"]) for e in events if e["unit"] == name]
-            units[name] = replace(units[name], extras={**units[name].extras, MOVED_AT: moved})
-    return replace(result, units=units, extras={**result.extras, EVENTS: [dict(e) for e in events]})
 
 
 def monitor_online(

@@ -145,7 +145,7 @@ def simulate_dataset(
 ):
     """A simulated :class:`~skincal.data.Dataset` from preset names (:func:`make_session`, then
     :func:`skincal.sim.simulate` on ``backend``); ``progress(done, total)`` after each unit."""
-    from skincal.sim import simulate
+    from skincal.sim import SimOptions, simulate
 
     if backend not in BACKENDS:
         raise ConfigError(f"unknown backend '{backend}' (use {' or '.join(BACKENDS)})")
@@ -160,5 +160,5 @@ def simulate_dataset(
         + (f" joints={joints}" if joints != "ideal" else "")
         + (f" clock={clock}" if clock != "ideal" else "")
     )
-    options = {"mode": mujoco_mode} if backend == "mujoco" else {}
-    return simulate(replace(session, description=text), backend, progress=progress, **options)
+    options = SimOptions(mode=mujoco_mode) if backend == "mujoco" else SimOptions()
+    return simulate(replace(session, description=text), backend, progress=progress, options=options)

@@ -690,7 +690,7 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     """Calibrate one unit with the default method (module docstring)."""
     warnings: list[str] = []
     extras: dict = {}
-    start = None
+    start, confidence = None, None
     early_notes: list[str] = []
     account = problem.samples.account
     if account is not None:  # the gyroscope's screening (the accelerometer's reaches the result elsewhere)
@@ -698,7 +698,6 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     if problem.link == 0:
         link, confidence, link_warnings, levels, start, by_gyro = choose_link(problem)
         warnings += link_warnings
-        extras["link_confidence"] = confidence
         extras["link_residual_mps2"] = {str(k): v for k, v in levels.items()}
         ruled_out = None if by_gyro is None else by_gyro.note()
         if ruled_out:
@@ -860,8 +859,6 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         extras["accel_scale"] = np.diag(st.A).copy()
         sym = 0.5 * (st.E + st.E.T)
         extras["accel_misalignment_sym"] = sym - np.diag(np.diag(sym))
-    if notes:
-        extras["notes"] = notes
     return UnitResult(
         pose=SkinUnitPose(link, st.R, st.p),
         observable=observable,
@@ -870,6 +867,8 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         warnings=tuple(warnings),
         extras=extras,
         imu=ImuCalibration(**imu),
+        link_confidence=confidence,
+        notes=tuple(notes),
     )
 
 

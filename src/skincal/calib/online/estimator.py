@@ -29,7 +29,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -50,7 +50,7 @@ from skincal.calib.timing import (
 )
 from skincal.data.dataset import Dataset, JointStates
 from skincal.data.imu_calibration import ImuCalibration
-from skincal.data.result import EVENTS, MOVED_AT, CalibrationResult, UnitResult
+from skincal.data.result import CalibrationResult, UnitResult, with_events
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray
@@ -1059,24 +1059,15 @@ class OnlineCalibrator:
                 "saturated_samples": st.saturated,
                 "realigned": st.realigned,
                 "scale_estimated": st.scale_estimated,
-                "pose_covariance": cov,
             }
-            if notes:
-                extras["notes"] = notes
             units[name] = UnitResult(
                 pose=s.pose, observable=True, position_std_m=s.position_std_m, rotation_std_deg=s.rotation_std_deg,
-                warnings=tuple(warnings), extras=extras, imu=imu,
+                warnings=tuple(warnings), extras=extras, imu=imu, pose_covariance=cov, notes=tuple(notes),
             )  # fmt: skip
         top: dict[str, Any] = {"late_samples": self.late, "cpu_s": self.cpu_s}
-        if failed:
-            top["failed_units"] = failed
-        if self.events:
-            top[EVENTS] = self._events_now(units)
-            for name in {e["unit"] for e in self.events} & set(units):
-                moved = [float(e["t_change_s"]) for e in self.events if e["unit"] == name]
-                units[name] = replace(units[name], extras={**units[name].extras, MOVED_AT: moved})
-        return CalibrationResult("online", self.chain.name, dataset_sha256, time.perf_counter() - self._t_start,
-                                 units, top)  # fmt: skip
+        result = CalibrationResult("online", self.chain.name, dataset_sha256, time.perf_counter() - self._t_start,
+                                   units, top, failed_units=failed)  # fmt: skip
+        return with_events(result, self._events_now(units)) if self.events else result
 
     def _events_now(self, units: Mapping[str, UnitResult]) -> list[dict]:
         """The recorded events, each unit's last one completed with the pose re-calibrated since
