@@ -9,6 +9,7 @@ or the method's own discovery when it has one).
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from collections.abc import Callable, Generator, Iterator, Mapping
@@ -280,11 +281,22 @@ def calibrate(
     if getattr(parsed, "consistency", False):  # the split check (skincal.calib.consistency)
         from skincal.calib.consistency import check
 
+        part_options = dataclasses.replace(parsed, consistency=False)
+
         def refit(part: Dataset, part_links: dict[str, int]) -> CalibrationResult:
-            return calibrate(
-                part, method, seed=seed, links=part_links, use_dataset_qdd=use_dataset_qdd, qdd_window_s=qdd_window_s,
-                units=list(part_links), workers=workers, **{**options, "consistency": False},
-            )  # fmt: skip
+            """The method on a part of the recording: the same joint conditioning and shared tables (they do
+            not depend on the IMU samples), the units on their links."""
+            units: dict[str, UnitResult] = {}
+            part_failed: dict[str, str] = {}
+            for k, name in enumerate(part_links):
+                try:
+                    units[name] = calibrate_unit(
+                        part, name, spec, link=part_links[name], rng=np.random.default_rng([seed, k]),
+                        interpolator=interpolator, shared=shared, options=part_options,
+                    )  # fmt: skip
+                except CalibrationError as exc:
+                    part_failed[name] = str(exc)
+            return CalibrationResult(method, dataset.chain.name, "", 0.0, units, failed_units=part_failed)
 
         result = check(tagged, result, refit)
     return result

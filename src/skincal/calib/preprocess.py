@@ -672,7 +672,10 @@ def unit_samples(
     finite = np.all(np.isfinite(accel), axis=1)
     unit_warnings = check_accel_units(unit, accel[finite], float(np.linalg.norm(dataset.gravity)))
     tj = dataset.joint_states.t
-    inside_joints = (t >= tj[0]) & (t <= tj[-1])
+    t0, t1 = float(tj[0]), float(tj[-1])
+    if interpolator is not None:  # a conditioned (spline) stream may end a grid step inside the reports
+        t0, t1 = max(t0, interpolator.t_start), min(t1, interpolator.t_end)
+    inside_joints = (t >= t0) & (t <= t1)
     keep = finite & inside_joints
     t, accel = t[keep], accel[keep]
     gyro = None if imu.gyro is None else np.asarray(imu.gyro, dtype=float)[keep]
