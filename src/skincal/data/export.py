@@ -14,6 +14,10 @@ Link frame names come from the robot (:func:`robot_names`), no map needed:
   because those URDF frames are the presets' modified-DH frames (same origins and axes);
 * any other DH chain (``ur5e``, ``sawyer``, a DH chain file): ``<robot>_dh_link<i>``, since its DH
   frames are *not* the maker's URDF frames and must not be taken for them;
+* a result exported onto another description of its robot (a DH preset's result onto the maker's
+  URDF): each pose is moved into the target's link frame, ``X_i @ T_link_su`` with ``X_i =
+  T_targetlink_sourcelink`` from both chains' forward kinematics (:func:`link_offsets`, refused when
+  they do not move alike; the source chain from :func:`result_chain` or the dataset);
 * ``--robot-links map.yaml`` overrides: ``{links: {<i>: <frame> | {frame: <name>, xyz: [m], rpy:
   [rad]}}}``; ``rpy`` is URDF's fixed-axis roll-pitch-yaw, ``R = Rz(yaw) Ry(pitch) Rx(roll)``.
 
