@@ -23,6 +23,7 @@ from skincal.cli import main
 from skincal.data.export import export_result, load_link_map
 from skincal.data.result import CalibrationResult, UnitResult, result_to_dict
 from skincal.errors import ConfigError, DatasetError
+from skincal.kinematics import get_robot
 from skincal.names import name_problem
 from skincal.skin.pose import SkinUnitPose
 
@@ -220,8 +221,8 @@ def test_crafted_method_unit_and_robot_names_are_carried_as_data(tmp_path, metho
     link_map = _panda_map(tmp_path)  # the crafted robot name has no preset
     for fmt, check in {"urdf": None, **CHECKS}.items():
         out = tmp_path / f"skin.{fmt}"
-        if fmt == "urdf":  # a complete URDF takes the robot, not a link map
-            export_result(result, fmt, out, robot="panda", prefix=prefix)
+        if fmt == "urdf":  # a complete URDF takes the robot, not a link map; its dataset's chain names the robot
+            export_result(result, fmt, out, robot="panda", prefix=prefix, source=get_robot("panda"))
         else:
             export_result(result, fmt, out, link_map=link_map, prefix=prefix)
         if check is None:

@@ -399,13 +399,15 @@ def test_cli_urdf_robot_range_frames_and_one_line_errors(tmp_path, capsys):
     assert "shoulder_link" in printed and "warning" not in printed
     links = {link.get("name") for link in ET.parse(out).getroot().findall("link")}
     assert {f"su{i}_0_range" for i in range(1, 7)} <= links and "upper_arm_link" in links
-    # the same result onto another robot: exported with a warning naming both
+    # a result of another robot onto this one: refused in one line naming both, nothing written
     write_result(_result("panda", 6, per_link=1), tmp_path / "p.json")
     assert (
         main(["export", str(tmp_path / "p.json"), "-f", "yaml", "-o", str(tmp_path / "p.yaml"), "--robot", str(path)])
-        == 0
+        == 2
     )
-    assert "warning: the result is for robot 'panda', exported onto 'ur5'" in capsys.readouterr().out
+    err = capsys.readouterr().err
+    assert "the result is for robot 'panda'" in err and "'ur5'" in err and err.count("\n") == 1, err
+    assert not (tmp_path / "p.yaml").exists()
     for extra, message in (
         (["--frame", "beam"], "unknown frame 'beam' (use unit or range)"),
         (["--base-link", "nope"], "--base-link 'nope' is not a link of the URDF"),

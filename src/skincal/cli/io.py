@@ -222,9 +222,15 @@ def export_cmd(
     frame: str = typer.Option("unit", help="unit: the unit frames; range: Range frames <unit>_range, +x along the "
                               "ToF beam (sensor_msgs/Range)"),
     prefix: str = typer.Option("", help="prefix of the unit frame names"),
+    dataset: Path | None = typer.Option(None, help="the dataset the result was computed from (.h5, checked by its "
+                                        "SHA-256): its robot (a URDF robot without --robot), and the frames the "
+                                        "poses are moved from onto --robot"),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
 ) -> None:
-    """Export calibrated unit poses onto the robot's link frames for ROS (URDF, xacro, YAML/JSON, TF node, CSV)."""
+    """Export calibrated unit poses onto the robot's link frames for ROS (URDF, xacro, YAML/JSON, TF node, CSV).
+
+    Each pose is moved from the link frame of the robot it was computed on into the same link's frame of
+    --robot (both chains' forward kinematics; refused when they do not move alike)."""
     from rich.markup import escape
 
     from skincal.data.export import export_result
@@ -234,20 +240,24 @@ def export_cmd(
     from skincal.names import printable
 
     robot_file = (Path(robot),) if robot is not None and robot not in PRESETS else ()
-    check_output(out, force=force, inputs=(result, *robot_file, *((robot_links,) if robot_links else ())))
+    check_output(out, force=force, inputs=(result, *robot_file, *((robot_links,) if robot_links else ()),
+                                           *((dataset,) if dataset else ())))
     res = read_result(result)
+    source = None
+    if dataset is not None:
+        from skincal.data.hdf5 import read_dataset
+        from skincal.data.provenance import check_result_dataset
+
+        ds = read_dataset(dataset)
+        _, provenance_warnings = check_result_dataset(res, result, ds, dataset)
+        for text in provenance_warnings:
+            console.print("[yellow]warning[/]: " + escape(printable(text)), highlight=False)
+        source = ds.chain
     frames = export_result(res, fmt, out, link_map=robot_links, prefix=prefix, robot=robot, base_link=base_link,
-                           tip_link=tip_link, frame=frame)
+                           tip_link=tip_link, frame=frame, source=source)
     # names come from the result and the link map: no markup, control characters shown escaped
     console.print(printable(f"wrote {out}: {len(frames)} unit(s) as {fmt} onto " + ", ".join(
         sorted({f.parent for f in frames}))), highlight=False, markup=False)
-    if robot is not None:
-        from skincal.data.provenance import result_robot
-
-        chain = result_robot(res, robot, base_link=base_link, tip_link=tip_link)
-        if chain is not None and chain.name != res.robot:
-            shown = printable(f"the result is for robot '{res.robot}', exported onto '{chain.name}' ({robot})")
-            console.print("[yellow]warning[/]: " + escape(shown), highlight=False)
     for name, reason in res.failed_units.items():
         if name not in res.units:
             console.print("[yellow]warning[/]: " + escape(printable(f"unit {name} not exported (not calibrated: "

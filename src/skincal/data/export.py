@@ -14,6 +14,10 @@ Link frame names come from the robot (:func:`robot_names`), no map needed:
   because those URDF frames are the presets' modified-DH frames (same origins and axes);
 * any other DH chain (``ur5e``, ``sawyer``, a DH chain file): ``<robot>_dh_link<i>``, since its DH
   frames are *not* the maker's URDF frames and must not be taken for them;
+* a result exported onto another description of its robot (a DH preset's result onto the maker's
+  URDF): each pose is moved into the target's link frame, ``X_i @ T_link_su`` with ``X_i =
+  T_targetlink_sourcelink`` from both chains' forward kinematics (:func:`link_offsets`, refused when
+  they do not move alike; the source chain from :func:`result_chain` or the dataset);
 * ``--robot-links map.yaml`` overrides: ``{links: {<i>: <frame> | {frame: <name>, xyz: [m], rpy:
   [rad]}}}``; ``rpy`` is URDF's fixed-axis roll-pitch-yaw, ``R = Rz(yaw) Ry(pitch) Rx(roll)``.
 
@@ -243,6 +247,127 @@ def link_frames_for(chain: SerialChain | None, link_map: str | Path | None = Non
     return {i: LinkFrame(names[i], np.eye(4)) for i in range(1, chain.n_joints + 1)}
 
 
+SAME_MOTION_ATOL_M = 1e-4
+"""Largest change (m) of a link offset ``T_target_source`` over configurations that still counts as
+the same motion (a URDF rounds its numbers: xarm_description writes pi/2 as 1.5708, 1e-5 m at the
+tool; far below a calibration's millimetres)."""
+SAME_MOTION_ATOL_RAD = 1e-4
+"""The same for the offset's rotation (rad)."""
+
+
+def _offset_spread(X: FloatArray) -> tuple[float, float]:
+    """Largest change over configurations of offsets ``X`` ``(N, n + 1, 4, 4)`` from ``X[0]``:
+    position (m) and rotation angle (rad)."""
+    dp = float(np.max(np.linalg.norm(X[:, :, :3, 3] - X[:1, :, :3, 3], axis=-1)))
+    dR = np.swapaxes(X[:1, :, :3, :3], -1, -2) @ X[:, :, :3, :3]
+    return dp, float(np.max(Rotation.from_matrix(dR.reshape(-1, 3, 3)).magnitude()))
+
+
+def _base_offset(source: SerialChain, target: SerialChain, F_s: FloatArray, F_t: FloatArray) -> FloatArray | None:
+    """``T_targetbase_sourcebase`` ``B`` with ``U_k B = B D_k`` for the motions of the last link between
+    configuration 0 and the single-joint steps ``1..n`` (``U_k = F_t[k] F_t[0]^-1``, the same ``D_k`` of
+    ``source``; the hand-eye equation ``AX = XB``): the rotation by Kabsch from the motions' rotation
+    vectors (a prismatic joint's translation), then ``(R_U - I) t_B = R_B t_D - t_U`` by least squares.
+    None when the motions do not determine ``B`` (parallel axes only)."""
+    n = source.n_joints
+    U = F_t[1 : n + 1, -1] @ np.linalg.inv(F_t[0, -1])
+    D = F_s[1 : n + 1, -1] @ np.linalg.inv(F_s[0, -1])
+    a = np.where(source.revolute[:, None], Rotation.from_matrix(U[:, :3, :3]).as_rotvec(), U[:, :3, 3])
+    b = np.where(source.revolute[:, None], Rotation.from_matrix(D[:, :3, :3]).as_rotvec(), D[:, :3, 3])
+    u, sv, vt = np.linalg.svd(a.T @ b)
+    if sv.size < 2 or sv[1] < 1e-6 * max(sv[0], 1e-300):
+        return None
+    R = u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
+    A = (U[:, :3, :3] - np.eye(3)).reshape(-1, 3)
+    rhs = (D[:, :3, 3] @ R.T - U[:, :3, 3]).reshape(-1)
+    t, _, rank, _ = np.linalg.lstsq(A, rhs, rcond=None)
+    if rank < 3:
+        return None
+    B = np.eye(4)
+    B[:3, :3], B[:3, 3] = R, t
+    return B
+
+
+def result_chain(result: CalibrationResult, target: SerialChain, source: SerialChain | None = None) -> SerialChain:
+    """The chain whose link frames ``result``'s poses are in, for an export onto ``target``:
+    ``source`` when known (the dataset's chain); else, from the link names the units record (extra
+    ``link_name``, written by ``calibrate``): the preset the result names when they are the preset's
+    (``link<i>``; ``target`` itself when it moves as that preset does), else ``target`` when it bears
+    the result's robot name and those link names; a result that records no link names is of
+    ``target`` when the names agree, else of the preset it names. Anything else is a result of
+    another robot: a one-line :class:`ConfigError` (give its dataset)."""
+    if source is not None:
+        return source
+    from skincal.kinematics.presets import PRESETS
+
+    recorded = {u.pose.link: u.extras.get("link_name") for u in result.units.values()}
+    named = any(isinstance(name, str) for name in recorded.values())
+
+    def names_match(chain: SerialChain) -> bool:
+        return all(not isinstance(name, str) or name == chain.link_name(link) for link, name in recorded.items())
+
+    if result.robot == target.name and names_match(target) and not (named and result.robot in PRESETS):
+        return target
+    if result.robot in PRESETS:
+        preset = PRESETS[result.robot]()
+        if names_match(preset):
+            return target if target.same_motion(preset) else preset
+        if result.robot == target.name and names_match(target):
+            return target
+    shown = ", ".join(sorted({_shown(n) for n in recorded.values() if isinstance(n, str)})) or "unnamed links"
+    raise ConfigError(
+        f"the result is for robot '{_shown(str(result.robot))}' (units on {shown}), not for robot "
+        f"'{_shown(target.name)}': give the dataset it was computed from (--dataset) to export it onto another "
+        "description of that robot"
+    )
+
+
+def link_offsets(source: SerialChain, target: SerialChain) -> FloatArray:
+    """``T_targetlink_sourcelink`` ``(n + 1, 4, 4)``: the pose of each link frame of ``source`` (the
+    chain a result was computed on) in the same link's frame of ``target`` (the robot it is exported
+    onto), so that ``T_targetlink_su = T_targetlink_sourcelink @ T_sourcelink_su``.
+
+    The two chains describe the same robot when ``F_t_i(q) X_i = B F_s_i(q)`` for every link ``i`` and
+    configuration ``q`` with constant ``X_i`` and base offset ``B`` (forward kinematics ``F``, link
+    poses in each chain's base). ``B = I`` is tried first, else solved from the motions
+    (:func:`_base_offset`; the UR URDFs' ``base_link`` is the controller's base turned by pi about z);
+    ``X_i = F_t_i(q)^-1 B F_s_i(q)`` at ``q = 0`` and checked constant to :data:`SAME_MOTION_ATOL_M`,
+    :data:`SAME_MOTION_ATOL_RAD` over single-joint steps and random configurations (seeded).
+    Raises a one-line :class:`ConfigError` when they differ (another robot, or other joint zeros or
+    directions)."""
+    n = source.n_joints
+    shown_s, shown_t = _shown(source.name), _shown(target.name)
+    if target.n_joints != n or target.joint_type != source.joint_type:
+        raise ConfigError(
+            f"the result is for robot '{shown_s}' ({n} joints {'/'.join(source.joint_type)}), which robot "
+            f"'{shown_t}' ({target.n_joints} joints) is not: the result cannot be exported onto it"
+        )
+    steps = np.eye(n) * 0.4
+    rng = np.random.default_rng(0)
+    Q = np.vstack([np.zeros((1, n)), steps, rng.uniform(-1.5, 1.5, (6, n))])
+    F_s, F_t = source.link_frames(Q), target.link_frames(Q)
+    inv_t = np.linalg.inv(F_t)
+    X = inv_t @ F_s
+    spread = _offset_spread(X)
+    if spread[0] > SAME_MOTION_ATOL_M or spread[1] > SAME_MOTION_ATOL_RAD:
+        B = _base_offset(source, target, F_s, F_t)
+        if B is not None:
+            X_b = inv_t @ B @ F_s
+            spread_b = _offset_spread(X_b)
+            if spread_b[0] <= SAME_MOTION_ATOL_M and spread_b[1] <= SAME_MOTION_ATOL_RAD:
+                X, spread = X_b, spread_b
+    if spread[0] > SAME_MOTION_ATOL_M or spread[1] > SAME_MOTION_ATOL_RAD:
+        raise ConfigError(
+            f"robot '{shown_t}' does not move its links as the result's robot '{shown_s}' does (their link "
+            f"frames drift apart by up to {spread[0] * 1e3:.3g} mm, {math.degrees(spread[1]):.3g} deg over "
+            "configurations: another robot, or other joint zeros or directions): the result cannot be "
+            "exported onto it"
+        )
+    out = X[0].copy()
+    out[:, 3, :] = (0.0, 0.0, 0.0, 1.0)
+    return out
+
+
 def pose_covariance(unit: UnitResult, R_frame_link: FloatArray, name: str = "unit") -> tuple[FloatArray, str]:
     """``(6, 6)`` covariance of ``(x, y, z, rx, ry, rz)`` (m^2, rad^2) of a unit in a parent frame
     whose axes are ``R_frame_link`` of the link's, and its source (``full``, ``std``, ``none``).
@@ -350,13 +475,17 @@ def _frame_problem(frame: object) -> str | None:
     return None
 
 
+def _check_robot_name(result: CalibrationResult) -> None:
+    problem = name_problem(result.robot)
+    if problem is not None:
+        raise DatasetError(f"robot name '{_shown(str(result.robot))}' {problem}; the result cannot be exported")
+
+
 def check_names(result: CalibrationResult, frames: list[UnitFrame]) -> None:
     """Refuse, with a one-line :class:`DatasetError` (names from the result) or :class:`ConfigError`
     (frame names from the link map or the prefix), any name an export would carry that
     :func:`skincal.names.name_problem` refuses. Every writer calls it before writing a byte."""
-    problem = name_problem(result.robot)
-    if problem is not None:
-        raise DatasetError(f"robot name '{_shown(str(result.robot))}' {problem}; the result cannot be exported")
+    _check_robot_name(result)
     children: set[str] = set()
     for f in frames:
         problem = name_problem(f.unit)
@@ -822,6 +951,7 @@ def export_text(
     base_link: str | None = None,
     tip_link: str | None = None,
     frame: str = "unit",
+    source: SerialChain | None = None,
 ) -> tuple[str, list[UnitFrame]]:
     """The text of ``result`` as ``fmt`` and the exported frames (see :func:`export_result`)."""
     if fmt not in FORMATS:
@@ -833,13 +963,28 @@ def export_text(
             "a complete URDF names its own links: --robot-links does not apply to -f urdf (use -f xacro "
             "to add the units to your own robot description)"
         )
-    chain = result_robot(result, robot, base_link=base_link, tip_link=tip_link)
+    _check_robot_name(result)  # before the robot is looked at: a crafted name is refused as such
+    if robot is None and source is not None:
+        if base_link is not None or tip_link is not None:
+            raise ConfigError("--base-link and --tip-link apply to a URDF robot given with --robot")
+        from skincal.data.result import check_links
+
+        check_links(result, source, "result")
+        chain: SerialChain | None = source
+    else:
+        chain = result_robot(result, robot, base_link=base_link, tip_link=tip_link)
     links = link_frames_for(chain, link_map)
+    if links is not None and link_map is None and chain is not None:
+        computed_on = result_chain(result, chain, source)
+        if computed_on is not chain:
+            X = link_offsets(computed_on, chain)
+            links = {i: LinkFrame(f.name, X[i] @ f.T_frame_link) for i, f in links.items()}
     frames = unit_frames(result, links, frame=frame, prefix=prefix) if links is not None else None
     if frames is None:
         raise ConfigError(
             f"robot '{_shown(str(result.robot))}' is not a preset; give the robot (--robot arm.urdf or "
-            "a preset) or a link map (--robot-links map.yaml with links: {1: frame, ...})"
+            "a preset, or --dataset: the dataset the result was computed from) or a link map (--robot-links "
+            "map.yaml with links: {1: frame, ...})"
         )
     if fmt == "urdf":
         return to_urdf(result, frames, chain, frame), frames
@@ -857,13 +1002,25 @@ def export_result(
     base_link: str | None = None,
     tip_link: str | None = None,
     frame: str = "unit",
+    source: SerialChain | None = None,
 ) -> list[UnitFrame]:
     """Write ``result`` as ``fmt`` (:data:`FORMATS`) to ``out`` atomically; returns the exported
     frames. The robot is ``robot`` (preset, ``.urdf`` with ``base_link``/``tip_link``, DH chain
-    file) or the result's preset; ``link_map`` overrides the link frame names (not for ``urdf``);
-    ``frame`` is ``unit`` or ``range`` (:data:`T_SU_RANGE`)."""
+    file), else ``source``, else the result's preset; ``source`` is the chain the result was computed
+    on (its dataset's, checked by the caller), else found by :func:`result_chain`; each pose is moved
+    from the source's link frame into the robot's (:func:`link_offsets`). ``link_map`` overrides the
+    link frame names and offsets (not for ``urdf``); ``frame`` is ``unit`` or ``range``
+    (:data:`T_SU_RANGE`)."""
     text, frames = export_text(
-        result, fmt, link_map=link_map, prefix=prefix, robot=robot, base_link=base_link, tip_link=tip_link, frame=frame
+        result,
+        fmt,
+        link_map=link_map,
+        prefix=prefix,
+        robot=robot,
+        base_link=base_link,
+        tip_link=tip_link,
+        frame=frame,
+        source=source,
     )
     write_bytes_atomic(out, text.encode("utf-8"))
     return frames

@@ -85,7 +85,7 @@ def result_robot(
                 raise ConfigError(
                     f"result: unit '{printable(name)}' is on link '{printable(recorded)}', which preset '{chain.name}' "
                     f"calls '{printable(preset)}': the result is of another robot of that name (a URDF?); give it with "
-                    "--robot"
+                    "--robot, or the dataset the result was computed from (export --dataset)"
                 )
         return chain
     chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
