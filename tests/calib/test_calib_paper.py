@@ -177,8 +177,8 @@ def test_units_that_never_move(two_units):
         u: ImuStream(s.t, np.broadcast_to(s.accel[0], s.accel.shape).copy(), s.gyro) for u, s in two_units.imu.items()
     }
     r = calibrate(replace(two_units, imu=still), "om", seed=0)  # still a result: every unit with its reason
-    assert r.units == {} and set(r.extras["failed_units"]) == set(two_units.units)
-    assert all(reason and "\n" not in reason for reason in r.extras["failed_units"].values())
+    assert r.units == {} and set(r.failed_units) == set(two_units.units)
+    assert all(reason and "\n" not in reason for reason in r.failed_units.values())
 
 
 def test_nan_readings_are_dropped(two_units):

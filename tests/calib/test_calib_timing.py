@@ -211,7 +211,7 @@ def test_one_off_clock_steps_at_gaps_are_found_and_named():
         found = np.asarray(unit.extras.get("clock_gap_steps", np.zeros((0, 3))))
         if np.any(np.abs(true) > 0.01):
             assert found.size and np.any(np.abs(found[:, 2]) > 0.005), (name, true)
-            said = unit.warnings + tuple(unit.extras.get("notes", ()))
+            said = unit.warnings + unit.notes
             named += any("clock stepped at stamp gaps" in w for w in said)
         e = unit.pose.p_link_su - ds.truth[name].p_link_su
         assert np.all(np.abs(e) <= 4 * np.asarray(unit.position_std_m)), (name, e)

@@ -101,7 +101,7 @@ def test_a_low_rate_joint_stream_keeps_the_motion_and_says_so(session):
     truth = low.truth[name]
     acc = u.extras["samples"]
     assert acc["kinks"] == 0 and acc["shares"]["kept"] > 0.9, acc
-    assert any(n.startswith("kept ") and "% of the motion" in n for n in u.extras["notes"])
+    assert any(n.startswith("kept ") and "% of the motion" in n for n in u.notes)
     assert u.pose.link == truth.link
     assert np.linalg.norm(u.pose.p_link_su - truth.p_link_su) < 0.01  # 20 Hz joints: within a centimetre
 

@@ -47,7 +47,7 @@ def test_every_unit_failed_still_writes_the_result(static_only, tmp_path, capsys
     assert set(doc["failed_units"]) == {"su1", "su2"}
     assert "not calibrated" in captured.out and "no unit could be calibrated" in captured.err
     back = read_result(out)
-    assert back.units == {} and set(back.extras["failed_units"]) == {"su1", "su2"}
+    assert back.units == {} and set(back.failed_units) == {"su1", "su2"}
 
 
 def test_static_only_writes_rotations_with_null_positions(static_only, tmp_path, capsys):

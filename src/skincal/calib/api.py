@@ -264,7 +264,8 @@ def calibrate(
             forked.close()  # the worker processes end with the run
     results = {name: results[name] for name in names if name in results}
     failed = {name: failed[name] for name in names if name in failed}
-    if not results and unusable == len(names):  # the data, not the calibration: one error for the run
+    internal = bool(errors) and all(str(e).startswith("internal error (") for e in errors)  # a bug, every unit
+    if not results and (unusable == len(names) or internal):  # the data or the method, not the calibration
         reasons = "; ".join(f"{u}: {m}" for u, m in failed.items())
         raise CalibrationError(f"no unit could be calibrated ({reasons})") from (errors[0] if errors else None)
     # every unit failed otherwise: still a result (each unit listed with its reason, observable: false)
