@@ -14,6 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from skincal.calib.metrics import Evaluation, UnitEvaluation
 from skincal.cli import main
 from skincal.data.hdf5 import write_dataset
 from skincal.data.imu_calibration import ImuCalibration
@@ -102,8 +103,9 @@ def test_any_dollar_and_backslash_name_draws(names):
     figs = [
         plots.activity_figure(rng.uniform(0.01, 20, (n, 3)), names),
         plots.bias_figure(names, rng.normal(size=(n, 3))),
-        plots.error_figure({"units": {u: {"position_error_mm": 1.0, "rotation_error_deg": 0.1, "observable": True}
-                                      for u in names}}),
+        plots.error_figure(Evaluation(
+            {u: UnitEvaluation(1, 1, True, 1.0, 0.1, 0.001) for u in names}, 1.0, 0.1, 0.001, n, n, ()
+        )),
     ]
     for fig in figs:
         uri = plots.png_data_uri(fig, dpi=30)
