@@ -6,9 +6,10 @@ in link frame from the joint stream). With a scale/misalignment matrix ``A_g`` t
 ``g = A_g R^T w + b_g = M w + b_g``: linear in ``M`` (9) and ``b_g`` (3), so the moving samples give
 ``M`` by least squares. ``M M^T = A_g A_g^T`` does not depend on the unknown rotation, and for the
 symmetric positive ``A_g`` of a scale and a symmetric misalignment, ``A_g = (M M^T)^(1/2)``: the
-gyroscope is checked (and its readings corrected, ``g' = A_g^-1 g``) before the pose is fitted, with no
-new unknown in the pose fit. (The antisymmetric part of a misalignment is a rotation: indistinguishable
-from the unit's pose by the gyroscope alone; the accelerometer's rests fix the pose.)
+gyroscope is checked before the pose is fitted, with no new unknown in the pose fit. It is named, not
+corrected: the antisymmetric part of a misalignment is a rotation, indistinguishable from the unit's pose
+by the gyroscope alone, and correcting the scale alone would let the misaligned gyroscope decide the
+rotation more firmly.
 """
 
 from __future__ import annotations
@@ -49,13 +50,12 @@ class GyroScale:
         dev = np.abs(np.diag(self.A) - 1.0)
         return bool(self.determined and np.any((dev > CORRECT_MIN) & (dev > CORRECT_SIGMAS * self.diag_std)))
 
-    def correct(self, gyro: FloatArray) -> FloatArray:
-        """Readings ``(M, 3)`` with the scale removed: ``A^-1 g`` (rad/s)."""
-        return np.asarray(gyro, dtype=float) @ np.linalg.inv(self.A).T
-
     def describe(self) -> str:
         pct = ", ".join(f"{100 * (s - 1):+.1f}" for s in np.diag(self.A))
-        return f"gyroscope scale off the robot's rotation rate by ({pct}) % per axis (estimated and corrected)"
+        return (
+            f"gyroscope scale off the robot's rotation rate by ({pct}) % per axis (not modelled: the rotation may "
+            "be off by about as many percent of a radian)"
+        )
 
 
 def gyro_scale(w_link: FloatArray, gyro: FloatArray) -> GyroScale | None:

@@ -713,8 +713,7 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         # (misaligned) axes decide the rotation more firmly (simulated: 4.5 % scale, 1 % misalignment).
         scale = _gyro_scale(problem, link)
         if scale is not None and scale.off:
-            warnings.append(scale.describe().replace("(estimated and corrected)", "(not modelled: the rotation"
-                            " may be off by about as many percent of a radian)"))
+            warnings.append(scale.describe())
             extras["gyro_scale_misalignment"] = scale.A
     p = _arrange(problem, link)
     warnings += list(p.data.rest.warnings)

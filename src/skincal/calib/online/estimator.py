@@ -513,6 +513,7 @@ class OnlineCalibrator:
                     self._keep(st, t, a, g)
                     return 0
         assert st.offset is not None
+        self._track_steps(st, t)
         s = self._instants(st, t)
         tg = grid.t
         late = s < tg[0]
@@ -528,15 +529,20 @@ class OnlineCalibrator:
         return self._absorb(name, st, grid, s[ready], a[ready], None if g is None else g[ready])
 
     @staticmethod
-    def _instants(st: _Unit, t: FloatArray) -> FloatArray:
-        """Joint-clock instants of the unit's stamps ``t`` under its clock mapping (:mod:`skincal.calib.timing`:
-        re-sync steps removed, then offset and drift); newer stamps are searched for re-sync steps first."""
-        assert st.offset is not None
+    def _track_steps(st: _Unit, t: FloatArray) -> None:
+        """Search the unit's stamps ``t`` newer than any seen for further re-sync steps."""
         if st.steps is not None:
             new = t > st.t_seen
             if new.any():
                 st.steps = st.steps.extend(st.t_seen, t[new])
                 st.t_seen = float(t[new][-1])
+
+    @staticmethod
+    def _instants(st: _Unit, t: FloatArray) -> FloatArray:
+        """Joint-clock instants of the unit's stamps ``t`` under its clock mapping (:mod:`skincal.calib.timing`:
+        re-sync steps removed, then offset and drift)."""
+        assert st.offset is not None
+        if st.steps is not None:
             t = st.steps.correct(t)
         return motion_instants(t, st.offset, st.drift, st.t_ref)
 
