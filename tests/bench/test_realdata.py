@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from skincal.bench.realdata import find_recordings, group_name, run_realdata_benchmark
+from skincal.bench.realdata import find_recordings, group_name, normalised_spread, run_realdata_benchmark
 from skincal.cli import main
 from skincal.data.hdf5 import write_dataset
 from skincal.sim import simulate
@@ -60,11 +60,24 @@ def test_simulated_recordings_of_one_mount_agree(mount, tmp_path):
         assert np.allclose(g["position_mean_mm"], 1e3 * truth[name].p_link_su, atol=0.5)
         for ratio in g["position_spread_over_std"] + g["rotation_spread_over_std"]:
             assert math.isfinite(ratio) and ratio < 4.0  # 3 recordings (2 dof): 1.7 at most here
+        for ratio in g["position_deviation_rms_std"] + g["rotation_deviation_rms_std"]:
+            assert math.isfinite(ratio) and ratio < 3.0  # sqrt(2/3) expected; a std 3x too small fails
         assert len(g["time_offsets_ms"]) == 3 and g["time_offset_spread_ms"] < 1.0
         assert g["median_motion_kept"] > 0.5
         om = by_method["om"]  # the paper's method joins; whatever it cannot take is a failure with its reason
         assert om["calibrated"] + len(om["failures"]) == 3
         assert all(f["reason"] for f in om["failures"])
+
+
+def test_normalised_spread_judges_each_recording_by_its_own_std():
+    """Three recordings within their own std (one pins little and says so) against the same with
+    one recording 10x over-confident: the first is near sqrt(2/3), the second far above."""
+    x = np.array([[0.0, 0.0, 0.0], [1.0, -1.0, 2.0], [30.0, 0.0, -40.0]])
+    honest = normalised_spread(x, [[1.0, 1.0, 2.0], [1.0, 1.0, 2.0], [30.0, 30.0, 40.0]])
+    assert np.all(honest < 1.1), honest
+    bold = normalised_spread(x, [[1.0, 1.0, 2.0], [1.0, 1.0, 2.0], [3.0, 3.0, 4.0]])
+    assert bold[0] > 4.0 and bold[2] > 4.0, bold
+    assert np.isnan(normalised_spread(x[:1], [[1.0, 1.0, 1.0]])).all()
 
 
 REALDATA = os.environ.get("SKINCAL_REALDATA")

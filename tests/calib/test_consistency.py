@@ -10,7 +10,14 @@ import numpy as np
 import pytest
 
 from skincal.calib import calibrate
-from skincal.calib.consistency import SPLITS, block_inflation, part_masks
+from skincal.calib.consistency import (
+    EXCITATION_WINDOW_S,
+    SPLITS,
+    axis_inflation,
+    block_inflation,
+    lively_windows,
+    part_masks,
+)
 from skincal.sim import simulate
 from skincal.workflows.session import make_session
 
@@ -30,10 +37,14 @@ def honest():
 
 def test_parts_split_every_sample_once():
     t = np.linspace(0.0, 20.0, 2001)
-    for split, (a, b) in part_masks(t, 0.0, 20.0).items():
-        assert split in SPLITS
+    lively = np.arange(10) % 3 == 0  # 10 windows of 2 s, 4 of them lively
+    masks = part_masks(t, 0.0, 20.0, lively)
+    assert set(masks) == set(SPLITS)
+    for a, b in masks.values():
         assert not np.any(a & b) and np.all(a | b)
-        assert 0.4 < a.mean() < 0.6
+        assert 0.35 < a.mean() < 0.65
+    assert np.array_equal(masks["excitation"][1], lively[np.minimum((t // 2.0).astype(int), 9)])
+    assert "excitation" not in part_masks(t, 0.0, 20.0)  # no ranking: no excitation split
 
 
 def test_block_inflation_is_one_below_the_quantile_and_the_excess_above():
@@ -41,6 +52,30 @@ def test_block_inflation_is_one_below_the_quantile_and_the_excess_above():
     c2, dof, f = block_inflation(np.full(6, 4.0))  # every component 4 std apart
     assert (c2, dof) == (96.0, 6) and f == pytest.approx(4.0)
     assert block_inflation(np.array([np.nan, 10.0]))[1] == 1  # undetermined components do not count
+
+
+def test_the_disagreeing_axis_is_inflated_not_the_block():
+    """A lever arm that disagrees along z only (4 std in each split) inflates z by 4, x and y not at all;
+    a consistent block inflates nothing."""
+    z = np.array([[0.3, -0.5, 4.0], [0.1, 0.4, -4.0], [np.nan, 0.2, 4.0]])
+    c2, dof, f = block_inflation(z)
+    assert f > 1.0 and dof == 8
+    assert axis_inflation(z, f) == pytest.approx((1.0, 1.0, 4.0))
+    assert axis_inflation(z, 1.0) == (1.0, 1.0, 1.0)
+
+
+def test_lively_windows_rank_the_links_own_motion(honest):
+    """The excitation split's livelier half: the windows where the unit's link turns faster than in the
+    median window, from the joint stream (half the windows, and every one of them faster than every calm one)."""
+    ds, result = honest
+    link = result.units["su6"].pose.link
+    lively = lively_windows(ds, link)
+    j = ds.joints
+    speed = np.linalg.norm(ds.robot.link_motion(j.q, j.qd, np.zeros_like(j.q), upto=link).omega[:, link], axis=1)
+    index = np.floor((np.asarray(j.t) - j.t[0]) / EXCITATION_WINDOW_S).astype(int)
+    mean = np.array([speed[index == k].mean() for k in range(lively.size)])
+    assert lively.size == index.max() + 1 and abs(lively.mean() - 0.5) <= 1.0 / lively.size
+    assert mean[lively].min() > mean[~lively].max() * 0.999  # thinned to 50 Hz: ranks, not exact means
 
 
 def test_honest_simulated_std_are_not_inflated(honest):
@@ -55,7 +90,7 @@ def test_honest_simulated_std_are_not_inflated(honest):
         assert not any("gyroscope scale" in w for w in unit.warnings), unit.warnings
         chi2 += c["chi2_position"] + c["chi2_rotation"]
         dof += c["dof_position"] + c["dof_rotation"]
-    assert dof == 12 * len(result.units)
+    assert dof == 6 * len(SPLITS) * len(result.units)
     assert 0.5 < chi2 / dof < 1.6, chi2 / dof
     off = calibrate(ds, "mle", consistency=False)
     for name, unit in result.units.items():

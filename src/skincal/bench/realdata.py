@@ -16,7 +16,9 @@ Per group and method, over the recordings calibrated on the group's most common 
   about the link frame's axes, ``delta_i = log(R_i R_bar^T)``: std per axis, largest pairwise angle
   ``max_ij angle(R_i^T R_j)``;
 * spread over the reported uncertainty: the std across recordings divided by the median reported
-  std, per axis (1 when the reported std is honest; ``null`` where no std was reported);
+  std, per axis (1 when the reported std is honest; ``null`` where no std was reported), and the RMS of
+  each recording's deviation from the weighted mean in its own std (:func:`normalised_spread`: fair to
+  a recording that pins little and says so with a large std, which the median hides);
 * motion kept: the moving samples the calibration used over the unit's samples not at rest;
 * time offsets (ms) and their spread; links chosen; failures (recording and reason).
 
@@ -179,6 +181,21 @@ def _finite_or_none(x: Any) -> Any:
     return [_finite_or_none(v) for v in arr]
 
 
+def normalised_spread(x: np.ndarray, std: list[Any]) -> np.ndarray:
+    """RMS over recordings of ``(x_i - x_w) / s_i`` per axis: each estimate's deviation from the
+    inverse-variance weighted mean ``x_w`` in its own reported std ``s_i`` (``x`` ``(K, 3)``; about 1
+    when the recordings agree within their std, whatever each one's size; NaN with fewer than 2).
+    The weighted mean is fitted, so the expectation is ``sqrt((K - 1) / K)``, not 1."""
+    if len(x) < 2 or any(s is None for s in std):
+        return np.full(3, np.nan)
+    s = np.asarray(std, dtype=float).reshape(-1, 3)
+    with np.errstate(all="ignore"):
+        w = np.where(np.isfinite(s) & (s > 0), 1.0 / s**2, 0.0)
+        mean = np.sum(w * x, axis=0) / np.sum(w, axis=0)
+        z = np.where(w > 0, (x - mean) / s, np.nan)
+        return np.sqrt(np.nanmean(z * z, axis=0))
+
+
 def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
     """The spread across recordings of one group and method (module docstring); ``entries`` are the
     per-recording unit records (:func:`calibrate_recording`), each with ``recording``."""
@@ -225,6 +242,8 @@ def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
         p_ratio, r_ratio = p_std / p_rep, r_std / r_rep
     offsets = [e["time_offset_ms"] for e in same if e["time_offset_ms"] is not None]
     kept = [e["motion_kept"] for e in same if e.get("motion_kept") is not None]
+    p_z = normalised_spread(P, [e["position_std_mm"] for e in placed])
+    r_z = normalised_spread(delta, [e["rotation_std_deg"] for e in same])
     out.update(
         {
             "position_mean_mm": _finite_or_none(P.mean(axis=0)),
@@ -237,6 +256,8 @@ def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
             "median_reported_rotation_std_deg": _finite_or_none(r_rep),
             "position_spread_over_std": _finite_or_none(p_ratio),
             "rotation_spread_over_std": _finite_or_none(r_ratio),
+            "position_deviation_rms_std": _finite_or_none(p_z),
+            "rotation_deviation_rms_std": _finite_or_none(r_z),
             "time_offsets_ms": _finite_or_none(offsets),
             "time_offset_spread_ms": _finite_or_none(np.ptp(offsets)) if offsets else None,
             "motion_kept": _finite_or_none(kept),
@@ -315,7 +336,8 @@ def realdata_report(doc: dict[str, Any]) -> list[Any]:
     table = Table(title=f"repeatability across recordings ({doc['data']}): {shown(doc['folder'])}")
     for col in (
         "IMU", "method", "ok/all", "link", "pos std x y z (mm)", "pos pairwise x y z (mm)", "rot std (deg)",
-        "rot pairwise (deg)", "spread/std pos", "spread/std rot", "motion kept", "offsets (ms)", "failures",
+        "rot pairwise (deg)", "spread/std pos", "spread/std rot", "dev/own std pos", "dev/own std rot",
+        "motion kept", "offsets (ms)", "failures",
     ):  # fmt: skip
         table.add_column(col)
     failures: list[str] = []
@@ -329,6 +351,7 @@ def realdata_report(doc: dict[str, Any]) -> list[Any]:
                 _fmt(g.get("position_std_mm")), _fmt(g.get("position_pairwise_mm")),
                 _fmt(g.get("rotation_std_deg"), 2), _fmt(g.get("rotation_pairwise_max_deg"), 2),
                 _fmt(g.get("position_spread_over_std")), _fmt(g.get("rotation_spread_over_std")),
+                _fmt(g.get("position_deviation_rms_std")), _fmt(g.get("rotation_deviation_rms_std")),
                 _fmt(g.get("median_motion_kept"), 2), offset_text,
                 str(len(g["failures"])),
             )  # fmt: skip

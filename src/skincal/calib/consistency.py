@@ -8,7 +8,11 @@ their std allow. Each unit's samples are split two ways:
 * ``time``: the first and the second half of the recording (catches what changes over time: clocks,
   drifts, a unit that slipped);
 * ``interleaved``: alternate windows of :data:`WINDOW_S` (both parts span the whole recording and
-  see the same kinds of motion: catches model errors and residuals correlated beyond the model).
+  see the same kinds of motion: catches model errors and residuals correlated beyond the model);
+* ``excitation``: the calmer and the livelier half of the recording, windows of
+  :data:`EXCITATION_WINDOW_S` ranked by how fast the unit's link turns (or, on a link that only
+  translates, moves): catches errors that grow or shrink with the motion (a low-rate joint stream
+  that resolves slow motion but not fast, a delay that is not one constant offset).
 
 Each part is calibrated with the same method on the unit's link (the full result's), and for each
 split the pose difference ``d = x_A - x_B`` (position in the link frame, m; rotation
@@ -16,10 +20,12 @@ split the pose difference ``d = x_A - x_B`` (position in the link frame, m; rota
 
     z_i = d_i / sqrt(s_A,i^2 + s_B,i^2),   chi2 = sum z_i^2   (~ chi-square with as many dof, if honest)
 
-separately for the position and the rotation components of both splits (6 dof each). When a block's
-chi2 exceeds its :data:`QUANTILE` quantile the data disagree with the reported std: the full result's
-std of that block is inflated by ``sqrt(chi2 / dof)`` (the parts' observed excess) and the unit is
-warned; honest data are left alone (a false inflation in 1 % of units). The result carries a
+separately for the position and the rotation components of all splits (9 dof each). When a block's
+chi2 exceeds its :data:`QUANTILE` quantile the data disagree with the reported std: each axis of the
+block is inflated by its own observed excess ``max(1, sqrt(mean_splits z_i^2))`` (the disagreement
+is usually along one axis, the lever arm along a tool's axis, say: one factor for the block would
+inflate the others and not that one enough) and the unit is warned; honest data are left alone (a
+false inflation in 1 % of units). The result carries a
 ``consistency`` block per unit (``docs/interfaces.md``).
 """
 
@@ -39,11 +45,15 @@ from skincal.kinematics.transforms import FloatArray
 
 WINDOW_S = 4.0
 """Length of the alternate windows of the ``interleaved`` split, s."""
+EXCITATION_WINDOW_S = 2.0
+"""Length of the windows the ``excitation`` split ranks by the link's motion, s."""
+EXCITATION_RATE_HZ = 50.0
+"""The joint stream is thinned to at most this rate to rank the windows."""
 QUANTILE = 0.99
 """A block's chi-square beyond this quantile of its distribution counts as disagreement."""
 Z_NAMED = 3.0
 """Components whose split difference exceeds this many std are named."""
-SPLITS = ("time", "interleaved")
+SPLITS = ("time", "interleaved", "excitation")
 AXES = ("x", "y", "z")
 
 Refit = Callable[[Dataset, dict[str, int]], CalibrationResult]
@@ -57,8 +67,10 @@ class Consistency:
     Attributes:
         chi2_position, chi2_rotation: chi-square of the position / rotation components over both splits.
         dof_position, dof_rotation: their degrees of freedom (finite components compared).
-        inflation_position, inflation_rotation: factor the full result's std of the block was multiplied
-            by (1: consistent).
+        inflation_position, inflation_rotation: the block's excess ``sqrt(chi2 / dof)`` when chi2 is beyond
+            its quantile (1: consistent).
+        axes_position, axes_rotation: ``(3,)`` the factors the full result's std were multiplied by,
+            per link-frame axis (all 1 when the block is consistent).
         disagrees: what disagrees, e.g. ``"time: position z 12.3 mm (4.1 std)"``.
         failed: splits whose parts could not be calibrated, with why.
     """
@@ -71,6 +83,8 @@ class Consistency:
     inflation_rotation: float
     disagrees: tuple[str, ...]
     failed: tuple[str, ...]
+    axes_position: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    axes_rotation: tuple[float, float, float] = (1.0, 1.0, 1.0)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -81,30 +95,67 @@ class Consistency:
             "dof_rotation": self.dof_rotation,
             "inflation_position": self.inflation_position,
             "inflation_rotation": self.inflation_rotation,
+            "inflation_position_axes": list(self.axes_position),
+            "inflation_rotation_axes": list(self.axes_rotation),
             "disagrees": list(self.disagrees),
             "failed": list(self.failed),
         }
 
 
-def part_masks(t: FloatArray, t0: float, t1: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """``{split: (mask_A, mask_B)}`` over stamps ``t`` ``(M,)`` for a recording spanning ``[t0, t1]`` s."""
+def lively_windows(dataset: Dataset, link: int) -> np.ndarray:
+    """``(W,)`` True on the :data:`EXCITATION_WINDOW_S` windows (from the joint stream's start) in
+    which link ``link`` moves more than in the median window: its mean angular speed, or its
+    origin's mean speed when no joint up to it turns (base frame, from the joint stream's ``q, qd``
+    thinned to :data:`EXCITATION_RATE_HZ`)."""
+    j = dataset.joints
+    assert j is not None
+    t = np.asarray(j.t, dtype=float)
+    step = max(1, int(round(1.0 / (EXCITATION_RATE_HZ * max(float(np.median(np.diff(t))), 1e-9))))) if t.size > 1 else 1
+    q, qd = np.asarray(j.q, dtype=float)[::step], np.asarray(j.qd, dtype=float)[::step]
+    motion = dataset.robot.link_motion(q, qd, np.zeros_like(q), upto=link)
+    rotates = bool(dataset.robot.revolute[:link].any())
+    speed = np.linalg.norm((motion.omega if rotates else motion.v_origin)[:, link], axis=1)
+    index = np.floor((t[::step] - t[0]) / EXCITATION_WINDOW_S).astype(int)
+    n = int(index.max()) + 1 if index.size else 0
+    total = np.bincount(index, weights=speed, minlength=n)
+    count = np.bincount(index, minlength=n)
+    score = np.where(count > 0, total / np.maximum(count, 1), 0.0)
+    return score > np.median(score) if n else np.zeros(0, dtype=bool)
+
+
+def part_masks(
+    t: FloatArray, t0: float, t1: float, lively: np.ndarray | None = None
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """``{split: (mask_A, mask_B)}`` over stamps ``t`` ``(M,)`` for a recording spanning ``[t0, t1]`` s;
+    ``lively``: :func:`lively_windows` of the unit's link (no ``excitation`` split without it)."""
     mid = 0.5 * (t0 + t1)
     window = np.floor((t - t0) / WINDOW_S).astype(int) % 2 == 0
-    return {"time": (t < mid, t >= mid), "interleaved": (window, ~window)}
+    out = {"time": (t < mid, t >= mid), "interleaved": (window, ~window)}
+    if lively is not None and lively.size:
+        live = lively[np.clip(np.floor((t - t0) / EXCITATION_WINDOW_S).astype(int), 0, lively.size - 1)]
+        out["excitation"] = (~live, live)
+    return out
 
 
-def _part(dataset: Dataset, split: str, side: int) -> Dataset:
-    """``dataset`` with every unit's IMU (and ToF) samples restricted to one part of ``split``."""
+def _part(dataset: Dataset, split: str, side: int, links: dict[str, int]) -> Dataset:
+    """``dataset`` with every unit's IMU (and ToF) samples restricted to one part of ``split``
+    (``links``: each unit's link, which the ``excitation`` split ranks the windows by)."""
     j = dataset.joints
     assert j is not None
     t0, t1 = float(j.t[0]), float(j.t[-1])
+    lively = {k: lively_windows(dataset, k) for k in set(links.values())} if split == "excitation" else {}
+
+    def mask(name: str, t: FloatArray) -> np.ndarray:
+        masks = part_masks(np.asarray(t, dtype=float), t0, t1, lively.get(links.get(name, -1)))
+        return masks[split][side] if split in masks else np.zeros(len(t), dtype=bool)
+
     imu: dict[str, ImuStream] = {}
     for name, s in dataset.imu.items():
-        m = part_masks(np.asarray(s.t, dtype=float), t0, t1)[split][side]
+        m = mask(name, s.t)
         imu[name] = ImuStream(s.t[m], s.accel[m], None if s.gyro is None else s.gyro[m])
     tof: dict[str, TofStream] = {}
     for name, r in dataset.tof.items():
-        m = part_masks(np.asarray(r.t, dtype=float), t0, t1)[split][side]
+        m = mask(name, r.t)
         tof[name] = TofStream(r.t[m], r.range[m])
     return replace(dataset, imu=imu, tof=tof)
 
@@ -120,7 +171,7 @@ def _pose_vector(unit: UnitResult) -> tuple[FloatArray, FloatArray, FloatArray]:
 
 
 def compare(parts: dict[str, tuple[UnitResult, UnitResult]]) -> tuple[FloatArray, list[str]]:
-    """``(2, 6)`` normalised differences ``z`` per split (rows in :data:`SPLITS` order; NaN where not
+    """``(len(SPLITS), 6)`` normalised differences ``z`` per split (rows in :data:`SPLITS` order; NaN where not
     determined) and the components beyond :data:`Z_NAMED` std, named."""
     z = np.full((len(SPLITS), 6), np.nan)
     named: list[str] = []
@@ -154,6 +205,18 @@ def block_inflation(z: FloatArray) -> tuple[float, int, float]:
     return c2, dof, float(np.sqrt(c2 / dof))
 
 
+def axis_inflation(z: FloatArray, block: float) -> tuple[float, float, float]:
+    """Per-axis factors of a block of normalised differences ``z`` ``(splits, 3)`` (NaN ignored):
+    ``max(1, sqrt(mean_splits z_i^2))`` when the block is inflated (``block > 1``), else all 1."""
+    if block <= 1.0:
+        return (1.0, 1.0, 1.0)
+    out = []
+    for i in range(3):
+        v = z[:, i][np.isfinite(z[:, i])]
+        out.append(max(1.0, float(np.sqrt(np.mean(v * v)))) if v.size else 1.0)
+    return (out[0], out[1], out[2])
+
+
 def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> CalibrationResult:
     """``result`` with each unit's :class:`Consistency` (``extras["consistency"]``) and its std inflated
     where the parts disagree (module docstring); ``refit`` runs the method on each part."""
@@ -167,7 +230,7 @@ def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> Calibrat
     for split in SPLITS:
         for side in (0, 1):
             try:
-                part = refit(_part(dataset, split, side), links)
+                part = refit(_part(dataset, split, side, links), links)
             except Exception as exc:  # noqa: BLE001 - a part that cannot be calibrated is a finding, not a crash
                 for u in links:
                     errors[u].append(f"{split} part {side + 1}: {exc}")
@@ -184,21 +247,25 @@ def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> Calibrat
         z, named = compare(pairs)  # type: ignore[arg-type]
         cp, dp, fp = block_inflation(z[:, :3])
         cr, dr, fr = block_inflation(z[:, 3:])
-        c = Consistency(cp, cr, dp, dr, fp, fr, tuple(named), tuple(errors[name]))
+        ap, ar = axis_inflation(z[:, :3], fp), axis_inflation(z[:, 3:], fr)
+        c = Consistency(cp, cr, dp, dr, fp, fr, tuple(named), tuple(errors[name]), ap, ar)
         unit = units[name]
         warnings = list(unit.warnings)
         if fp > 1.0 or fr > 1.0:
-            parts = [f"position x{fp:.1f}"] * (fp > 1.0) + [f"rotation x{fr:.1f}"] * (fr > 1.0)
+            def said(what: str, f: tuple[float, float, float]) -> str:
+                return f"{what} " + " ".join(f"{a} x{v:.1f}" for a, v in zip(AXES, f, strict=True))
+
+            parts = [said("position", ap)] * (fp > 1.0) + [said("rotation", ar)] * (fr > 1.0)
             warnings.append(
                 "independent parts of the recording disagree beyond their std ("
                 + "; ".join(named[:3]) + "): std inflated by the observed excess, " + ", ".join(parts)
             )
-        pos = None if unit.position_std_m is None else np.asarray(unit.position_std_m, dtype=float) * fp
-        rot = None if unit.rotation_std_deg is None else np.asarray(unit.rotation_std_deg, dtype=float) * fr
+        pos = None if unit.position_std_m is None else np.asarray(unit.position_std_m, dtype=float) * np.asarray(ap)
+        rot = None if unit.rotation_std_deg is None else np.asarray(unit.rotation_std_deg, dtype=float) * np.asarray(ar)
         extras = {**unit.extras, "consistency": c.to_json()}
         cov = unit.pose_covariance
         if cov is not None and (fp > 1.0 or fr > 1.0):
-            T = np.diag([fp] * 3 + [fr] * 3)
+            T = np.diag([*ap, *ar])
             cov = T @ cov @ T
         units[name] = replace(unit, position_std_m=pos, rotation_std_deg=rot, warnings=tuple(warnings), extras=extras,
                               pose_covariance=cov)  # fmt: skip
