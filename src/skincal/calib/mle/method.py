@@ -108,6 +108,8 @@ MOVE_IMPROVEMENT = 10.0
 """A before/after split must explain the rest runs this many times better than one pose..."""
 MOVE_MIN_ANGLE_DEG = 1.0
 """...and the two poses' rotations differ by this much, deg."""
+SANDWICH_WARN = 2.0
+"""A block-sandwich factor on the position std above this is reported (``solver.sandwich_inflation``)."""
 CORRELATION_WARN = 4.0
 """Residual autocorrelation factors above this are reported (model error, covariance inflated)."""
 
@@ -678,6 +680,12 @@ def _honesty(
             f"time offset uncertain: coarse alignment {alignment.offset_s * 1e3:.0f} ms (peak sharpness "
             f"{alignment.sharpness:.2f}), refined {total_offset * 1e3:.0f} ms"
         )
+    if fit.sandwich is not None and float(fit.sandwich[3:6].max()) > SANDWICH_WARN:
+        warnings.append(
+            f"residual errors follow the motion beyond the noise model (a low-rate joint stream's interpolation, "
+            f"an unmodelled effect): position std raised up to x{float(fit.sandwich[3:6].max()):.1f} to what the "
+            "residuals show"
+        )
     if fit.residual_correlation > CORRELATION_WARN:
         warnings.append(
             f"residuals strongly correlated in time (factor {fit.residual_correlation:.1f}: unmodelled dynamics "
@@ -817,6 +825,7 @@ def run_unit(problem: UnitProblem) -> UnitResult:
             "time_offset_coarse_s": None if alignment is None else alignment.offset_s,
             "residual_std_mps2": fit.sigma,
             "residual_correlation": fit.residual_correlation,
+            "covariance_sandwich": None if fit.sandwich is None else fit.sandwich[:6].copy(),
             "n_static_runs": int(p.data.n_static),
             "n_static_dropped": int(len(p.data.rest.dropped)),
             "n_moving_samples": int(len(p.data.rows.moving_t)),
