@@ -191,3 +191,23 @@ def test_adaptive_force_refuses_a_folder_named_like_a_segment(tmp_path: Path) ->
                                  "--max-motion", "0.001", "--force"], tmp_path))  # fmt: skip
     assert "m_001.json" in line
     assert (tmp_path / "m_001.json").is_dir()
+
+
+def test_imu_range_fits_the_motion_to_the_imus(tmp_path, capsys):
+    """``--imu-range`` (issue 27): SO-101's fast motion at +-2 g / +-245 deg/s keeps every joint speed
+    below the gyroscope's range and says what it changed; a malformed range is a one-line error."""
+    from skincal.protocol.imu_range import ImuRange, imu_bounds
+
+    path = registry_urdf("so101")
+    out = tmp_path / "motion.json"
+    code, text, _ = _run(capsys, "--robot", str(path), "--imu-range", "2g,245dps", "--out", str(out))
+    assert code == 0, text
+    assert "95% of the gyroscope's range" in text
+    traj = read_trajectory_json(out)
+    assert np.max(np.abs(traj.qd)) <= 0.95 * np.radians(245) + 1e-9  # 9 rad/s without the range
+    chain = get_robot(str(path))
+    assert not imu_bounds(chain, traj).exceeds(ImuRange.parse("2g,245dps"), 0.951)
+    for bad, message in (("2g", "--imu-range must be ACCEL,GYRO"), ("0.5g,245dps", "needs more than 1 g")):
+        code, _, err = _run(capsys, "--robot", "panda", "--imu-range", bad, "--out", str(tmp_path / "x.json"))
+        assert code == 2 and message in err, err
+        assert not (tmp_path / "x.json").exists()

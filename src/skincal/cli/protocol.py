@@ -39,6 +39,12 @@ def protocol_cmd(
         "every link frame) or uniform (the protocol's plain draw)",
     ),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
+    imu_range: str | None = typer.Option(
+        None,
+        "--imu-range",
+        help="fit the motion to the IMUs' full scale too: ACCEL,GYRO (2g,245dps or 19.6,4.28 in m/s^2 and "
+        "rad/s) or an IMU preset (realistic, ...); every unit anywhere on a link then stays below its rails",
+    ),
     adaptive: bool = typer.Option(
         False,
         "--adaptive",
@@ -89,6 +95,7 @@ def protocol_cmd(
     from skincal.protocol import build_trajectory, get_protocol
     from skincal.protocol.config import POSE_SELECTIONS
     from skincal.protocol.export import TRAJECTORY_SUFFIXES, export_trajectory
+    from skincal.protocol.imu_range import ImuRange, build_within_imu_range
     from skincal.protocol.limits import fit_to_limits
 
     if out.suffix.lower() not in TRAJECTORY_SUFFIXES:
@@ -103,7 +110,10 @@ def protocol_cmd(
     if out.suffix == "" and out.exists():  # (check_output would call it "a folder; give a file name")
         raise ConfigError(f"{out} exists; a ROS 2 bag folder is never overwritten, even with --force (remove it)")
     check_output(out, force=force, inputs=() if robot in PRESETS else (Path(robot),))
+    imu = None if imu_range is None else ImuRange.parse(imu_range)
     chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
+    if adaptive and imu is not None:
+        raise ConfigError("--imu-range does not apply to --adaptive (its segments are not fitted to it yet)")
     if adaptive:
         from skincal.cli.protocol_adaptive import run_adaptive  # (it does not import this module)
 
@@ -121,7 +131,11 @@ def protocol_cmd(
         if given is not None:
             raise ConfigError(f"{name} applies to --adaptive only")
     config = replace(fit_to_limits(chain, get_protocol(protocol)), collision_check=True, pose_selection=poses)
-    traj = at_rate(build_trajectory(chain, config, np.random.default_rng(seed)), rate)  # checked at 1 kHz
+    if imu is None:
+        traj = build_trajectory(chain, config, np.random.default_rng(seed))
+    else:
+        config, traj = build_within_imu_range(chain, config, imu, np.random.default_rng(seed))
+    traj = at_rate(traj, rate)  # checked at 1 kHz
     t = traj.t
     export_trajectory(traj, out, joint_names=joint_names(chain))
     seg = traj.segments
