@@ -217,7 +217,7 @@ class _PoseChecker:
         from skincal.protocol.motion import excitation_offsets
 
         self.chain, self.config, self.step = chain, config, CHECK_STEP_S
-        self.model = CollisionModel(chain)
+        self.model = CollisionModel(chain, floor_z=config.floor_z)
         n = chain.n_joints
         A, f = config.amplitude_per_joint(n), config.frequency_per_joint(n)
         self.blocks = []  # (m_j, n) offsets of each excitation and its return
@@ -305,7 +305,9 @@ def _no_pose(chain: SerialChain, config: ProtocolConfig, p: int) -> ProtocolErro
     return ProtocolError(
         f"robot '{chain.name}', protocol '{config.name}': no collision-free static pose {p + 1} found in "
         f"{MAX_POSE_DRAWS} draws (every draw collided with the robot itself or the floor during its "
-        f"excitation or move)"
+        f"excitation or move"
+        + ("" if config.floor_z is None else f"; the floor is z = {config.floor_z:g} m of the base: --floor moves it")
+        + ")"
     )
 
 

@@ -261,7 +261,7 @@ def build_trajectory(
         from skincal.protocol.collision import CHECK_STEP_S, CollisionModel, check_motion
 
         t_check = np.append(np.arange(0.0, traj.duration, CHECK_STEP_S), traj.duration)
-        check_motion(CollisionModel(chain), t_check, traj.evaluate(t_check)[0],
+        check_motion(CollisionModel(chain, floor_z=config.floor_z), t_check, traj.evaluate(t_check)[0],
                      f"robot '{chain.name}', protocol '{config.name}': ")  # fmt: skip
     return _with_samples(traj, t, q, qd, qdd)
 
