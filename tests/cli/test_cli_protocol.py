@@ -217,9 +217,9 @@ def test_floor_can_be_moved_or_switched_off_for_an_arm_not_on_the_floor(tmp_path
     """Issue 27: TALOS's arm hangs from its shoulder (the chain's base): below z = 0 of it in every pose, so
     the floor check found no pose. ``--floor none`` (or a floor below the hand) gives the motion, stored in its
     JSON; the refusal says how."""
-    from registry_robots import robots_dir
-
     from skincal.protocol.collision import CollisionModel
+
+    from registry_robots import robots_dir
 
     arm = str(robots_dir() / "talos_data/robots/talos_left_arm.urdf")
     out = tmp_path / "talos.json"

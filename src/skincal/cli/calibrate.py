@@ -87,7 +87,8 @@ def calibrate(
     ),
     dask: str | None = typer.Option(None, "--dask", help="several datasets: address of a dask.distributed scheduler"),
     option: list[str] | None = typer.Option(
-        None, "--option", help="method option name=value (repeatable), e.g. scale=false, maxeval_static=500"
+        None, "--option", help="method option name=value (repeatable), e.g. scale=false (mle), maxeval_static=500 "
+        "(with --method om)"
     ),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
     reference: str | None = typer.Option(
