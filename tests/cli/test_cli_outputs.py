@@ -70,3 +70,14 @@ def test_other_writers_keep_existing_files(files, command, capsys):
     assert main(args) == 2
     assert capsys.readouterr().err.startswith("error:")
     assert {p: _digest(p) for p in (data, result)} == before
+
+
+@pytest.mark.parametrize("name", ["data.json", "arm.urdf", "data"])
+def test_simulate_writes_only_a_dataset_name(tmp_path, name, capsys):
+    """Issue 27: ``simulate --out x.json`` wrote HDF5 under a JSON name (and ``-o arm.urdf --force`` could
+    replace the robot it read); the name must say HDF5 (.h5, .hdf5), checked before any work."""
+    out = tmp_path / name
+    for extra in ([], ["--handheld"]):
+        assert main(["simulate", "--protocol", "fast", *extra, "--out", str(out)]) == 2
+        assert "a dataset is an HDF5 file; name it .h5" in capsys.readouterr().err
+        assert not out.exists()

@@ -12,6 +12,10 @@ from skincal.cli.app import app, console, err_console
 ROBOT_HELP = "robot preset (panda, iiwa14, gen3, sawyer, ur5, ur5e, ur10e, xarm7), a .urdf file, or a DH chain file"
 
 
+DATASET_SUFFIXES = (".h5", ".hdf5")
+"""Names ``simulate --out`` takes: the dataset is HDF5 whatever its name (a ``.json`` would be misleading)."""
+
+
 @app.command()
 def simulate(
     out: Path = typer.Option(..., "--out", "-o", help="dataset file to write (.h5)"),
@@ -52,6 +56,10 @@ def simulate(
     other_body: int = typer.Option(0, min=0, help="--handheld: units on a second, independently moved body"),
 ) -> None:
     """Simulate a calibration session and write it as a dataset file."""
+    if Path(out).suffix.lower() not in DATASET_SUFFIXES:
+        from skincal.errors import ConfigError
+
+        raise ConfigError(f"{out}: a dataset is an HDF5 file; name it .h5 (or .hdf5)")
     if handheld:
         _simulate_handheld(out, units or 2, spacing, duration, noise, clock, seed, other_body, force)
         return
