@@ -81,3 +81,12 @@ def test_simulate_writes_only_a_dataset_name(tmp_path, name, capsys):
         assert main(["simulate", "--protocol", "fast", *extra, "--out", str(out)]) == 2
         assert "a dataset is an HDF5 file; name it .h5" in capsys.readouterr().err
         assert not out.exists()
+
+
+def test_simulate_says_the_paper_placement_is_the_pandas(tmp_path, capsys):
+    """Issue 27: ``--placement paper`` (the default) reused the Panda's Table II offsets on any robot silently."""
+    assert main(["simulate", "--robot", "ur5e", "--protocol", "fast", "-o", str(tmp_path / "u.h5")]) == 0
+    out = capsys.readouterr().out
+    assert "note: --placement paper is the paper's Table II on the Panda; on ur5e" in out and "links 2..6" in out
+    assert main(["simulate", "--protocol", "fast", "-o", str(tmp_path / "p.h5")]) == 0
+    assert "note:" not in capsys.readouterr().out

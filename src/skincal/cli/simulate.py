@@ -85,6 +85,13 @@ def simulate(
         f"wrote {out}: {ds.robot.name}, {len(ds.units)} units, {ds.duration:.1f} s of motion, "
         f"{n} IMU samples ({time.perf_counter() - start:.2f} s)"
     )
+    if placement == "paper" and robot != "panda":
+        from skincal.names import printable
+
+        console.print(printable(
+            f"  note: --placement paper is the paper's Table II on the Panda; on {chain.name} its unit poses are "
+            f"reused in the frames of links 2..{len(ds.units) + 1} as they are (--placement random fits any robot)"
+        ), highlight=False, markup=False)  # fmt: skip
 
 
 def _simulate_handheld(
