@@ -90,3 +90,14 @@ def test_simulate_says_the_paper_placement_is_the_pandas(tmp_path, capsys):
     assert "note: --placement paper is the paper's Table II on the Panda; on ur5e" in out and "links 2..6" in out
     assert main(["simulate", "--protocol", "fast", "-o", str(tmp_path / "p.h5")]) == 0
     assert "note:" not in capsys.readouterr().out
+
+
+def test_robustness_in_a_pipe_says_each_finished_job(tmp_path):
+    """Issue 27: ``benchmark robustness --quick`` ran 5 minutes without a line when its output was a pipe
+    (the progress bar is drawn on terminals only): now one stderr line per finished job."""
+    from cli_subprocess import run_cli
+
+    proc = run_cli(["benchmark", "robustness", "--quick", "--robots", "panda", "--backends", "analytic",
+                    "--faults", "qd-1e-3", "--workers", "1"], tmp_path)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "1/1 robustness: panda analytic qd-1e-3" in proc.stderr.splitlines()
