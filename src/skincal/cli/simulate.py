@@ -30,7 +30,11 @@ def simulate(
         "like the ABB tool-IMU ones: consumer IMU with gyroscope scale/misalignment; auto joints report14, "
         "auto clock host-gaps)",
     ),
-    protocol: str = typer.Option("paper-sim", help="protocol preset: paper-sim, paper-real, ... (fitted to the robot)"),
+    protocol: str = typer.Option(
+        "paper-sim",
+        help="protocol preset: paper-sim, paper-real, fast (fitted to the robot), or a motion .json written by "
+        "skincal protocol (simulated as it is: the rehearsal of a real session)",
+    ),
     seed: int = typer.Option(0, help="random seed (placements, poses, noise)"),
     backend: str = typer.Option("analytic", help="analytic (exact, fast) or mujoco (independent physics)"),
     mujoco_mode: str = typer.Option(

@@ -266,6 +266,16 @@ def build_trajectory(
     return _with_samples(traj, t, q, qd, qdd)
 
 
+def sampled_at(traj: Trajectory, rate_hz: float) -> Trajectory:
+    """``traj`` sampled every ``1 / rate_hz`` s from its exact piecewise form (``config.rate_hz`` set to it):
+    for a controller (100 Hz) or a simulator (1 kHz); the motion itself is unchanged."""
+    from dataclasses import replace
+
+    t = np.arange(int(np.floor(traj.duration * rate_hz + 1e-9)) + 1) / rate_hz
+    q, qd, qdd = traj.evaluate(t)
+    return replace(traj, t=t, q=q, qd=qd, qdd=qdd, config=replace(traj.config, rate_hz=float(rate_hz)))
+
+
 def _with_samples(traj: Trajectory, t: FloatArray, q: FloatArray, qd: FloatArray, qdd: FloatArray) -> Trajectory:
     from dataclasses import replace
 
