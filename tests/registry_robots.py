@@ -27,10 +27,17 @@ REGISTRY_URDFS = {
 }
 """Serial arms among them, by short name: relative paths under :func:`robots_dir`."""
 
+OTHER_URDFS = {
+    "so101": "so_arm_description/urdf/so101.urdf",
+    "z1": "z1_description/urdf/z1.urdf",
+}
+"""Arms that are not presets and whose tree needs care (issue 27): SO-101 (joints to 10 rad/s, the gripper
+jaw a revolute joint at the tip), Unitree Z1 (a gripper joint on the tip link)."""
+
 
 def registry_urdf(name: str) -> Path:
-    """Path of the registry URDF ``name`` (a key of :data:`REGISTRY_URDFS`)."""
-    return robots_dir() / REGISTRY_URDFS[name]
+    """Path of the registry URDF ``name`` (a key of :data:`REGISTRY_URDFS` or :data:`OTHER_URDFS`)."""
+    return robots_dir() / {**REGISTRY_URDFS, **OTHER_URDFS}[name]
 
 
 def random_chain(rng: np.random.Generator, n: int) -> SerialChain:

@@ -72,3 +72,20 @@ def test_an_integer_option_beyond_a_c_int_is_refused(value):
 def test_the_largest_c_int_is_taken():
     opts = parse_options(PaperOptions, parse_option_strings([f"maxeval_static={INT_OPTION_MAX}"]), "om")
     assert opts.maxeval_static == INT_OPTION_MAX
+
+
+def test_the_examples_of_calibrate_help_are_accepted_by_the_methods_they_name():
+    """Issue 27: ``calibrate --help`` gave ``--option maxeval_static=500`` as an example, which the default
+    method refuses; each example now names its method, and that method takes it."""
+    import inspect
+    import re
+
+    from skincal.cli.calibrate import calibrate as calibrate_cmd
+
+    help_text = inspect.signature(calibrate_cmd).parameters["option"].default.help
+    examples = re.findall(r"(\w+=\w+) \((?:with --method )?(\w+)\)", help_text.split("e.g.")[1])
+    assert len(examples) == 2, help_text
+    for item, method in examples:
+        parse_options(METHODS[method].options, parse_option_strings([item]), method)
+    with pytest.raises(ConfigError, match="unknown option"):
+        parse_options(MleOptions, parse_option_strings(["maxeval_static=500"]), "mle")

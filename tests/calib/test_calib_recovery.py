@@ -241,7 +241,7 @@ def test_paper_session_with_controller_joints_and_realistic_imus():
     for name, unit in result.units.items():
         z = (unit.pose.p_link_su - ds.truth[name].p_link_su) / unit.position_std_m
         silent = np.any(np.abs(z) > 3) or float(np.sum(z**2)) > 14.16
-        assert not silent or unit.warnings, (name, z)
+        assert not silent, (name, z, unit.warnings)  # a warning does not excuse an error beyond the std
 
 
 def test_velocities_a_driver_differentiates_from_encoder_counts():

@@ -175,3 +175,33 @@ def test_a_turning_gyroscope_rules_out_links_that_cannot_turn_it():
     assert "links [1, 2, 3, 4] ruled out" in out.note()
     still = gyro_rules_out(rng.normal(0, 0.01, t.size), links)
     assert not still.rotates and still.allowed.all() and still.note() is None
+
+
+def test_so101_fast_with_a_realistic_gyroscope_is_named_and_stays_honest():
+    """Issue 27 item 2: SO-101's `fast` motion turns its links at 9 rad/s, a realistic gyroscope clips at
+    4.28 rad/s (simulated). Every unit says its gyroscope saturates, the clipped samples are dropped, and
+    the pose errors stay within 4 reported std per axis (they used to reach 98 std without a word)."""
+    from scipy.spatial.transform import Rotation
+
+    from skincal.kinematics import get_robot
+    from skincal.protocol import get_protocol
+    from skincal.protocol.limits import fit_to_limits
+
+    from registry_robots import registry_urdf
+
+    chain = get_robot(str(registry_urdf("so101")))
+    rng = np.random.default_rng(1)
+    config = replace(fit_to_limits(chain, get_protocol("fast")), n_poses=4)
+    imu = get_imu_model("realistic")
+    ds = simulate(chain, random_placement(chain, 2, rng, links=[3, 5]), build_trajectory(chain, config, rng), imu, rng)
+    assert all(np.mean(np.abs(s.gyro) >= imu.gyro_range) > 0.02 for s in ds.imu.values())  # it really clips
+    result = calibrate(ds, "mle")
+    for name, unit in result.units.items():
+        assert any(w.startswith("gyroscope") and "saturates" in w for w in unit.warnings), unit.warnings
+        assert unit.extras["samples"]["saturated"] > 0
+        truth = ds.truth[name]
+        assert unit.pose.link == truth.link
+        z_p = (unit.pose.p_link_su - truth.p_link_su) / unit.position_std_m
+        d_rot = np.degrees(Rotation.from_matrix(unit.pose.R_link_su @ truth.R_link_su.T).as_rotvec())
+        z_r = d_rot / unit.rotation_std_deg
+        assert np.all(np.abs(z_p) < 4) and np.all(np.abs(z_r) < 4), (name, z_p, z_r)

@@ -101,3 +101,18 @@ def test_calibrate_table_with_an_undetermined_std_and_a_failed_unit():
     row2 = next(line for line in text.splitlines() if "su2" in line)
     assert "not calibrated: diverged" in row2
     assert "nan" not in text.lower()
+
+
+def test_calibrate_table_names_the_link_and_heads_the_warnings_as_such():
+    """Issue 27: the table showed link indices only (not the URDF's link names) and headed the warnings
+    'notes' (the notes, found and corrected, are not in it)."""
+    pose = SkinUnitPose.from_quaternion(3, [0.05, 0.0, 0.12], [1, 0, 0, 0])
+    su1 = UnitResult(pose, position_std_m=[1e-4] * 3, rotation_std_deg=[0.01] * 3, warnings=("bias drifts",),
+                     extras={"link_name": "forearm_link"}, notes=("clock drifts: +20 ppm",))  # fmt: skip
+    result = CalibrationResult("mle", "ur5", "", 1.0, {"su1": su1})
+    console = Console(width=250, record=True)
+    console.print(unit_table(result, "t"))
+    text = console.export_text()
+    assert "warnings" in text and "notes" not in text
+    row = next(line for line in text.splitlines() if "su1" in line)
+    assert "3 (forearm_link)" in row and "bias drifts" in row and "clock drifts" not in row

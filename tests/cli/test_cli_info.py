@@ -90,3 +90,22 @@ def test_console_script(data_file: Path, tmp_path: Path) -> None:
     assert bad.returncode == 2
     assert bad.stderr.startswith(f"error: {cut}: not a readable HDF5 file") and bad.stderr.count("\n") == 1
     assert "Traceback" not in bad.stderr
+
+
+def test_info_of_a_urdf_prints_the_chain_and_what_it_leaves_out(capsys):
+    """``skincal info arm.urdf`` (issue 27): the links the chain runs between, each joint with its link
+    frame and limits, and the gripper joint the default chain leaves out."""
+    from registry_robots import registry_urdf
+
+    path = str(registry_urdf("z1"))
+    assert main(["info", path]) == 0
+    out = capsys.readouterr().out
+    assert "z1_description (URDF, 6 joints)" in out and "world -> gripperStator" in out
+    assert "left out" in out and "jointGripper" in out
+    for k in range(1, 7):
+        assert f"joint{k}" in out and f"link0{k}" in out
+    assert main(["info", path, "--tip-link", "gripperMover"]) == 0
+    out = capsys.readouterr().out
+    assert "7 joints" in out and "left out" not in out
+    assert main(["info", path, "--tip-link", "nowhere"]) == 2
+    assert "'nowhere' is not a link of the URDF" in capsys.readouterr().err

@@ -70,3 +70,34 @@ def test_other_writers_keep_existing_files(files, command, capsys):
     assert main(args) == 2
     assert capsys.readouterr().err.startswith("error:")
     assert {p: _digest(p) for p in (data, result)} == before
+
+
+@pytest.mark.parametrize("name", ["data.json", "arm.urdf", "data"])
+def test_simulate_writes_only_a_dataset_name(tmp_path, name, capsys):
+    """Issue 27: ``simulate --out x.json`` wrote HDF5 under a JSON name (and ``-o arm.urdf --force`` could
+    replace the robot it read); the name must say HDF5 (.h5, .hdf5), checked before any work."""
+    out = tmp_path / name
+    for extra in ([], ["--handheld"]):
+        assert main(["simulate", "--protocol", "fast", *extra, "--out", str(out)]) == 2
+        assert "a dataset is an HDF5 file; name it .h5" in capsys.readouterr().err
+        assert not out.exists()
+
+
+def test_simulate_says_the_paper_placement_is_the_pandas(tmp_path, capsys):
+    """Issue 27: ``--placement paper`` (the default) reused the Panda's Table II offsets on any robot silently."""
+    assert main(["simulate", "--robot", "ur5e", "--protocol", "fast", "-o", str(tmp_path / "u.h5")]) == 0
+    out = capsys.readouterr().out
+    assert "note: --placement paper is the paper's Table II on the Panda; on ur5e" in out and "links 2..6" in out
+    assert main(["simulate", "--protocol", "fast", "-o", str(tmp_path / "p.h5")]) == 0
+    assert "note:" not in capsys.readouterr().out
+
+
+def test_robustness_in_a_pipe_says_each_finished_job(tmp_path):
+    """Issue 27: ``benchmark robustness --quick`` ran 5 minutes without a line when its output was a pipe
+    (the progress bar is drawn on terminals only): now one stderr line per finished job."""
+    from cli_subprocess import run_cli
+
+    proc = run_cli(["benchmark", "robustness", "--quick", "--robots", "panda", "--backends", "analytic",
+                    "--faults", "qd-1e-3", "--workers", "1"], tmp_path)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "1/1 robustness: panda analytic qd-1e-3" in proc.stderr.splitlines()

@@ -191,3 +191,49 @@ def test_adaptive_force_refuses_a_folder_named_like_a_segment(tmp_path: Path) ->
                                  "--max-motion", "0.001", "--force"], tmp_path))  # fmt: skip
     assert "m_001.json" in line
     assert (tmp_path / "m_001.json").is_dir()
+
+
+def test_imu_range_fits_the_motion_to_the_imus(tmp_path, capsys):
+    """``--imu-range`` (issue 27): SO-101's fast motion at +-2 g / +-245 deg/s keeps every joint speed
+    below the gyroscope's range and says what it changed; a malformed range is a one-line error."""
+    from skincal.protocol.imu_range import ImuRange, imu_bounds
+
+    path = registry_urdf("so101")
+    out = tmp_path / "motion.json"
+    code, text, _ = _run(capsys, "--robot", str(path), "--imu-range", "2g,245dps", "--out", str(out))
+    assert code == 0, text
+    assert "95% of the gyroscope's range" in text
+    traj = read_trajectory_json(out)
+    assert np.max(np.abs(traj.qd)) <= 0.95 * np.radians(245) + 1e-9  # 9 rad/s without the range
+    chain = get_robot(str(path))
+    assert not imu_bounds(chain, traj).exceeds(ImuRange.parse("2g,245dps"), 0.951)
+    for bad, message in (("2g", "--imu-range must be ACCEL,GYRO"), ("0.5g,245dps", "needs more than 1 g")):
+        code, _, err = _run(capsys, "--robot", "panda", "--imu-range", bad, "--out", str(tmp_path / "x.json"))
+        assert code == 2 and message in err, err
+        assert not (tmp_path / "x.json").exists()
+
+
+def test_floor_can_be_moved_or_switched_off_for_an_arm_not_on_the_floor(tmp_path, capsys):
+    """Issue 27: TALOS's arm hangs from its shoulder (the chain's base): below z = 0 of it in every pose, so
+    the floor check found no pose. ``--floor none`` (or a floor below the hand) gives the motion, stored in its
+    JSON; the refusal says how."""
+    from skincal.protocol.collision import CollisionModel
+
+    from registry_robots import robots_dir
+
+    arm = str(robots_dir() / "talos_data/robots/talos_left_arm.urdf")
+    out = tmp_path / "talos.json"
+    code, _, err = _run(capsys, "--robot", arm, "--out", str(out))
+    assert code == 2 and "no collision-free static pose" in err and "--floor moves it" in err
+    assert not out.exists()
+    for floor, stored in (("none", None), ("-1.5", -1.5)):
+        code, text, err = _run(capsys, "--robot", arm, "--floor", floor, "--out", str(out), "--force")
+        assert code == 0, err
+        doc = json.loads(out.read_text())
+        assert doc["config"]["floor_z"] == stored
+        traj = read_trajectory_json(out)
+        assert CollisionModel(get_robot(arm), floor_z=stored).free(traj.q[::20]).all()
+    code, _, err = _run(capsys, "--robot", "panda", "--floor", "low", "--out", str(tmp_path / "x.json"))
+    assert code == 2 and "--floor must be a height in m or none" in err
+    code, _, err = _run(capsys, "--robot", "panda", "--floor", "nan", "--out", str(tmp_path / "x.json"))
+    assert code == 2 and "floor_z must be a height" in err

@@ -201,9 +201,23 @@ def _unsorted_t(f: h5py.File) -> None:
     f["imu/su1/t"][...] = t
 
 
+def _repeated_t(f: h5py.File) -> None:
+    t = f["imu/su1/t"][()]
+    t[41] = t[40]  # two samples with one stamp: as a bag or a driver may repeat one
+    f["imu/su1/t"][...] = t
+
+
+def _repeated_joint_t(f: h5py.File) -> None:
+    t = f["joints/t"][()]
+    t[10] = t[9]
+    f["joints/t"][...] = t
+
+
 BAD_EDITS = {
     "nan in q": (_nan_in_q, "/joints/q contains NaN or infinite values (sample 7, column 2)"),
     "unsorted time": (_unsorted_t, "/imu/su1/t is not strictly increasing (sample 41)"),
+    "repeated stamp": (_repeated_t, "/imu/su1/t is not strictly increasing (sample 41)"),
+    "repeated joint stamp": (_repeated_joint_t, "/joints/t is not strictly increasing (sample 10)"),
     "wrong shape q": (lambda f: _replace(f, "joints/q", np.zeros((120, 6))), "/joints/q has shape (120, 6)"),
     "wrong shape accel": (lambda f: _replace(f, "imu/su1/accel", np.zeros((117, 2))), "/imu/su1/accel has shape"),
     "accel rows": (lambda f: _replace(f, "imu/su1/accel", np.zeros((116, 3))), "expected (117, 3)"),
@@ -234,6 +248,10 @@ BAD_EDITS = {
         "/truth/su1 attr 'accel_bias' has shape (2,)",
     ),
     "tof inf": (lambda f: f["tof/su1/range"].__setitem__(5, np.inf), "/tof/su1/range contains infinite values"),
+    "tof negative": (
+        lambda f: f["tof/su1/range"].__setitem__(7, -0.25),
+        "/tof/su1/range contains negative ranges (sample 7)",
+    ),
     "segment order": (lambda f: f["segments/t_end"].__setitem__(1, 0.3), "/segments/t_end is not after t_start"),
     "segment kind": (lambda f: f["segments/kind"].__setitem__(0, 2), "/segments/kind must be 0 (static) or 1"),
     "static with joint": (lambda f: f["segments/joint"].__setitem__(0, 3), "/segments/joint must be -1 for a static"),

@@ -121,3 +121,41 @@ def test_a_long_run_of_fixed_joints_is_no_recursion_error():
     chain = chain_from_urdf(text=text, tip_link=f"l{n}")
     assert chain.n_joints == 1 and chain.link_names == ("l0", "l1")
     assert chain.T_link_flange[2, 3] == pytest.approx((n - 1) * 0.001)
+
+
+def test_the_default_chain_leaves_a_trailing_gripper_joint_out():
+    """Issue 27: a moving joint at the tip named like a gripper's (Unitree Z1's ``jointGripper``) is the
+    end effector's, not the arm's: the default chain ends before it and says so; ``tip_link`` takes it in.
+    A wrist whose child link is named ``gripper_link`` (SO-101's wrist roll) stays; so does a lone joint."""
+    from skincal.kinematics.urdf import urdf_chain
+
+    from registry_robots import registry_urdf
+
+    z1 = urdf_chain(registry_urdf("z1"))
+    assert z1.chain.n_joints == 6 and z1.excluded == ("jointGripper",) and z1.tip_link == "gripperStator"
+    assert z1.chain.joint_names == tuple(f"joint{k}" for k in range(1, 7))
+    assert urdf_chain(registry_urdf("z1"), tip_link="gripperMover").chain.n_joints == 7
+    so101 = urdf_chain(registry_urdf("so101"))
+    assert so101.excluded == ("gripper",) and so101.chain.joint_names[-1] == "wrist_roll"
+    text = urdf(["base", "l1", "l2", "l3"], [("j1", "base", "l1"), ("j2", "l1", "l2"), ("finger_joint", "l2", "l3")])
+    picked = urdf_chain(text=text)
+    assert picked.chain.joint_names == ("j1", "j2") and picked.excluded == ("finger_joint",) and picked.tip_link == "l2"
+    alone = urdf_chain(text=urdf(["base", "jaw"], [("jaw_joint", "base", "jaw")]))
+    assert alone.chain.n_joints == 1 and alone.excluded == ()
+
+
+def test_z1_fast_protocol_finds_its_poses():
+    """Issue 27: with the gripper joint as joint 7 the protocol found no collision-free pose for the Z1."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from skincal.protocol import build_trajectory, get_protocol
+    from skincal.protocol.limits import fit_to_limits
+
+    from registry_robots import registry_urdf
+
+    chain = chain_from_urdf(registry_urdf("z1"))
+    config = replace(fit_to_limits(chain, get_protocol("fast")), collision_check=True, pose_selection="diverse")
+    traj = build_trajectory(chain, config, np.random.default_rng(0))
+    assert traj.poses.shape == (config.n_poses, 6)

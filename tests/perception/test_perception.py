@@ -21,7 +21,7 @@ from skincal.perception import (
 )
 from skincal.skin import SkinUnitPose
 from skincal.skin.placement import frame_from_normal, paper_placement
-from skincal.skin.tof import Plane, Sphere, TofModel, tof_range
+from skincal.skin.tof import Plane, Sphere, TofModel, cone_directions, tof_range
 
 Q0 = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
 
@@ -227,3 +227,32 @@ def test_body_proximity_of_groups_is_the_nearest_of_each_group(rng):
     for f in ("distance", "capsule", "link", "p_base_robot", "normal"):
         np.testing.assert_array_equal(getattr(nearest, f), getattr(every, f)[pick])
     assert not np.array_equal(pick, 7 * np.arange(40))  # not simply the first of each group
+
+
+def test_cone_spread_bounds_where_the_target_of_a_reading_can_be(rng):
+    """A reading's ``spread`` (``points_from_streams``) is how far across the ray the target that gave it
+    can lie: a small target on every ray of the simulated 27 deg cone (``skin.tof``), one per reading,
+    lies within the spread of the point placed on the axis, and those on the cone's edge at it (a halved
+    spread would leave them outside)."""
+    chain, pose = panda(), paper_placement(panda())["su4"]
+    model = TofModel()  # 37 rays: the axis and rings at 4.5, 9 and 13.5 deg
+    dirs_su = cone_directions(model.fov_deg, model.n_rays)
+    k = len(dirs_su)
+    origin, _ = unit_rays(chain, pose, Q0[None])
+    R_base_su = (chain.link_frames(Q0[None])[0, pose.link] @ pose.T_link_su)[:3, :3]
+    d = rng.uniform(0.2, 1.5, k)  # target distance along its ray, m
+    radius = 0.002  # small beside the 4.5 deg between rays at 0.2 m (16 mm): only its own ray hits it
+    centres = origin + (d + radius)[:, None] * (dirs_su @ R_base_su.T)
+    r = tof_range(np.repeat(origin, k, axis=0), np.repeat(R_base_su[None], k, axis=0), [Sphere(centres, radius)], model)
+    np.testing.assert_allclose(r, d, atol=1e-9)
+    t = np.arange(k) * 0.02
+    t_j, q_j = np.array([-1.0, 1.0]), np.repeat(Q0[None], 2, axis=0)
+    pts = points_from_streams(chain, {"su4": pose}, t_j, q_j, {"su4": (t, r)}, PerceptionConfig(max_range=2.0))
+    assert len(pts) == k
+    target = origin + d[:, None] * (dirs_su @ R_base_su.T)  # the hit points, in reading order (stamps sorted)
+    rel = target - origin
+    across = np.linalg.norm(rel - np.sum(rel * pts.axes, axis=1, keepdims=True) * pts.axes, axis=1)
+    assert np.all(across <= pts.spread * (1 + 1e-9)), np.max(across / pts.spread)
+    edge = np.isclose(np.arccos(np.clip(dirs_su[:, 2], -1, 1)), np.deg2rad(model.fov_deg / 2))
+    assert edge.sum() == 18
+    np.testing.assert_allclose(across[edge], pts.spread[edge], rtol=1e-9)

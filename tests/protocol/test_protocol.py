@@ -307,3 +307,18 @@ def test_fast_protocol_fits_every_preset_robot_under_two_minutes():
         assert traj.duration < 120.0
         assert np.all(np.abs(traj.qd).max(axis=0) <= chain.velocity_limit + 1e-9)
         assert np.abs(traj.qd).max() > 0.85 * chain.velocity_limit.min()
+
+
+@pytest.mark.parametrize("seed", [101, 115])
+def test_a_pose_no_collision_free_move_leaves_is_drawn_again(seed):
+    """Issue 27: the Sawyer's `fast` sessions of seeds 101 and 115 (``benchmark mle``'s placements 2 and 16)
+    failed with 'no collision-free static pose found in 200 draws': the pose before was a dead end that no
+    collision-free move leaves. The uniform draw now draws that pose again; the motion is collision-free."""
+    from skincal.protocol.collision import CollisionModel
+    from skincal.workflows.session import make_session
+
+    session = make_session("sawyer", "random", 6, "realistic", "fast", seed, joints="controller")
+    traj = session.trajectory
+    assert traj.poses.shape[0] == 6
+    model = CollisionModel(session.chain)
+    assert model.free(traj.q[::10]).all()

@@ -124,3 +124,26 @@ def test_simulator_options_are_one_frozen_dataclass():
     for bad in (SimOptions(mode="dynamic"), SimOptions(position_gain=5.0), SimOptions(model_options={"r": 1})):
         with pytest.raises(ConfigError, match="^mode, position_gain and model_options are options of the mujoco"):
             simulate(session, "analytic", options=bad)
+
+
+def test_simulate_rehearses_the_motion_skincal_protocol_wrote(tmp_path):
+    """Issue 27: ``simulate --protocol motion.json`` was refused, and ``simulate``'s fast motion is not
+    ``protocol``'s (collision-checked, diverse poses), so a real session could not be rehearsed. The file's
+    motion is now simulated as it is: the dataset's joints follow it, its segments are the file's, and
+    ``segment --protocol motion.json`` finds them at t = 0 of the rehearsal; another robot's motion is refused."""
+    from skincal.protocol import read_trajectory_json
+
+    motion, data = tmp_path / "motion.json", tmp_path / "rehearsal.h5"
+    assert main(["protocol", "--robot", "panda", "--protocol", "fast", "-o", str(motion)]) == 0
+    args = ["--placement", "random", "--units", "2", "--noise", "realistic", "--joints", "ideal"]
+    assert main(["simulate", "--protocol", str(motion), *args, "-o", str(data)]) == 0
+    traj, ds = read_trajectory_json(motion), read_dataset(data)
+    assert ds.duration == pytest.approx(traj.duration, abs=2e-3)
+    q, _, _ = traj.evaluate(ds.joints.t)
+    np.testing.assert_allclose(ds.joints.q, q, atol=1e-9)
+    np.testing.assert_allclose(ds.segments.t_start, traj.segments.t_start, atol=1e-9)
+    segmented = tmp_path / "segmented.h5"
+    assert main(["segment", str(data), "--protocol", str(motion), "-o", str(segmented)]) == 0
+    np.testing.assert_allclose(read_dataset(segmented).segments.t_start, traj.segments.t_start, atol=1e-3)
+    with pytest.raises(ConfigError, match="a motion for robot 'panda' \\(7 joints\\), not 'ur5e'"):
+        make_session("ur5e", "random", 1, "none", str(motion), 0)

@@ -47,14 +47,11 @@ def shown(text: object) -> str:
 
 
 def at_rate(traj, rate: float):  # noqa: ANN001, ANN201  (a skincal.protocol.Trajectory)
-    """``traj`` sampled at ``rate`` Hz for the controller (the limits were checked at the protocol's 1 kHz)."""
-    from dataclasses import replace
+    """``traj`` sampled at ``rate`` Hz for the controller (the limits were checked at the protocol's 1 kHz):
+    :func:`skincal.protocol.trajectory.sampled_at`."""
+    from skincal.protocol.trajectory import sampled_at
 
-    import numpy as np
-
-    t = np.arange(int(np.floor(traj.duration * rate + 1e-9)) + 1) / rate
-    q, qd, qdd = traj.evaluate(t)
-    return replace(traj, t=t, q=q, qd=qd, qdd=qdd, config=replace(traj.config, rate_hz=float(rate)))
+    return sampled_at(traj, rate)
 
 
 def joint_names(chain) -> tuple[str, ...]:  # noqa: ANN001

@@ -7,7 +7,7 @@ from typing import Any
 
 from skincal.bench import options
 from skincal.bench.harness import typer_command
-from skincal.cli.app import console
+from skincal.cli.app import console, err_console
 from skincal.cli.benchmark import benchmark_app
 
 
@@ -31,13 +31,18 @@ def robustness(v: dict[str, Any]) -> None:
     columns = (
         TextColumn("[progress.description]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn()
     )  # fmt: skip
+    total = len(rb.jobs(config))
+    done = 0
     with Progress(*columns, console=console, transient=True) as progress:
-        task = progress.add_task(f"robustness ({rb.where(workers, dask)})", total=len(rb.jobs(config)))
+        task = progress.add_task(f"robustness ({rb.where(workers, dask)})", total=total)
 
         def advance(record: dict[str, Any]) -> None:
-            progress.update(
-                task, advance=1, description=f"robustness: {record['robot']} {record['backend']} {record['fault']}"
-            )
+            nonlocal done
+            done += 1
+            what = f"robustness: {record['robot']} {record['backend']} {record['fault']}"
+            progress.update(task, advance=1, description=what)
+            if not console.is_terminal:  # a pipe or a log: no bar is drawn, so one line per finished job
+                err_console.print(f"{done}/{total} {what}", markup=False, highlight=False, soft_wrap=True)
 
         doc, run = run_harness(harness, config, workers=workers, dask=dask, progress=advance)
     for part in harness.report(config, doc, run):

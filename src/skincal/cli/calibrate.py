@@ -41,22 +41,25 @@ def std_cell(values, scale: float = 1.0) -> str:
 
 
 def unit_table(result, title: str):
-    """The per-unit table; units without a pose (``failed_units``) get a row saying why. Names and
-    notes are shown escaped (:func:`skincal.cli.app.shown`)."""
+    """The per-unit table; units without a pose (``failed_units``) get a row saying why. The link is its
+    number and, where the result names it, its name (a URDF's link); the last column holds the warnings
+    (the notes, what was found and corrected, are in the result file). Names and warnings are shown
+    escaped (:func:`skincal.cli.app.shown`)."""
     from rich.table import Table
 
     from skincal.data.result import has_position
 
     table = Table(title=shown(title))
-    for col in ("unit", "link", "position (m)", "quaternion (w,x,y,z)", "pos std (mm)", "rot std (deg)", "notes"):
+    for col in ("unit", "link", "position (m)", "quaternion (w,x,y,z)", "pos std (mm)", "rot std (deg)", "warnings"):
         table.add_column(col)
     for name, unit in result.units.items():
         std_p = std_cell(unit.position_std_m, 1e3)
         std_r = std_cell(unit.rotation_std_deg)
         notes = ("unobservable; " if not unit.observable else "") + "; ".join(unit.warnings)
+        link_name = unit.extras.get("link_name")
         table.add_row(
             shown(name),
-            str(unit.pose.link),
+            f"{unit.pose.link} ({shown(link_name)})" if isinstance(link_name, str) else str(unit.pose.link),
             " ".join(f"{x:+.4f}" for x in unit.pose.p_link_su) if has_position(unit) else "- (not determined)",
             " ".join(f"{x:+.4f}" for x in unit.pose.quaternion_wxyz),
             std_p,
@@ -87,7 +90,8 @@ def calibrate(
     ),
     dask: str | None = typer.Option(None, "--dask", help="several datasets: address of a dask.distributed scheduler"),
     option: list[str] | None = typer.Option(
-        None, "--option", help="method option name=value (repeatable), e.g. scale=false, maxeval_static=500"
+        None, "--option", help="method option name=value (repeatable), e.g. scale=false (mle), maxeval_static=500 "
+        "(with --method om)"
     ),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
     reference: str | None = typer.Option(

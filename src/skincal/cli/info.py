@@ -1,4 +1,4 @@
-"""``skincal info``: summary of a dataset file; ``skincal version``."""
+"""``skincal info``: summary of a dataset file, or of the serial chain a URDF gives; ``skincal version``."""
 
 from __future__ import annotations
 
@@ -42,14 +42,60 @@ def _fmt_rate(rate: float | None) -> str:
     return "-" if rate is None else f"{rate:.4g}"
 
 
+def _urdf_info(path: Path, base_link: str | None, tip_link: str | None) -> None:
+    """The chain every command takes from the URDF ``path``: links, joints and limits, what was left out."""
+    from rich.table import Table
+
+    from skincal.kinematics.urdf import urdf_chain
+
+    picked = urdf_chain(path, base_link=base_link, tip_link=tip_link)
+    chain = picked.chain
+    head = Table.grid(padding=(0, 2))
+    head.add_column(style="bold")
+    head.add_column()
+    head.add_row("file", shown(path))
+    head.add_row("robot", f"{shown(chain.name)} (URDF, {chain.n_joints} joints)")
+    head.add_row("chain", f"{shown(picked.base_link)} -> {shown(picked.tip_link)} (the flange's link)")
+    if picked.excluded:
+        head.add_row(
+            "left out",
+            f"{', '.join(shown(j) for j in picked.excluded)}: the gripper's joint(s) at the tip, not the arm's "
+            "(--tip-link takes them in)",
+        )
+    console.print(head)
+    table = Table(title="joints of the chain", title_justify="left")
+    for column, justify in (("#", "right"), ("joint", "left"), ("type", "left"), ("link (frame)", "left"),
+                            ("lower", "right"), ("upper", "right"), ("velocity", "right")):  # fmt: skip
+        table.add_column(column, justify=justify)  # type: ignore[arg-type]
+    names = chain.joint_names or tuple(f"joint{k + 1}" for k in range(chain.n_joints))
+    links = chain.link_names or tuple(str(k) for k in range(chain.n_joints + 1))
+    for k in range(chain.n_joints):
+        unit = "m" if chain.joint_type[k] == "prismatic" else "rad"
+        lo, hi = chain.joint_lower[k], chain.joint_upper[k]
+        v = "-" if chain.velocity_limit is None else f"{chain.velocity_limit[k]:.4g} {unit}/s"
+        table.add_row(str(k + 1), shown(names[k]), chain.joint_type[k], shown(links[k + 1]),
+                      f"{lo:.4g}" if np.isfinite(lo) else "-", f"{hi:.4g}" if np.isfinite(hi) else "-", v)  # fmt: skip
+    console.print(table)
+
+
 @app.command()
-def info(path: Path = typer.Argument(..., help="dataset file (.h5)")) -> None:
-    """Summarise a dataset: robot, units, duration, segments, sample rates."""
+def info(
+    path: Path = typer.Argument(..., help="dataset file (.h5), or a robot's .urdf (the chain it gives)"),
+    base_link: str | None = typer.Option(None, "--base-link", help="with a .urdf: the link the chain starts from"),
+    tip_link: str | None = typer.Option(None, "--tip-link", help="with a .urdf: the link the chain ends at"),
+) -> None:
+    """Summarise a dataset: robot, units, duration, segments, sample rates; or the serial chain of a URDF."""
     from rich.table import Table
 
     from skincal.data.dataset import DYNAMIC, STATIC
     from skincal.data.hdf5 import read_dataset
+    from skincal.errors import ConfigError
 
+    if path.suffix.lower() == ".urdf":
+        _urdf_info(path, base_link, tip_link)
+        return
+    if base_link is not None or tip_link is not None:
+        raise ConfigError("--base-link and --tip-link apply to a .urdf only")
     ds = read_dataset(path)
     robot = ds.robot
     js = ds.joints

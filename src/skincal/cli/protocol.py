@@ -39,6 +39,18 @@ def protocol_cmd(
         "every link frame) or uniform (the protocol's plain draw)",
     ),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
+    floor: str = typer.Option(
+        "0",
+        "--floor",
+        help="height of the floor the collision check keeps the arm above, m in the base frame, or none (an arm "
+        "whose base is not on the floor, e.g. a humanoid's)",
+    ),
+    imu_range: str | None = typer.Option(
+        None,
+        "--imu-range",
+        help="fit the motion to the IMUs' full scale too: ACCEL,GYRO (2g,245dps or 19.6,4.28 in m/s^2 and "
+        "rad/s) or an IMU preset (realistic, ...); every unit anywhere on a link then stays below its rails",
+    ),
     adaptive: bool = typer.Option(
         False,
         "--adaptive",
@@ -75,7 +87,7 @@ def protocol_cmd(
     ),
 ) -> None:
     """Write the calibration motion for a robot: fitted into its position, velocity and acceleration
-    limits, static poses collision-free (self and floor z = 0 of the base) along the whole motion.
+    limits, static poses collision-free (self and the floor, z = 0 of the base or --floor) along the whole motion.
     With --adaptive, the motion is chosen segment by segment from the data (a live session, or --simulate)."""
     import math
     from dataclasses import replace
@@ -89,6 +101,7 @@ def protocol_cmd(
     from skincal.protocol import build_trajectory, get_protocol
     from skincal.protocol.config import POSE_SELECTIONS
     from skincal.protocol.export import TRAJECTORY_SUFFIXES, export_trajectory
+    from skincal.protocol.imu_range import ImuRange, build_within_imu_range
     from skincal.protocol.limits import fit_to_limits
 
     if out.suffix.lower() not in TRAJECTORY_SUFFIXES:
@@ -103,7 +116,16 @@ def protocol_cmd(
     if out.suffix == "" and out.exists():  # (check_output would call it "a folder; give a file name")
         raise ConfigError(f"{out} exists; a ROS 2 bag folder is never overwritten, even with --force (remove it)")
     check_output(out, force=force, inputs=() if robot in PRESETS else (Path(robot),))
+    imu = None if imu_range is None else ImuRange.parse(imu_range)
+    try:
+        floor_z = None if floor.strip().lower() == "none" else float(floor)
+    except ValueError:
+        raise ConfigError(f"--floor must be a height in m or none, got {floor!r}") from None
     chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
+    if adaptive and imu is not None:
+        raise ConfigError("--imu-range does not apply to --adaptive (its segments are not fitted to it yet)")
+    if adaptive and floor_z != 0.0:
+        raise ConfigError("--floor does not apply to --adaptive (its segments check the floor at z = 0 yet)")
     if adaptive:
         from skincal.cli.protocol_adaptive import run_adaptive  # (it does not import this module)
 
@@ -120,8 +142,14 @@ def protocol_cmd(
                         (bind != "127.0.0.1" or None, "--bind")):  # fmt: skip
         if given is not None:
             raise ConfigError(f"{name} applies to --adaptive only")
-    config = replace(fit_to_limits(chain, get_protocol(protocol)), collision_check=True, pose_selection=poses)
-    traj = at_rate(build_trajectory(chain, config, np.random.default_rng(seed)), rate)  # checked at 1 kHz
+    config = replace(
+        fit_to_limits(chain, get_protocol(protocol)), collision_check=True, pose_selection=poses, floor_z=floor_z
+    )
+    if imu is None:
+        traj = build_trajectory(chain, config, np.random.default_rng(seed))
+    else:
+        config, traj = build_within_imu_range(chain, config, imu, np.random.default_rng(seed))
+    traj = at_rate(traj, rate)  # checked at 1 kHz
     t = traj.t
     export_trajectory(traj, out, joint_names=joint_names(chain))
     seg = traj.segments

@@ -12,6 +12,10 @@ from skincal.cli.app import app, console, err_console
 ROBOT_HELP = "robot preset (panda, iiwa14, gen3, sawyer, ur5, ur5e, ur10e, xarm7), a .urdf file, or a DH chain file"
 
 
+DATASET_SUFFIXES = (".h5", ".hdf5")
+"""Names ``simulate --out`` takes: the dataset is HDF5 whatever its name (a ``.json`` would be misleading)."""
+
+
 @app.command()
 def simulate(
     out: Path = typer.Option(..., "--out", "-o", help="dataset file to write (.h5)"),
@@ -26,7 +30,11 @@ def simulate(
         "like the ABB tool-IMU ones: consumer IMU with gyroscope scale/misalignment; auto joints report14, "
         "auto clock host-gaps)",
     ),
-    protocol: str = typer.Option("paper-sim", help="protocol preset: paper-sim, paper-real, ... (fitted to the robot)"),
+    protocol: str = typer.Option(
+        "paper-sim",
+        help="protocol preset: paper-sim, paper-real, fast (fitted to the robot), or a motion .json written by "
+        "skincal protocol (simulated as it is: the rehearsal of a real session)",
+    ),
     seed: int = typer.Option(0, help="random seed (placements, poses, noise)"),
     backend: str = typer.Option("analytic", help="analytic (exact, fast) or mujoco (independent physics)"),
     mujoco_mode: str = typer.Option(
@@ -52,6 +60,10 @@ def simulate(
     other_body: int = typer.Option(0, min=0, help="--handheld: units on a second, independently moved body"),
 ) -> None:
     """Simulate a calibration session and write it as a dataset file."""
+    if Path(out).suffix.lower() not in DATASET_SUFFIXES:
+        from skincal.errors import ConfigError
+
+        raise ConfigError(f"{out}: a dataset is an HDF5 file; name it .h5 (or .hdf5)")
     if handheld:
         _simulate_handheld(out, units or 2, spacing, duration, noise, clock, seed, other_body, force)
         return
@@ -77,6 +89,13 @@ def simulate(
         f"wrote {out}: {ds.robot.name}, {len(ds.units)} units, {ds.duration:.1f} s of motion, "
         f"{n} IMU samples ({time.perf_counter() - start:.2f} s)"
     )
+    if placement == "paper" and robot != "panda":
+        from skincal.names import printable
+
+        console.print(printable(
+            f"  note: --placement paper is the paper's Table II on the Panda; on {chain.name} its unit poses are "
+            f"reused in the frames of links 2..{len(ds.units) + 1} as they are (--placement random fits any robot)"
+        ), highlight=False, markup=False)  # fmt: skip
 
 
 def _simulate_handheld(

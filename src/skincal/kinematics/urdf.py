@@ -2,7 +2,11 @@
 
 The serial chain runs from ``base_link`` (default: the tree's root) to ``tip_link`` (default: the
 last link before the tree branches into several moving sub-chains, e.g. a gripper's fingers, or the
-single leaf of a serial arm). Along it:
+single leaf of a serial arm; then before a trailing gripper joint, a moving joint at the end whose
+name contains ``gripper``, ``finger`` or ``jaw``, e.g. Unitree Z1's ``jointGripper`` or SO-101's
+``gripper`` (its jaw): the end effector's own motion, not the arm's; the joint's child link does not
+count, SO-101's wrist roll carries a ``gripper_link``; :func:`urdf_chain` names what was left out).
+Along it:
 
 * every ``revolute``, ``continuous`` (revolute without position limits) and ``prismatic`` joint is
   a joint of the chain; link frame ``i`` is the URDF frame of the child link of the ``i``-th of
@@ -32,6 +36,8 @@ Every failure is one :class:`~skincal.errors.ConfigError` line naming the file.
 from __future__ import annotations
 
 import io
+import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -137,6 +143,22 @@ def _inertials(urdf_links: dict, joints: dict, children: dict[str, list[str]], f
     return None if all(b is None for b in bodies) else tuple(bodies)
 
 
+GRIPPER_WORDS = re.compile(r"gripper|finger|jaw", re.IGNORECASE)
+"""A moving joint at the end of the default chain whose name matches is the end effector's (module
+docstring)."""
+
+
+@dataclass(frozen=True)
+class UrdfChain:
+    """The chain :func:`chain_from_urdf` picks and why: ``base_link`` and ``tip_link`` (the flange's
+    link), ``excluded`` the trailing gripper joints the default tip leaves out (names)."""
+
+    chain: SerialChain
+    base_link: str
+    tip_link: str
+    excluded: tuple[str, ...]
+
+
 def chain_from_urdf(
     path: str | Path | None = None,
     *,
@@ -147,6 +169,18 @@ def chain_from_urdf(
 ) -> SerialChain:
     """The serial chain of a URDF file (``path``) or text (``text``) from ``base_link`` to
     ``tip_link`` (see the module docstring for the defaults and the frames)."""
+    return urdf_chain(path, text=text, base_link=base_link, tip_link=tip_link, name=name).chain
+
+
+def urdf_chain(
+    path: str | Path | None = None,
+    *,
+    text: str | None = None,
+    base_link: str | None = None,
+    tip_link: str | None = None,
+    name: str | None = None,
+) -> UrdfChain:
+    """:func:`chain_from_urdf` with the links it runs between and the gripper joints it left out."""
     if (path is None) == (text is None):
         raise ConfigError("give a URDF file or its text, not both")
     source = str(path) if path is not None else "URDF"
@@ -192,7 +226,18 @@ def chain_from_urdf(
     def moving_below(link: str) -> bool:
         return below[link]
 
+    def path_to(tip: str) -> list:
+        path_joints = []
+        link = tip
+        while link != base_link:
+            if link not in joints:
+                raise ConfigError(f"{source}: '{tip}' is not below '{base_link}' in the URDF tree")
+            path_joints.append(joints[link])
+            link = joints[link].parent
+        return path_joints[::-1]
+
     branches: list[str] = []
+    excluded: list[str] = []
     if tip_link is None:
         tip_link = base_link
         while True:
@@ -200,14 +245,13 @@ def chain_from_urdf(
             if len(branches) != 1:
                 break
             tip_link = branches[0]
-    path_joints = []
-    link = tip_link
-    while link != base_link:
-        if link not in joints:
-            raise ConfigError(f"{source}: '{tip_link}' is not below '{base_link}' in the URDF tree")
-        path_joints.append(joints[link])
-        link = joints[link].parent
-    path_joints.reverse()
+        while True:  # a trailing gripper joint is the end effector's, not the arm's (module docstring)
+            moving = [j for j in path_to(tip_link) if j.type != "fixed"]
+            if len(moving) < 2 or not GRIPPER_WORDS.search(moving[-1].name):
+                break
+            excluded.insert(0, moving[-1].name)
+            tip_link = moving[-1].parent
+    path_joints = path_to(tip_link)
     origins, axes, types, lower, upper, velocity, effort, joint_names, link_names = [], [], [], [], [], [], [], [], []
     pending = np.eye(4)
     for j in path_joints:
@@ -257,7 +301,7 @@ def chain_from_urdf(
     if not origins:
         raise ConfigError(f"{source}: no moving joint between '{base_link}' and '{tip_link}'")
     try:
-        return SerialChain(
+        chain = SerialChain(
             name=name or robot.name or Path(source).stem,
             T_parent_joint=np.array(origins),
             axis=np.array(axes),
@@ -276,3 +320,4 @@ def chain_from_urdf(
         )
     except ConfigError as exc:
         raise ConfigError(f"{source}: {exc}") from None
+    return UrdfChain(chain, base_link, tip_link, tuple(excluded))

@@ -7,8 +7,8 @@ polyline, radius :data:`LINK_RADIUS`). A configuration is *collision-free* when
   except pairs that touch in every configuration because the links between them are shorter than
   the two radii (a wrist whose joint axes meet: e.g. the Panda's link 1 is a point, so links 0 and 2
   always touch); and
-* no capsule of a link ``>= 2`` reaches below the floor plane ``z = 0`` of the base frame (links 0
-  and 1 stand on it).
+* no capsule of a link ``>= 2`` reaches below the floor plane ``z = floor_z`` of the base frame
+  (default 0: links 0 and 1 stand on it; ``None``: no floor, e.g. an arm hanging from a torso).
 
 Capsule-capsule distance = segment-segment distance - the two radii (:func:`segment_distance`,
 vectorised). :func:`check_motion` samples a trajectory every :data:`CHECK_STEP_S` seconds.
@@ -71,7 +71,7 @@ class CollisionModel:
 
     chain: SerialChain
     radius: float = LINK_RADIUS
-    floor_z: float = FLOOR_Z
+    floor_z: float | None = FLOOR_Z
 
     @cached_property
     def capsules(self):
@@ -126,7 +126,7 @@ class CollisionModel:
         else:
             pair_min = np.full(q.shape[0], np.inf)
         above = link >= 2
-        if above.any():
+        if above.any() and self.floor_z is not None:
             z = np.minimum(a[:, above, 2], b[:, above, 2]) - radius[above] - self.floor_z
             floor_min = z.min(axis=1)
         else:

@@ -59,6 +59,8 @@ class ProtocolConfig:
         collision_check: static poses are drawn collision-free and the whole motion is checked
             against self-collision and the floor (:mod:`skincal.protocol.collision`); ``False`` keeps
             the plain uniform draw (``paper-sim``: a simulation protocol, kept as the benchmarks had it).
+        floor_z: height of the floor plane of the collision check in the base frame, m; ``None``: no
+            floor (an arm whose base is not on the floor, e.g. a humanoid's arm hanging from its torso).
         pose_selection: ``"uniform"`` (poses drawn uniformly within the limits) or ``"diverse"``
             (drawn from a pool for gravity directions spread in every link frame; see
             :func:`skincal.protocol.limits.sample_static_poses`).
@@ -82,6 +84,7 @@ class ProtocolConfig:
     name: str = "custom"
     velocity_fraction: float | None = None
     collision_check: bool = False
+    floor_z: float | None = 0.0
     pose_selection: str = "uniform"
     notes: tuple[str, ...] = ()
 
@@ -125,6 +128,14 @@ class ProtocolConfig:
         if not isinstance(self.collision_check, (bool, np.bool_)):
             raise ConfigError(f"protocol: collision_check must be true or false, got {self.collision_check!r}")
         set_("collision_check", bool(self.collision_check))
+        if self.floor_z is not None:
+            if isinstance(self.floor_z, bool) or not isinstance(self.floor_z, (int, float, np.number)) or not (
+                math.isfinite(self.floor_z) and abs(self.floor_z) <= 1e3
+            ):
+                raise ConfigError(
+                    f"protocol: floor_z must be a height in m (|z| <= 1000) or null, got {self.floor_z!r}"
+                )
+            set_("floor_z", float(self.floor_z))
         if self.pose_selection not in POSE_SELECTIONS:
             raise ConfigError(
                 f"protocol: pose_selection must be one of {', '.join(POSE_SELECTIONS)}, got {self.pose_selection!r}"

@@ -207,7 +207,7 @@ def candidate_poses(
         return np.zeros((0, chain.n_joints))
     lo, hi = pose_box(chain, replace(config, excited_joints=None))
     pool = rng.uniform(lo, hi, size=(options.pose_pool, chain.n_joints))
-    pool = pool[CollisionModel(chain).free(pool)]
+    pool = pool[CollisionModel(chain, floor_z=config.floor_z).free(pool)]
     if pool.shape[0] == 0:
         return pool
     from skincal.protocol.limits import gravity_features

@@ -199,7 +199,10 @@ def pose_box(chain: SerialChain, config: ProtocolConfig) -> tuple[FloatArray, Fl
 
 
 MAX_POSE_DRAWS = 200
-"""Draws allowed per static pose before :func:`sample_static_poses` gives up (collision check)."""
+"""Draws allowed per static pose before :func:`sample_static_poses` gives up (collision check)..."""
+MAX_BACKTRACKS = 10
+"""...or, with the uniform draw, draws the previous pose again (a pose no collision-free move leaves), at
+most this many times per motion."""
 DIVERSE_POOL = 20
 """Candidates drawn per static pose (in one batch) for ``pose_selection="diverse"``; batches are drawn
 until :data:`DIVERSE_FEASIBLE` collision-free candidates per pose are available."""
@@ -214,7 +217,7 @@ class _PoseChecker:
         from skincal.protocol.motion import excitation_offsets
 
         self.chain, self.config, self.step = chain, config, CHECK_STEP_S
-        self.model = CollisionModel(chain)
+        self.model = CollisionModel(chain, floor_z=config.floor_z)
         n = chain.n_joints
         A, f = config.amplitude_per_joint(n), config.frequency_per_joint(n)
         self.blocks = []  # (m_j, n) offsets of each excitation and its return
@@ -260,7 +263,8 @@ def sample_static_poses(
 
     * ``pose_selection="uniform"``: one uniform draw of all poses (exactly the draw of earlier
       versions); with ``collision_check`` each pose whose excitations or move from the previous pose
-      collide (:mod:`skincal.protocol.collision`) is replaced by a fresh uniform draw.
+      collide (:mod:`skincal.protocol.collision`) is replaced by a fresh uniform draw, and a previous
+      pose from which :data:`MAX_POSE_DRAWS` draws found no collision-free move is drawn again.
     * ``pose_selection="diverse"``: candidates are drawn uniformly (batches of :data:`DIVERSE_POOL`
       per pose, until :data:`DIVERSE_FEASIBLE` per pose are collision-free); the first one starts,
       and each next pose is the candidate whose gravity directions in the link frames 1..n lie
@@ -281,13 +285,19 @@ def sample_static_poses(
     if not config.collision_check:
         return poses
     check = _PoseChecker(chain, config)
-    for p in range(P):
-        draws = 1
-        while not (check.static_ok(poses[p])[0] and (p == 0 or check.move_ok(poses[p - 1], poses[p]))):
-            if draws >= MAX_POSE_DRAWS:
+    p, draws, back = 0, 1, 0
+    while p < P:
+        if check.static_ok(poses[p])[0] and (p == 0 or check.move_ok(poses[p - 1], poses[p])):
+            p, draws = p + 1, 1
+            continue
+        if draws >= MAX_POSE_DRAWS:
+            if p == 0 or back >= MAX_BACKTRACKS:
                 raise _no_pose(chain, config, p)
-            poses[p] = rng.uniform(box_lo, box_hi)
-            draws += 1
+            # no collision-free move leaves the previous pose: a dead end, drawn again (a draw that
+            # succeeds without this step is the draw of earlier versions, draw for draw)
+            p, draws, back = p - 1, 1, back + 1
+        poses[p] = rng.uniform(box_lo, box_hi)
+        draws += 1
     return poses
 
 
@@ -295,7 +305,9 @@ def _no_pose(chain: SerialChain, config: ProtocolConfig, p: int) -> ProtocolErro
     return ProtocolError(
         f"robot '{chain.name}', protocol '{config.name}': no collision-free static pose {p + 1} found in "
         f"{MAX_POSE_DRAWS} draws (every draw collided with the robot itself or the floor during its "
-        f"excitation or move)"
+        f"excitation or move"
+        + ("" if config.floor_z is None else f"; the floor is z = {config.floor_z:g} m of the base: --floor moves it")
+        + ")"
     )
 
 

@@ -261,9 +261,19 @@ def build_trajectory(
         from skincal.protocol.collision import CHECK_STEP_S, CollisionModel, check_motion
 
         t_check = np.append(np.arange(0.0, traj.duration, CHECK_STEP_S), traj.duration)
-        check_motion(CollisionModel(chain), t_check, traj.evaluate(t_check)[0],
+        check_motion(CollisionModel(chain, floor_z=config.floor_z), t_check, traj.evaluate(t_check)[0],
                      f"robot '{chain.name}', protocol '{config.name}': ")  # fmt: skip
     return _with_samples(traj, t, q, qd, qdd)
+
+
+def sampled_at(traj: Trajectory, rate_hz: float) -> Trajectory:
+    """``traj`` sampled every ``1 / rate_hz`` s from its exact piecewise form (``config.rate_hz`` set to it):
+    for a controller (100 Hz) or a simulator (1 kHz); the motion itself is unchanged."""
+    from dataclasses import replace
+
+    t = np.arange(int(np.floor(traj.duration * rate_hz + 1e-9)) + 1) / rate_hz
+    q, qd, qdd = traj.evaluate(t)
+    return replace(traj, t=t, q=q, qd=qd, qdd=qdd, config=replace(traj.config, rate_hz=float(rate_hz)))
 
 
 def _with_samples(traj: Trajectory, t: FloatArray, q: FloatArray, qd: FloatArray, qdd: FloatArray) -> Trajectory:

@@ -3,7 +3,9 @@
 Used by ``skincal simulate`` and ``skincal demo``, the benchmarks (mle, Table I, core, robustness) and
 the avoidance experiment, so that a session of the same names is the same everywhere. The protocol is
 always fitted to the robot (:func:`skincal.protocol.limits.fit_to_limits`: robot-relative amplitudes
-resolved, amplitudes capped at 95 % of each joint's velocity limit), so every preset runs on every robot.
+resolved, amplitudes capped at 95 % of each joint's velocity limit), so every preset runs on every robot;
+a protocol ending in ``.json`` is the motion ``skincal protocol`` wrote (:func:`protocol_file`), simulated as
+it is: the rehearsal of the session a real robot will record.
 
 Random streams: one generator from ``seed`` draws the placements, then the static poses of the
 trajectory, then the simulation (in that order).
@@ -16,9 +18,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from skincal.errors import ConfigError
+from skincal.errors import ConfigError, ProtocolError
 from skincal.kinematics.chain import SerialChain
-from skincal.protocol import ProtocolConfig
+from skincal.protocol import ProtocolConfig, Trajectory
 from skincal.sim import BACKENDS, Session
 from skincal.sim.session import Progress
 
@@ -91,6 +93,32 @@ def fit_protocol(chain, protocol: str | ProtocolConfig) -> ProtocolConfig:
     return fit_to_limits(chain, config)
 
 
+SIM_RATE_HZ = 1000.0
+"""Rate a motion read from a file is sampled at for the simulators, Hz (the protocol's own rate)."""
+
+
+def protocol_file(chain: SerialChain, path: str) -> Trajectory:
+    """The motion of a ``skincal protocol`` JSON file (``.json``: the exact piecewise form) for ``chain``,
+    sampled at :data:`SIM_RATE_HZ`, refused (one line) when it was made for another robot or leaves this
+    one's position or velocity limits: the simulated rehearsal of a real session."""
+    from skincal.protocol import read_trajectory_json
+    from skincal.protocol.limits import check_limits
+    from skincal.protocol.trajectory import sampled_at
+
+    traj = read_trajectory_json(path)
+    if traj.n_joints != chain.n_joints or (traj.robot and traj.robot != chain.name):
+        raise ConfigError(
+            f"{path}: a motion for robot '{traj.robot}' ({traj.n_joints} joints), not '{chain.name}' "
+            f"({chain.n_joints} joints)"
+        )
+    traj = sampled_at(traj, SIM_RATE_HZ)
+    try:
+        check_limits(chain, traj.t, traj.q, traj.qd)
+    except ProtocolError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    return traj
+
+
 def make_session(
     robot: str | SerialChain = "panda",
     placement: str = "paper",
@@ -119,10 +147,11 @@ def make_session(
     chain = robot if isinstance(robot, SerialChain) else get_robot(robot)
     imu_model = get_imu_model(noise)
     joints, clock = resolve_timing(noise, joints, clock)
-    config = fit_protocol(chain, protocol)
+    from_file = isinstance(protocol, str) and protocol.lower().endswith(".json")
+    config = None if from_file else fit_protocol(chain, protocol)
     rng = np.random.default_rng(seed)
     placements = make_placements(chain, placement, units, rng, links)
-    trajectory = build_trajectory(chain, config, rng)
+    trajectory = protocol_file(chain, str(protocol)) if config is None else build_trajectory(chain, config, rng)
     return Session(
         chain, placements, trajectory, imu_model, rng, get_joint_model(joints), get_clock_model(clock),
         description=description,
