@@ -6,11 +6,11 @@ batch is lost with it), so :class:`RawReader` takes the serialised samples (``dd
 call ``take`` itself makes) and :func:`decode` turns each into its struct or ``None``:
 
 * more than ``max_bytes`` (:data:`MAX_BYTES` per type): oversized;
-* bytes that are not exactly one serialised struct: malformed. ``cyclonedds`` reads leniently (a
-  truncated sample decodes as zeros), so a decoded sample is serialised again, in the byte order its
-  encapsulation header names, and must give the same bytes (up to :data:`MAX_PADDING` bytes of
-  trailing padding, which ROS 2 writers add to a multiple of 4); bad UTF-8 or a length beyond the
-  data fails already while reading;
+* bytes that are not exactly one serialised struct: malformed. ``cyclonedds`` reads leniently (an
+  empty sample decodes as zeros, a string length beyond the data gives a short string), so the
+  sample must have its 4-byte plain-CDR encapsulation header and the read must end within the data,
+  at most :data:`MAX_PADDING` bytes before its end (ROS 2 writers pad to a multiple of 4); bad UTF-8
+  or a sequence beyond the data fails while reading;
 * read, but not what the message says it is (:func:`check`): a JointState whose arrays disagree with
   its names, a non-string frame id, more than :data:`MAX_JOINTS` joints: malformed.
 """
@@ -21,7 +21,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
-from cyclonedds.idl._support import Endianness
+from cyclonedds.idl._support import Buffer
 
 from skincal.data.ros2 import messages as m
 
@@ -38,8 +38,8 @@ MAX_BYTES: dict[Any, int] = {
 DEFAULT_MAX_BYTES = 64 * 1024
 MAX_PADDING = 3
 """Trailing bytes allowed after the serialised struct (CDR padding to a multiple of 4)."""
-ENCAPSULATION = {b"\x00\x00": "big", b"\x00\x01": "little"}
-"""XCDR1 plain CDR encapsulation ids (``CDR_BE``, ``CDR_LE``) -> byte order."""
+ENCAPSULATION = (b"\x00\x00", b"\x00\x01")
+"""XCDR1 plain CDR encapsulation ids: ``CDR_BE``, ``CDR_LE``."""
 
 
 @dataclass
@@ -80,13 +80,12 @@ def decode(kind: Any, data: bytes, drops: DropCounts | None = None, topic: str =
             drops.add(topic, "oversized")
         return None
     data = bytes(data)
-    order = ENCAPSULATION.get(data[:2])
     try:
-        if order is None:
+        if len(data) < 4 or data[:2] not in ENCAPSULATION:
             raise ValueError("not plain CDR")
-        msg = kind.deserialize(data)
-        again = msg.serialize(endianness=Endianness.Big if order == "big" else Endianness.Little)
-        ok = (data[4 : len(again)] == again[4:] and 0 <= len(data) - len(again) <= MAX_PADDING) and check(msg)
+        buffer = Buffer(data, align_offset=4)
+        msg = kind.__idl__.deserialize(buffer)
+        ok = 0 <= len(data) - buffer.tell() <= MAX_PADDING and check(msg)
     except Exception:  # noqa: BLE001 - any decoding failure of foreign bytes is a dropped sample
         ok, msg = False, None
     if not ok:
@@ -102,8 +101,9 @@ class RawReader:
     def __init__(self, reader: Any, kind: Any, topic: str, drops: DropCounts) -> None:
         self.reader, self.kind, self.topic, self.drops = reader, kind, topic, drops
 
-    def take(self, n: int = 4096) -> list[Any]:
-        """Up to ``n`` decoded messages (bad ones dropped and counted; disposals skipped)."""
+    def take(self, n: int = 4096) -> list[tuple[Any, bytes]]:
+        """Up to ``n`` ``(message, serialised bytes)`` pairs (bad ones dropped and counted; disposals
+        skipped)."""
         from cyclonedds._clayer import ddspy_take
         from cyclonedds.core import InstanceState, SampleState, ViewState
 
@@ -116,5 +116,5 @@ class RawReader:
                 continue
             msg = decode(self.kind, data, self.drops, self.topic)
             if msg is not None:
-                out.append(msg)
+                out.append((msg, data))
         return out

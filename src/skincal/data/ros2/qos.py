@@ -5,7 +5,7 @@
 profile                reliability  durability       keep last   used for
 =====================  ===========  ===============  ==========  =====================================
 sensor data            best effort  volatile         5           writers of ``/joint_states`` and IMUs
-sensor reader          best effort  volatile         4096        readers of them (a polled queue: 8 s
+sensor reader          best effort  volatile         32768       readers of them (a polled queue: 65 s
                                                                   of 500 Hz joint states)
 default                reliable     volatile         10          ``/diagnostics``
 tf_static (writer)     reliable     transient local  1           ``/tf_static`` (``StaticBroadcasterQoS``;
@@ -25,7 +25,7 @@ from cyclonedds.util import duration
 
 SENSOR_DEPTH = 5
 """``rmw_qos_profile_sensor_data``: keep last 5."""
-SENSOR_READER_DEPTH = 4096
+SENSOR_READER_DEPTH = 32768
 """Keep-last depth of skincal's sensor readers: samples queued between two polls."""
 DEFAULT_DEPTH = 10
 """``rmw_qos_profile_default``: keep last 10."""
