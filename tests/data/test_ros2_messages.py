@@ -165,3 +165,15 @@ def test_decoder_counts_oversized_and_inconsistent_samples():
     assert drops.as_dict() == {"/joint_states": {"malformed": 1}, "/skin/a/imu": {"malformed": 1, "oversized": 1}}
     assert decode(m.Imu, EXAMPLES[6].serialize(), drops, "/skin/a/imu") == EXAMPLES[6]
     assert drops.total() == 3
+
+
+def test_decoder_reads_big_endian_cdr_and_refuses_a_string_beyond_the_data():
+    from cyclonedds.idl._support import Endianness
+
+    msg = EXAMPLES[3]
+    big = msg.serialize(endianness=Endianness.Big)
+    assert big[:2] == b"\x00\x00" and decode(m.JointState, big) == msg
+    raw = bytearray(m.String(data="abc").serialize())
+    raw[4] = 200  # the string's length: 200 bytes, beyond the sample
+    drops = DropCounts()
+    assert decode(m.String, bytes(raw), drops, "/robot_description") is None and drops.total("malformed") == 1

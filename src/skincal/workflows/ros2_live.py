@@ -160,8 +160,7 @@ class Ros2Calibration:
         self._thread: threading.Thread | None = None
         self._receive_error: Exception | None = None
         self._quiet_since: float | None = None
-        if record is not None:
-            self._open_bag(record)
+        self._record_path = record
 
     # ------------------------------------------------------------------ input
     def _open_bag(self, path: Path) -> None:
@@ -227,18 +226,28 @@ class Ros2Calibration:
     def _receive(self) -> None:
         """The receiving thread: discovery and takes every ``poll_s``, into :attr:`_inbox`, so that a long
         calibrator step never lets a reader's queue overflow."""
-        while not self._closing.is_set():
-            c0 = time.monotonic()
-            try:
+        try:
+            if self._record_path is not None:  # sqlite: the bag is written and closed by this thread only
+                self._open_bag(self._record_path)
+            while not self._closing.is_set():
+                c0 = time.monotonic()
                 self._discover()
                 got = self._take()
-            except Exception as exc:  # noqa: BLE001 - the session must end cleanly, with what it has
-                self._receive_error = exc
-                return
-            if got:
-                with self._lock:
-                    self._inbox.extend(got)
-            self._closing.wait(max(0.0, self.options.poll_s - (time.monotonic() - c0)))
+                if got:
+                    with self._lock:
+                        self._inbox.extend(got)
+                self._closing.wait(max(0.0, self.options.poll_s - (time.monotonic() - c0)))
+            got = self._take()  # the last samples, recorded too
+            with self._lock:
+                self._inbox.extend(got)
+        except Exception as exc:  # noqa: BLE001 - the session must end cleanly, with what it has
+            self._receive_error = exc
+        finally:
+            if self._bag is not None:
+                try:
+                    self._bag.close()
+                finally:
+                    self._bag = None
 
     def start(self) -> None:
         """Start the receiving thread (:meth:`poll` starts it when needed)."""
@@ -535,6 +544,7 @@ class Ros2Calibration:
                 outcome = dataclasses.replace(outcome, result=result)
             return outcome
         finally:
-            if self._bag is not None:
-                self._bag.close()
-                self._bag = None
+            if self._receive_error is not None:
+                from skincal.errors import first_line
+
+                raise ConfigError(f"ROS 2 receiver failed: {first_line(self._receive_error)}")
