@@ -52,28 +52,53 @@ EXAMPLES = [
     m.Time(sec=-1, nanosec=999_999_999),
     m.String(data=""),
     m.String(data="<robot name='ärm'>\u2603</robot>"),
-    m.JointState(header=header(), name=["panda_joint1", "panda_joint2"], position=[0.1, -0.2], velocity=[1e-9, 3.0],
-                 effort=[]),  # fmt: skip
+    m.JointState(
+        header=header(), name=["panda_joint1", "panda_joint2"], position=[0.1, -0.2], velocity=[1e-9, 3.0], effort=[]
+    ),  # fmt: skip
     m.JointState(header=header(0, ""), name=[], position=[], velocity=[], effort=[]),  # every array empty
-    m.JointState(header=header(5, "wörld"), name=["Gelenk-ü", "j\u00e9", ""], position=[np.pi, -np.inf, 0.0],
-                 velocity=[], effort=[1.0, 2.0, 3.0]),  # fmt: skip
-    m.Imu(header=header(), orientation=m.Quaternion(0, 0, 0, 1), orientation_covariance=[-1.0] + [0.0] * 8,
-          angular_velocity=m.Vector3(0.1, -0.2, 0.3), angular_velocity_covariance=[1e-6] * 9,
-          linear_acceleration=m.Vector3(0.0, 0.0, 9.81), linear_acceleration_covariance=list(np.arange(9.0))),
+    m.JointState(
+        header=header(5, "wörld"),
+        name=["Gelenk-ü", "j\u00e9", ""],
+        position=[np.pi, -np.inf, 0.0],
+        velocity=[],
+        effort=[1.0, 2.0, 3.0],
+    ),  # fmt: skip
+    m.Imu(
+        header=header(),
+        orientation=m.Quaternion(0, 0, 0, 1),
+        orientation_covariance=[-1.0] + [0.0] * 8,
+        angular_velocity=m.Vector3(0.1, -0.2, 0.3),
+        angular_velocity_covariance=[1e-6] * 9,
+        linear_acceleration=m.Vector3(0.0, 0.0, 9.81),
+        linear_acceleration_covariance=list(np.arange(9.0)),
+    ),
     m.Imu(header=header(1, "Unterarm-links \u03b1"), linear_acceleration=m.Vector3(np.nan, 1e308, -0.0)),
     m.TFMessage(transforms=[]),
-    m.TFMessage(transforms=[
-        m.TransformStamped(header=header(2, "panda_link4"), child_frame_id="su1",
-                           transform=m.Transform(m.Vector3(0.01, 0.02, -0.03), m.Quaternion(0.1, 0.2, 0.3, 0.9))),
-        m.TransformStamped(header=header(3, "panda_link7"), child_frame_id="ünit 2"),
-    ]),  # fmt: skip
+    m.TFMessage(
+        transforms=[
+            m.TransformStamped(
+                header=header(2, "panda_link4"),
+                child_frame_id="su1",
+                transform=m.Transform(m.Vector3(0.01, 0.02, -0.03), m.Quaternion(0.1, 0.2, 0.3, 0.9)),
+            ),
+            m.TransformStamped(header=header(3, "panda_link7"), child_frame_id="ünit 2"),
+        ]
+    ),  # fmt: skip
     m.DiagnosticArray(header=header(4, ""), status=[]),
-    m.DiagnosticArray(header=header(), status=[
-        m.DiagnosticStatus(level=m.OK, name="skincal: su1", message="calibrated", hardware_id="su1",
-                           values=[m.KeyValue("link", "panda_link4"), m.KeyValue("std (mm)", "0.12")]),
-        m.DiagnosticStatus(level=m.WARN, name="skincal: ü", message="", hardware_id="", values=[]),
-        m.DiagnosticStatus(level=m.STALE),
-    ]),  # fmt: skip
+    m.DiagnosticArray(
+        header=header(),
+        status=[
+            m.DiagnosticStatus(
+                level=m.OK,
+                name="skincal: su1",
+                message="calibrated",
+                hardware_id="su1",
+                values=[m.KeyValue("link", "panda_link4"), m.KeyValue("std (mm)", "0.12")],
+            ),
+            m.DiagnosticStatus(level=m.WARN, name="skincal: ü", message="", hardware_id="", values=[]),
+            m.DiagnosticStatus(level=m.STALE),
+        ],
+    ),  # fmt: skip
 ]
 
 

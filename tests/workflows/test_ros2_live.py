@@ -155,3 +155,70 @@ def test_live_calibration_of_a_played_session_publishes_the_result_it_writes(sho
     assert sorted(recorded.imu) == list(UNITS)
     assert all(len(recorded.imu[u].t) == len(ds.imu[u].t) for u in UNITS)
     np.testing.assert_allclose(recorded.imu["su5"].accel, ds.imu["su5"].accel, rtol=0, atol=0)
+
+
+@pytest.mark.slow
+def test_a_unit_knocked_mid_stream_is_re_published_on_tf_static(tmp_path):
+    """280 s of teleoperation with su4 turned 2 deg at 240 s, played at 10x: the moved-unit monitor flags
+    it, it is re-calibrated from the data after the knock and published again before the end."""
+    from skincal.data.hdf5 import write_dataset
+    from skincal.kinematics.transforms import matrix_from_quat_wxyz, rotation_angle
+    from skincal.workflows.monitoring import knocked_dataset, work_session
+
+    path = tmp_path / "knock.h5"
+    write_dataset(knocked_dataset(work_session("panda", "realistic", "teleop", 280.0, seed=0), "su4", 240.0, 0.0, 2.0,
+                                  seed=0), path)  # fmt: skip
+    domain = fresh_domain()
+    me = join(domain)
+    tf = _reader(me, "/tf_static", m.TFMessage, qos.tf_static_listener())
+    out = tmp_path / "live.json"
+    live = subprocess.Popen(
+        [
+            *CLI,
+            "ros2",
+            "--robot",
+            "panda",
+            "--domain",
+            str(domain),
+            "--result",
+            str(out),
+            "--target",
+            "1mm,0.2deg",
+            "--idle",
+            "2",
+        ],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    play = subprocess.Popen([*CLI, "ros2-play", str(path), "--rate", "10", "--domain", str(domain)], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    messages = []
+    deadline = time.monotonic() + 240
+    while live.poll() is None and time.monotonic() < deadline:
+        messages += [x for x in tf.take(N=100) if isinstance(x, m.TFMessage)]
+        time.sleep(0.1)
+    play.communicate(timeout=30)
+    live_out, live_err = live.communicate(timeout=30)
+    messages += [x for x in tf.take(N=100) if isinstance(x, m.TFMessage)]
+    me.close()
+    assert live.returncode == 0, live_err
+    assert "moved: unit su4" in live_out
+    doc = json.loads(out.read_text())
+    (event,) = doc["events"]
+    assert event["unit"] == "su4" and abs(event["t_change_s"] - 240.0) < 1.0, (event, doc["ros2"])
+
+    def su4(msg):
+        (t,) = [t for t in msg.transforms if t.child_frame_id == "su4"] or [None]
+        if t is None:
+            return None
+        q = t.transform.rotation
+        return matrix_from_quat_wxyz(np.array([q.w, q.x, q.y, q.z]))
+
+    poses = [R for R in (su4(x) for x in messages) if R is not None]
+    before, after = np.asarray(event["T_link_su_before"])[:3, :3], np.asarray(event["T_link_su_after"])[:3, :3]
+    assert np.degrees(rotation_angle(poses[0], before)) < 0.1  # first published: the pose before the knock
+    # re-published before the end (not only in the final message) with the pose after the knock
+    assert any(np.degrees(rotation_angle(R, after)) < 0.3 for R in poses[:-1]), len(poses)
+    assert np.degrees(rotation_angle(poses[-1], after)) < 1e-6

@@ -16,7 +16,8 @@ polls, every :data:`POLL_S`:
   --follow``, with its moved-unit monitor), fed per poll;
 * **output**: ``/tf_static`` (``tf2_msgs/TFMessage``, reliable, transient local, keep last 1: every
   published unit in one message, parent the link's frame, child the unit's name), sent when a unit
-  first reaches the target, when a moved unit reaches it again, and at the end with the final result;
+  first reaches the target, when a moved unit (the moved-unit monitor's event) has a determined pose
+  again and when it reaches the target again, and at the end with the final result;
   ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``) every :data:`DIAGNOSTICS_EVERY_S`: a status
   per unit (link, std, what is missing, the joint to move, moves) and one for the session (topics,
   drops). ``record``: every accepted message written as received (its CDR bytes) to a ROS 2 bag.
@@ -146,7 +147,8 @@ class Ros2Calibration:
         self._source_unit: dict[tuple[str, str], str | None] = {}
         self._unit_source: dict[str, tuple[str, str]] = {}
         self._published: dict[str, Any] = {}  # unit -> TransformStamped now on /tf_static
-        self._moved: set[str] = set()
+        self._moved: set[str] = set()  # moved, not re-published yet
+        self._provisional: set[str] = set()  # re-published after a move, not at the target yet
         self._events = 0
         self._diag_wall = -math.inf
         self._t0_wall = time.monotonic()
@@ -404,15 +406,28 @@ class Ros2Calibration:
         self.stats.tf_messages += 1
 
     def _publish_decided(self) -> None:
-        """Units that reached the target and are not published (or moved since): published now."""
+        """Publish (all published units in one message) each unit that reached the target for the first
+        time; a moved unit as soon as its re-calibration has a determined pose (the pose published
+        before is known to be wrong), and again when it reaches the target."""
         assert self.feed is not None
-        due = [u for u, s in self.feed.statuses.items() if s.reached and (u not in self._published or u in self._moved)]
+        due = []
+        for u, s in self.feed.statuses.items():
+            if u in self._moved:
+                if s.pose is not None and s.link is not None and not s.missing:
+                    due.append(u)
+            elif s.reached and (u not in self._published or u in self._provisional):
+                due.append(u)
         if not due or self.feed.calibrator is None:
             return
         frames = self._frames(self.feed.calibrator.result(), due)
         if frames:
             self._published.update(frames)
-            self._moved.difference_update(frames)
+            for u in frames:
+                if u in self._moved:
+                    self._moved.discard(u)
+                    self._provisional.add(u)
+                else:
+                    self._provisional.discard(u)
             self._send_tf()
 
     def _diagnostics(self, force: bool = False) -> None:
@@ -435,6 +450,8 @@ class Ros2Calibration:
             joint = "-" if s.best_joint is None or self.chain is None else self.chain.joint_name(s.best_joint + 1)
             if unit in self._moved:
                 level, text = m.WARN, "moved on its link: re-calibrating"
+            elif unit in self._provisional and not s.reached:
+                level, text = m.WARN, "moved on its link: re-published, std above the target"
             elif s.reached:
                 level, text = m.OK, "calibrated (published on /tf_static)"
             else:
@@ -521,6 +538,7 @@ class Ros2Calibration:
                 result = outcome.result
                 self._published = self._frames(result, list(result.units))
                 self._moved.clear()
+                self._provisional.clear()
                 if self._published:
                     self._send_tf()
                 self._diagnostics(force=True)
