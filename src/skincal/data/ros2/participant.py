@@ -105,7 +105,8 @@ class Ros2Participant:
             return f"ROS 2 domain {self.domain_id} on the loopback interface ({LOOPBACK}), multicast off"
         addrs = interface_addresses(self.interface)
         shown = f" ({', '.join(addrs)})" if addrs else ""
-        return f"ROS 2 domain {self.domain_id} on interface {printable(self.interface)}{shown}, multicast discovery on"
+        return (f"ROS 2 domain {self.domain_id} on interface {printable(self.interface)}{shown}, Cyclone DDS's default "
+                "discovery (multicast where the interface supports it)")
 
     def close(self) -> None:
         """Delete the participant (its readers and writers with it)."""
