@@ -222,3 +222,30 @@ def test_a_unit_knocked_mid_stream_is_re_published_on_tf_static(tmp_path):
     # re-published before the end (not only in the final message) with the pose after the knock
     assert any(np.degrees(rotation_angle(R, after)) < 0.3 for R in poses[:-1]), len(poses)
     assert np.degrees(rotation_angle(poses[-1], after)) < 1e-6
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("how", ["sigterm", "until-decided"])
+def test_the_result_is_written_at_sigterm_or_at_the_target(short, tmp_path, how):
+    import signal
+
+    path, ds, _batch = short
+    domain = fresh_domain()
+    out = tmp_path / "live.json"
+    extra = ["--until-decided", "--target", "1mm,0.1deg"] if how == "until-decided" else []
+    live = subprocess.Popen([*CLI, "ros2", "--robot", "panda", "--domain", str(domain), "--result", str(out), *extra],
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    play = subprocess.Popen([*CLI, "ros2-play", str(path), "--rate", "4", "--domain", str(domain)], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    if how == "sigterm":
+        time.sleep(8.0)  # the stream is flowing (the play takes 10 s)
+        live.send_signal(signal.SIGTERM)
+    live_out, live_err = live.communicate(timeout=60)
+    play.communicate(timeout=60)
+    assert live.returncode == 0, live_err
+    doc = json.loads(out.read_text())
+    assert doc["ros2"]["ended"] == ("stopped" if how == "sigterm" else "target reached")
+    assert sum(doc["ros2"]["messages"].values()) < len(ds.joints.t) + sum(len(s.t) for s in ds.imu.values())
+    if how == "until-decided":
+        for u in UNITS:
+            assert max(doc["units"][u]["position_std_m"]) <= 1e-3 and max(doc["units"][u]["rotation_std_deg"]) <= 0.1
