@@ -249,3 +249,45 @@ def test_the_result_is_written_at_sigterm_or_at_the_target(short, tmp_path, how)
     if how == "until-decided":
         for u in UNITS:
             assert max(doc["units"][u]["position_std_m"]) <= 1e-3 and max(doc["units"][u]["rotation_std_deg"]) <= 0.1
+
+
+@pytest.mark.adversarial
+def test_hostile_decoded_messages_are_dropped_and_counted_never_fatal():
+    """Well-formed CDR with hostile content, fed through the session as the receiver would: NaN and inf
+    readings, another robot's joints, an empty and a control-character frame_id, thousands of frame_ids,
+    stamps at the int32 ends. Nothing raises; the units that remain are the real ones."""
+    from skincal.kinematics import panda
+    from skincal.workflows import ros2_live
+    from skincal.workflows.ros2_live import Ros2Calibration, Ros2Options
+
+    me = join(fresh_domain())
+    session = Ros2Calibration(me.participant, panda(), options=Ros2Options(warmup_s=0.0))
+    names = [f"panda_joint{i}" for i in range(1, 8)]
+    js = lambda ns, names=names, q=None: m.JointState(  # noqa: E731
+        header=m.Header(m.Time.from_ns(ns)), name=names, position=q or [0.1] * len(names), velocity=[])
+    imu = lambda ns, frame, a=(0.0, 0.0, 9.81): m.Imu(  # noqa: E731
+        header=m.Header(m.Time.from_ns(ns), frame), linear_acceleration=m.Vector3(*a))
+    t0 = 1_700_000_000 * 10**9
+    inbox = [("/joint_states", js(1), b"")]  # a stray first stamp (1970): not time 0, dropped as far behind
+    inbox += [("/joint_states", js(t0 + k * 2_000_000), b"") for k in range(50)]
+    inbox += [("/joint_states", js(t0, names=["other_joint"] * 7), b""),  # another robot
+              ("/joint_states", js(t0, q=[float("nan")] * 7), b""),
+              ("/joint_states", js((2**31 - 1) * 10**9), b"")]  # fmt: skip
+    inbox += [("/skin/su1/imu", imu(t0 + k * 10_000_000, "su1"), b"") for k in range(10)]
+    inbox += [("/skin/su1/imu", imu(t0, "su1", (float("nan"), float("inf"), 1e308)), b""),
+              ("/skin/esc/imu", imu(t0, "\x1b[2J"), b""),  # a control character: named by the topic
+              ("/skin/x/imu", imu(t0, ""), b"")]  # fmt: skip
+    inbox += [("/skin/many/imu", imu(t0, f"f{k}"), b"") for k in range(ros2_live.MAX_SOURCES + 50)]
+    session._inbox.extend(inbox)
+    session.poll()
+    session.poll()
+    outcome = session.finish()
+    me.close()
+    assert outcome is not None
+    dropped = session.drops.as_dict()
+    assert dropped["/joint_states"] == {"not the robot's joints": 1, "stamp jump": 2}
+    assert dropped["/skin/many/imu"]["no unit name"] >= 50  # beyond MAX_SOURCES sources
+    units = session.stats.units
+    assert units["/skin/su1/imu su1"] == "su1" and units["/skin/esc/imu \x1b[2J"] == "skin_esc"
+    assert units["/skin/x/imu"] == "skin_x"
+    assert len(units) <= ros2_live.MAX_SOURCES

@@ -10,7 +10,9 @@ polls, every :data:`POLL_S`:
   :func:`skincal.data.ros.reader.match_joints`), the IMU topics, ``/robot_description`` (latched) when
   no robot is given. A unit per topic and ``header.frame_id`` as ``import`` names bag units: the
   frame_id, else the topic (:func:`skincal.data.ros.topics.unit_from_topic`), names checked with
-  :func:`skincal.names.name_problem`. Time: ``header.stamp`` less the first joint state's stamp, s.
+  :func:`skincal.names.name_problem`. Time: ``header.stamp`` less the median stamp of the first
+  :data:`ORIGIN_JOINT_STATES` joint states, s; a stamp far from the newest accepted one
+  (:data:`MAX_AHEAD_S`, :data:`MAX_BEHIND_S`) is dropped.
   A malformed or oversized sample is counted and dropped (:mod:`skincal.data.ros2.decode`);
 * **calibration**: :class:`skincal.workflows.live.LiveFeed` (the streaming calibrator of ``calibrate
   --follow``, with its moved-unit monitor), fed per poll;
@@ -57,6 +59,20 @@ DIAGNOSTICS_EVERY_S = 1.0
 JOINT_TOPIC = "/joint_states"
 ROBOT_DESCRIPTION = "/robot_description"
 IMU_TYPE = "sensor_msgs::msg::dds_::Imu_"
+MAX_SOURCES = 1024
+"""IMU sources (topic, frame_id) and joint-name lists remembered at most; beyond, a new one's samples are
+dropped and counted (a publisher that changes its frame_id with every message cannot fill memory)."""
+MAX_AHEAD_S = 10.0
+"""A stamp more than this ahead of the newest accepted stamp (of any stream) is dropped and counted
+(``stamp jump``): one far-future stamp would make the calibrator process every block up to it. A robot
+clock that really jumps needs a new session."""
+MAX_BEHIND_S = 60.0
+"""A stamp more than this behind the newest accepted stamp is dropped and counted (``stamp jump``; the
+calibrator keeps no more history than that)."""
+ORIGIN_JOINT_STATES = 5
+"""Time 0 is the median stamp of the first this many joint states (one stray stamp cannot set it)."""
+MAX_TOPICS = 1024
+"""IMU topics followed at most (more are ignored and counted)."""
 HARDWARE_ID = "skincal"
 
 
@@ -142,6 +158,7 @@ class Ros2Calibration:
         self._m = m
         self._pending: list[tuple[str, Any, bytes]] = []  # before the robot and the first joint state are known
         self.origin_ns: int | None = None
+        self._t_newest = 0.0  # newest stamp accepted (any stream), s since time 0
         self.feed: LiveFeed | None = None
         self._joint_cols: dict[tuple[str, ...], np.ndarray | None] = {}
         self._source_unit: dict[tuple[str, str], str | None] = {}
@@ -192,8 +209,10 @@ class Ros2Calibration:
             if ros is None or ros in (JOINT_TOPIC, ROBOT_DESCRIPTION, "/tf_static", "/diagnostics"):
                 continue
             if kind != IMU_TYPE or (self.options.imu_topic is not None
-                                    and not fnmatch.fnmatchcase(ros, self.options.imu_topic)):  # fmt: skip
-                self.stats.ignored_topics.add(ros)
+                                    and not fnmatch.fnmatchcase(ros, self.options.imu_topic)) or (
+                    ros not in self._imu and len(self._imu) >= MAX_TOPICS):  # fmt: skip
+                if len(self.stats.ignored_topics) < MAX_TOPICS:
+                    self.stats.ignored_topics.add(ros)
                 continue
             if ros not in self._imu:
                 from skincal.data.ros2 import qos
@@ -280,6 +299,8 @@ class Ros2Calibration:
 
         key = (topic, frame)
         if key not in self._source_unit:
+            if len(self._source_unit) >= MAX_SOURCES:
+                return None
             unit = None
             for name in ((frame,) if frame else ()) + (unit_from_topic(topic),):
                 if name_problem(name) is None and name not in self._unit_source:
@@ -299,6 +320,8 @@ class Ros2Calibration:
 
         assert self.chain is not None
         if names not in self._joint_cols:
+            if len(self._joint_cols) >= MAX_SOURCES:
+                return None
             wanted = self.chain.joint_names
             cols: np.ndarray | None
             if wanted is None:
@@ -320,6 +343,10 @@ class Ros2Calibration:
             if topic == ROBOT_DESCRIPTION:
                 continue
             t = (msg.header.stamp.to_ns() - self.origin_ns) * 1e-9
+            if not self._t_newest - MAX_BEHIND_S <= t <= self._t_newest + MAX_AHEAD_S:
+                self.drops.add(topic, "stamp jump")
+                continue
+            self._t_newest = max(self._t_newest, t)
             if topic == JOINT_TOPIC:
                 cols = self._joint_columns(tuple(msg.name))
                 if cols is None:
@@ -361,10 +388,10 @@ class Ros2Calibration:
         if self.feed is None:
             if self.chain is None:
                 return
-            first = next((g for g in self._pending if g[0] == JOINT_TOPIC), None)
-            if first is None:
+            firsts = [g[1].header.stamp.to_ns() for g in self._pending if g[0] == JOINT_TOPIC][:ORIGIN_JOINT_STATES]
+            if len(firsts) < ORIGIN_JOINT_STATES:
                 return
-            self.origin_ns = first[1].header.stamp.to_ns()
+            self.origin_ns = int(np.median(firsts))
             self.feed = LiveFeed(self.chain, self.target, warmup_s=self.options.warmup_s, stop_at_target=True,
                                  watch=self.options.watch, on_event=self._moved_event)  # fmt: skip
         if self._pending:
