@@ -110,6 +110,8 @@ class Ros2Stats:
     units: dict[str, str] = field(default_factory=dict)
     refused: dict[str, str] = field(default_factory=dict)
     tf_messages: int = 0
+    tf_delay_max_s: float = 0.0
+    """Longest wall time from a calibrator step's statuses to the ``/tf_static`` message they made due, s."""
     last_message_wall: float | None = None
     first_message_wall: float | None = None
 
@@ -168,6 +170,7 @@ class Ros2Calibration:
         self._provisional: set[str] = set()  # re-published after a move, not at the target yet
         self._events = 0
         self._diag_wall = -math.inf
+        self._decided_wall = time.monotonic()
         self._t0_wall = time.monotonic()
         self._cpu0 = time.process_time()
         self.robot_source = "given" if chain is not None else ""
@@ -398,6 +401,7 @@ class Ros2Calibration:
             self._feed(self._pending)
             self._pending = []
         self.feed.tick()
+        self._decided_wall = time.monotonic()  # the statuses are the calibrator's decisions of now
         self._publish_decided()
         self._diagnostics()
 
@@ -456,6 +460,7 @@ class Ros2Calibration:
                 else:
                     self._provisional.discard(u)
             self._send_tf()
+            self.stats.tf_delay_max_s = max(self.stats.tf_delay_max_s, time.monotonic() - self._decided_wall)
 
     def _diagnostics(self, force: bool = False) -> None:
         now = time.monotonic()
@@ -580,6 +585,7 @@ class Ros2Calibration:
                     "ignored_topics": sorted(self.stats.ignored_topics),
                     "robot_source": self.robot_source,
                     "tf_messages": self.stats.tf_messages,
+                    "tf_delay_max_s": self.stats.tf_delay_max_s,
                     "finish_s": time.monotonic() - c0,
                     "last_message_to_result_s": None if last is None else time.monotonic() - last,
                     "process_cpu_s": time.process_time() - self._cpu0,
