@@ -71,9 +71,11 @@ MAX_BEHIND_S = 60.0
 calibrator keeps no more history than that)."""
 ORIGIN_JOINT_STATES = 5
 """Time 0 is the median stamp of the first this many joint states (one stray stamp cannot set it)."""
+MAX_PENDING = 1_000_000
+"""Messages kept while waiting for the robot or the first joint states; beyond, the oldest are dropped
+(counted ``waiting``)."""
 MAX_TOPICS = 1024
 """IMU topics followed at most (more are ignored and counted)."""
-HARDWARE_ID = "skincal"
 
 
 @dataclass(frozen=True)
@@ -388,6 +390,10 @@ class Ros2Calibration:
                 if topic == ROBOT_DESCRIPTION and self.chain is None:
                     self._robot_from(msg.data)
         self._pending.extend(g for g in got if g[0] != ROBOT_DESCRIPTION)
+        if len(self._pending) > MAX_PENDING:
+            for topic, _, _ in self._pending[: len(self._pending) - MAX_PENDING]:
+                self.drops.add(topic, "waiting")
+            del self._pending[: len(self._pending) - MAX_PENDING]
         if self.feed is None:
             if self.chain is None:
                 return
@@ -413,24 +419,10 @@ class Ros2Calibration:
             self.on_event(event)
 
     def _frames(self, result: Any, units: list[str]) -> dict[str, Any]:
-        """TransformStamped per unit of ``result`` among ``units`` (parent the link's frame)."""
-        from scipy.spatial.transform import Rotation
-
-        from skincal.data.export import link_frames_for, unit_frames
+        from skincal.workflows.ros2_publish import unit_transforms
 
         assert self.chain is not None
-        m = self._m
-        picked = dataclasses.replace(result, units={u: r for u, r in result.units.items() if u in units})
-        stamp = m.Time.from_ns(time.time_ns())
-        out = {}
-        for f in unit_frames(picked, link_frames_for(self.chain)):
-            x, y, z, w = Rotation.from_matrix(f.R_parent_child).as_quat()  # scalar last: ROS order
-            out[f.unit] = m.TransformStamped(
-                header=m.Header(stamp, f.parent), child_frame_id=f.child,
-                transform=m.Transform(m.Vector3(*(float(v) for v in f.p_parent_child)),
-                                      m.Quaternion(float(x), float(y), float(z), float(w))),
-            )  # fmt: skip
-        return out
+        return unit_transforms(result, self.chain, units, time.time_ns())
 
     def _send_tf(self) -> None:
         self._tf.write(self._m.TFMessage(transforms=[self._published[u] for u in sorted(self._published)]))
@@ -471,49 +463,26 @@ class Ros2Calibration:
 
     def diagnostics(self) -> Any:
         """The ``DiagnosticArray`` of now: one status per unit and the session's."""
+        from skincal.workflows.ros2_publish import session_status, unit_status
+
         m = self._m
-        kv = m.KeyValue
         statuses = [] if self.feed is None else sorted(self.feed.statuses.items())
         out = []
         for unit, s in statuses:
-            link = "-" if s.link is None or self.chain is None else self.chain.link_name(s.link)
-            p = np.asarray(s.position_std_m, float)
-            r = np.asarray(s.rotation_std_deg, float)
-            joint = "-" if s.best_joint is None or self.chain is None else self.chain.joint_name(s.best_joint + 1)
-            if unit in self._moved:
-                level, text = m.WARN, "moved on its link: re-calibrating"
-            elif unit in self._provisional and not s.reached:
-                level, text = m.WARN, "moved on its link: re-published, std above the target"
-            elif s.reached:
-                level, text = m.OK, "calibrated (published on /tf_static)"
-            else:
-                level, text = m.WARN, s.missing or "calibrating: std above the target"
-            values = [
-                kv("link", printable(link)),
-                kv("position std max (mm)", f"{1e3 * float(np.max(p)):.3f}" if np.all(np.isfinite(p)) else "inf"),
-                kv("rotation std max (deg)", f"{float(np.max(r)):.3f}" if np.all(np.isfinite(r)) else "inf"),
-                kv("target", self.target.text()),
-                kv("missing", s.missing or "-"),
-                kv("move joint", joint),
-                kv("samples", str(s.samples)),
-                kv("published", "yes" if unit in self._published else "no"),
-            ]
-            out.append(m.DiagnosticStatus(level=level, name=f"skincal: {unit}", message=text, hardware_id=unit,
-                                          values=values))  # fmt: skip
-        dropped = self.drops.total()
-        session = [
-            kv("imu topics", ", ".join(sorted(self._imu)) or "-"),
-            kv("units", str(len(statuses))),
-            kv("messages", str(sum(self.stats.messages.values()))),
-            kv("dropped", str(dropped)),
-            kv("ignored topics", str(len(self.stats.ignored_topics))),
-            kv("moves", str(self._events)),
-            kv("robot", "-" if self.chain is None else printable(self.chain.name)),
-        ]
+            state = "moved" if unit in self._moved else "provisional" if unit in self._provisional else ""
+            out.append(unit_status(unit, s, self.chain, self.target.text(), state, unit in self._published))
+        counts = {
+            "imu topics": ", ".join(sorted(self._imu)) or "-",
+            "units": str(len(statuses)),
+            "messages": str(sum(self.stats.messages.values())),
+            "dropped": str(self.drops.total()),
+            "ignored topics": str(len(self.stats.ignored_topics)),
+            "moves": str(self._events),
+            "robot": "-" if self.chain is None else printable(self.chain.name),
+        }
         state = "waiting for the robot" if self.chain is None else (
             "waiting for joint states" if self.feed is None else "calibrating")  # fmt: skip
-        out.append(m.DiagnosticStatus(level=m.OK if self.feed is not None else m.WARN, name="skincal: session",
-                                      message=state, hardware_id=HARDWARE_ID, values=session))  # fmt: skip
+        out.append(session_status(state, self.feed is not None, counts))
         return m.DiagnosticArray(header=m.Header(m.Time.from_ns(time.time_ns()), ""), status=out)
 
     # ------------------------------------------------------------------ the session
