@@ -277,6 +277,7 @@ def test_hostile_decoded_messages_are_dropped_and_counted_never_fatal():
     inbox += [("/skin/su1/imu", imu(t0, "su1", (float("nan"), float("inf"), 1e308)), b""),
               ("/skin/esc/imu", imu(t0, "\x1b[2J"), b""),  # a control character: named by the topic
               ("/skin/x/imu", imu(t0, ""), b"")]  # fmt: skip
+    inbox += [("/skin/imus", imu(t0 + k * 10_000_000, f"arm{k % 2}"), b"") for k in range(20)]  # 2 units, 1 topic
     inbox += [("/skin/many/imu", imu(t0, f"f{k}"), b"") for k in range(ros2_live.MAX_SOURCES + 50)]
     session._inbox.extend(inbox)
     session.poll()
@@ -290,4 +291,5 @@ def test_hostile_decoded_messages_are_dropped_and_counted_never_fatal():
     units = session.stats.units
     assert units["/skin/su1/imu su1"] == "su1" and units["/skin/esc/imu \x1b[2J"] == "skin_esc"
     assert units["/skin/x/imu"] == "skin_x"
+    assert units["/skin/imus arm0"] == "arm0" and units["/skin/imus arm1"] == "arm1"  # one unit per frame_id
     assert len(units) <= ros2_live.MAX_SOURCES

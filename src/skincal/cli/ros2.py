@@ -164,6 +164,7 @@ def ros2(
         if outcome is not None:
             show(outcome.statuses, outcome.t_data, None, force_draw=True)
     finally:
+        session.close()  # on an error too: the receiving thread ends and the bag is closed
         if live is not None:
             live.stop()
     joined.close()

@@ -521,14 +521,18 @@ class Ros2Calibration:
                 else:
                     time.sleep(rest)
 
+    def close(self) -> None:
+        """Stop the receiving thread (it closes the bag); idempotent."""
+        self._closing.set()
+        if self._thread is not None:
+            self._thread.join()
+
     def finish(self) -> LiveOutcome | None:
         """Absorb what is left, publish the final poses (every calibrated unit) and diagnostics, close the
         bag; the outcome with the session's counters in ``extras['ros2']`` (None: the calibrator never
         started: no robot, no joint states or no IMU)."""
         c0 = time.monotonic()
-        self._closing.set()
-        if self._thread is not None:
-            self._thread.join()
+        self.close()
         try:
             self._pending.extend(self._drain())
             if self._pending and self.feed is not None:
