@@ -11,8 +11,8 @@ polls, every :data:`POLL_S`:
   no robot is given. A unit per topic and ``header.frame_id`` as ``import`` names bag units: the
   frame_id, else the topic (:func:`skincal.data.ros.topics.unit_from_topic`), names checked with
   :func:`skincal.names.name_problem`. Time: ``header.stamp`` less the median stamp of the first
-  :data:`ORIGIN_JOINT_STATES` joint states, s; a stamp far from the newest accepted one
-  (:data:`MAX_AHEAD_S`, :data:`MAX_BEHIND_S`) is dropped.
+  :data:`ORIGIN_JOINT_STATES` joint states, s; a stamp far ahead of the newest accepted one or far
+  behind its topic's newest (:data:`MAX_AHEAD_S`, :data:`MAX_BEHIND_S`) is dropped.
   A malformed or oversized sample is counted and dropped (:mod:`skincal.data.ros2.decode`);
 * **calibration**: :class:`skincal.workflows.live.LiveFeed` (the streaming calibrator of ``calibrate
   --follow``, with its moved-unit monitor), fed per poll;
@@ -67,8 +67,9 @@ MAX_AHEAD_S = 10.0
 (``stamp jump``): one far-future stamp would make the calibrator process every block up to it. A robot
 clock that really jumps needs a new session."""
 MAX_BEHIND_S = 60.0
-"""A stamp more than this behind the newest accepted stamp is dropped and counted (``stamp jump``; the
-calibrator keeps no more history than that)."""
+"""A stamp more than this behind the newest accepted stamp of its own topic is dropped and counted
+(``stamp jump``; the calibrator keeps no more history than that). Per topic: under load one topic's
+messages may be taken seconds after another's."""
 ORIGIN_JOINT_STATES = 5
 """Time 0 is the median stamp of the first this many joint states (one stray stamp cannot set it)."""
 MAX_PENDING = 1_000_000
@@ -153,7 +154,7 @@ class Ros2Calibration:
             dds = DataReader(participant, Topic(participant, m.dds_topic(topic), kind), profile)
             return RawReader(dds, kind, topic, self.drops)
 
-        self._joints = reader(JOINT_TOPIC, m.JointState, qos.sensor_data(qos.SENSOR_READER_DEPTH))
+        self._joints = reader(JOINT_TOPIC, m.JointState, qos.sensor_reader())
         self._description = reader(ROBOT_DESCRIPTION, m.String, qos.latched()) if chain is None else None
         self._imu: dict[str, Any] = {}
         self._tf = DataWriter(participant, Topic(participant, m.dds_topic("/tf_static"), m.TFMessage), qos.tf_static())
@@ -163,6 +164,7 @@ class Ros2Calibration:
         self._pending: list[tuple[str, Any, bytes]] = []  # before the robot and the first joint state are known
         self.origin_ns: int | None = None
         self._t_newest = 0.0  # newest stamp accepted (any stream), s since time 0
+        self._t_stream: dict[str, float] = {}  # newest stamp accepted per topic
         self.feed: LiveFeed | None = None
         self._joint_cols: dict[tuple[str, ...], np.ndarray | None] = {}
         self._source_unit: dict[tuple[str, str], str | None] = {}
@@ -223,7 +225,7 @@ class Ros2Calibration:
                 from skincal.data.ros2 import qos
 
                 dds = self._DataReader(self.participant, self._Topic(self.participant, name, self._m.Imu),
-                                       qos.sensor_data(qos.SENSOR_READER_DEPTH))  # fmt: skip
+                                       qos.sensor_reader())  # fmt: skip
                 self._imu[ros] = self._RawReader(dds, self._m.Imu, ros, self.drops)
 
     def _take(self) -> list[tuple[str, Any, bytes]]:
@@ -348,10 +350,12 @@ class Ros2Calibration:
             if topic == ROBOT_DESCRIPTION:
                 continue
             t = (msg.header.stamp.to_ns() - self.origin_ns) * 1e-9
-            if not self._t_newest - MAX_BEHIND_S <= t <= self._t_newest + MAX_AHEAD_S:
+            own = self._t_stream.get(topic, self._t_newest)  # the newest of this topic's own stream
+            if not (own - MAX_BEHIND_S <= t and t <= self._t_newest + MAX_AHEAD_S):
                 self.drops.add(topic, "stamp jump")
                 continue
             self._t_newest = max(self._t_newest, t)
+            self._t_stream[topic] = max(own, t)
             if topic == JOINT_TOPIC:
                 cols = self._joint_columns(tuple(msg.name))
                 if cols is None:
@@ -521,6 +525,18 @@ class Ros2Calibration:
                 else:
                     time.sleep(rest)
 
+    def _count_dds_losses(self) -> None:
+        """Samples DDS itself lost (sequence gaps of best-effort traffic) or rejected (a reader's queue
+        full), per topic, into the drop counts."""
+        for r in [self._joints, *self._imu.values()]:
+            for reason, get in (("lost in transport", "get_sample_lost_status"),
+                                ("queue full", "get_sample_rejected_status")):  # fmt: skip
+                try:
+                    n = int(getattr(r.reader, get)().total_count)
+                except Exception:  # noqa: BLE001 - a status the binding cannot read is not a loss
+                    n = 0
+                self.drops.add(r.topic, reason, n)
+
     def close(self) -> None:
         """Stop the receiving thread (it closes the bag); idempotent."""
         self._closing.set()
@@ -547,6 +563,7 @@ class Ros2Calibration:
                 if self._published:
                     self._send_tf()
                 self._diagnostics(force=True)
+                self._count_dds_losses()
                 last = self.stats.last_message_wall
                 info = {
                     "domain": None,

@@ -48,8 +48,9 @@ class DropCounts:
 
     counts: Counter = field(default_factory=Counter)
 
-    def add(self, topic: str, reason: str) -> None:
-        self.counts[(topic, reason)] += 1
+    def add(self, topic: str, reason: str, n: int = 1) -> None:
+        if n > 0:
+            self.counts[(topic, reason)] += n
 
     def total(self, reason: str | None = None) -> int:
         return sum(n for (_, r), n in self.counts.items() if reason is None or r == reason)

@@ -5,8 +5,10 @@
 profile                reliability  durability       keep last   used for
 =====================  ===========  ===============  ==========  =====================================
 sensor data            best effort  volatile         5           writers of ``/joint_states`` and IMUs
-sensor reader          best effort  volatile         32768       readers of them (a polled queue: 65 s
-                                                                  of 500 Hz joint states)
+sensor reader          best effort  volatile         keep all    readers of them: a queue of at most
+                                                                  200000 samples (400 s of 500 Hz joint
+                                                                  states), never overwritten; beyond, new
+                                                                  samples are rejected (counted)
 default                reliable     volatile         10          ``/diagnostics``
 tf_static (writer)     reliable     transient local  1           ``/tf_static`` (``StaticBroadcasterQoS``;
                                                                   one message holds every unit)
@@ -25,8 +27,9 @@ from cyclonedds.util import duration
 
 SENSOR_DEPTH = 5
 """``rmw_qos_profile_sensor_data``: keep last 5."""
-SENSOR_READER_DEPTH = 32768
-"""Keep-last depth of skincal's sensor readers: samples queued between two polls."""
+SENSOR_READER_MAX_SAMPLES = 200_000
+"""Samples a sensor reader queues at most between two takes (keep all: a slow take loses nothing until
+this many are waiting; then new ones are rejected, and counted by DDS)."""
 DEFAULT_DEPTH = 10
 """``rmw_qos_profile_default``: keep last 10."""
 TF_STATIC_DEPTH = 1
@@ -40,6 +43,16 @@ LATCHED_DEPTH = 1
 def sensor_data(depth: int = SENSOR_DEPTH) -> Qos:
     """Best effort, volatile, keep last ``depth``."""
     return Qos(Policy.Reliability.BestEffort, Policy.Durability.Volatile, Policy.History.KeepLast(depth))
+
+
+def sensor_reader(max_samples: int = SENSOR_READER_MAX_SAMPLES) -> Qos:
+    """Best effort, volatile, keep all, at most ``max_samples`` queued (:data:`SENSOR_READER_MAX_SAMPLES`)."""
+    return Qos(
+        Policy.Reliability.BestEffort,
+        Policy.Durability.Volatile,
+        Policy.History.KeepAll,
+        Policy.ResourceLimits(max_samples=max_samples, max_samples_per_instance=max_samples),
+    )
 
 
 def default(depth: int = DEFAULT_DEPTH) -> Qos:
