@@ -27,6 +27,7 @@ from skincal.cli import hw as _hw  # noqa: E402,F401
 from skincal.cli import info as _info  # noqa: E402,F401
 from skincal.cli import io as _io  # noqa: E402,F401
 from skincal.cli import protocol as _protocol  # noqa: E402,F401
+from skincal.cli import ros2 as _ros2  # noqa: E402,F401
 from skincal.cli import simulate as _simulate  # noqa: E402,F401
 from skincal.cli import viz as _viz  # noqa: E402,F401
 from skincal.cli.app import app, console_error

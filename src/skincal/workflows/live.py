@@ -256,7 +256,9 @@ def follow_dataset(
 
 @dataclass
 class LiveFeed:
-    """Deliveries of a recording session turned into calibrator input (``record --live``).
+    """Samples of a live source turned into calibrator input: the deliveries of a recording session
+    (``record --live``, :meth:`on_delivery`) or any other stream (:meth:`add_joints`, :meth:`add_imu`;
+    ``skincal ros2``).
 
     Packets are buffered until :meth:`tick` starts the calibrator (the first tick at least
     :data:`LIVE_WARMUP_S` after the first joint state, with the units seen by then), then fed as they
@@ -270,6 +272,10 @@ class LiveFeed:
     stop_at_target: bool = True
     status_every_s: float = STATUS_EVERY_S
     clock: Callable[[], float] = time.monotonic
+    watch: bool = False
+    """A moved-unit monitor watches every settled unit (as ``calibrate --follow --watch``); a unit that
+    moved is re-calibrated from the data after the change and ``on_event(event)`` is called."""
+    on_event: Callable[[dict], None] | None = None
     calibrator: OnlineCalibrator | None = None
     statuses: dict[str, UnitStatus] = field(default_factory=dict)
     t_data: float = 0.0
@@ -303,22 +309,32 @@ class LiveFeed:
         if isinstance(p, JointPacket):
             if p.q.shape[1] != self.chain.n_joints:
                 return  # another robot: the recorder ignores it too
-            if self._first_joint_s is None:
-                self._first_joint_s = self.clock()
-            q, qd = np.asarray(p.q, dtype=float), np.asarray(p.qd, dtype=float)
-            if self.calibrator is None:
-                self._joints.append((t, q, qd))
-            else:
-                self.calibrator.add_joint_states(t, q, qd)
-            self.t_data = max(self.t_data, float(t[-1]))
+            self.add_joints(t, np.asarray(p.q, dtype=float), np.asarray(p.qd, dtype=float))
             return
         if p.accel is None:
             return
         name = self._unit_name(recorder, p.unit_id)
         if name is None:
             return
-        accel = np.asarray(p.accel, dtype=float)
         gyro = None if p.gyro is None else np.asarray(p.gyro, dtype=float)
+        self.add_imu(name, t, np.asarray(p.accel, dtype=float), gyro)
+
+    def add_joints(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray | None) -> None:
+        """Joint states on the feed's time axis: ``t`` ``(N,)`` s, ``q``/``qd`` ``(N, n)`` rad, rad/s (any
+        source: the UDP receiver, a ROS 2 topic)."""
+        if self._first_joint_s is None:
+            self._first_joint_s = self.clock()
+        if self.calibrator is None:
+            self._joints.append((t, q, qd))
+        else:
+            self.calibrator.add_joint_states(t, q, qd)
+        if len(t):
+            self.t_data = max(self.t_data, float(np.max(t)))
+
+    def add_imu(self, name: str, t: np.ndarray, accel: np.ndarray, gyro: np.ndarray | None) -> None:
+        """IMU samples of unit ``name`` (a checked name) on the feed's time axis: ``t`` ``(M,)`` s, ``accel``
+        ``(M, 3)`` m/s^2, ``gyro`` ``(M, 3)`` rad/s or None. A unit first seen after the calibrator started
+        is counted in :attr:`late_units`, not followed."""
         if self.calibrator is None:
             self._imu.setdefault(name, []).append((t, accel, gyro))
         elif name in self._units:
@@ -332,6 +348,14 @@ class LiveFeed:
 
         gravity = self.gravity if self.gravity is not None else GRAVITY_BASE
         self.calibrator = make_calibrator(self.chain, self._units, gravity, self.target)
+        if self.watch:
+            from skincal.calib.online.monitor import MovedUnitMonitor
+
+            cal = self.calibrator
+            monitor = MovedUnitMonitor().attach(cal)
+            if self.on_event is not None:
+                on_event = self.on_event
+                monitor.on_alarm = lambda _alarm: on_event(dict(cal.events[-1])) if cal.events else None
         for t, q, qd in self._joints:
             self.calibrator.add_joint_states(t, q, qd)
         for name, parts in self._imu.items():

@@ -156,7 +156,7 @@ def _refuse_interleaved(label: str, t_ns: np.ndarray, accel: np.ndarray | None, 
         )
 
 
-def _match_joints(
+def match_joints(
     names: tuple[str, ...], wanted: tuple[str, ...], source: str, topic: str
 ) -> tuple[np.ndarray | None, list[str]]:
     """Index into the message's arrays of each wanted joint (None if some are missing) and the
@@ -392,7 +392,7 @@ def _joint_states(scan: _Pass, chain: SerialChain, source: str) -> tuple[np.ndar
     for i, (_, _, (names, pos, vel)) in enumerate(jrows):  # per message: name order may differ between messages
         if names not in matched:
             if wanted is not None:
-                matched[names] = _match_joints(names, wanted, source, topic)
+                matched[names] = match_joints(names, wanted, source, topic)
             elif len(names) == n:
                 matched[names] = (np.arange(n), [])
                 notes.append(

@@ -1,0 +1,189 @@
+"""``skincal ros2`` (the streaming calibrator on a live ROS 2 graph) and ``skincal ros2-play`` (a
+dataset published as a robot and its skin would publish it)."""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import typer
+
+from skincal.cli.app import app, console, shown
+from skincal.errors import ConfigError
+
+DOMAIN_HELP = "ROS 2 domain id (default: ROS_DOMAIN_ID, else 0)"
+INTERFACE_HELP = "network interface to join (default: loopback only, multicast off)"
+
+
+@contextlib.contextmanager
+def _stop_on_signals() -> Iterator[threading.Event]:
+    """An event set by Ctrl-C (SIGINT) or SIGTERM while the command runs (main thread only); the previous
+    handlers are restored afterwards."""
+    stop = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield stop
+        return
+    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stop
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+@app.command("ros2-play")
+def ros2_play(
+    dataset: Path = typer.Argument(..., help="dataset file (.h5) with joint states"),
+    rate: float = typer.Option(
+        1.0, "--rate", help="data seconds per wall second (1: real time; 0: as fast as possible)"
+    ),
+    domain: int | None = typer.Option(None, "--domain", help=DOMAIN_HELP),
+    interface: str | None = typer.Option(None, "--interface", help=INTERFACE_HELP),
+    robot_description: Path | None = typer.Option(
+        None, "--robot-description", help="a URDF file published latched on /robot_description"
+    ),
+    wait: float = typer.Option(5.0, "--wait", min=0.0, help="wait up to this long (s) for a subscriber on every topic"),
+    origin_ns: int | None = typer.Option(
+        None, "--origin-ns", help="stamp of the dataset's time 0, ns since the epoch (default: now)"
+    ),
+) -> None:
+    """Publish a dataset on ROS 2: /joint_states and /skin/<unit>/imu with the dataset's stamps."""
+    import math
+
+    from skincal.data.hdf5 import read_dataset
+    from skincal.data.ros2.participant import join
+    from skincal.workflows.ros2_play import play_dataset
+
+    if not math.isfinite(rate) or rate < 0:
+        raise ConfigError(f"--rate {rate}: a finite number >= 0 (0: as fast as possible)")
+    ds = read_dataset(dataset)
+    ds.require_joints("ros2-play (a robot's joint states)", source=str(dataset))
+    urdf = None
+    if robot_description is not None:
+        try:
+            urdf = robot_description.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"--robot-description {shown(str(robot_description))}: cannot read it ({exc})") from None
+    joined = join(domain, interface)
+    console.print(f"joined {joined.joined}", highlight=False)
+    with _stop_on_signals() as stop:
+        report = play_dataset(ds, joined.participant, rate=None if rate == 0 else rate, origin_ns=origin_ns,
+                              robot_description=urdf, wait_s=wait, stop=stop)  # fmt: skip
+    joined.close()
+    total = sum(report.messages.values())
+    state = "stopped" if report.stopped else "played"
+    console.print(f"{state} {report.t_data_s:.1f} s of data in {report.wall_s:.1f} s: {total} messages on "
+                  f"{len(report.messages)} topics", highlight=False)  # fmt: skip
+
+
+@app.command("ros2")
+def ros2(
+    result: Path | None = typer.Option(None, "--result", help="write the result (.json) at the end"),
+    domain: int | None = typer.Option(None, "--domain", help=DOMAIN_HELP),
+    interface: str | None = typer.Option(None, "--interface", help=INTERFACE_HELP),
+    robot: str | None = typer.Option(
+        None, "--robot", help="robot preset, .urdf or chain file (default: the URDF on /robot_description)"
+    ),
+    base_link: str | None = typer.Option(None, "--base-link", help="URDF: first link of the serial chain"),
+    tip_link: str | None = typer.Option(None, "--tip-link", help="URDF: last link of the serial chain"),
+    imu_topic: str | None = typer.Option(
+        None, "--imu-topic", help="follow only the sensor_msgs/Imu topics matching this glob (e.g. '/skin/*/imu')"
+    ),
+    target: str | None = typer.Option(
+        None, "--target", help="std to reach on every axis, position and rotation with units (default 0.3mm,0.05deg)"
+    ),
+    until_decided: bool = typer.Option(False, "--until-decided", help="stop when every unit reached --target"),
+    duration: float | None = typer.Option(None, "--duration", help="stop after this many seconds"),
+    idle: float | None = typer.Option(None, "--idle", help="stop this many seconds after the last message"),
+    record: Path | None = typer.Option(None, "--record", help="write what was received as a ROS 2 bag (a new folder)"),
+    watch: bool = typer.Option(True, "--watch/--no-watch", help="watch calibrated units for moves (re-published)"),
+    force: bool = typer.Option(False, "--force", help="overwrite --result if it exists"),
+) -> None:
+    """Calibrate the skin live on a ROS 2 graph: /joint_states and every sensor_msgs/Imu topic in, each
+    unit's pose on /tf_static and its status on /diagnostics out, the live meter here."""
+    import math
+    import time
+
+    from rich.live import Live
+
+    from skincal.data.result import write_result
+    from skincal.data.ros2.participant import join
+    from skincal.io.atomic import check_output
+    from skincal.viz.meter import meter_line, meter_table
+    from skincal.workflows.live import Target, parse_target
+    from skincal.workflows.ros2_live import Ros2Calibration, Ros2Options
+
+    goal = parse_target(target) if target is not None else Target()
+    options = Ros2Options(imu_topic=imu_topic, until_decided=until_decided, duration_s=duration, idle_s=idle,
+                          watch=watch)  # fmt: skip
+    if result is not None:
+        check_output(result, force=force)
+    if record is not None and record.exists():
+        raise ConfigError(f"--record {shown(str(record))}: exists (a bag is written to a new folder)")
+    chain = None
+    if robot is not None:
+        from skincal.kinematics import get_robot
+
+        chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
+    joined = join(domain, interface)
+    console.print(f"joined {joined.joined}", highlight=False)
+    period = 0.25 if console.is_terminal else 1.0
+    last: dict = {"wall": -math.inf}
+    title = f"ros2 domain {joined.domain_id}"
+
+    def show(statuses, t_data: float, t_end: float | None, force_draw: bool = False) -> None:
+        now = time.monotonic()
+        if not force_draw and now - last["wall"] < period:
+            return
+        last["wall"] = now
+        if live is not None:
+            live.update(meter_table(statuses, goal.position_m, goal.rotation_deg, t_data, t_end, title))
+        elif statuses:
+            line = meter_line(statuses, goal.position_m, goal.rotation_deg, t_data, t_end)
+            if line != last.get("line"):
+                last["line"] = line
+                console.print(line, markup=False, highlight=False, soft_wrap=True)
+
+    def moved(event: dict) -> None:
+        console.print(f"[yellow]moved[/]: unit {shown(str(event.get('unit')))} changed at "
+                      f"{float(event.get('t_change_s', math.nan)):.1f} s; re-calibrating it, re-published when "
+                      "decided", highlight=False)  # fmt: skip
+
+    session = Ros2Calibration(joined.participant, chain, goal, options, record=record, on_event=moved,
+                              base_link=base_link, tip_link=tip_link)  # fmt: skip
+    live = Live(console=console, refresh_per_second=4, transient=False) if console.is_terminal else None
+    if live is not None:
+        live.start()
+    try:
+        with _stop_on_signals() as stop:
+            why = session.run(stop, on_meter=show)
+            outcome = session.finish()
+        if outcome is not None:
+            show(outcome.statuses, outcome.t_data, None, force_draw=True)
+    finally:
+        session.close()  # on an error too: the receiving thread ends and the bag is closed
+        if live is not None:
+            live.stop()
+    joined.close()
+    if outcome is None:
+        waiting = "the robot (/robot_description; or give --robot)" if session.chain is None else (
+            "joint states on /joint_states and sensor_msgs/Imu topics")  # fmt: skip
+        raise ConfigError(f"ended ({why}) before the calibrator started: no {waiting}")
+    info = outcome.result.extras["ros2"]
+    info["domain"] = joined.domain_id
+    info["interface"] = interface or "loopback"
+    info["ended"] = why
+    dropped = sum(sum(r.values()) for r in info["dropped"].values())
+    console.print(f"ended ({why}): {len(outcome.result.units)} of {len(outcome.statuses)} units calibrated, "
+                  f"{sum(info['messages'].values())} messages, {dropped} dropped, "
+                  f"{info['tf_messages']} /tf_static messages", highlight=False)  # fmt: skip
+    for note in outcome.notes:
+        console.print(f"note: {shown(note)}", highlight=False)
+    if result is not None:
+        write_result(outcome.result, result)
+        console.print(f"wrote {shown(str(result))}", highlight=False)
+    if record is not None:
+        console.print(f"recorded {shown(str(record))}", highlight=False)
