@@ -85,15 +85,10 @@ def test_coloured_noise_std_covers_the_spread(mc_coloured):
     assert ratio.value <= ratio.high, str(ratio)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="issue 27: with correlated accelerometer noise the rest-pose test of mle (_static_chi2) takes the "
-    "rest means' noise as white, finds them 2-3.5x too scattered and inflates the whole covariance again on top "
-    "of the autocorrelation factor: the std are 1.5x the spread (pooled spread/std 0.66); dividing that chi2 by "
-    "the residual autocorrelation factor gives 1.00 (tried locally, not committed: calib/mle is being changed)",
-)
 def test_coloured_noise_std_matches_the_spread(mc_coloured):
-    """Two-sided: with correlated residuals the std match the spread as they do with white noise."""
+    """Two-sided: with correlated residuals the std match the spread as they do with white noise (the
+    rest-pose test credits the rest means with the residuals' autocorrelation; taking them as white it
+    inflated the covariance a second time: spread/std 0.66)."""
     errors = normalised_errors(mc_coloured.result, mc_coloured.dataset, mc_coloured.units)
     ratio = variance_ratio(np.hstack([errors[q] for q in QUANTITIES]))
     assert ratio.ok, str(ratio)

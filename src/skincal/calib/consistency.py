@@ -112,8 +112,8 @@ def lively_windows(dataset: Dataset, link: int) -> np.ndarray:
     t = np.asarray(j.t, dtype=float)
     step = max(1, int(round(1.0 / (EXCITATION_RATE_HZ * max(float(np.median(np.diff(t))), 1e-9))))) if t.size > 1 else 1
     q, qd = np.asarray(j.q, dtype=float)[::step], np.asarray(j.qd, dtype=float)[::step]
-    motion = dataset.robot.link_motion(q, qd, np.zeros_like(q), upto=link)
-    rotates = bool(dataset.robot.revolute[:link].any())
+    motion = dataset.chain.link_motion(q, qd, np.zeros_like(q), upto=link)
+    rotates = bool(dataset.chain.revolute[:link].any())
     speed = np.linalg.norm((motion.omega if rotates else motion.v_origin)[:, link], axis=1)
     index = np.floor((t[::step] - t[0]) / EXCITATION_WINDOW_S).astype(int)
     n = int(index.max()) + 1 if index.size else 0

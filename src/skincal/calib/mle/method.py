@@ -209,6 +209,10 @@ def align(shared: Shared, imu: ImuStream) -> Alignment:
 class _Problem:
     table: SignalTable
     data: UnitData
+    sandwich: bool = False
+    """Raise the covariance to the block sandwich's (:func:`~skincal.calib.mle.solver.sandwich_inflation`):
+    for a low-rate joint stream, whose interpolated accelerations carry an error that follows the motion
+    and that the noise model does not name."""
 
     def linearise(self, tau: float, d: float) -> Linearisation:
         rows = self.data.rows
@@ -222,7 +226,7 @@ def _decimated(p: _Problem, step: int) -> _Problem:
     r = p.data.rows
     sub = lambda x: None if x is None else x[::step]  # noqa: E731
     rows = replace(r, moving_t=r.moving_t[::step], moving_f=r.moving_f[::step], moving_g=sub(r.moving_g))
-    return _Problem(p.table, replace(p.data, rows=rows))
+    return _Problem(p.table, replace(p.data, rows=rows), p.sandwich)
 
 
 def _use_gyro(problem: UnitProblem) -> bool:
@@ -243,7 +247,7 @@ def _arrange(
     data = arrange_unit_data(
         problem.chain, link, s.t[keep], s.accel[keep], gyro, shared.rest, shared.interpolator, problem.gravity
     )
-    p = _Problem(shared.table, data)
+    p = _Problem(shared.table, data, sandwich=shared.interpolator.conditioning.qdd_variance is not None)
     return _decimated(p, decimate) if decimate > 1 else p
 
 
@@ -356,7 +360,7 @@ def _fit(p: _Problem, blocks: Blocks, state: State | None = None, **kw) -> Fit:
         rows = replace(rows, moving_t=rows.moving_t[:0], moving_f=rows.moving_f[:0],
                        moving_g=None if rows.moving_g is None else rows.moving_g[:0])
         return solve(state, blocks, rows, None, **kw)
-    return solve(state, blocks, rows, p.linearise, **kw)
+    return solve(state, blocks, rows, p.linearise, sandwich=p.sandwich, **kw)
 
 
 def _residual_level(problem: UnitProblem, link: int, state: State) -> float:
@@ -624,11 +628,11 @@ def _blocks(problem: UnitProblem, p: _Problem) -> Blocks:
 def _static_chi2(fit: Fit, rows: Rows, rest_noise: float, angle_noise: float = 0.0) -> float:
     """Variance ratio of the rest rows' residuals to what the noise explains (1 when consistent).
 
-    A rest run of ``n`` samples with white noise ``sigma_r`` has a mean residual of variance
-    ``sigma_r^2 / n`` per axis, plus ``(|u| sigma_q)^2`` from the joint angles' own error
-    ``sigma_q`` (rad; an encoder's rounding tilts the predicted gravity); the ratio over all runs,
-    ``sum |r|^2 / (3 var (S - k))``, exceeds 1 when the runs disagree with the model (bias drift, a
-    moved unit, wrong gravity).
+    A rest run of ``n`` samples with white noise ``sigma_r`` has a mean residual of variance ``sigma_r^2
+    / n`` per axis (the caller divides by the noise's autocorrelation factor when it is not white), plus
+    ``(|u| sigma_q)^2`` from the joint angles' own error ``sigma_q`` (rad; an encoder's rounding tilts
+    the predicted gravity); the ratio over all runs, ``sum |r|^2 / (3 var (S - k))``, exceeds 1 when the
+    runs disagree with the model (bias drift, a moved unit, wrong gravity).
     """
     S = len(rows.static_u)
     if fit.residuals is None or S < 4:
@@ -653,7 +657,10 @@ def _honesty(
     st = fit.state
     warnings: list[str] = []
     notes: list[str] = []
+    # The rest means' noise is as correlated as the residuals are (up to CORRELATION_WARN: beyond it the
+    # correlation is model error, not noise, and is reported below): white-noise variance times that factor.
     chi2 = _static_chi2(fit, rows, p.data.rest.accel_noise, angle_noise)
+    chi2 /= min(fit.residual_correlation, CORRELATION_WARN)
     if chi2 > STATIC_CHI2_WARN:
         cov = cov * chi2
         warnings.append(

@@ -23,9 +23,9 @@ linearises the time dependence around the current ``tau_k, d_k``
 rows are weighted by its own robust residual variance (times the residuals' autocorrelation
 factor); outliers get Huber weights; directions the data cannot determine (a unit on link 1) are
 left at their start values (pseudo-inverse on the scaled normal equations) and reported. The
-covariance is the normal equations' (divided by the autocorrelation factor), raised per parameter
-to the block sandwich's where the residuals show errors that follow the motion
-(:func:`sandwich_inflation`).
+covariance is the normal equations' (divided by the autocorrelation factor); for data whose errors
+the noise model does not describe (a low-rate joint stream) it is raised per parameter to the block
+sandwich's where the residuals show errors that follow the motion (:func:`sandwich_inflation`).
 
 Parameter vector order: ``dtheta (3), p (3), b (3)``, then the optional blocks in this order:
 ``e (6: xx, yy, zz, xy, xz, yz, or 9: row-major E)``, ``tau (1)``, ``d (1)``, ``b_g (3)``, ``c (3)``,
@@ -343,6 +343,7 @@ def solve(
     max_inner: int = 8,
     tol: float = 1e-6,
     sigma_floor: float = SIGMA_FLOOR,
+    sandwich: bool = False,
 ) -> Fit:
     """Robust Gauss-Newton (see module docstring).
 
@@ -351,6 +352,9 @@ def solve(
         blocks: which optional blocks are estimated.
         rows: the unit's measurements.
         linearise: ``(tau, d) -> Linearisation`` of the moving samples (``None``: static data only).
+        sandwich: raise the covariance to the block sandwich's where it is larger
+            (:func:`sandwich_inflation`; for data whose errors the noise model does not describe, such
+            as a low-rate joint stream's interpolated accelerations).
     """
     if linearise is None:
         blocks = replace(blocks, time_offset=False, clock_drift=False)
@@ -410,15 +414,15 @@ def solve(
     else:
         info = (H - H_p) / rho + H_p
     cov = pinv(info)
-    sandwich = np.ones(blocks.size)
-    if len(r) > S + 20:
+    factors = np.ones(blocks.size)
+    if sandwich and len(r) > S + 20:
         scores = np.einsum("nkp,nk->np", J, r * w[:, None])
         if use_gyro:
             scores[:, cols_g] += np.einsum("nkp,nk->np", J_g, r_g * w_g[:, None])
-        sandwich = sandwich_inflation(cov, pinv(H), scores, rows.moving_t, S)
-        cov = cov * np.outer(sandwich, sandwich)
+        factors = sandwich_inflation(cov, pinv(H), scores, rows.moving_t, S)
+        cov = cov * np.outer(factors, factors)
     return Fit(
-        state, cov, sigma, null, blocks, cost, iterations, max(rho, rho_g), sigma_g if use_gyro else 0.0, r, sandwich
+        state, cov, sigma, null, blocks, cost, iterations, max(rho, rho_g), sigma_g if use_gyro else 0.0, r, factors
     )
 
 
