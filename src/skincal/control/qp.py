@@ -54,6 +54,15 @@ i.e. ``n_i^T J_i qd <= u_i*``, the fixed point of :func:`skincal.control.separat
 large ``S_p`` -> retreat -> small ``S_p`` -> fast approach ...): measured 0.23 <-> 1.03 m on alternate steps.
 Below ``S_p`` the bound is negative, so the robot backs away. ``separation = None`` is the fixed critical
 distance, unchanged.
+
+Power and force limiting (``ControllerConfig.pfl`` a body region, ``skincal avoid --margin iso-pfl``;
+ISO/TS 15066 Annex A, :mod:`skincal.control.body_regions`): speed and separation monitoring alone asks the
+robot point never to move toward a person inside ``S_p``; with PFL it may, up to the transient speed limit
+of the body region at its effective mass along the row's normal (:mod:`skincal.control.effective_mass`,
+``M_eff,i = 1 / (g_i M(q)^-1 g_i^T)`` with ``g_i = n_i^T J_i``), as long as the point is not touching
+(``d_i > 0``; touching, the separation row holds, so the robot never presses: no quasi-static contact)::
+
+    n_i^T J_i qd <= max(u_i*, min(pfl_share F_T / sqrt(mu_i k), v_max)),   mu_i = (1/m_H + 1/M_eff,i)^-1
 """
 
 from __future__ import annotations
@@ -65,6 +74,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from skincal.control.body_regions import BodyRegion, pfl_speed_limit
 from skincal.control.constraints import (
     FrameCache,
     approach_speed_bound,
@@ -75,6 +85,7 @@ from skincal.control.constraints import (
     obstacle_rows,
     ramp_width,
 )
+from skincal.control.effective_mass import MassMatrix, effective_mass
 from skincal.control.separation import (
     ApproachSpeedTable,
     SeparationParams,
@@ -119,6 +130,13 @@ class ControllerConfig:
         separation: ISO/TS 15066 protective separation per point instead of the fixed ``critical``
             (module docstring; ``critical`` and ``notice`` then only set the ramp width); None: the
             fixed critical distance.
+        pfl: with ``separation``, the body region (ISO/TS 15066 Annex A) every obstacle point is taken to
+            be: a point inside ``S_p`` but not touching may be approached at up to ``pfl_share`` of the
+            region's transient speed limit at the robot point's effective mass (power and force
+            limiting, module docstring; needs the controller's ``mass_matrix``); None: pure speed and
+            separation monitoring.
+        pfl_share: the share of the Annex A speed limit the controller allows itself (the rest covers
+            perception and tracking errors).
     """
 
     dt: float = 0.001
@@ -134,8 +152,14 @@ class ControllerConfig:
     limit_margin: float = 0.05
     solver: str = "daqp"
     separation: SeparationParams | None = None
+    pfl: BodyRegion | None = None
+    pfl_share: float = 0.5
 
     def __post_init__(self) -> None:
+        if self.pfl is not None and (self.separation is None or not isinstance(self.pfl, BodyRegion)):
+            raise ConfigError("controller: pfl needs a BodyRegion and a separation model")
+        if not (0 < self.pfl_share <= 1):
+            raise ConfigError(f"controller: pfl_share must be in (0, 1], got {self.pfl_share}")
         if self.separation is not None and not isinstance(self.separation, SeparationParams):
             raise ConfigError(f"controller: separation must be SeparationParams or None, got {self.separation!r}")
         if not (0 < self.critical < self.notice):
@@ -238,6 +262,7 @@ class AvoidanceController:
         config: ControllerConfig = ControllerConfig(),
         body: RobotBody | None = None,
         q_posture: ArrayLike | None = None,
+        mass_matrix: MassMatrix | None = None,
     ) -> None:
         import qpsolvers
 
@@ -247,6 +272,9 @@ class AvoidanceController:
         self.config = config
         self.body = (body if body is not None else RobotBody.of(chain)).inflated(config.padding)
         self.q_posture = None if q_posture is None else np.asarray(q_posture, dtype=float)
+        if config.pfl is not None and mass_matrix is None:
+            raise ConfigError("controller: power and force limiting (pfl) needs the robot's mass_matrix")
+        self.mass_matrix = mass_matrix
         self._flange = chain.T_link_flange[:3, 3]
         self._frames = FrameCache(chain)
         self._width = ramp_width(config.critical, config.notice)
@@ -309,6 +337,10 @@ class AvoidanceController:
                 assert self._speeds is not None
                 v_allowed = self._speeds(dist, sep_in.v_now if moving else None, sep_in.v_h, sep_in.z_d)
                 h_all = v_allowed  # the point's own approach is in it (the velocity-aware row)
+                if cfg.pfl is not None and self.mass_matrix is not None:
+                    # PFL: short of touching, up to the Annex A speed at the point's effective mass
+                    v_pfl = cfg.pfl_share * pfl_speed_limit(cfg.pfl, effective_mass(G_all, self.mass_matrix(q)))
+                    h_all = np.where(dist > 0, np.maximum(h_all, np.minimum(v_pfl, cfg.v_max)), h_all)
             # A row with no lever on the robot (point at the base) and a non-negative bound is void.
             keep = (np.abs(G_all).max(axis=1) > 1e-9) | (h_all < 0)
             G, h = G_all[keep], h_all[keep]

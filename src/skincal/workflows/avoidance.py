@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from skincal.control.effective_mass import MassMatrix
 from skincal.control.iso_metrics import TERMS
 from skincal.control.qp import AvoidanceController, ControllerConfig
 from skincal.control.separation import separation_speed
@@ -134,6 +135,7 @@ def run_scenario(
     resume_band: float = RESUME_BAND,
     mode: str = "kinematic",
     torque: object | None = None,
+    mass_matrix: MassMatrix | None = None,
 ) -> RunLog:
     """Run ``scenario`` in closed loop (see the module docstring) and log it.
 
@@ -141,7 +143,9 @@ def run_scenario(
     ``tof_model``: default the VL53L1X preset (27 deg cone of 37 rays, 5 mm + 0.5 % noise).
     ``uncertainty``: the believed poses' covariances behind each point's ``cov`` (perception's default
     when None). ``resume``: the task clock of the module docstring. ``mode``: ``kinematic`` or ``torque``
-    (``torque``: a :class:`skincal.sim.dynamics.TorqueConfig`, default its defaults).
+    (``torque``: a :class:`skincal.sim.dynamics.TorqueConfig`, default its defaults). ``mass_matrix``: the
+    robot's joint-space inertia ``q -> M(q)`` for a controller with power and force limiting
+    (``controller.pfl``; default :func:`robot_mass_matrix`).
     """
     if mode not in MODES:
         raise ConfigError(f"unknown mode '{mode}' (use {' or '.join(MODES)})")
@@ -195,7 +199,9 @@ def run_scenario(
 
     body = RobotBody.of(chain, link_radius)
     tracker = ProximityTracker(chain, dict(believed_poses), perception, body, uncertainty)
-    ctl = AvoidanceController(chain, controller, body, q_posture=scenario.q0)
+    if controller.pfl is not None and mass_matrix is None:
+        mass_matrix = robot.mass_matrix if robot is not None else robot_mass_matrix(chain)
+    ctl = AvoidanceController(chain, controller, body, q_posture=scenario.q0, mass_matrix=mass_matrix)
     fixed_margin = float(controller.critical)
     margin = np.full(S, fixed_margin)
     separation = getattr(controller, "separation", None)
@@ -286,6 +292,26 @@ def run_scenario(
         ~feasible,
         mode,
     )
+
+
+def robot_mass_matrix(chain: SerialChain) -> MassMatrix:
+    """``q -> M(q)`` ``(n, n)``: the joint-space inertia of the torque robot's MuJoCo model (the published
+    inertials of the Panda, UR5e, iiwa14 or a URDF's own, rotor armature included: what
+    :class:`skincal.sim.dynamics.TorqueRobot` simulates), by ``mj_fullM``."""
+    from skincal.sim.dynamics import torque_model
+    from skincal.sim.mujoco_model import full_mass_matrix
+
+    mujoco = require_mujoco()
+    model = torque_model(chain)
+    data = mujoco.MjData(model)
+    n = chain.n_joints
+
+    def mass_matrix(q: FloatArray) -> FloatArray:
+        data.qpos[:n] = q
+        mujoco.mj_fwdPosition(model, data)
+        return full_mass_matrix(model, data)[:n, :n]
+
+    return mass_matrix
 
 
 def _binding(parts, res) -> int:

@@ -22,6 +22,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from skincal.control import iso_metrics
+from skincal.control.body_regions import BodyRegion, body_region, pfl_speed_limit
+from skincal.control.effective_mass import MassMatrix
 from skincal.control.iso_metrics import AvoidMetrics
 from skincal.control.qp import ControllerConfig
 from skincal.control.separation import SeparationParams, StoppingModel
@@ -32,9 +34,14 @@ from skincal.perception.body import RobotBody
 from skincal.perception.uncertainty import SkinUncertainty
 from skincal.sim.scenarios import Scenario
 from skincal.skin.pose import SkinUnitPose
-from skincal.workflows.avoidance import MODES, RunLog, run_scenario
+from skincal.workflows.avoidance import MODES, RunLog, robot_mass_matrix, run_scenario
 
-MARGINS = ("fixed", "iso")
+MARGINS = ("fixed", "iso", "iso-pfl")
+"""``fixed``: the legacy critical distance; ``iso``: ISO/TS 15066 ``S_p``, speed and separation monitoring
+(inside ``S_p`` the robot never approaches); ``iso-pfl``: ``S_p`` with power and force limiting (inside it
+the robot may approach at the Annex A speed of the body region, :mod:`skincal.control.body_regions`)."""
+CRITERION = {"iso": "ssm", "iso-pfl": "pfl"}
+"""The ISO criterion a margin's run is judged by (:func:`skincal.control.iso_metrics.iso_criteria`)."""
 
 
 class StoppingModels:
@@ -81,7 +88,7 @@ class ExperimentConfig:
         believed_poses: what perception believes (may lack units; ``{}``: blind).
         label: the beliefs' name in the metrics (``poses``).
         uncertainty: the believed poses' covariances (perception's default when None).
-        margin: ``fixed`` or ``iso``.
+        margin: ``fixed``, ``iso`` or ``iso-pfl`` (:data:`MARGINS`).
         resume: the task clock that waits while a person is near.
         mode: ``kinematic`` or ``torque``.
         seed: seed of the sensor noise.
@@ -127,9 +134,13 @@ def run_experiment(
     ``reference`` a run without anybody made before (then not run again)."""
     c = config
     controller = ControllerConfig()
-    if c.margin == "iso":
+    regions = scenario_regions(c.scenario)
+    if c.margin in CRITERION:
         controller = replace(controller, separation=separation_for(c.chain, c.scenario, stopping=stopping))
-    kw = dict(controller=controller, uncertainty=c.uncertainty, resume=c.resume, mode=c.mode)
+    if c.margin == "iso-pfl":
+        controller = replace(controller, pfl=assumed_region(regions))
+    mass = robot_mass_matrix(c.chain) if c.margin in CRITERION else None
+    kw = dict(controller=controller, uncertainty=c.uncertainty, resume=c.resume, mode=c.mode, mass_matrix=mass)
     log = run_scenario(c.chain, c.scenario, c.true_poses, c.believed_poses, np.random.default_rng(c.seed), **kw)
     wanted = c.resume if c.reference is None else c.reference
     if reference is None and wanted:
@@ -138,7 +149,35 @@ def run_experiment(
             c.chain, nobody, c.true_poses, c.believed_poses, np.random.default_rng(c.seed), **kw
         )  # fmt: skip
     body = RobotBody.of(c.chain)
-    return Experiment(c, controller, log, reference, summarize(log, body, c.label, reference), body)
+    judged = (CRITERION[c.margin], regions, mass) if c.margin in CRITERION else None
+    return Experiment(c, controller, log, reference, summarize(log, body, c.label, reference, judged), body)
+
+
+def scenario_regions(scenario: Scenario) -> list[BodyRegion | None]:
+    """The ISO/TS 15066 body region of every solid of the scenario's scene (its ``tof_primitives`` order):
+    a person part's region, None for an object; a one-line :class:`ConfigError` naming the file and the
+    person for an unknown region name."""
+    out: list[BodyRegion | None] = []
+    for obs in scenario.scene.obstacles:
+        if not obs.body_regions:
+            out += [None] * len(obs.primitives)
+            continue
+        for name in obs.body_regions:
+            try:
+                out.append(body_region(name))
+            except ConfigError as e:
+                raise ConfigError(f"{scenario.source or scenario.name}: person '{obs.name}': {e}") from None
+    return out
+
+
+def assumed_region(regions: list[BodyRegion | None]) -> BodyRegion:
+    """The body region a PFL controller takes every perceived point to be: the skin does not tell who or what
+    it sees, so the scenario's most restrictive person part (the lowest Annex A speed limit against an
+    infinitely heavy robot); the hand without any person."""
+    people = [r for r in regions if r is not None]
+    if not people:
+        return body_region("hand")
+    return min(people, key=lambda r: float(pfl_speed_limit(r, np.inf)))
 
 
 # ---------------------------------------------------------------------------------------------- a run's metrics
@@ -160,9 +199,21 @@ def task_time_lost(log: RunLog, reference: RunLog) -> float:
     )
 
 
-def summarize(log: RunLog, body: RobotBody, poses: str = "", reference: RunLog | None = None) -> AvoidMetrics:
+def summarize(
+    log: RunLog,
+    body: RobotBody,
+    poses: str = "",
+    reference: RunLog | None = None,
+    judged: tuple[str, list, MassMatrix | None] | None = None,
+) -> AvoidMetrics:
     """All metrics of a run; ``body`` is the TRUE robot geometry (as simulated); ``reference`` the same
-    run without a person (for the task time lost; NaN without it)."""
+    run without a person (for the task time lost; NaN without it); ``judged``: ``(criterion, regions,
+    mass_matrix)`` to judge the run by ISO/TS 15066's criteria (:func:`skincal.control.iso_metrics.iso_criteria`)."""
+    iso = None
+    scene = log.scenario.scene
+    if judged is not None:
+        solids = scene.tof_primitives if scene.obstacles else None
+        iso = iso_metrics.iso_criteria(log.t, log.q, body, solids, margin_of(log), judged[1], judged[2], judged[0])
     return iso_metrics.summarize_run(
         scenario=log.scenario.name,
         poses=poses,
@@ -180,4 +231,5 @@ def summarize(log: RunLog, body: RobotBody, poses: str = "", reference: RunLog |
         loop_time_s=log.loop_time_s,
         task_time_lost_s=task_time_lost(log, reference) if reference is not None else float("nan"),
         mode=log.mode,
+        iso=iso,
     )
