@@ -381,16 +381,22 @@ class ContactEvent:
 class IsoCriteria:
     """The run against ISO/TS 15066's criteria (:func:`iso_criteria`); times s, speeds m/s.
 
+    The standard's criterion is on the *measured* separation (its ``S_p`` has the intrusion distance ``C``
+    and the sensing uncertainty ``Z_d`` for what the sensors miss): per perceived point inside its ``S_p``,
+    the robot point's actual speed toward it. The same test against the TRUE geometry (the true nearest pair
+    of robot and person, the step's ``S_p``) is stricter and reported beside it (``true_*``).
+
     Attributes:
         criterion: ``ssm`` or ``pfl`` (:data:`CRITERIA`).
-        inside_sp_s: time the true clearance was below the step's ``S_p``.
-        violation_s: time inside ``S_p`` with the robot point approaching the person faster than allowed
+        inside_sp_s: time some perceived point was inside its ``S_p``.
+        violation_s: time inside ``S_p`` with the robot point approaching the point faster than allowed
             (must be 0).
         violation_steps: steps of it.
-        max_approach_inside_sp_mps: the largest speed of the robot point toward the person inside ``S_p``.
+        max_approach_inside_sp_mps: the largest actual speed of a robot point toward a point inside ``S_p``.
         max_excess_mps: the largest amount by which that speed exceeded the allowed one (<= 0: none).
-        contacts: the contacts (:class:`ContactEvent`).
-        passed: no violation and every contact within its limits.
+        true_inside_sp_s, true_violation_s, true_max_approach_mps: the same against the true geometry.
+        contacts: the contacts (:class:`ContactEvent`, true geometry).
+        passed: no violation (measured separation) and every contact within its limits.
     """
 
     criterion: str
@@ -399,6 +405,9 @@ class IsoCriteria:
     violation_steps: int
     max_approach_inside_sp_mps: float
     max_excess_mps: float
+    true_inside_sp_s: float
+    true_violation_s: float
+    true_max_approach_mps: float
     contacts: tuple[ContactEvent, ...]
     passed: bool
 
@@ -413,6 +422,9 @@ class IsoCriteria:
             "sp_violation_steps": self.violation_steps,
             "max_approach_inside_sp_mps": self.max_approach_inside_sp_mps,
             "max_approach_excess_mps": self.max_excess_mps,
+            "true_inside_sp_s": self.true_inside_sp_s,
+            "true_sp_violation_s": self.true_violation_s,
+            "true_max_approach_inside_sp_mps": self.true_max_approach_mps,
             "contacts_robot_initiated": sum(e.robot_initiated for e in c),
             "contacts_person_initiated": sum(not e.robot_initiated for e in c),
             "contacts_within_limits": sum(e.within_limits for e in c),
@@ -434,6 +446,7 @@ def iso_criteria(
     mass_matrix: MassMatrix | None,
     criterion: str = "ssm",
     tolerance: float = APPROACH_TOLERANCE_MPS,
+    measured: tuple[np.ndarray, FloatArray, FloatArray] | None = None,
 ) -> IsoCriteria:
     """A run (instants ``t`` ``(S,)``, configurations ``q`` ``(S, n)``, the step's ``S_p`` ``margin`` ``(S,)``)
     against ISO/TS 15066: at each step the TRUE nearest pair of robot and solid (:func:`nearest_pairs`), the
@@ -443,7 +456,10 @@ def iso_criteria(
 
     ``regions``: per solid (``solids_at``'s order) its :class:`~skincal.control.body_regions.BodyRegion` or
     None (an object). ``mass_matrix``: ``q -> M(q)`` ``(n, n)`` (None: effective mass unknown, taken as
-    infinite: the most cautious limit)."""
+    infinite: the most cautious limit). ``measured``: per step ``(inside, approach, excess)`` ``(S,)`` each:
+    the number of perceived points inside their ``S_p``, the robot's largest actual speed toward them and
+    its largest excess over their allowed speed, m/s (:class:`skincal.workflows.avoidance.RunLog`'s
+    ``sp_*``); the standard's criterion. None: the true-geometry test is the criterion."""
     if criterion not in CRITERIA:
         raise ConfigError(f"unknown ISO criterion '{criterion}' (use {' or '.join(CRITERIA)})")
     S = t.size
@@ -492,13 +508,25 @@ def iso_criteria(
             e_rel, e_lim, force, f_lim, vr > v_allowed + tolerance, vr <= v_lim + tolerance,
         ))  # fmt: skip
     excess = v_r - allowed
+    true_approach = float(v_r[inside].max()) if np.any(inside) else 0.0
+    if measured is None:
+        m_inside, m_bad = inside, bad
+        m_approach, m_excess = true_approach, float(excess[inside].max()) if np.any(inside) else float("-inf")
+    else:
+        m_inside = np.asarray(measured[0]) > 0
+        m_bad = m_inside & (np.asarray(measured[2]) > tolerance)
+        m_approach = float(np.max(measured[1][m_inside])) if np.any(m_inside) else 0.0
+        m_excess = float(np.max(measured[2][m_inside])) if np.any(m_inside) else float("-inf")
     return IsoCriteria(
         criterion=criterion,
-        inside_sp_s=float(np.sum(inside) * dt),
-        violation_s=float(np.sum(bad) * dt),
-        violation_steps=int(np.sum(bad)),
-        max_approach_inside_sp_mps=float(v_r[inside].max()) if np.any(inside) else 0.0,
-        max_excess_mps=float(excess[inside].max()) if np.any(inside) else float("-inf"),
+        inside_sp_s=float(np.sum(m_inside) * dt),
+        violation_s=float(np.sum(m_bad) * dt),
+        violation_steps=int(np.sum(m_bad)),
+        max_approach_inside_sp_mps=m_approach,
+        max_excess_mps=m_excess,
+        true_inside_sp_s=float(np.sum(inside) * dt),
+        true_violation_s=float(np.sum(bad) * dt),
+        true_max_approach_mps=true_approach,
         contacts=tuple(events),
-        passed=bool(not np.any(bad) and all(e.within_limits and not e.robot_initiated for e in events)),
+        passed=bool(not np.any(m_bad) and all(e.within_limits and not e.robot_initiated for e in events)),
     )

@@ -28,7 +28,10 @@ the arm escape along any direction that opens both gaps (their normals not exact
 stands still only where every motion violates more (exactly opposite points, a point by the base it has
 no lever on). The former stop (``eps = 1``: as still as possible, the violation traded against motion 1:1)
 held the arm where a person arrived (issue 17: ``elbow``, ``lower``, ``pinch``). A feasible QP is solved as
-before, bit for bit.
+before, bit for bit. With ``ControllerConfig.stop_never_approaches`` (``--margin iso``/``iso-pfl``, issue 28)
+the slack of a row that asks to back away is capped, ``s_i <= -h_i``, so the retreat never moves toward a
+point inside its margin (``n_i^T J_i qd <= 0``, always feasible: ``qd = 0`` meets it): the standard's
+protective stop when the person comes faster than the arm can back away.
 
 Protective separation (``ControllerConfig.separation`` set, ISO/TS 15066 speed and separation
 monitoring, :mod:`skincal.control.separation`): the critical distance of each obstacle row is the point's
@@ -137,6 +140,10 @@ class ControllerConfig:
             separation monitoring.
         pfl_share: the share of the Annex A speed limit the controller allows itself (the rest covers
             perception and tracking errors).
+        stop_never_approaches: in the least-violating retreat, a row that asks to back away (``h_i < 0``)
+            may be violated only down to standing still, never to approaching (``n_i^T J_i qd <= 0``: the
+            protective stop of speed and separation monitoring; module docstring). False: the legacy
+            retreat, which may approach one point to back away from others.
     """
 
     dt: float = 0.001
@@ -154,6 +161,7 @@ class ControllerConfig:
     separation: SeparationParams | None = None
     pfl: BodyRegion | None = None
     pfl_share: float = 0.5
+    stop_never_approaches: bool = False
 
     def __post_init__(self) -> None:
         if self.pfl is not None and (self.separation is None or not isinstance(self.pfl, BodyRegion)):
@@ -190,6 +198,11 @@ class StepResult:
             each, in the order of the points); None otherwise.
         clearance: ``min_i (d_i - S_p,i)`` (or ``min d_i - critical``), m; inf without points
             (negative: inside the protective separation).
+        inside_rows: with ``separation``, the rows ``n_i^T J_i`` ``(m, n)`` of the points inside their ``S_p``
+            (``d_i < S_p,i``) at this step, for the standard's criterion on the robot's actual motion
+            (:func:`skincal.control.iso_metrics.iso_criteria`); None otherwise.
+        inside_allowed: ``(m,)`` the speed each of those points allows the robot toward it, m/s: 0 (speed
+            and separation monitoring) or, with ``pfl``, the full Annex A limit at the row's effective mass.
     """
 
     qd: FloatArray
@@ -202,6 +215,8 @@ class StepResult:
     margin: float = float("nan")
     terms: SeparationTerms | None = None
     clearance: float = float("inf")
+    inside_rows: FloatArray | None = None
+    inside_allowed: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -370,7 +385,10 @@ class AvoidanceController:
         P = np.diag(np.concatenate([np.full(n, _STOP_EPS), np.ones(K)]))
         G = np.hstack([prob.G, -np.eye(K)])
         lb = np.concatenate([prob.lb, np.zeros(K)])
-        ub = np.concatenate([prob.ub, np.full(K, np.inf)])
+        slack_ub = np.full(K, np.inf)
+        if self.config.stop_never_approaches:  # violate a retreat row at most down to a stop (s_i <= -h_i)
+            slack_ub = np.where(prob.h < 0, -prob.h, np.inf)
+        ub = np.concatenate([prob.ub, slack_ub])
         t0 = time.perf_counter()
         z = qpsolvers.solve_qp(P, np.zeros(n + K), G, prob.h, lb=lb, ub=ub, solver=self.config.solver)
         elapsed = time.perf_counter() - t0
@@ -400,10 +418,18 @@ class AvoidanceController:
             s = prob.separation_inputs
             terms = protective_separation(self.config.separation, np.maximum(s.G @ qd, s.v_now), s.v_h, s.z_d)
             critical = terms.total
+        inside_rows = inside_allowed = None
         if prob.distance.size and critical is not None:
             gap = prob.distance - critical
             i = int(np.argmin(gap))
             margin, clearance = float(critical[i]), float(gap[i])
+            if prob.separation_inputs is not None:
+                inside_rows = prob.separation_inputs.G[gap < 0]
+                inside_allowed = np.zeros(inside_rows.shape[0])
+                if self.config.pfl is not None and self.mass_matrix is not None and inside_rows.shape[0]:
+                    m_eff = effective_mass(inside_rows, self.mass_matrix(np.asarray(q, dtype=float).reshape(-1)))
+                    inside_allowed = pfl_speed_limit(self.config.pfl, m_eff)
         return StepResult(
-            qd, feasible, violation, elapsed, int(prob.G.shape[0]), d_min, prob.x, margin, terms, clearance
-        )
+            qd, feasible, violation, elapsed, int(prob.G.shape[0]), d_min, prob.x, margin, terms, clearance,
+            inside_rows, inside_allowed,
+        )  # fmt: skip

@@ -89,6 +89,11 @@ class RunLog:
         task_time: ``(S,)`` the task clock, s (``t`` without resume).
         protective_stop: ``(S,)`` the controller commanded its protective (safe) stop.
         mode: ``kinematic`` or ``torque``.
+        sp_inside: ``(S,)`` perceived points inside their ``S_p`` at the step (with a separation model).
+        sp_excess: ``(S,)`` over those points, the largest of the robot point's ACTUAL speed toward the
+            point over the step (``n_i^T J_i (q_{k+1} - q_k) / dt``) less the speed the point allows
+            (:attr:`skincal.control.qp.StepResult.inside_allowed`), m/s; ``-inf`` where none is inside.
+        sp_approach: ``(S,)`` the largest actual speed toward those points, m/s (``-inf``: none inside).
     """
 
     scenario: Scenario
@@ -112,6 +117,9 @@ class RunLog:
     task_time: FloatArray | None = None
     protective_stop: np.ndarray | None = None
     mode: str = "kinematic"
+    sp_inside: np.ndarray | None = None
+    sp_excess: FloatArray | None = None
+    sp_approach: FloatArray | None = None
 
     @property
     def tracking_error(self) -> FloatArray:
@@ -218,6 +226,8 @@ def run_scenario(
     violation, min_dist = np.zeros(S), np.full(S, np.inf)
     n_obs = np.zeros(S, dtype=int)
     solve_t, step_t, loop_t = np.zeros(S), np.zeros(S), np.zeros(S)
+    sp_inside = np.zeros(S, dtype=int)
+    sp_excess, sp_approach = np.full(S, -np.inf), np.full(S, -np.inf)
     for k in range(S):  # the closed loop is sequential
         t0 = time.perf_counter()
         reading = np.flatnonzero((k - phase) % period == 0)
@@ -263,11 +273,18 @@ def run_scenario(
             near = res.min_distance < margin[k] + resume_band
             rate = max(rate - dr, 0.0) if near else min(rate + dr, 1.0)
             lag += (1.0 - rate) * dt
+        q_before = q
         if robot is None:
             q = q + res.qd * dt
         else:
             robot.step(res.qd, dt)
             q, qd = robot.q, robot.qd
+        rows = getattr(res, "inside_rows", None)
+        if rows is not None and rows.shape[0]:  # the standard's criterion on the motion the robot made
+            speed = rows @ ((q - q_before) / dt)
+            sp_inside[k] = rows.shape[0]
+            sp_approach[k] = float(speed.max())
+            sp_excess[k] = float(np.max(speed - res.inside_allowed))
         loop_t[k] = time.perf_counter() - t0
     return RunLog(
         scenario,
@@ -291,6 +308,9 @@ def run_scenario(
         task_time,
         ~feasible,
         mode,
+        sp_inside if separated else None,
+        sp_excess if separated else None,
+        sp_approach if separated else None,
     )
 
 

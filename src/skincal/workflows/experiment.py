@@ -136,7 +136,8 @@ def run_experiment(
     controller = ControllerConfig()
     regions = scenario_regions(c.scenario)
     if c.margin in CRITERION:
-        controller = replace(controller, separation=separation_for(c.chain, c.scenario, stopping=stopping))
+        sep = separation_for(c.chain, c.scenario, stopping=stopping)
+        controller = replace(controller, separation=sep, stop_never_approaches=True)
     if c.margin == "iso-pfl":
         controller = replace(controller, pfl=assumed_region(regions))
     mass = robot_mass_matrix(c.chain) if c.margin in CRITERION else None
@@ -213,7 +214,13 @@ def summarize(
     scene = log.scenario.scene
     if judged is not None:
         solids = scene.tof_primitives if scene.obstacles else None
-        iso = iso_metrics.iso_criteria(log.t, log.q, body, solids, margin_of(log), judged[1], judged[2], judged[0])
+        measured = None
+        if log.sp_inside is not None and log.sp_approach is not None and log.sp_excess is not None:
+            measured = (log.sp_inside, log.sp_approach, log.sp_excess)
+        criterion, regions, mass = judged
+        iso = iso_metrics.iso_criteria(
+            log.t, log.q, body, solids, margin_of(log), regions, mass, criterion, measured=measured
+        )
     return iso_metrics.summarize_run(
         scenario=log.scenario.name,
         poses=poses,
