@@ -117,3 +117,22 @@ def test_pfl_row_allows_the_annex_a_speed_at_the_effective_mass_and_ssm_a_retrea
         AvoidanceController(chain, cfg)
     with pytest.raises(ConfigError, match="pfl needs"):
         ControllerConfig(pfl=HAND)
+
+
+def test_pfl_keeps_the_separation_row_for_the_head_and_the_buffer_shifts_the_ramp():
+    """No transient contact with the skull: its PFL row is the SSM row. ``sp_buffer`` b: the row at distance d
+    is the unbuffered row at d - b (the ramp's zero moved b beyond S_p)."""
+    from dataclasses import replace
+
+    chain = panda()
+    sep = SeparationParams(stopping=StoppingModel.constant_deceleration(4.0, 0.021))
+    x = flange(chain, Q_START)
+    point = (x + np.array([0.0, 0.0, -0.15]))[None]
+    base = ControllerConfig(separation=sep)
+    ssm = AvoidanceController(chain, base).problem(Q_START, x, np.zeros(3), point)
+    head = AvoidanceController(chain, replace(base, pfl=body_region("head")), mass_matrix=spring_mass)
+    np.testing.assert_array_equal(head.problem(Q_START, x, np.zeros(3), point).h, ssm.h)
+    buffered = AvoidanceController(chain, replace(base, sp_buffer=0.03)).problem(Q_START, x, np.zeros(3), point)
+    nearer = AvoidanceController(chain, base).problem(Q_START, x, np.zeros(3), point + [0.0, 0.0, 0.03])
+    assert buffered.h[0] < ssm.h[0]
+    assert buffered.h[0] == pytest.approx(nearer.h[0], abs=0.01)  # the table's 2 mm grid in distance

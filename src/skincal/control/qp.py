@@ -63,7 +63,8 @@ ISO/TS 15066 Annex A, :mod:`skincal.control.body_regions`): speed and separation
 robot point never to move toward a person inside ``S_p``; with PFL it may, up to the transient speed limit
 of the body region at its effective mass along the row's normal (:mod:`skincal.control.effective_mass`,
 ``M_eff,i = 1 / (g_i M(q)^-1 g_i^T)`` with ``g_i = n_i^T J_i``), as long as the point is not touching
-(``d_i > 0``; touching, the separation row holds, so the robot never presses: no quasi-static contact)::
+(``d_i > 0``; touching, the separation row holds, so the robot never presses: no quasi-static contact;
+a region where transient contact is not permitted, the head, keeps the separation row too)::
 
     n_i^T J_i qd <= max(u_i*, min(pfl_share F_T / sqrt(mu_i k), v_max)),   mu_i = (1/m_H + 1/M_eff,i)^-1
 """
@@ -140,6 +141,9 @@ class ControllerConfig:
             separation monitoring.
         pfl_share: the share of the Annex A speed limit the controller allows itself (the rest covers
             perception and tracking errors).
+        sp_buffer: the obstacle rows' ramp reaches zero this far outside each point's ``S_p``, m (``S_p``
+            itself, logged and judged, is unchanged): room for a drive whose actual speed lags the command
+            (torque mode) to come to rest before ``S_p`` (speed scaling before the protective separation).
         stop_never_approaches: in the least-violating retreat, a row that asks to back away (``h_i < 0``)
             may be violated only down to standing still, never to approaching (``n_i^T J_i qd <= 0``: the
             protective stop of speed and separation monitoring; module docstring). False: the legacy
@@ -161,6 +165,7 @@ class ControllerConfig:
     separation: SeparationParams | None = None
     pfl: BodyRegion | None = None
     pfl_share: float = 0.5
+    sp_buffer: float = 0.0
     stop_never_approaches: bool = False
 
     def __post_init__(self) -> None:
@@ -175,7 +180,7 @@ class ControllerConfig:
         for name in ("dt", "damping", "v_max", "velocity_scale"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"controller: {name} must be positive, got {getattr(self, name)}")
-        for name in ("gain", "posture_gain", "padding", "limit_margin", "n_rim"):
+        for name in ("gain", "posture_gain", "padding", "limit_margin", "n_rim", "sp_buffer"):
             if not getattr(self, name) >= 0:
                 raise ConfigError(f"controller: {name} must be non-negative, got {getattr(self, name)}")
 
@@ -350,12 +355,16 @@ class AvoidanceController:
                     terms, crit = None, None
                 dist = prox.distance
                 assert self._speeds is not None
-                v_allowed = self._speeds(dist, sep_in.v_now if moving else None, sep_in.v_h, sep_in.z_d)
+                v_allowed = self._speeds(
+                    dist - cfg.sp_buffer, sep_in.v_now if moving else None, sep_in.v_h, sep_in.z_d
+                )  # fmt: skip
                 h_all = v_allowed  # the point's own approach is in it (the velocity-aware row)
                 if cfg.pfl is not None and self.mass_matrix is not None:
                     # PFL: short of touching, up to the Annex A speed at the point's effective mass
+                    # (a region with no transient contact permitted, v = 0, keeps the separation row)
                     v_pfl = cfg.pfl_share * pfl_speed_limit(cfg.pfl, effective_mass(G_all, self.mass_matrix(q)))
-                    h_all = np.where(dist > 0, np.maximum(h_all, np.minimum(v_pfl, cfg.v_max)), h_all)
+                    pfl = (dist > 0) & (v_pfl > 0)
+                    h_all = np.where(pfl, np.maximum(h_all, np.minimum(v_pfl, cfg.v_max)), h_all)
             # A row with no lever on the robot (point at the base) and a non-negative bound is void.
             keep = (np.abs(G_all).max(axis=1) > 1e-9) | (h_all < 0)
             G, h = G_all[keep], h_all[keep]

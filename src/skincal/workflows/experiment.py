@@ -40,6 +40,14 @@ MARGINS = ("fixed", "iso", "iso-pfl")
 """``fixed``: the legacy critical distance; ``iso``: ISO/TS 15066 ``S_p``, speed and separation monitoring
 (inside ``S_p`` the robot never approaches); ``iso-pfl``: ``S_p`` with power and force limiting (inside it
 the robot may approach at the Annex A speed of the body region, :mod:`skincal.control.body_regions`)."""
+TORQUE_V_MAX = 0.5
+"""The ramp's largest approach speed in torque mode with an ISO margin, m/s (kinematic: 1.0): half the slope
+near ``S_p``, so that the drive's lag behind the command stays small (``hand`` on the Panda, torque, SSM:
+the actual speed toward a point inside ``S_p`` reached 0.18 m/s with 1.0; simulated)."""
+TORQUE_SP_BUFFER_M = 0.02
+"""``ControllerConfig.sp_buffer`` in torque mode with an ISO margin, m: the lagging drive comes to rest before
+``S_p`` (with :data:`TORQUE_V_MAX`: no step approaching inside ``S_p`` in ``hand``, Panda, torque; simulated,
+chosen on that run)."""
 CRITERION = {"iso": "ssm", "iso-pfl": "pfl"}
 """The ISO criterion a margin's run is judged by (:func:`skincal.control.iso_metrics.iso_criteria`)."""
 
@@ -138,6 +146,8 @@ def run_experiment(
     if c.margin in CRITERION:
         sep = separation_for(c.chain, c.scenario, stopping=stopping)
         controller = replace(controller, separation=sep, stop_never_approaches=True)
+        if c.mode == "torque":  # speed scaling before S_p for a drive that lags its command
+            controller = replace(controller, v_max=TORQUE_V_MAX, sp_buffer=TORQUE_SP_BUFFER_M)
     if c.margin == "iso-pfl":
         controller = replace(controller, pfl=assumed_region(regions))
     mass = robot_mass_matrix(c.chain) if c.margin in CRITERION else None
