@@ -50,3 +50,19 @@ def test_an_unknown_region_is_one_line_naming_the_file_and_person():
     assert "\n" not in str(e.value)
     with pytest.raises(ConfigError, match="body_region: must be a string"):
         parse_scenario(_spec(body_region=3), "bad.yaml", chain)
+
+
+def test_the_pfl_controller_assumes_the_most_restrictive_part():
+    """A hand and a chest: the chest (against an infinitely heavy robot 280 / sqrt(40 * 25000) = 0.28 m/s, the
+    hand 280 / sqrt(0.6 * 75000) = 1.32 m/s); a human (with a head): the skull, no transient contact; nobody:
+    the hand."""
+    from skincal.workflows.experiment import assumed_region
+
+    chain = panda()
+    two = parse_scenario(
+        {"people": [_spec()["people"][0], _spec(name="q", body_region="chest")["people"][0]]}, "t", chain
+    )
+    assert assumed_region(scenario_regions(two)).name == "chest"
+    walker = {"name": "w", "shape": "human", "waypoints": [{"p": [1.0, 0.0, 0.0]}]}
+    assert assumed_region(scenario_regions(parse_scenario({"people": [walker]}, "t", chain))).name == "skull"
+    assert assumed_region([None]).name == "hand"
