@@ -359,7 +359,9 @@ class ContactEvent:
     ``ssm``, the Annex A limit for ``pfl``); ``within_limits``: the robot's share of the contact (its own
     speed toward the person) is within the region's transient limit, ``v_robot <= v_limit`` (equivalently
     ``energy <= energy_limit``, ``force <= force_limit``); the person's own speed (``v_person``) is reported
-    with ``energy_relative`` (the relative speed's energy) and is the person's doing."""
+    with ``energy_relative`` (the relative speed's energy) and is the person's doing. ``robot_approaching``:
+    the robot point moved toward the person at all (faster than the tolerance): under ``pfl`` a contact may
+    be that and still not robot-initiated (within the limit)."""
 
     t: float
     obstacle_solid: int
@@ -375,6 +377,7 @@ class ContactEvent:
     force_limit: float
     robot_initiated: bool
     within_limits: bool
+    robot_approaching: bool = False
 
 
 @dataclass(frozen=True)
@@ -428,6 +431,7 @@ class IsoCriteria:
             "contacts_robot_initiated": sum(e.robot_initiated for e in c),
             "contacts_person_initiated": sum(not e.robot_initiated for e in c),
             "contacts_within_limits": sum(e.within_limits for e in c),
+            "contacts_robot_approaching": sum(e.robot_approaching for e in c),
             "peak_contact_energy_j": worst.energy if worst is not None else 0.0,
             "peak_contact_energy_limit_j": worst.energy_limit if worst is not None else float("nan"),
             "peak_contact_force_n": max((e.force for e in c), default=0.0),
@@ -505,7 +509,7 @@ def iso_criteria(
             f_lim = region.transient_force or 0.0
         events.append(ContactEvent(
             float(t[k0]), int(pairs.solid[k]), None if region is None else region.name, vr, vh, mr, v_lim, energy,
-            e_rel, e_lim, force, f_lim, vr > v_allowed + tolerance, vr <= v_lim + tolerance,
+            e_rel, e_lim, force, f_lim, vr > v_allowed + tolerance, vr <= v_lim + tolerance, vr > tolerance,
         ))  # fmt: skip
     excess = v_r - allowed
     true_approach = float(v_r[inside].max()) if np.any(inside) else 0.0

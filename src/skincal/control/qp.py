@@ -29,9 +29,10 @@ stands still only where every motion violates more (exactly opposite points, a p
 no lever on). The former stop (``eps = 1``: as still as possible, the violation traded against motion 1:1)
 held the arm where a person arrived (issue 17: ``elbow``, ``lower``, ``pinch``). A feasible QP is solved as
 before, bit for bit. With ``ControllerConfig.stop_never_approaches`` (``--margin iso``/``iso-pfl``, issue 28)
-the slack of a row that asks to back away is capped, ``s_i <= -h_i``, so the retreat never moves toward a
-point inside its margin (``n_i^T J_i qd <= 0``, always feasible: ``qd = 0`` meets it): the standard's
-protective stop when the person comes faster than the arm can back away.
+the slack of every row is capped, ``s_i <= max(-h_i, 0)``: a row that asks to back away may be violated
+only down to standing still (``n_i^T J_i qd <= 0``), any other row not at all (violating one let the retreat
+from the others approach its point past its ``S_p``: ``walk-at``, simulated); always feasible, ``qd = 0``
+meets it: the standard's protective stop when the person comes faster than the arm can back away.
 
 Protective separation (``ControllerConfig.separation`` set, ISO/TS 15066 speed and separation
 monitoring, :mod:`skincal.control.separation`): the critical distance of each obstacle row is the point's
@@ -145,9 +146,10 @@ class ControllerConfig:
             itself, logged and judged, is unchanged): room for a drive whose actual speed lags the command
             (torque mode) to come to rest before ``S_p`` (speed scaling before the protective separation).
         stop_never_approaches: in the least-violating retreat, a row that asks to back away (``h_i < 0``)
-            may be violated only down to standing still, never to approaching (``n_i^T J_i qd <= 0``: the
-            protective stop of speed and separation monitoring; module docstring). False: the legacy
-            retreat, which may approach one point to back away from others.
+            may be violated only down to standing still, never to approaching (``n_i^T J_i qd <= 0``), and
+            a row that allows an approach not at all: the protective stop of speed and separation
+            monitoring (module docstring). False: the legacy retreat, which may approach one point to back
+            away from others.
     """
 
     dt: float = 0.001
@@ -395,8 +397,8 @@ class AvoidanceController:
         G = np.hstack([prob.G, -np.eye(K)])
         lb = np.concatenate([prob.lb, np.zeros(K)])
         slack_ub = np.full(K, np.inf)
-        if self.config.stop_never_approaches:  # violate a retreat row at most down to a stop (s_i <= -h_i)
-            slack_ub = np.where(prob.h < 0, -prob.h, np.inf)
+        if self.config.stop_never_approaches:  # a retreat row violated at most down to a stop, no other row
+            slack_ub = np.maximum(-prob.h, 0.0)
         ub = np.concatenate([prob.ub, slack_ub])
         t0 = time.perf_counter()
         z = qpsolvers.solve_qp(P, np.zeros(n + K), G, prob.h, lb=lb, ub=ub, solver=self.config.solver)
