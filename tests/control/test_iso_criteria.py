@@ -136,3 +136,23 @@ def test_pfl_keeps_the_separation_row_for_the_head_and_the_buffer_shifts_the_ram
     nearer = AvoidanceController(chain, base).problem(Q_START, x, np.zeros(3), point + [0.0, 0.0, 0.03])
     assert buffered.h[0] < ssm.h[0]
     assert buffered.h[0] == pytest.approx(nearer.h[0], abs=0.01)  # the table's 2 mm grid in distance
+
+
+def test_the_protective_stop_never_approaches_past_a_row():
+    """An infeasible QP (row A asks qd0 <= -2 within |qd| <= 1; row B allows -qd0 + 0.1 qd1 <= 0.5). The legacy
+    least-violating retreat violates B too (worked by hand: qd = (-1, -1), B's left side 0.9); the protective
+    stop keeps B and violates A only down to a stop: qd0 = -0.6, qd1 = -1, B exactly 0.5, A -0.6 <= 0."""
+    from skincal.control.qp import QpProblem
+
+    chain = panda()
+    prob = QpProblem(
+        np.eye(2), np.zeros(2), np.array([[1.0, 0.0], [-1.0, 0.1]]), np.array([-2.0, 0.5]),
+        -np.ones(2), np.ones(2), np.zeros(3), np.zeros(2),
+    )  # fmt: skip
+    legacy, feasible, _, _ = AvoidanceController(chain, ControllerConfig()).solve(prob)
+    assert not feasible and prob.G[1] @ legacy > 0.5 + 0.3
+    stop, feasible, violation, _ = AvoidanceController(chain, ControllerConfig(stop_never_approaches=True)).solve(prob)
+    assert not feasible
+    np.testing.assert_allclose(stop, [-0.6, -1.0], atol=1e-4)
+    assert np.all(prob.G @ stop <= np.maximum(prob.h, 0.0) + 1e-6)
+    assert violation == pytest.approx(1.4, abs=1e-4)
