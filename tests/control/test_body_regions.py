@@ -175,3 +175,55 @@ def test_effective_mass_is_what_mujoco_accelerates_under_a_force_at_the_point():
         mujoco.mj_step(model, data)
         dv = n @ (J[0] @ data.qvel[:7])
         assert f * model.opt.timestep / dv == pytest.approx(m_eff, rel=1e-6)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_effective_mass_is_what_a_mujoco_contact_transfers(seed):
+    """A real MuJoCo contact on the torque robot's model (published Panda inertias, armature, no gravity,
+    motors off): a free frictionless sphere (0.2 kg, 0.3 m/s) hits link 7's capsule head-on along a normal n
+    at a random direction across the capsule. Momentum along n: m_s dv_s = -M_eff dv_R, with dv_R the robot
+    point's speed change along n: M_eff from the contact impulse equals 1 / (n^T J M^-1 J^T n) within 1 %
+    (the robot moves a little during the contact: 1e-3 rad)."""
+    from lxml import etree
+
+    from skincal.perception import RobotBody
+    from skincal.sim.dynamics import effort_limits
+    from skincal.sim.mujoco_model import build_mjcf, published_inertials
+    from skincal.workflows.avoidance import robot_mass_matrix
+
+    chain = panda()
+    xml = build_mjcf(chain, board_geoms=False, inertials=published_inertials(chain), motor_limits=effort_limits(chain),
+                     armature=0.1, damping=0.0, gravity=np.zeros(3))  # fmt: skip
+    root = etree.fromstring(xml.encode())
+    for g in root.iter("geom"):
+        if g.get("name", "").startswith("link7/"):
+            g.set("conaffinity", "1")  # only link 7 can touch the sphere
+    body = RobotBody.of(chain)
+    T = chain.link_frames(Q_START)[0]
+    i = int(np.flatnonzero(body.link == 7)[0])
+    a, b = (T[7] @ np.r_[body.p0_link[i], 1])[:3], (T[7] @ np.r_[body.p1_link[i], 1])[:3]
+    core, axis = 0.5 * (a + b), (b - a) / np.linalg.norm(b - a)
+    n = np.cross(axis, np.random.default_rng(seed).normal(size=3))
+    n /= np.linalg.norm(n)
+    r_s, m_s, v0 = 0.03, 0.2, 0.3
+    ball = etree.SubElement(root.find("worldbody"), "body", name="ball",
+                            pos=" ".join(map(str, core + n * (body.radius[i] + r_s + 0.01))))  # fmt: skip
+    etree.SubElement(ball, "freejoint", name="ball")
+    etree.SubElement(ball, "geom", name="ball", type="sphere", size=str(r_s), mass=str(m_s), contype="1",
+                     conaffinity="0", condim="1")  # fmt: skip
+    model = mujoco.MjModel.from_xml_string(etree.tostring(root).decode())
+    data = mujoco.MjData(model)
+    data.qpos[:7] = Q_START
+    data.qvel[7:10] = -v0 * n
+    touched = False
+    for _ in range(400):
+        mujoco.mj_step(model, data)
+        touched |= data.ncon > 0
+        if touched and data.ncon == 0:
+            break
+    assert touched and data.ncon == 0
+    J = chain.point_jacobians(T, [7], (core + n * body.radius[i])[None])
+    m_eff = point_effective_mass(J, n[None], robot_mass_matrix(chain)(Q_START))[0]
+    dv_s = n @ data.qvel[7:10] + v0
+    dv_r = n @ (J[0] @ data.qvel[:7])
+    assert m_s * dv_s / -dv_r == pytest.approx(m_eff, rel=0.01)
