@@ -3,7 +3,8 @@
 
 One experiment: the simulated skin at its TRUE poses, the poses the controller BELIEVES (and their
 covariance), a scenario on a robot, the controller's margin (``fixed``: the legacy critical distance;
-``iso``: ISO/TS 15066's ``S_p`` with the scenario's ``v_h`` and the robot's measured stopping model), the
+``iso``: ISO/TS 15066's ``S_p`` with the scenario's ``v_h`` and the robot's measured stopping model, speed and
+separation monitoring; ``iso-pfl``: the same with power and force limiting, issue 28), the
 task clock that waits (``resume``) and the robot mode; run in MuJoCo by
 :func:`skincal.workflows.avoidance.run_scenario` with the sensor noise seeded by ``seed``. With ``resume``
 the same run without anybody is made too (or given), for the task time lost. The metrics are
