@@ -62,6 +62,15 @@ def main() -> None:
             json.dump({"step": step, "runs": rows}, fh, indent=2)
 
 
+def iso_columns(iso: dict | None) -> str:
+    """Issue 28's columns: time approaching a point inside its S_p faster than allowed (s), contacts
+    robot-/person-initiated, and the verdict (ISO/TS 15066: none of the first, every contact within limits)."""
+    if not iso:
+        return f"{'-':>7} {'-':>8} {'-':>4}"
+    pair = f"{iso['contacts_robot_initiated']}/{iso['contacts_person_initiated']}"
+    return f"{iso['sp_violation_s']:7.3f} {pair:>8} {'pass' if iso['iso_pass'] else 'FAIL':>4}"
+
+
 def iso(args) -> None:
     import time
 
@@ -81,7 +90,7 @@ def iso(args) -> None:
     print(
         f"{'robot':7} {'scenario':8} {'v_h':>4} {'poses':18} {'mode':9} {'contacts':>8} {'clear[m]':>8} "
         f"{'min(d-Sp)':>9} {'<Sp':>5} {'Sp@min':>6} {'Sp max':>6} {'Z_d':>6} {'stop[s]':>7} {'near[s]':>7} "
-        f"{'lost[s]':>7} {'loop med/p95[ms]':>17}",
+        f"{'lost[s]':>7} {'loop med/p95[ms]':>17} {'viol[s]':>7} {'rob/pers':>8} {'ISO':>4}",
         flush=True,
     )
 
@@ -93,7 +102,7 @@ def iso(args) -> None:
             f"{row['contacts']:8d} {f(row['min_clearance_m'], 8)} {f(row['min_clearance_minus_sp_m'], 9)} "
             f"{row['steps_below_sp']:5d} {f(row['margin_m'])} {f(row['margin_max_m'])} {f(zd)} "
             f"{row['protective_stop_s']:7.2f} {row['near_time_s']:7.2f} {f(row['task_time_lost_s'], 7)} "
-            f"{row['loop_median_ms']:8.3f}/{row['loop_p95_ms']:.3f}",
+            f"{row['loop_median_ms']:8.3f}/{row['loop_p95_ms']:.3f} {iso_columns(row.get('iso'))}",
             flush=True,
         )
         if args.plots and row["poses"] == "mle":

@@ -167,3 +167,12 @@ def test_avoid_refuses_an_absurd_degradation_on_one_line(tmp_path: Path, degrade
     line = one_line_error(run_cli(["avoid", "--degrade", degrade, "--duration", "0.05"], tmp_path))
     assert "at most" in line
 
+
+
+def test_an_unknown_body_region_is_one_line_naming_the_file_and_person(tmp_path, capsys):
+    """Issue 28: `body_region` of a person part is checked before the run (exit 2, one line)."""
+    path = tmp_path / "bad.yaml"
+    path.write_text(HAND.replace("    radius: 0.05\n", "    radius: 0.05\n    body_region: elbowz\n"))
+    assert main(["avoid", "--scenario", str(path), "--margin", "iso-pfl"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bad.yaml: person 'hand': unknown body region 'elbowz'" in err[0]

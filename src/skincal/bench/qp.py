@@ -20,10 +20,12 @@ from typing import Any
 import numpy as np
 
 from skincal.control import AvoidanceController, ControllerConfig, SeparationParams
+from skincal.control.body_regions import body_region
 from skincal.errors import ConfigError
 from skincal.kinematics import panda
 from skincal.kinematics.points import Q_START
 from skincal.perception import ObstaclePoints, RobotBody, SkinUncertainty, body_proximity, point_covariance
+from skincal.workflows.avoidance import robot_mass_matrix
 
 
 def benchmark_points(chain, n_points: int, seed: int = 0) -> ObstaclePoints:
@@ -68,6 +70,12 @@ def qp_step_benchmark(n_points: int = 100, repeats: int = 2000, seed: int = 0) -
     ctls = {
         "fixed": AvoidanceController(chain, ControllerConfig()),
         "separation": AvoidanceController(chain, ControllerConfig(separation=SeparationParams())),
+        # issue 28: power and force limiting, the effective mass of every row from MuJoCo's M(q) per step
+        "pfl": AvoidanceController(
+            chain,
+            ControllerConfig(separation=SeparationParams(), pfl=body_region("hand"), stop_never_approaches=True),
+            mass_matrix=robot_mass_matrix(chain),
+        ),
     }
     x = chain.flange_pose(Q_START)[0, :3, 3]
     xd = np.array([0.0, 0.1, 0.0])
@@ -109,7 +117,9 @@ def qp_step_benchmark(n_points: int = 100, repeats: int = 2000, seed: int = 0) -
 def format_qp_benchmark(res: dict[str, Any]) -> str:
     """The figures of :func:`qp_step_benchmark` as a few lines of text."""
     lines = [f"controller step, {res['dof']} DoF, {res['points']} obstacle points, {res['repeats']} steps each (ms)"]
-    for name in ("fixed", "separation"):
+    for name in ("fixed", "separation", "pfl"):
+        if name not in res:
+            continue
         r = res[name]
         lines.append(
             f"  {name:10s} rows {r['rows']:3d} feasible {100 * r['feasible_fraction']:.0f} %  "

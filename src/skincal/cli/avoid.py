@@ -39,8 +39,9 @@ def avoid(
     mode: str = typer.Option("kinematic", help="kinematic (ideal velocity interface) or torque (MuJoCo dynamics)"),
     margin: str = typer.Option(
         "fixed",
-        help="fixed (the legacy critical distance) or iso (ISO/TS 15066 S_p from the pose covariance, "
-        "the robot's speed and its measured stopping)",
+        help="fixed (the legacy critical distance), iso (ISO/TS 15066 S_p from the pose covariance, "
+        "the robot's speed and its measured stopping; inside S_p the robot never approaches) or iso-pfl "
+        "(S_p with power and force limiting: inside it the robot may approach at the body region's Annex A speed)",
     ),
     resume: bool = typer.Option(False, "--resume", help="the task waits while a person is within S_p + a band"),
     duration: float | None = typer.Option(None, help="run length, s (default: the scenario's)"),
@@ -103,6 +104,15 @@ def avoid(
         f"recovery {m.recovery_s:.2f} s after the person left",
         f"  QP {m.qp_median_ms:.3f} ms median / {m.qp_p95_ms:.3f} ms p95; loop {m.loop_median_ms:.3f} ms median",
     ]
+    if m.iso is not None:
+        i = m.iso
+        lines.append(
+            f"  ISO/TS 15066 ({i['iso_criterion']}): {'PASS' if i['iso_pass'] else 'FAIL'}; inside S_p "
+            f"{i['inside_sp_s']:.2f} s, approaching there faster than allowed {i['sp_violation_s']:.3f} s (max "
+            f"approach {i['max_approach_inside_sp_mps']:.3f} m/s); contacts robot-initiated "
+            f"{i['contacts_robot_initiated']}, person-initiated {i['contacts_person_initiated']}, within the "
+            f"body-region limits {i['contacts_within_limits']}"
+        )
     if m.margin_terms:
         lines.append("  S_p parts there: " + ", ".join(f"{k} {v:.3f}" for k, v in m.margin_terms.items()) + " m")
     if reference is not None:

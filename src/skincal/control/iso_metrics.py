@@ -15,7 +15,15 @@ against the same run without a person (:func:`task_time_lost`).
 
 Every function takes arrays (instants ``t`` ``(S,)`` s, configurations ``q`` ``(S, n)`` rad, errors m) and
 the obstacle solids as a function of time (``solids_at(t) -> [skin.tof solids]``, base frame): no
-simulator. A run of the MuJoCo experiment is summarised by :func:`skincal.workflows.experiment.summarize`.
+simulator.
+
+ISO/TS 15066's own criteria (:func:`iso_criteria`, issue 28): speed and separation monitoring asks that
+whenever the separation is below ``S_p`` the robot is stopped or moving away: per step, the speed of the
+TRUE robot point nearest the person toward it (the robot's actual joint velocity) must be <= 0 inside
+``S_p`` (``ssm``), or <= the body region's transient speed limit at the point's effective mass (power and
+force limiting, ``pfl``); every contact is judged against the region's Annex A limits
+(:mod:`skincal.control.body_regions`) and split into robot-initiated and person-initiated.
+A run of the MuJoCo experiment is summarised by :func:`skincal.workflows.experiment.summarize`.
 """
 
 from __future__ import annotations
@@ -25,9 +33,11 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from skincal.control.body_regions import BodyRegion, contact_force, pfl_speed_limit, transfer_energy
+from skincal.control.effective_mass import MassMatrix, effective_mass
 from skincal.errors import ConfigError
 from skincal.kinematics.transforms import FloatArray
-from skincal.perception.body import RobotBody, segment_distance
+from skincal.perception.body import RobotBody, segment_closest_points, segment_distance
 from skincal.skin import tof
 
 RECOVERY_THRESHOLD = 0.005
@@ -163,6 +173,8 @@ class AvoidMetrics:
     near_time_s: float = 0.0
     task_time_lost_s: float = float("nan")
     mode: str = "kinematic"
+    iso: dict | None = None
+    """The ISO/TS 15066 criteria of the run (:meth:`IsoCriteria.summary`), None when not judged."""
 
     def to_dict(self) -> dict:
         """Plain JSON-ready dict (NaN/inf -> None)."""
@@ -170,6 +182,8 @@ class AvoidMetrics:
         def plain(v):
             if isinstance(v, dict):
                 return {k: plain(x) for k, x in v.items()}
+            if isinstance(v, (list, tuple)):
+                return [plain(x) for x in v]
             return None if isinstance(v, float) and not np.isfinite(v) else v
 
         return {k: plain(v) for k, v in asdict(self).items()}
@@ -193,6 +207,7 @@ def summarize_run(
     loop_time_s: FloatArray,
     task_time_lost_s: float = float("nan"),
     mode: str = "kinematic",
+    iso: IsoCriteria | None = None,
 ) -> AvoidMetrics:
     """All metrics of a run from its arrays (each ``(S,)``): the clearance (:func:`clearance`), the
     protective separation ``margin`` ``S_p`` and its ``terms`` per step (m), the flange's tracking error
@@ -233,4 +248,289 @@ def summarize_run(
         near_time_s=float(np.sum(finite & (gap < NEAR_BAND)) * dt),
         task_time_lost_s=task_time_lost_s,
         mode=mode,
+        iso=iso.summary() if iso is not None else None,
+    )
+
+
+# ------------------------------------------------------------------- ISO/TS 15066 criteria (issue 28)
+APPROACH_TOLERANCE_MPS = 1e-3
+"""Speed toward a person (m/s) below which a robot point counts as not approaching (numerical noise of the
+finite-difference velocities; 1 mm/s)."""
+CRITERIA = ("ssm", "pfl")
+"""``ssm``: inside ``S_p`` the robot point nearest the person must not approach it (ISO/TS 15066 5.5.4);
+``pfl``: it may, up to the body region's Annex A transient speed at its effective mass (5.5.5, Annex A)."""
+
+
+@dataclass(frozen=True)
+class NearestPairs:
+    """Per control instant the nearest pair of a TRUE robot capsule and an obstacle solid (each ``(S,)`` or
+    ``(S, 3)``; base frame, m).
+
+    Attributes:
+        clearance: surface-to-surface distance (:func:`clearance`; inf without solids).
+        capsule: index of the robot capsule (``body``'s order; -1 without solids).
+        solid: index of the obstacle solid (``solids_at``'s order; -1 without solids).
+        p_robot: the robot's surface point facing the solid (core point + radius along ``normal``).
+        normal: unit vector from the robot's core point to the solid's.
+        p_solid: the solid's core point (on its segment).
+    """
+
+    clearance: FloatArray
+    capsule: np.ndarray
+    solid: np.ndarray
+    p_robot: FloatArray
+    normal: FloatArray
+    p_solid: FloatArray
+
+
+def nearest_pairs(t: FloatArray, q: FloatArray, body: RobotBody, solids_at: SolidsAt | None) -> NearestPairs:
+    """:class:`NearestPairs` of the robot at ``q`` ``(S, n)`` and the solids at ``t`` ``(S,)``; the clearance
+    is :func:`clearance`'s, number for number."""
+    S = t.size
+    out = NearestPairs(np.full(S, np.inf), np.full(S, -1), np.full(S, -1), np.zeros((S, 3)),
+                       np.tile([0.0, 0.0, 1.0], (S, 1)), np.zeros((S, 3)))  # fmt: skip
+    if solids_at is None:
+        return out
+    for k0 in range(0, S, _CHUNK):
+        sl = slice(k0, min(S, k0 + _CHUNK))
+        oa, ob, orad = obstacle_segments(solids_at(t[sl]), t[sl].size)
+        if orad.size == 0:
+            continue
+        ra, rb = body.segments(body.chain.link_frames(q[sl]))
+        d = segment_distance(ra[:, :, None], rb[:, :, None], oa[:, None], ob[:, None])
+        d = d - body.radius[None, :, None] - orad[None, None, :]
+        M, C, P = d.shape
+        flat = d.reshape(M, -1)
+        best = np.argmin(flat, axis=1)
+        cap, sol = best // P, best % P
+        m = np.arange(M)
+        c_r, c_h = segment_closest_points(ra[m, cap], rb[m, cap], oa[m, sol], ob[m, sol])
+        g = c_h - c_r
+        norm = np.linalg.norm(g, axis=1, keepdims=True)
+        normal = np.where(norm > 1e-12, g / np.maximum(norm, 1e-12), np.array([0.0, 0.0, 1.0]))
+        out.clearance[sl] = flat[m, best]
+        out.capsule[sl], out.solid[sl] = cap, sol
+        out.p_robot[sl] = c_r + body.radius[cap][:, None] * normal
+        out.normal[sl], out.p_solid[sl] = normal, c_h
+    return out
+
+
+def approach_speeds(
+    t: FloatArray, q: FloatArray, body: RobotBody, solids_at: SolidsAt | None, pairs: NearestPairs
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``(v_robot, v_person, J_n)``: per instant ``(S,)`` the speed of the robot's surface point toward the
+    nearest solid and of that solid toward the robot (m/s, > 0: approaching), and ``(S, n)`` the rows
+    ``n^T J`` of the robot point (the robot's actual joint velocity: forward differences of ``q``, the
+    last repeated; the solid's velocity: forward differences of its core point's ends over one step)."""
+    S, n = q.shape
+    Jn = np.zeros((S, n))
+    v_r, v_h = np.zeros(S), np.zeros(S)
+    if solids_at is None or S < 2:
+        return v_r, v_h, Jn
+    dt = float(t[1] - t[0])
+    qd = np.empty_like(q)
+    qd[:-1] = np.diff(q, axis=0) / dt
+    qd[-1] = qd[-2]
+    for k0 in range(0, S, _CHUNK):
+        sl = slice(k0, min(S, k0 + _CHUNK))
+        ok = pairs.capsule[sl] >= 0
+        if not np.any(ok):
+            continue
+        idx = np.flatnonzero(ok) + k0
+        T = body.chain.link_frames(q[idx])
+        J = body.chain.point_jacobians(T, body.link[pairs.capsule[idx]], pairs.p_robot[idx])  # (M, 3, n)
+        Jn[idx] = np.einsum("ki,kij->kj", pairs.normal[idx], J)
+        v_r[idx] = np.einsum("kj,kj->k", Jn[idx], qd[idx])
+        a0, b0, _ = obstacle_segments(solids_at(t[idx]), idx.size)
+        a1, b1, _ = obstacle_segments(solids_at(t[idx] + dt), idx.size)
+        m, s = np.arange(idx.size), pairs.solid[idx]
+        vel = 0.5 * ((a1[m, s] - a0[m, s]) + (b1[m, s] - b0[m, s])) / dt  # translation of the solid
+        v_h[idx] = -np.einsum("ki,ki->k", pairs.normal[idx], vel)
+    return v_r, v_h, Jn
+
+
+@dataclass(frozen=True)
+class ContactEvent:
+    """One contact (the first instant of a run of clearance < 0) judged by ISO/TS 15066 Annex A.
+
+    Speeds are taken one step before the touch (the impact), m/s; masses kg; energies J; forces N.
+    ``region`` None: an object, not a person (no contact is permitted; any approach is robot-initiated).
+    ``robot_initiated``: the robot point moved toward the person faster than the allowed speed (0 for
+    ``ssm``, the Annex A limit for ``pfl``); ``within_limits``: the robot's share of the contact (its own
+    speed toward the person) is within the region's transient limit, ``v_robot <= v_limit`` (equivalently
+    ``energy <= energy_limit``, ``force <= force_limit``); the person's own speed (``v_person``) is reported
+    with ``energy_relative`` (the relative speed's energy) and is the person's doing. ``robot_approaching``:
+    the robot point moved toward the person at all (faster than the tolerance): under ``pfl`` a contact may
+    be that and still not robot-initiated (within the limit)."""
+
+    t: float
+    obstacle_solid: int
+    region: str | None
+    v_robot: float
+    v_person: float
+    m_robot: float
+    v_limit: float
+    energy: float
+    energy_relative: float
+    energy_limit: float
+    force: float
+    force_limit: float
+    robot_initiated: bool
+    within_limits: bool
+    robot_approaching: bool = False
+
+
+@dataclass(frozen=True)
+class IsoCriteria:
+    """The run against ISO/TS 15066's criteria (:func:`iso_criteria`); times s, speeds m/s.
+
+    The standard's criterion is on the *measured* separation (its ``S_p`` has the intrusion distance ``C``
+    and the sensing uncertainty ``Z_d`` for what the sensors miss): per perceived point inside its ``S_p``,
+    the robot point's actual speed toward it. The same test against the TRUE geometry (the true nearest pair
+    of robot and person, the step's ``S_p``) is stricter and reported beside it (``true_*``).
+
+    Attributes:
+        criterion: ``ssm`` or ``pfl`` (:data:`CRITERIA`).
+        inside_sp_s: time some perceived point was inside its ``S_p``.
+        violation_s: time inside ``S_p`` with the robot point approaching the point faster than allowed
+            (must be 0).
+        violation_steps: steps of it.
+        max_approach_inside_sp_mps: the largest actual speed of a robot point toward a point inside ``S_p``.
+        max_excess_mps: the largest amount by which that speed exceeded the allowed one (<= 0: none).
+        true_inside_sp_s, true_violation_s, true_max_approach_mps: the same against the true geometry.
+        contacts: the contacts (:class:`ContactEvent`, true geometry).
+        passed: no violation (measured separation) and every contact within its limits.
+    """
+
+    criterion: str
+    inside_sp_s: float
+    violation_s: float
+    violation_steps: int
+    max_approach_inside_sp_mps: float
+    max_excess_mps: float
+    true_inside_sp_s: float
+    true_violation_s: float
+    true_max_approach_mps: float
+    contacts: tuple[ContactEvent, ...]
+    passed: bool
+
+    def summary(self) -> dict:
+        """The metrics' flat fields (JSON-ready): counts, peaks and the verdict."""
+        c = self.contacts
+        worst = max(c, key=lambda e: e.energy / e.energy_limit if e.energy_limit > 0 else np.inf, default=None)
+        return {
+            "iso_criterion": self.criterion,
+            "inside_sp_s": self.inside_sp_s,
+            "sp_violation_s": self.violation_s,
+            "sp_violation_steps": self.violation_steps,
+            "max_approach_inside_sp_mps": self.max_approach_inside_sp_mps,
+            "max_approach_excess_mps": self.max_excess_mps,
+            "true_inside_sp_s": self.true_inside_sp_s,
+            "true_sp_violation_s": self.true_violation_s,
+            "true_max_approach_inside_sp_mps": self.true_max_approach_mps,
+            "contacts_robot_initiated": sum(e.robot_initiated for e in c),
+            "contacts_person_initiated": sum(not e.robot_initiated for e in c),
+            "contacts_within_limits": sum(e.within_limits for e in c),
+            "contacts_robot_approaching": sum(e.robot_approaching for e in c),
+            "peak_contact_energy_j": worst.energy if worst is not None else 0.0,
+            "peak_contact_energy_limit_j": worst.energy_limit if worst is not None else float("nan"),
+            "peak_contact_force_n": max((e.force for e in c), default=0.0),
+            "iso_pass": self.passed,
+            "contact_events": [asdict(e) for e in c],
+        }
+
+
+def iso_criteria(
+    t: FloatArray,
+    q: FloatArray,
+    body: RobotBody,
+    solids_at: SolidsAt | None,
+    margin: FloatArray,
+    regions: Sequence[object | None],
+    mass_matrix: MassMatrix | None,
+    criterion: str = "ssm",
+    tolerance: float = APPROACH_TOLERANCE_MPS,
+    measured: tuple[np.ndarray, FloatArray, FloatArray] | None = None,
+) -> IsoCriteria:
+    """A run (instants ``t`` ``(S,)``, configurations ``q`` ``(S, n)``, the step's ``S_p`` ``margin`` ``(S,)``)
+    against ISO/TS 15066: at each step the TRUE nearest pair of robot and solid (:func:`nearest_pairs`), the
+    robot point's speed toward it (:func:`approach_speeds`), inside ``S_p`` at most 0 (``ssm``) or the body
+    region's Annex A speed at the point's effective mass (``pfl``; :mod:`skincal.control.body_regions`,
+    :mod:`skincal.control.effective_mass`), plus ``tolerance``; every contact judged (:class:`ContactEvent`).
+
+    ``regions``: per solid (``solids_at``'s order) its :class:`~skincal.control.body_regions.BodyRegion` or
+    None (an object). ``mass_matrix``: ``q -> M(q)`` ``(n, n)`` (None: effective mass unknown, taken as
+    infinite: the most cautious limit). ``measured``: per step ``(inside, approach, excess)`` ``(S,)`` each:
+    the number of perceived points inside their ``S_p``, the robot's largest actual speed toward them and
+    its largest excess over their allowed speed, m/s (:class:`skincal.workflows.avoidance.RunLog`'s
+    ``sp_*``); the standard's criterion. None: the true-geometry test is the criterion."""
+    if criterion not in CRITERIA:
+        raise ConfigError(f"unknown ISO criterion '{criterion}' (use {' or '.join(CRITERIA)})")
+    S = t.size
+    dt = float(t[1] - t[0]) if S > 1 else 0.0
+    pairs = nearest_pairs(t, q, body, solids_at)
+    v_r, v_h, Jn = approach_speeds(t, q, body, solids_at, pairs)
+    inside = np.isfinite(pairs.clearance) & (pairs.clearance < margin)
+    touching = np.concatenate([[False], pairs.clearance < 0])
+    onsets = np.flatnonzero(touching[1:] & ~touching[:-1])
+    impact = np.maximum(onsets - 1, 0)
+    need = np.union1d(np.flatnonzero(inside), impact)
+
+    def m_eff(k: int) -> float:
+        if mass_matrix is None:
+            return float("inf")
+        return float(effective_mass(Jn[k][None], mass_matrix(q[k]))[0])
+
+    masses = {int(k): m_eff(int(k)) for k in need} if criterion == "pfl" or onsets.size else {}
+
+    def limit(k: int) -> tuple[float, BodyRegion | None]:
+        region = regions[pairs.solid[k]] if pairs.solid[k] >= 0 else None
+        if not isinstance(region, BodyRegion):
+            return 0.0, None
+        return float(pfl_speed_limit(region, masses.get(k, float("inf")))), region
+
+    allowed = np.zeros(S)
+    if criterion == "pfl":
+        for k in np.flatnonzero(inside):
+            allowed[k] = limit(int(k))[0]
+    bad = inside & (v_r > allowed + tolerance)
+    events = []
+    for k0, k in zip(onsets, impact, strict=True):
+        k = int(k)
+        v_lim, region = limit(k)
+        v_allowed = v_lim if criterion == "pfl" else 0.0
+        vr, vh, mr = float(v_r[k]), float(v_h[k]), masses.get(k, float("inf"))
+        if region is None:
+            energy = e_rel = e_lim = force = f_lim = float("nan")
+        else:
+            energy = float(transfer_energy(region, mr, vr))
+            e_rel = float(transfer_energy(region, mr, vr + max(vh, 0.0)))
+            e_lim, force = region.transient_energy, float(contact_force(region, mr, vr))
+            f_lim = region.transient_force or 0.0
+        events.append(ContactEvent(
+            float(t[k0]), int(pairs.solid[k]), None if region is None else region.name, vr, vh, mr, v_lim, energy,
+            e_rel, e_lim, force, f_lim, vr > v_allowed + tolerance, vr <= v_lim + tolerance, vr > tolerance,
+        ))  # fmt: skip
+    excess = v_r - allowed
+    true_approach = float(v_r[inside].max()) if np.any(inside) else 0.0
+    if measured is None:
+        m_inside, m_bad = inside, bad
+        m_approach, m_excess = true_approach, float(excess[inside].max()) if np.any(inside) else float("-inf")
+    else:
+        m_inside = np.asarray(measured[0]) > 0
+        m_bad = m_inside & (np.asarray(measured[2]) > tolerance)
+        m_approach = float(np.max(measured[1][m_inside])) if np.any(m_inside) else 0.0
+        m_excess = float(np.max(measured[2][m_inside])) if np.any(m_inside) else float("-inf")
+    return IsoCriteria(
+        criterion=criterion,
+        inside_sp_s=float(np.sum(m_inside) * dt),
+        violation_s=float(np.sum(m_bad) * dt),
+        violation_steps=int(np.sum(m_bad)),
+        max_approach_inside_sp_mps=m_approach,
+        max_excess_mps=m_excess,
+        true_inside_sp_s=float(np.sum(inside) * dt),
+        true_violation_s=float(np.sum(bad) * dt),
+        true_max_approach_mps=true_approach,
+        contacts=tuple(events),
+        passed=bool(not np.any(m_bad) and all(e.within_limits and not e.robot_initiated for e in events)),
     )

@@ -28,7 +28,11 @@ the arm escape along any direction that opens both gaps (their normals not exact
 stands still only where every motion violates more (exactly opposite points, a point by the base it has
 no lever on). The former stop (``eps = 1``: as still as possible, the violation traded against motion 1:1)
 held the arm where a person arrived (issue 17: ``elbow``, ``lower``, ``pinch``). A feasible QP is solved as
-before, bit for bit.
+before, bit for bit. With ``ControllerConfig.stop_never_approaches`` (``--margin iso``/``iso-pfl``, issue 28)
+the slack of every row is capped, ``s_i <= max(-h_i, 0)``: a row that asks to back away may be violated
+only down to standing still (``n_i^T J_i qd <= 0``), any other row not at all (violating one let the retreat
+from the others approach its point past its ``S_p``: ``walk-at``, simulated); always feasible, ``qd = 0``
+meets it: the standard's protective stop when the person comes faster than the arm can back away.
 
 Protective separation (``ControllerConfig.separation`` set, ISO/TS 15066 speed and separation
 monitoring, :mod:`skincal.control.separation`): the critical distance of each obstacle row is the point's
@@ -54,6 +58,16 @@ i.e. ``n_i^T J_i qd <= u_i*``, the fixed point of :func:`skincal.control.separat
 large ``S_p`` -> retreat -> small ``S_p`` -> fast approach ...): measured 0.23 <-> 1.03 m on alternate steps.
 Below ``S_p`` the bound is negative, so the robot backs away. ``separation = None`` is the fixed critical
 distance, unchanged.
+
+Power and force limiting (``ControllerConfig.pfl`` a body region, ``skincal avoid --margin iso-pfl``;
+ISO/TS 15066 Annex A, :mod:`skincal.control.body_regions`): speed and separation monitoring alone asks the
+robot point never to move toward a person inside ``S_p``; with PFL it may, up to the transient speed limit
+of the body region at its effective mass along the row's normal (:mod:`skincal.control.effective_mass`,
+``M_eff,i = 1 / (g_i M(q)^-1 g_i^T)`` with ``g_i = n_i^T J_i``), as long as the point is not touching
+(``d_i > 0``; touching, the separation row holds, so the robot never presses: no quasi-static contact;
+a region where transient contact is not permitted, the head, keeps the separation row too)::
+
+    n_i^T J_i qd <= max(u_i*, min(pfl_share F_T / sqrt(mu_i k), v_max)),   mu_i = (1/m_H + 1/M_eff,i)^-1
 """
 
 from __future__ import annotations
@@ -65,6 +79,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from skincal.control.body_regions import BodyRegion, pfl_speed_limit
 from skincal.control.constraints import (
     FrameCache,
     approach_speed_bound,
@@ -75,6 +90,7 @@ from skincal.control.constraints import (
     obstacle_rows,
     ramp_width,
 )
+from skincal.control.effective_mass import MassMatrix, effective_mass
 from skincal.control.separation import (
     ApproachSpeedTable,
     SeparationParams,
@@ -119,6 +135,21 @@ class ControllerConfig:
         separation: ISO/TS 15066 protective separation per point instead of the fixed ``critical``
             (module docstring; ``critical`` and ``notice`` then only set the ramp width); None: the
             fixed critical distance.
+        pfl: with ``separation``, the body region (ISO/TS 15066 Annex A) every obstacle point is taken to
+            be: a point inside ``S_p`` but not touching may be approached at up to ``pfl_share`` of the
+            region's transient speed limit at the robot point's effective mass (power and force
+            limiting, module docstring; needs the controller's ``mass_matrix``); None: pure speed and
+            separation monitoring.
+        pfl_share: the share of the Annex A speed limit the controller allows itself (the rest covers
+            perception and tracking errors).
+        sp_buffer: the obstacle rows' ramp reaches zero this far outside each point's ``S_p``, m (``S_p``
+            itself, logged and judged, is unchanged): room for a drive whose actual speed lags the command
+            (torque mode) to come to rest before ``S_p`` (speed scaling before the protective separation).
+        stop_never_approaches: in the least-violating retreat, a row that asks to back away (``h_i < 0``)
+            may be violated only down to standing still, never to approaching (``n_i^T J_i qd <= 0``), and
+            a row that allows an approach not at all: the protective stop of speed and separation
+            monitoring (module docstring). False: the legacy retreat, which may approach one point to back
+            away from others.
     """
 
     dt: float = 0.001
@@ -134,8 +165,16 @@ class ControllerConfig:
     limit_margin: float = 0.05
     solver: str = "daqp"
     separation: SeparationParams | None = None
+    pfl: BodyRegion | None = None
+    pfl_share: float = 0.5
+    sp_buffer: float = 0.0
+    stop_never_approaches: bool = False
 
     def __post_init__(self) -> None:
+        if self.pfl is not None and (self.separation is None or not isinstance(self.pfl, BodyRegion)):
+            raise ConfigError("controller: pfl needs a BodyRegion and a separation model")
+        if not (0 < self.pfl_share <= 1):
+            raise ConfigError(f"controller: pfl_share must be in (0, 1], got {self.pfl_share}")
         if self.separation is not None and not isinstance(self.separation, SeparationParams):
             raise ConfigError(f"controller: separation must be SeparationParams or None, got {self.separation!r}")
         if not (0 < self.critical < self.notice):
@@ -143,7 +182,7 @@ class ControllerConfig:
         for name in ("dt", "damping", "v_max", "velocity_scale"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"controller: {name} must be positive, got {getattr(self, name)}")
-        for name in ("gain", "posture_gain", "padding", "limit_margin", "n_rim"):
+        for name in ("gain", "posture_gain", "padding", "limit_margin", "n_rim", "sp_buffer"):
             if not getattr(self, name) >= 0:
                 raise ConfigError(f"controller: {name} must be non-negative, got {getattr(self, name)}")
 
@@ -166,6 +205,11 @@ class StepResult:
             each, in the order of the points); None otherwise.
         clearance: ``min_i (d_i - S_p,i)`` (or ``min d_i - critical``), m; inf without points
             (negative: inside the protective separation).
+        inside_rows: with ``separation``, the rows ``n_i^T J_i`` ``(m, n)`` of the points inside their ``S_p``
+            (``d_i < S_p,i``) at this step, for the standard's criterion on the robot's actual motion
+            (:func:`skincal.control.iso_metrics.iso_criteria`); None otherwise.
+        inside_allowed: ``(m,)`` the speed each of those points allows the robot toward it, m/s: 0 (speed
+            and separation monitoring) or, with ``pfl``, the full Annex A limit at the row's effective mass.
     """
 
     qd: FloatArray
@@ -178,6 +222,8 @@ class StepResult:
     margin: float = float("nan")
     terms: SeparationTerms | None = None
     clearance: float = float("inf")
+    inside_rows: FloatArray | None = None
+    inside_allowed: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -238,6 +284,7 @@ class AvoidanceController:
         config: ControllerConfig = ControllerConfig(),
         body: RobotBody | None = None,
         q_posture: ArrayLike | None = None,
+        mass_matrix: MassMatrix | None = None,
     ) -> None:
         import qpsolvers
 
@@ -247,6 +294,9 @@ class AvoidanceController:
         self.config = config
         self.body = (body if body is not None else RobotBody.of(chain)).inflated(config.padding)
         self.q_posture = None if q_posture is None else np.asarray(q_posture, dtype=float)
+        if config.pfl is not None and mass_matrix is None:
+            raise ConfigError("controller: power and force limiting (pfl) needs the robot's mass_matrix")
+        self.mass_matrix = mass_matrix
         self._flange = chain.T_link_flange[:3, 3]
         self._frames = FrameCache(chain)
         self._width = ramp_width(config.critical, config.notice)
@@ -307,8 +357,16 @@ class AvoidanceController:
                     terms, crit = None, None
                 dist = prox.distance
                 assert self._speeds is not None
-                v_allowed = self._speeds(dist, sep_in.v_now if moving else None, sep_in.v_h, sep_in.z_d)
+                v_allowed = self._speeds(
+                    dist - cfg.sp_buffer, sep_in.v_now if moving else None, sep_in.v_h, sep_in.z_d
+                )  # fmt: skip
                 h_all = v_allowed  # the point's own approach is in it (the velocity-aware row)
+                if cfg.pfl is not None and self.mass_matrix is not None:
+                    # PFL: short of touching, up to the Annex A speed at the point's effective mass
+                    # (a region with no transient contact permitted, v = 0, keeps the separation row)
+                    v_pfl = cfg.pfl_share * pfl_speed_limit(cfg.pfl, effective_mass(G_all, self.mass_matrix(q)))
+                    pfl = (dist > 0) & (v_pfl > 0)
+                    h_all = np.where(pfl, np.maximum(h_all, np.minimum(v_pfl, cfg.v_max)), h_all)
             # A row with no lever on the robot (point at the base) and a non-negative bound is void.
             keep = (np.abs(G_all).max(axis=1) > 1e-9) | (h_all < 0)
             G, h = G_all[keep], h_all[keep]
@@ -338,7 +396,10 @@ class AvoidanceController:
         P = np.diag(np.concatenate([np.full(n, _STOP_EPS), np.ones(K)]))
         G = np.hstack([prob.G, -np.eye(K)])
         lb = np.concatenate([prob.lb, np.zeros(K)])
-        ub = np.concatenate([prob.ub, np.full(K, np.inf)])
+        slack_ub = np.full(K, np.inf)
+        if self.config.stop_never_approaches:  # a retreat row violated at most down to a stop, no other row
+            slack_ub = np.maximum(-prob.h, 0.0)
+        ub = np.concatenate([prob.ub, slack_ub])
         t0 = time.perf_counter()
         z = qpsolvers.solve_qp(P, np.zeros(n + K), G, prob.h, lb=lb, ub=ub, solver=self.config.solver)
         elapsed = time.perf_counter() - t0
@@ -368,10 +429,18 @@ class AvoidanceController:
             s = prob.separation_inputs
             terms = protective_separation(self.config.separation, np.maximum(s.G @ qd, s.v_now), s.v_h, s.z_d)
             critical = terms.total
+        inside_rows = inside_allowed = None
         if prob.distance.size and critical is not None:
             gap = prob.distance - critical
             i = int(np.argmin(gap))
             margin, clearance = float(critical[i]), float(gap[i])
+            if prob.separation_inputs is not None:
+                inside_rows = prob.separation_inputs.G[gap < 0]
+                inside_allowed = np.zeros(inside_rows.shape[0])
+                if self.config.pfl is not None and self.mass_matrix is not None and inside_rows.shape[0]:
+                    m_eff = effective_mass(inside_rows, self.mass_matrix(np.asarray(q, dtype=float).reshape(-1)))
+                    inside_allowed = pfl_speed_limit(self.config.pfl, m_eff)
         return StepResult(
-            qd, feasible, violation, elapsed, int(prob.G.shape[0]), d_min, prob.x, margin, terms, clearance
-        )
+            qd, feasible, violation, elapsed, int(prob.G.shape[0]), d_min, prob.x, margin, terms, clearance,
+            inside_rows, inside_allowed,
+        )  # fmt: skip

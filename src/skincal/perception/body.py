@@ -156,6 +156,24 @@ def segment_distance(a1: FloatArray, b1: FloatArray, a2: FloatArray, b2: FloatAr
     ``a = u.u``, ``b = u.v``, ``c = u.w``, ``e = v.v``, ``f = v.w``. Zero-length segments are points.
     """
     u, v, w = b1 - a1, b2 - a2, a1 - a2
+    s, t_clamped = _segment_parameters(u, v, w)
+    gap = w + s[..., None] * u - t_clamped[..., None] * v
+    return np.linalg.norm(gap, axis=-1)
+
+
+def segment_closest_points(
+    a1: FloatArray, b1: FloatArray, a2: FloatArray, b2: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """The closest points ``(c1, c2)`` (``(..., 3)`` each, m) of segments ``a1``-``b1`` and ``a2``-``b2``
+    (broadcast): :func:`segment_distance`'s parameters, ``c1 = a1 + s u``, ``c2 = a2 + t v``."""
+    u, v, w = b1 - a1, b2 - a2, a1 - a2
+    s, t = _segment_parameters(u, v, w)
+    return a1 + s[..., None] * u, a2 + t[..., None] * v
+
+
+def _segment_parameters(u: FloatArray, v: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``(s, t)`` in [0, 1] of the closest points of segments ``a1 + s u`` and ``a2 + t v``, ``w = a1 - a2``
+    (:func:`segment_distance`)."""
 
     def dot(p: FloatArray, q: FloatArray) -> FloatArray:
         return np.einsum("...i,...i->...", p, q)
@@ -169,6 +187,5 @@ def segment_distance(a1: FloatArray, b1: FloatArray, a2: FloatArray, b2: FloatAr
     t_clamped = np.clip(t, 0.0, 1.0)
     s_re = np.clip(np.where(a_ok, (b * t_clamped - c) / np.where(a_ok, a, 1.0), 0.0), 0.0, 1.0)
     s = np.where((t != t_clamped) & e_ok, s_re, s)
-    gap = w + s[..., None] * u - t_clamped[..., None] * v
-    return np.linalg.norm(gap, axis=-1)
+    return s, t_clamped
 

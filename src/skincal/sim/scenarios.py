@@ -27,6 +27,8 @@ Scenario file (every key optional unless said; lengths m, times s, speeds m/s)::
         floor: false               # true: the z of the waypoints is absolute (feet on the floor); human: true
         start: 1.0                 # instant the first leg starts (default 0) ...
         arrive: {waypoint: 2, at: 7.0}  # ... or: the instant waypoint k (1-based) is reached
+        body_region: hand          # ISO/TS 15066 body region (skincal.control.body_regions); default by
+                                   # shape: sphere hand, capsule forearm, human per part (chest, skull, ...)
         waypoints:                 # at least 1, at most 256
           - {p: [0.645, -1.657, 0.433]}
           - {p: [0.033, -0.310, 0.187], hold: 3.0}   # hold: s to stay once there
@@ -208,7 +210,10 @@ class _Fields:
 
 _TOP = ("name", "description", "human_speed", "duration", "after", "people", "obstacles")
 _PERSON = ("name", "shape", "radius", "length", "axis", "height", "speed", "relative_to", "floor", "start", "arrive",
-           "waypoints")  # fmt: skip
+           "waypoints", "body_region")  # fmt: skip
+DEFAULT_REGIONS = {"sphere": "hand", "capsule": "forearm"}
+"""ISO/TS 15066 body region of a person part without ``body_region``, by shape (a ``human``'s parts:
+:data:`skincal.sim.scene.HUMAN_REGIONS`)."""
 _OBSTACLE = ("name", "shape", "radius", "length", "axis", "p", "relative_to", "floor")
 _WAYPOINT = ("p", "hold", "speed")
 
@@ -280,6 +285,12 @@ def _person(
         f.fail(f"{printable(name)[:40]!r} {problem}", "name")
     prims = _shape(f, person=True)
     is_human = prims is None
+    region = None
+    if f.has("body_region"):
+        region = f.text("body_region")
+        problem = name_problem(region)
+        if problem:
+            f.fail(f"{printable(region)[:40]!r} {problem}", "body_region")
     speed = f.number("speed", 1.0, 0.0, MAX_SPEED, open_lo=True)
     if speed_override is not None:
         speed = speed_override
@@ -333,8 +344,9 @@ def _person(
         step = next((pts[i] - pts[0] for i in range(1, len(pts)) if np.linalg.norm((pts[i] - pts[0])[:2]) > 1e-9), None)
         yaw = float(np.arctan2(step[1], step[0])) if step is not None else np.pi
         height = f.number("height", 1.75, 0.5, 2.5)
-        return human(name, pts[0], yaw, height, path), t
-    return Obstacle(name, prims, pts[0], path=path), t
+        return human(name, pts[0], yaw, height, path, region), t
+    region = region if region is not None else DEFAULT_REGIONS[prims[0].kind]
+    return Obstacle(name, prims, pts[0], path=path, body_regions=(region,)), t
 
 
 def _static(f: _Fields, chain: SerialChain, q0: FloatArray, points: dict) -> Obstacle:

@@ -78,18 +78,28 @@ class TimeTable:
 
 @dataclass(frozen=True)
 class Obstacle:
-    """A rigid group of primitives; its frame is at ``p_base_obs`` (or follows ``path``), rotated by ``R_base_obs``."""
+    """A rigid group of primitives; its frame is at ``p_base_obs`` (or follows ``path``), rotated by ``R_base_obs``.
+
+    ``body_regions``: for a person, the ISO/TS 15066 body region of each primitive (names of
+    :data:`skincal.control.body_regions.BODY_REGIONS`, one per primitive, checked there); ``()``: not a
+    person (a post, a table)."""
 
     name: str
     primitives: tuple[Primitive, ...]
     p_base_obs: FloatArray = field(default_factory=lambda: np.zeros(3))
     R_base_obs: FloatArray = field(default_factory=lambda: np.eye(3))
     path: TimeTable | None = None
+    body_regions: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.name or not self.primitives:
             raise ConfigError("an obstacle needs a name and at least one primitive")
         object.__setattr__(self, "primitives", tuple(self.primitives))
+        object.__setattr__(self, "body_regions", tuple(str(r) for r in self.body_regions))
+        if self.body_regions and len(self.body_regions) != len(self.primitives):
+            raise ConfigError(
+                f"obstacle '{self.name}': {len(self.body_regions)} body regions for {len(self.primitives)} primitives"
+            )
         object.__setattr__(
             self, "p_base_obs", finite_array(self.p_base_obs, f"obstacle '{self.name}' position (m)", (3,))
         )
@@ -259,11 +269,13 @@ def human(
     yaw: float = np.pi,
     height: float = 1.75,
     path: TimeTable | None = None,
+    body_region: str | None = None,
 ) -> Obstacle:
     """A standing person of capsules (torso, head, upper/lower arms, legs), feet at ``position``.
 
     The person faces its local +x, turned by ``yaw`` (rad) about the base z axis (``pi``: facing a
-    robot at the origin from +x). Proportions scale with ``height`` (m).
+    robot at the origin from +x). Proportions scale with ``height`` (m). Body regions
+    (:data:`HUMAN_REGIONS`: chest, skull, upper arms, forearms, thighs), or ``body_region`` for every part.
     """
     s = height / 1.75
     down = np.eye(3)
@@ -281,7 +293,13 @@ def human(
         cap(0.08, 0.10, 0.88, y=0.10),
         cap(0.08, 0.10, 0.88, y=-0.10),  # legs
     )
-    return Obstacle(name, prims, position, rot_z(yaw), path)
+    regions = HUMAN_REGIONS if body_region is None else (body_region,) * len(prims)
+    return Obstacle(name, prims, position, rot_z(yaw), path, regions)
+
+
+HUMAN_REGIONS = ("chest", "skull", "upper_arm", "upper_arm", "forearm", "forearm", "thigh", "thigh")
+"""ISO/TS 15066 body regions of :func:`human`'s parts, in its order (torso, head, two upper arms, two
+forearms, two legs)."""
 
 
 def approaching_human(

@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from skincal.control.effective_mass import MassMatrix
 from skincal.control.iso_metrics import TERMS
 from skincal.control.qp import AvoidanceController, ControllerConfig
 from skincal.control.separation import separation_speed
@@ -88,6 +89,11 @@ class RunLog:
         task_time: ``(S,)`` the task clock, s (``t`` without resume).
         protective_stop: ``(S,)`` the controller commanded its protective (safe) stop.
         mode: ``kinematic`` or ``torque``.
+        sp_inside: ``(S,)`` perceived points inside their ``S_p`` at the step (with a separation model).
+        sp_excess: ``(S,)`` over those points, the largest of the robot point's ACTUAL speed toward the
+            point over the step (``n_i^T J_i (q_{k+1} - q_k) / dt``) less the speed the point allows
+            (:attr:`skincal.control.qp.StepResult.inside_allowed`), m/s; ``-inf`` where none is inside.
+        sp_approach: ``(S,)`` the largest actual speed toward those points, m/s (``-inf``: none inside).
     """
 
     scenario: Scenario
@@ -111,6 +117,9 @@ class RunLog:
     task_time: FloatArray | None = None
     protective_stop: np.ndarray | None = None
     mode: str = "kinematic"
+    sp_inside: np.ndarray | None = None
+    sp_excess: FloatArray | None = None
+    sp_approach: FloatArray | None = None
 
     @property
     def tracking_error(self) -> FloatArray:
@@ -134,6 +143,7 @@ def run_scenario(
     resume_band: float = RESUME_BAND,
     mode: str = "kinematic",
     torque: object | None = None,
+    mass_matrix: MassMatrix | None = None,
 ) -> RunLog:
     """Run ``scenario`` in closed loop (see the module docstring) and log it.
 
@@ -141,7 +151,9 @@ def run_scenario(
     ``tof_model``: default the VL53L1X preset (27 deg cone of 37 rays, 5 mm + 0.5 % noise).
     ``uncertainty``: the believed poses' covariances behind each point's ``cov`` (perception's default
     when None). ``resume``: the task clock of the module docstring. ``mode``: ``kinematic`` or ``torque``
-    (``torque``: a :class:`skincal.sim.dynamics.TorqueConfig`, default its defaults).
+    (``torque``: a :class:`skincal.sim.dynamics.TorqueConfig`, default its defaults). ``mass_matrix``: the
+    robot's joint-space inertia ``q -> M(q)`` for a controller with power and force limiting
+    (``controller.pfl``; default :func:`robot_mass_matrix`).
     """
     if mode not in MODES:
         raise ConfigError(f"unknown mode '{mode}' (use {' or '.join(MODES)})")
@@ -195,7 +207,9 @@ def run_scenario(
 
     body = RobotBody.of(chain, link_radius)
     tracker = ProximityTracker(chain, dict(believed_poses), perception, body, uncertainty)
-    ctl = AvoidanceController(chain, controller, body, q_posture=scenario.q0)
+    if controller.pfl is not None and mass_matrix is None:
+        mass_matrix = robot.mass_matrix if robot is not None else robot_mass_matrix(chain)
+    ctl = AvoidanceController(chain, controller, body, q_posture=scenario.q0, mass_matrix=mass_matrix)
     fixed_margin = float(controller.critical)
     margin = np.full(S, fixed_margin)
     separation = getattr(controller, "separation", None)
@@ -212,6 +226,8 @@ def run_scenario(
     violation, min_dist = np.zeros(S), np.full(S, np.inf)
     n_obs = np.zeros(S, dtype=int)
     solve_t, step_t, loop_t = np.zeros(S), np.zeros(S), np.zeros(S)
+    sp_inside = np.zeros(S, dtype=int)
+    sp_excess, sp_approach = np.full(S, -np.inf), np.full(S, -np.inf)
     for k in range(S):  # the closed loop is sequential
         t0 = time.perf_counter()
         reading = np.flatnonzero((k - phase) % period == 0)
@@ -257,11 +273,18 @@ def run_scenario(
             near = res.min_distance < margin[k] + resume_band
             rate = max(rate - dr, 0.0) if near else min(rate + dr, 1.0)
             lag += (1.0 - rate) * dt
+        q_before = q
         if robot is None:
             q = q + res.qd * dt
         else:
             robot.step(res.qd, dt)
             q, qd = robot.q, robot.qd
+        rows = getattr(res, "inside_rows", None)
+        if rows is not None and rows.shape[0]:  # the standard's criterion on the motion the robot made
+            speed = rows @ ((q - q_before) / dt)
+            sp_inside[k] = rows.shape[0]
+            sp_approach[k] = float(speed.max())
+            sp_excess[k] = float(np.max(speed - res.inside_allowed))
         loop_t[k] = time.perf_counter() - t0
     return RunLog(
         scenario,
@@ -285,7 +308,30 @@ def run_scenario(
         task_time,
         ~feasible,
         mode,
+        sp_inside if separated else None,
+        sp_excess if separated else None,
+        sp_approach if separated else None,
     )
+
+
+def robot_mass_matrix(chain: SerialChain) -> MassMatrix:
+    """``q -> M(q)`` ``(n, n)``: the joint-space inertia of the torque robot's MuJoCo model (the published
+    inertials of the Panda, UR5e, iiwa14 or a URDF's own, rotor armature included: what
+    :class:`skincal.sim.dynamics.TorqueRobot` simulates), by ``mj_fullM``."""
+    from skincal.sim.dynamics import torque_model
+    from skincal.sim.mujoco_model import full_mass_matrix
+
+    mujoco = require_mujoco()
+    model = torque_model(chain)
+    data = mujoco.MjData(model)
+    n = chain.n_joints
+
+    def mass_matrix(q: FloatArray) -> FloatArray:
+        data.qpos[:n] = q
+        mujoco.mj_fwdPosition(model, data)
+        return full_mass_matrix(model, data)[:n, :n]
+
+    return mass_matrix
 
 
 def _binding(parts, res) -> int:

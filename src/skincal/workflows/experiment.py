@@ -3,7 +3,8 @@
 
 One experiment: the simulated skin at its TRUE poses, the poses the controller BELIEVES (and their
 covariance), a scenario on a robot, the controller's margin (``fixed``: the legacy critical distance;
-``iso``: ISO/TS 15066's ``S_p`` with the scenario's ``v_h`` and the robot's measured stopping model), the
+``iso``: ISO/TS 15066's ``S_p`` with the scenario's ``v_h`` and the robot's measured stopping model, speed and
+separation monitoring; ``iso-pfl``: the same with power and force limiting, issue 28), the
 task clock that waits (``resume``) and the robot mode; run in MuJoCo by
 :func:`skincal.workflows.avoidance.run_scenario` with the sensor noise seeded by ``seed``. With ``resume``
 the same run without anybody is made too (or given), for the task time lost. The metrics are
@@ -22,6 +23,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from skincal.control import iso_metrics
+from skincal.control.body_regions import BodyRegion, body_region, pfl_speed_limit
+from skincal.control.effective_mass import MassMatrix
 from skincal.control.iso_metrics import AvoidMetrics
 from skincal.control.qp import ControllerConfig
 from skincal.control.separation import SeparationParams, StoppingModel
@@ -32,9 +35,22 @@ from skincal.perception.body import RobotBody
 from skincal.perception.uncertainty import SkinUncertainty
 from skincal.sim.scenarios import Scenario
 from skincal.skin.pose import SkinUnitPose
-from skincal.workflows.avoidance import MODES, RunLog, run_scenario
+from skincal.workflows.avoidance import MODES, RunLog, robot_mass_matrix, run_scenario
 
-MARGINS = ("fixed", "iso")
+MARGINS = ("fixed", "iso", "iso-pfl")
+"""``fixed``: the legacy critical distance; ``iso``: ISO/TS 15066 ``S_p``, speed and separation monitoring
+(inside ``S_p`` the robot never approaches); ``iso-pfl``: ``S_p`` with power and force limiting (inside it
+the robot may approach at the Annex A speed of the body region, :mod:`skincal.control.body_regions`)."""
+TORQUE_V_MAX = 0.5
+"""The ramp's largest approach speed in torque mode with an ISO margin, m/s (kinematic: 1.0): half the slope
+near ``S_p``, so that the drive's lag behind the command stays small (``hand`` on the Panda, torque, SSM:
+the actual speed toward a point inside ``S_p`` reached 0.18 m/s with 1.0; simulated)."""
+TORQUE_SP_BUFFER_M = 0.02
+"""``ControllerConfig.sp_buffer`` in torque mode with an ISO margin, m: the lagging drive comes to rest before
+``S_p`` (with :data:`TORQUE_V_MAX`: no step approaching inside ``S_p`` in ``hand``, Panda, torque; simulated,
+chosen on that run)."""
+CRITERION = {"iso": "ssm", "iso-pfl": "pfl"}
+"""The ISO criterion a margin's run is judged by (:func:`skincal.control.iso_metrics.iso_criteria`)."""
 
 
 class StoppingModels:
@@ -81,7 +97,7 @@ class ExperimentConfig:
         believed_poses: what perception believes (may lack units; ``{}``: blind).
         label: the beliefs' name in the metrics (``poses``).
         uncertainty: the believed poses' covariances (perception's default when None).
-        margin: ``fixed`` or ``iso``.
+        margin: ``fixed``, ``iso`` or ``iso-pfl`` (:data:`MARGINS`).
         resume: the task clock that waits while a person is near.
         mode: ``kinematic`` or ``torque``.
         seed: seed of the sensor noise.
@@ -127,9 +143,16 @@ def run_experiment(
     ``reference`` a run without anybody made before (then not run again)."""
     c = config
     controller = ControllerConfig()
-    if c.margin == "iso":
-        controller = replace(controller, separation=separation_for(c.chain, c.scenario, stopping=stopping))
-    kw = dict(controller=controller, uncertainty=c.uncertainty, resume=c.resume, mode=c.mode)
+    regions = scenario_regions(c.scenario)
+    if c.margin in CRITERION:
+        sep = separation_for(c.chain, c.scenario, stopping=stopping)
+        controller = replace(controller, separation=sep, stop_never_approaches=True)
+        if c.mode == "torque":  # speed scaling before S_p for a drive that lags its command
+            controller = replace(controller, v_max=TORQUE_V_MAX, sp_buffer=TORQUE_SP_BUFFER_M)
+    if c.margin == "iso-pfl":
+        controller = replace(controller, pfl=assumed_region(regions))
+    mass = robot_mass_matrix(c.chain) if c.margin in CRITERION else None
+    kw = dict(controller=controller, uncertainty=c.uncertainty, resume=c.resume, mode=c.mode, mass_matrix=mass)
     log = run_scenario(c.chain, c.scenario, c.true_poses, c.believed_poses, np.random.default_rng(c.seed), **kw)
     wanted = c.resume if c.reference is None else c.reference
     if reference is None and wanted:
@@ -138,7 +161,35 @@ def run_experiment(
             c.chain, nobody, c.true_poses, c.believed_poses, np.random.default_rng(c.seed), **kw
         )  # fmt: skip
     body = RobotBody.of(c.chain)
-    return Experiment(c, controller, log, reference, summarize(log, body, c.label, reference), body)
+    judged = (CRITERION[c.margin], regions, mass) if c.margin in CRITERION else None
+    return Experiment(c, controller, log, reference, summarize(log, body, c.label, reference, judged), body)
+
+
+def scenario_regions(scenario: Scenario) -> list[BodyRegion | None]:
+    """The ISO/TS 15066 body region of every solid of the scenario's scene (its ``tof_primitives`` order):
+    a person part's region, None for an object; a one-line :class:`ConfigError` naming the file and the
+    person for an unknown region name."""
+    out: list[BodyRegion | None] = []
+    for obs in scenario.scene.obstacles:
+        if not obs.body_regions:
+            out += [None] * len(obs.primitives)
+            continue
+        for name in obs.body_regions:
+            try:
+                out.append(body_region(name))
+            except ConfigError as e:
+                raise ConfigError(f"{scenario.source or scenario.name}: person '{obs.name}': {e}") from None
+    return out
+
+
+def assumed_region(regions: list[BodyRegion | None]) -> BodyRegion:
+    """The body region a PFL controller takes every perceived point to be: the skin does not tell who or what
+    it sees, so the scenario's most restrictive person part (the lowest Annex A speed limit against an
+    infinitely heavy robot); the hand without any person."""
+    people = [r for r in regions if r is not None]
+    if not people:
+        return body_region("hand")
+    return min(people, key=lambda r: float(pfl_speed_limit(r, np.inf)))
 
 
 # ---------------------------------------------------------------------------------------------- a run's metrics
@@ -160,9 +211,27 @@ def task_time_lost(log: RunLog, reference: RunLog) -> float:
     )
 
 
-def summarize(log: RunLog, body: RobotBody, poses: str = "", reference: RunLog | None = None) -> AvoidMetrics:
+def summarize(
+    log: RunLog,
+    body: RobotBody,
+    poses: str = "",
+    reference: RunLog | None = None,
+    judged: tuple[str, list, MassMatrix | None] | None = None,
+) -> AvoidMetrics:
     """All metrics of a run; ``body`` is the TRUE robot geometry (as simulated); ``reference`` the same
-    run without a person (for the task time lost; NaN without it)."""
+    run without a person (for the task time lost; NaN without it); ``judged``: ``(criterion, regions,
+    mass_matrix)`` to judge the run by ISO/TS 15066's criteria (:func:`skincal.control.iso_metrics.iso_criteria`)."""
+    iso = None
+    scene = log.scenario.scene
+    if judged is not None:
+        solids = scene.tof_primitives if scene.obstacles else None
+        measured = None
+        if log.sp_inside is not None and log.sp_approach is not None and log.sp_excess is not None:
+            measured = (log.sp_inside, log.sp_approach, log.sp_excess)
+        criterion, regions, mass = judged
+        iso = iso_metrics.iso_criteria(
+            log.t, log.q, body, solids, margin_of(log), regions, mass, criterion, measured=measured
+        )
     return iso_metrics.summarize_run(
         scenario=log.scenario.name,
         poses=poses,
@@ -180,4 +249,5 @@ def summarize(log: RunLog, body: RobotBody, poses: str = "", reference: RunLog |
         loop_time_s=log.loop_time_s,
         task_time_lost_s=task_time_lost(log, reference) if reference is not None else float("nan"),
         mode=log.mode,
+        iso=iso,
     )
