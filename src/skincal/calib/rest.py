@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from skincal.calib.preprocess import joint_noise, white_noise_std
+from skincal.calib.robust import residual_correlation
 from skincal.data.dataset import DYNAMIC, STATIC, JointStates, Segments
 from skincal.kinematics.transforms import FloatArray
 
@@ -193,6 +194,11 @@ class RestRuns:
         gyro_noise: typical gyroscope std inside a run, rad/s (0 without a gyroscope).
         warnings: one per dropped run (or a summary when there are many).
         trimmed: how many kept runs lost their start to a unit still settling (no warning).
+        accel_correlation: integrated autocorrelation of the accelerometer inside the kept runs
+            (:func:`~skincal.calib.robust.residual_correlation` of each run's deviations from its
+            mean, the runs end to end; 1 for white noise): a run's mean then varies by about
+            ``accel_correlation * accel_noise^2 / n``, not ``accel_noise^2 / n`` (an underestimate
+            for short runs, whose own mean takes some of the correlation away).
     """
 
     bounds: np.ndarray
@@ -203,6 +209,7 @@ class RestRuns:
     gyro_noise: float
     warnings: tuple[str, ...]
     trimmed: int = 0
+    accel_correlation: float = 1.0
 
 
 def _spread(x: FloatArray, a: int, b: int) -> float:
@@ -288,6 +295,8 @@ def unit_rest_runs(
             f"static segment moved: {len(gone)} of {len(candidates)} rest period(s) dropped because the unit's "
             f"IMU moved in them ({where}; accelerometer spread above {limit_a:.3g} m/s^2)"
         )
+    deviations = [accel[a:b] - accel[a:b].mean(axis=0) for a, b in keep]
+    correlation = residual_correlation(np.concatenate(deviations)) if deviations else 1.0
     return RestRuns(
         np.array(keep, dtype=np.intp).reshape(-1, 2),
         rest,
@@ -297,6 +306,7 @@ def unit_rest_runs(
         level_g,
         tuple(warnings),
         trimmed,
+        correlation,
     )
 
 

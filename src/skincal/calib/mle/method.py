@@ -629,7 +629,7 @@ def _static_chi2(fit: Fit, rows: Rows, rest_noise: float, angle_noise: float = 0
     """Variance ratio of the rest rows' residuals to what the noise explains (1 when consistent).
 
     A rest run of ``n`` samples with white noise ``sigma_r`` has a mean residual of variance ``sigma_r^2
-    / n`` per axis (the caller divides by the noise's autocorrelation factor when it is not white), plus
+    / n`` per axis (``rest_noise`` carries the noise's autocorrelation factor when it is not white), plus
     ``(|u| sigma_q)^2`` from the joint angles' own error ``sigma_q`` (rad; an encoder's rounding tilts
     the predicted gravity); the ratio over all runs, ``sum |r|^2 / (3 var (S - k))``, exceeds 1 when the
     runs disagree with the model (bias drift, a moved unit, wrong gravity).
@@ -657,10 +657,9 @@ def _honesty(
     st = fit.state
     warnings: list[str] = []
     notes: list[str] = []
-    # The rest means' noise is as correlated as the residuals are (up to CORRELATION_WARN: beyond it the
-    # correlation is model error, not noise, and is reported below): white-noise variance times that factor.
-    chi2 = _static_chi2(fit, rows, p.data.rest.accel_noise, angle_noise)
-    chi2 /= min(fit.residual_correlation, CORRELATION_WARN)
+    # The rest means vary as the IMU's noise at rest is correlated (measured inside the rest runs: the
+    # moving residuals' correlation also carries model error, which the robot at rest does not have).
+    chi2 = _static_chi2(fit, rows, p.data.rest.accel_noise * np.sqrt(p.data.rest.accel_correlation), angle_noise)
     if chi2 > STATIC_CHI2_WARN:
         cov = cov * chi2
         warnings.append(
