@@ -17,6 +17,7 @@ import pytest
 
 from skincal.calib.api import METHODS, calibrate_unit
 from skincal.calib.mle import method as mle
+from skincal.calib.mle.problem import arrange
 from skincal.calib.mle.solver import State, _accel_rows
 from skincal.calib.model import link_specific_force, predict_specific_force
 from skincal.calib.preprocess import JointInterpolator
@@ -63,7 +64,7 @@ def _method_residuals(unit, problem):
     result reports, and the arranged data: the solver's state rebuilt from ``unit.pose`` and
     ``unit.imu`` alone (the result holds the whole model)."""
     imu = unit.imu
-    p = mle._arrange(problem, unit.pose.link)
+    p = arrange(problem, unit.pose.link)
     d = 1e-6 * imu.clock_drift_ppm
     # time_offset_s is at time_reference_s and includes the coarse offset; the solver's tau is at t_c
     tau = imu.time_offset_s - d * (imu.time_reference_s - p.data.t_c) - problem.time_offset_s
