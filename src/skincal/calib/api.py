@@ -283,6 +283,7 @@ def calibrate(
         from skincal.calib.consistency import check
 
         part_options = dataclasses.replace(parsed, consistency=False)
+        alignments: dict[str, Any] = {}  # each unit's clock alignment on its whole stream, for its parts
 
         def refit(part: Dataset, part_links: dict[str, int]) -> CalibrationResult:
             """The method on a part of the recording: the same joint conditioning and shared tables (they do
@@ -290,10 +291,13 @@ def calibrate(
             units: dict[str, UnitResult] = {}
             part_failed: dict[str, str] = {}
             for k, name in enumerate(part_links):
+                if spec.align is not None and name not in alignments:  # the whole stream's, found once
+                    alignments[name] = spec.align(shared, tagged.imu[name])
                 try:
                     units[name] = calibrate_unit(
                         part, name, spec, link=part_links[name], rng=np.random.default_rng([seed, k]),
                         interpolator=interpolator, shared=shared, options=part_options,
+                        alignment=alignments.get(name),
                     )  # fmt: skip
                 except CalibrationError as exc:
                     part_failed[name] = str(exc)
@@ -403,16 +407,19 @@ def calibrate_unit(
     interpolator: JointInterpolator | None = None,
     shared: Any = None,
     options: Any = None,
+    alignment: Any = None,
 ) -> UnitResult:
     """Calibrate one unit (see :func:`calibrate`); ``options``: the method's parsed options
-    (default: the method's defaults)."""
+    (default: the method's defaults); ``alignment``: the unit's clock alignment found on its whole
+    stream (``spec.align``), applied to this dataset's stream (a part of it) with its ``for_stream``
+    instead of searching again."""
     with method_errors():  # a foreign exception: this unit's CalibrationError, raised from it
         if interpolator is None:
             interpolator = JointInterpolator(dataset.joints)
         if shared is None and spec.prepare is not None:
             shared = spec.prepare(dataset, interpolator)
         options = parse_options(spec.options, {}, "") if options is None else options
-        alignment, offset = None, 0.0
+        given_alignment, alignment, offset = alignment, None, 0.0
         _check_overlap(dataset, unit)
         motion = sees_motion(dataset, unit)
         skipped = None  # why the coarse clock search did not run
@@ -424,7 +431,10 @@ def calibrate_unit(
                 "determines the clock offset; the stamps taken as they are"
             )
         if spec.align is not None and skipped is None:
-            alignment = spec.align(shared, dataset.imu[unit])
+            if given_alignment is None:
+                alignment = spec.align(shared, dataset.imu[unit])
+            else:
+                alignment = given_alignment.for_stream(dataset.imu[unit])
             offset = float(alignment.offset_s)
             stamps = getattr(alignment, "stamps", None)  # the unit's stamps corrected by the alignment
             if stamps is not None:

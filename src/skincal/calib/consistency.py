@@ -49,6 +49,9 @@ EXCITATION_WINDOW_S = 2.0
 """Length of the windows the ``excitation`` split ranks by the link's motion, s."""
 EXCITATION_RATE_HZ = 50.0
 """The joint stream is thinned to at most this rate to rank the windows."""
+PART_STD_LIMIT = 10.0
+"""A part whose std of a component exceeds this many times the full result's does not determine it
+(a half of the data gives about 1.4 times the std): that component is not compared."""
 QUANTILE = 0.99
 """A block's chi-square beyond this quantile of its distribution counts as disagreement."""
 Z_NAMED = 3.0
@@ -170,10 +173,16 @@ def _pose_vector(unit: UnitResult) -> tuple[FloatArray, FloatArray, FloatArray]:
     return np.asarray(unit.pose.p_link_su, dtype=float), np.asarray(unit.pose.R_link_su, dtype=float), s
 
 
-def compare(parts: dict[str, tuple[UnitResult, UnitResult]]) -> tuple[FloatArray, list[str]]:
+def compare(
+    parts: dict[str, tuple[UnitResult, UnitResult]], full: UnitResult | None = None
+) -> tuple[FloatArray, list[str]]:
     """``(len(SPLITS), 6)`` normalised differences ``z`` per split (rows in :data:`SPLITS` order; NaN where not
-    determined) and the components beyond :data:`Z_NAMED` std, named."""
+    determined) and the components beyond :data:`Z_NAMED` std, named. With the ``full`` result, a
+    component is compared only where both parts determine it to within :data:`PART_STD_LIMIT` times
+    the full result's std (a part without the motion that determines it, such as the calm half of a
+    recording for a unit only one joint turns, measures nothing there)."""
     z = np.full((len(SPLITS), 6), np.nan)
+    limit = None if full is None else PART_STD_LIMIT * _pose_vector(full)[2]
     named: list[str] = []
     for k, split in enumerate(SPLITS):
         if split not in parts:
@@ -185,6 +194,9 @@ def compare(parts: dict[str, tuple[UnitResult, UnitResult]]) -> tuple[FloatArray
         pb, Rb, sb = _pose_vector(b)
         d = np.r_[pb - pa, Rotation.from_matrix(Rb @ Ra.T).as_rotvec()]
         z[k] = d / np.sqrt(sa**2 + sb**2)
+        if limit is not None:
+            with np.errstate(invalid="ignore"):
+                z[k, ~((sa <= limit) & (sb <= limit))] = np.nan
         for i in np.flatnonzero(np.abs(np.nan_to_num(z[k])) > Z_NAMED):
             if i < 3:
                 what, size = "position", f"{d[i] * 1e3:+.1f} mm"
@@ -244,7 +256,7 @@ def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> Calibrat
     units = dict(result.units)
     for name in links:
         pairs = {s: (v[0], v[1]) for s, v in outcomes[name].items() if v[0] is not None and v[1] is not None}
-        z, named = compare(pairs)  # type: ignore[arg-type]
+        z, named = compare(pairs, result.units[name])  # type: ignore[arg-type]
         cp, dp, fp = block_inflation(z[:, :3])
         cr, dr, fr = block_inflation(z[:, 3:])
         ap, ar = axis_inflation(z[:, :3], fp), axis_inflation(z[:, 3:], fr)

@@ -83,6 +83,18 @@ class Alignment:
     stamps: FloatArray | None = None
     gaps: GapSteps | None = None
 
+    def for_stream(self, imu: ImuStream) -> Alignment:
+        """This alignment (found on a unit's whole stream) applied to ``imu``, a part of that stream:
+        the same steps removed from its stamps and the same coarse offset, without searching again (a
+        part with holes in it, such as alternate windows, would show the holes as stamp gaps)."""
+        t = np.asarray(imu.t, dtype=float)
+        stamps = None
+        if self.steps is not None:
+            t = stamps = self.steps.correct(t)
+        if self.gaps is not None and self.gaps.corrected.any():
+            t = stamps = self.gaps.correct(t)
+        return replace(self, stamps=stamps)
+
 
 def align(shared: Shared, imu: ImuStream) -> Alignment:
     """Re-sync steps (:func:`~skincal.calib.timing.find_clock_steps`) and coarse time offset
