@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
 import typer
 
-from skincal.cli.app import app, console, shown
+from skincal.cli.app import app, console, require_file, shown
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 @app.command()
@@ -35,6 +38,8 @@ def _root(
 
 def _rate_hz(t: np.ndarray) -> float | None:
     """Nominal sample rate, Hz: the inverse of the median sample interval (None below 2 samples)."""
+    import numpy as np
+
     return float(1.0 / np.median(np.diff(t))) if len(t) >= 2 else None
 
 
@@ -45,6 +50,11 @@ def _fmt_rate(rate: float | None) -> str:
 @app.command()
 def info(path: Path = typer.Argument(..., help="dataset file (.h5)")) -> None:
     """Summarise a dataset: robot, units, duration, segments, sample rates."""
+    from skincal.io.files import DATASET_FILE
+
+    require_file(path, DATASET_FILE)  # before NumPy and h5py are loaded
+
+    import numpy as np
     from rich.table import Table
 
     from skincal.data.dataset import DYNAMIC, STATIC
