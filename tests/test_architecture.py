@@ -11,6 +11,8 @@ Every import counts: at module level, inside functions (a lazy import is still a
 * ``calib`` imports neither ``sim`` nor ``protocol`` (a calibrator needs neither the simulator nor motion
   plans), and ``control`` no ``sim``;
 * ``import skincal.control`` and ``import skincal.kinematics`` load no ``h5py`` (checked in a subprocess).
+* ``skincal --help`` and a command whose input file is missing load none of :data:`HEAVY` (NumPy, h5py,
+  SciPy, MuJoCo, viser, Dask, ...; checked in a subprocess): the command answers at start-up speed.
 
 :data:`KNOWN_VIOLATIONS` lists the few edges still to remove, each exactly, so that a new one fails.
 """
@@ -18,6 +20,7 @@ Every import counts: at module level, inside functions (a lazy import is still a
 from __future__ import annotations
 
 import ast
+import json
 import subprocess
 import sys
 import textwrap
@@ -252,6 +255,75 @@ def test_importing_the_package_loads_no_h5py(package):
     code = f"import sys, {package}; sys.exit(3 if 'h5py' in sys.modules else 0)"
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, f"import {package} loads h5py" if done.returncode == 3 else done.stderr
+
+
+HEAVY = ("h5py", "mujoco", "rosbags", "viser", "dask", "distributed", "scipy", "numpy", "nlopt", "yourdfpy",
+         "matplotlib", "qpsolvers", "cyclonedds")
+"""Libraries the ``skincal`` command loads only for the commands that use them (issue 26: start-up under 0.3 s)."""
+
+_RUN_COMMAND = """
+import json, sys
+from skincal.cli import main
+code = main(sys.argv[2:])
+json.dump({"code": code, "modules": sorted({m.partition(".")[0] for m in sys.modules})}, open(sys.argv[1], "w"))
+"""
+
+
+def command_imports(argv: list[str], cwd: Path, report: Path) -> tuple[int, set[str], str]:
+    """``skincal *argv`` run in a fresh interpreter in ``cwd``: exit code, top-level modules loaded, stderr."""
+    done = subprocess.run([sys.executable, "-c", _RUN_COMMAND, str(report), *argv], capture_output=True, text=True,
+                          timeout=120, cwd=cwd)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    doc = json.loads(report.read_text())
+    return doc["code"], set(doc["modules"]), done.stderr
+
+
+@pytest.mark.parametrize(
+    ("argv", "code"),
+    [
+        (["--help"], 0),
+        (["benchmark", "--help"], 0),
+        (["calibrate", "missing.h5", "-o", "out.json"], 2),
+        (["info", "missing.h5"], 2),
+        (["evaluate", "missing.json", "--truth", "missing.h5"], 2),
+        (["view", "missing.json"], 2),
+        (["report", "missing.json", "--dataset", "missing.h5"], 2),
+    ],
+)
+def test_help_and_a_failing_command_load_no_heavy_library(argv, code, tmp_path):
+    """``--help`` and a command whose input is missing answer before NumPy, h5py, SciPy, MuJoCo, viser, ...
+    are imported (with its reader's own one-line error)."""
+    got, modules, stderr = command_imports(argv, tmp_path, tmp_path / "modules.json")
+    assert got == code, stderr
+    assert not modules & set(HEAVY), f"skincal {' '.join(argv)} loads {sorted(modules & set(HEAVY))}"
+    if code == 2:
+        assert stderr.count("\n") == 1 and "no such file; cannot read the" in stderr, stderr
+
+
+def test_the_import_check_sees_a_command_that_reads_a_file(tmp_path):
+    """The check above proves something: a command that gets as far as its reader loads h5py and NumPy."""
+    (tmp_path / "text.h5").write_text("not HDF5\n")
+    got, modules, stderr = command_imports(["info", "text.h5"], tmp_path, tmp_path / "modules.json")
+    assert got == 2 and "not a readable HDF5 file" in stderr, stderr
+    assert {"h5py", "numpy"} <= modules
+
+
+def test_the_early_file_check_says_what_the_reader_says(tmp_path):
+    """The command's early check (:func:`skincal.cli.app.require_file`) and the readers refuse a missing
+    dataset or result with the same line."""
+    from skincal.cli.app import require_file
+    from skincal.data.hdf5 import read_dataset
+    from skincal.data.result import read_result
+    from skincal.errors import DatasetError
+    from skincal.io.files import DATASET_FILE, RESULT_FILE
+
+    for what, reader in ((DATASET_FILE, read_dataset), (RESULT_FILE, read_result)):
+        for path in (tmp_path / "missing", tmp_path):  # missing, and a folder
+            with pytest.raises(DatasetError) as early:
+                require_file(path, what)
+            with pytest.raises(DatasetError) as late:
+                reader(path)
+            assert str(early.value) == str(late.value)
 
 
 # The checker itself: it must see imports inside functions, under TYPE_CHECKING and relative ones, or it

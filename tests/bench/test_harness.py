@@ -65,7 +65,7 @@ def test_argparse_refuses_a_value_outside_the_choices():
 
 @pytest.mark.parametrize(
     "module", ["table1", "robustness", "mle", "core", "qp", "online", "adaptive", "rosbag", "avoid", "handheld",
-               "monitor"],
+               "monitor", "speed"],
 )  # fmt: skip
 def test_every_benchmark_declares_its_options_once_with_unique_flags(module):
     options = getattr(importlib.import_module("skincal.bench.options"), module.upper())
@@ -121,7 +121,9 @@ def test_run_harness_refuses_no_workers():
         run_harness(harness, SquaresConfig(1), workers=0)
 
 
-@pytest.mark.parametrize(("module", "n_jobs"), [("table1", 40), ("robustness", None), ("rosbag", 3), ("adaptive", 3)])
+@pytest.mark.parametrize(
+    ("module", "n_jobs"), [("table1", 40), ("robustness", None), ("rosbag", 3), ("adaptive", 3), ("speed", 4)]
+)
 def test_harness_benchmarks_build_picklable_jobs_from_their_default_options(module, n_jobs):
     import pickle
 

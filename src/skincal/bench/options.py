@@ -149,6 +149,18 @@ MONITOR = (
 """The options of ``benchmarks/bench_monitor.py``."""
 
 
+SPEED = (
+    Opt("quick", bool, False, "a smoke run in seconds: 2 units on a 3-pose fast protocol, 4 units for the scale "
+        "figure, 2 streamed units, 2 start-ups"),
+    Opt("full", bool, False, "also the 1000-unit figure (fast protocol)"),
+    Opt("robot", str, "panda", "robot preset"),
+    Opt("seed", int, 0, "seed of the simulated sessions"),
+    Opt("workers", int, 2, "worker processes of the 100- and 1000-unit figures"),
+    Opt("json_out", Path | None, None, "also write the figures as JSON", flag="--json"),
+)
+"""The options of ``skincal benchmark speed`` and ``benchmarks/bench_speed.py``."""
+
+
 REALDATA = (
     Opt("folder", Path, None, "folder of recordings sharing a mount (folders with recording.h5, or .h5 files)",
         positional=True),

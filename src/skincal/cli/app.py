@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import typer
 from rich.console import Console
 
@@ -33,6 +35,16 @@ def console_warning(message: str) -> None:
     from skincal.names import printable
 
     err_console.print(f"warning: {printable(message)}", markup=False, highlight=False, soft_wrap=True)
+
+
+def require_file(path: Path, what: str) -> None:
+    """Refuse a missing or non-regular input file (``what``: :data:`skincal.io.files.DATASET_FILE`, ...) with
+    its reader's own one-line message, before the command imports the libraries that would read it: a
+    failing command answers at start-up speed (issue 26)."""
+    from skincal.errors import DatasetError
+    from skincal.io.files import regular_file
+
+    regular_file(path, what, DatasetError)
 
 
 def shown(text: object) -> str:

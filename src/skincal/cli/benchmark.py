@@ -1,6 +1,6 @@
-"""``skincal benchmark table1|core|mle|realdata``: the paper's Table I beside the paper's numbers, throughput,
-the default calibrator's targets, the repeatability across real recordings of one mount (``robustness`` is in
-:mod:`skincal.cli.bench_robustness`).
+"""``skincal benchmark table1|core|mle|speed|realdata``: the paper's Table I beside the paper's numbers, throughput,
+the default calibrator's targets, the speed figures of issue 26, the repeatability across real recordings of one
+mount (``robustness`` is in :mod:`skincal.cli.bench_robustness`).
 
 The options of every command are declared once, in :mod:`skincal.bench.options`, and serve the scripts in
 ``benchmarks/`` too (:mod:`skincal.bench.harness`); a benchmark's module is imported only when it runs."""
@@ -103,6 +103,27 @@ def mle(v: dict[str, Any]) -> None:
 typer_command(benchmark_app, "table1", options.TABLE1 + (FORCE,), table1)
 typer_command(benchmark_app, "core", options.CORE + (FORCE,), core)
 typer_command(benchmark_app, "mle", options.MLE + (FORCE,), mle)
+
+
+def speed(v: dict[str, Any]) -> None:
+    """Speed on simulated sessions, in CPU seconds of one run: OM's and mle's time and their ratio, CPU
+    seconds per unit, 100 (and with --full 1000) units with peak memory, the command's start-up time and
+    the streaming calibrator's cost per sample and latency."""
+    from skincal.bench import speed as bench_speed
+    from skincal.bench.harness import run_harness
+
+    _check_json(v["json_out"], v["force"])
+    harness = bench_speed.HARNESS
+    config = harness.config(v)
+    with console.status("benchmarking speed...") as status:
+        # one job after the other (workers=1): each job's CPU time, memory and latency are its own
+        doc, run = run_harness(harness, config, workers=1, progress=lambda r: status.update(f"done: {r['kind']}"))
+    for line in harness.report(config, doc, run):
+        console.print(line, highlight=False)
+    _write_json(doc, v["json_out"])
+
+
+typer_command(benchmark_app, "speed", options.SPEED + (FORCE,), speed)
 
 
 def realdata(v: dict[str, Any]) -> None:

@@ -7,8 +7,9 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console, console_warning, shown
+from skincal.cli.app import app, console, console_warning, require_file, shown
 from skincal.errors import ConfigError
+from skincal.io.files import DATASET_FILE, RESULT_FILE
 
 NO_UNIT_EXIT = 1
 """Exit code of ``calibrate`` when the result was written but no unit could be calibrated (each unit
@@ -124,13 +125,6 @@ def calibrate(
     ),
 ) -> None:
     """Calibrate the skin units of a dataset (or of many: a fleet) and write the result JSON."""
-    from rich.progress import Progress
-
-    from skincal.calib import calibrate as run
-    from skincal.data.hdf5 import read_dataset
-    from skincal.data.result import sha256_file, write_result
-    from skincal.io.atomic import check_output
-
     if compare_with is not None and reference is None:
         raise ConfigError("--compare-with needs --reference (it compares an IMU-only result with a joint-based one)")
     if follow:
@@ -149,11 +143,20 @@ def calibrate(
             raise ConfigError("--reference calibrates one dataset; give one dataset with it")
         _calibrate_relative(datasets[0], out, reference, unit, compare_with, force, option or [])
         return
+    if len(datasets) == 1 and dask is None:  # a missing dataset is refused before calib and h5py are loaded
+        require_file(datasets[0], DATASET_FILE)
     options = _method_options(method, option or [])  # refused before any dataset is read
     if len(datasets) > 1 or dask is not None:
         _calibrate_fleet(datasets, out, method, seed, links, use_truth_links, use_dataset_qdd, unit, workers, dask,
                          options, force)  # fmt: skip
         return
+    from rich.progress import Progress
+
+    from skincal.calib import calibrate as run
+    from skincal.data.hdf5 import read_dataset
+    from skincal.data.result import sha256_file, write_result
+    from skincal.io.atomic import check_output
+
     dataset = datasets[0]
     check_output(out, force=force, inputs=(dataset,))
     ds = read_dataset(dataset)
@@ -361,6 +364,9 @@ def evaluate(
     ),
 ) -> None:
     """Compare a calibration result with the true poses of the simulated dataset it was computed from."""
+    require_file(result, RESULT_FILE)  # before calib and h5py are loaded
+    require_file(truth, DATASET_FILE)
+
     from rich.table import Table
 
     from skincal.calib.metrics import evaluate as run

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
 import typer
 
-from skincal.cli.app import app, console, shown
+from skincal.cli.app import app, console, require_file, shown
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 @app.command()
@@ -35,6 +38,8 @@ def _root(
 
 def _rate_hz(t: np.ndarray) -> float | None:
     """Nominal sample rate, Hz: the inverse of the median sample interval (None below 2 samples)."""
+    import numpy as np
+
     return float(1.0 / np.median(np.diff(t))) if len(t) >= 2 else None
 
 
@@ -44,6 +49,7 @@ def _fmt_rate(rate: float | None) -> str:
 
 def _urdf_info(path: Path, base_link: str | None, tip_link: str | None) -> None:
     """The chain every command takes from the URDF ``path``: links, joints and limits, what was left out."""
+    import numpy as np
     from rich.table import Table
 
     from skincal.kinematics.urdf import urdf_chain
@@ -85,6 +91,12 @@ def info(
     tip_link: str | None = typer.Option(None, "--tip-link", help="with a .urdf: the link the chain ends at"),
 ) -> None:
     """Summarise a dataset: robot, units, duration, segments, sample rates; or the serial chain of a URDF."""
+    if path.suffix.lower() != ".urdf":
+        from skincal.io.files import DATASET_FILE
+
+        require_file(path, DATASET_FILE)  # before NumPy and h5py are loaded
+
+    import numpy as np
     from rich.table import Table
 
     from skincal.data.dataset import DYNAMIC, STATIC

@@ -6,8 +6,9 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console, console_warning, err_console, shown
+from skincal.cli.app import app, console, console_warning, err_console, require_file, shown
 from skincal.errors import ConfigError
+from skincal.io.files import DATASET_FILE, RESULT_FILE
 
 
 def _finite(value: float | None) -> float | None:
@@ -61,6 +62,10 @@ def view(
     """Show a calibration result on the robot in the browser (viser); with --scenario, play an avoidance run.
 
     A URDF robot is drawn with its visual meshes when they are found (else as capsules, with a note)."""
+    for given, what in ((result, RESULT_FILE), (truth, DATASET_FILE), (play, DATASET_FILE)):
+        if given is not None:  # refused before viser, h5py and the viewer are loaded
+            require_file(given, what)
+
     import dataclasses
     import os
     import time
@@ -260,6 +265,9 @@ def report(
     ),
 ) -> None:
     """Write a calibration report: per-unit table, residuals, sensor parameters, coverage, errors."""
+    require_file(result, RESULT_FILE)  # before h5py and the report's libraries are loaded
+    require_file(dataset, DATASET_FILE)
+
     from skincal.data.hdf5 import open_dataset
     from skincal.data.provenance import check_result_dataset
     from skincal.data.result import read_result

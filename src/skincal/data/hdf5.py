@@ -58,7 +58,7 @@ from skincal.data.writer import FORMAT, JOINT_TYPE_CODES, VERSION, DatasetWriter
 from skincal.errors import ConfigError, DatasetError
 from skincal.errors import first_line as _first_line
 from skincal.io.atomic import atomic_path
-from skincal.io.jsonio import regular_file
+from skincal.io.files import DATASET_FILE, regular_file
 from skincal.kinematics.chain import CONVENTIONS, GRAVITY_BASE, SerialChain
 from skincal.names import printable
 from skincal.skin.pose import SkinUnitPose
@@ -512,7 +512,7 @@ class _Reader:
 def _open(path: Path) -> tuple[h5py.File, _Reader]:
     """The file opened read-only and its :class:`_Reader` (one-line DatasetError when it cannot be)."""
     source = str(path)
-    size = regular_file(path, "dataset file (.h5)", DatasetError)  # before opening: a FIFO would block
+    size = regular_file(path, DATASET_FILE, DatasetError)  # before opening: a FIFO would block
     try:
         # No chunk cache: every dataset is read whole, once; the default 1 MB cache per dataset left
         # ~70 MB of freed-but-held heap after reading a 100-unit file (issue 19, report memory).

@@ -59,7 +59,8 @@ from skincal.data.events import MAX_POSITION_M, MoveEvent, check_events
 from skincal.data.imu_calibration import IMU_KEYS, IMU_SHAPES, INTEGER_KEYS, ImuCalibration, imu_to_fields
 from skincal.errors import ConfigError, DatasetError
 from skincal.io.atomic import write_bytes_atomic
-from skincal.io.jsonio import load_json, regular_file
+from skincal.io.files import RESULT_FILE, regular_file
+from skincal.io.jsonio import load_json
 from skincal.kinematics.transforms import FloatArray
 from skincal.names import MAX_NAME_CHARS, name_problem
 from skincal.skin.pose import SkinUnitPose
@@ -665,7 +666,7 @@ def read_result(path: str | Path) -> CalibrationResult:
             beyond :data:`MAX_POSITION_M`, or a link beyond a preset robot's links; one line naming
             the file and the field (``units.su1.position_m``).
     """
-    doc = load_json(path, "result file (.json)", DatasetError)
+    doc = load_json(path, RESULT_FILE, DatasetError)
     return result_from_dict(doc, source=str(path))
 
 

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from skincal.errors import DatasetError, SkincalError
+from skincal.io.files import regular_file
 
 MAX_TEXT_BYTES = 64 * 2**20
 """Largest JSON/YAML file read, bytes (64 MiB; skincal's own files are a few kB)."""
@@ -37,30 +38,6 @@ MAX_DEPTH = 64
 """Deepest nesting of arrays/objects (JSON) or sequences/mappings (YAML) accepted."""
 MAX_INT_DIGITS = 40
 """Longest integer literal accepted in JSON, digits."""
-
-_KINDS = (
-    (stat.S_ISDIR, "a directory"),
-    (stat.S_ISFIFO, "a FIFO (named pipe)"),
-    (stat.S_ISCHR, "a character device"),
-    (stat.S_ISBLK, "a block device"),
-    (stat.S_ISSOCK, "a socket"),
-)
-
-
-def regular_file(path: str | Path, what: str = "file", error: type[SkincalError] = DatasetError) -> int:
-    """Size in bytes of ``path`` after checking that it is an existing regular file (symbolic links
-    are followed); without opening it, so a FIFO or a device cannot block or stream forever."""
-    try:
-        st = os.stat(path)
-    except FileNotFoundError:
-        raise error(f"{path}: no such file; cannot read the {what}") from None
-    except OSError as exc:
-        raise error(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
-    if not stat.S_ISREG(st.st_mode):
-        kind = next((name for test, name in _KINDS if test(st.st_mode)), "not a regular file")
-        raise error(f"{path}: is {kind}, expected a {what}")
-    return int(st.st_size)
-
 
 def read_bytes(
     path: str | Path, what: str = "file", error: type[SkincalError] = DatasetError, max_bytes: int = MAX_TEXT_BYTES
