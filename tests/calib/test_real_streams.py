@@ -62,6 +62,12 @@ def test_low_rate_streams_are_detected_from_their_stamps():
     grid = np.arange(5000) * 2e-3  # 500 Hz
     jitter = grid + np.random.default_rng(1).normal(0, 2e-4, grid.size)
     assert not is_low_rate(grid) and not is_low_rate(jitter)
+    # a 1 kHz stream with 0.28 ms of host jitter has no grid under it, yet resolves its motion: never
+    # splined (as fast as the splines' own 250 Hz grid); the same jitter at 100 Hz stays irregular
+    fast = np.arange(5000) * 1e-3 + np.random.default_rng(2).uniform(0, 1e-3, 5000)
+    assert not is_low_rate(np.sort(fast))
+    slow = np.arange(500) * 1e-2 + np.random.default_rng(3).uniform(0, 8e-3, 500)
+    assert is_low_rate(np.sort(slow))
 
 
 def test_a_low_rate_stream_is_splined_and_its_acceleration_error_characterised():

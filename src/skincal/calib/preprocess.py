@@ -102,14 +102,17 @@ extrapolated with."""
 
 def is_low_rate(t: FloatArray) -> bool:
     """Whether stamps ``t`` ``(N,)`` are those of a low-rate stream (median rate below
-    :data:`LOW_RATE_HZ`) or of an irregular one (spacing std above :data:`IRREGULAR_SPREAD` of its
-    median and no regular grid under it, :func:`_regular_grid`). Judged from the stamps alone."""
+    :data:`LOW_RATE_HZ`) or of an irregular one slower than :data:`FINE_RATE_HZ` (spacing std above
+    :data:`IRREGULAR_SPREAD` of its median and no regular grid under it, :func:`_regular_grid`).
+    Judged from the stamps alone."""
     d = np.diff(np.asarray(t, dtype=float))
     dt = float(np.median(d))
     if dt <= 0:
         return False
     if 1.0 / dt < LOW_RATE_HZ:
         return True
+    if 1.0 / dt >= FINE_RATE_HZ:  # as fast as the splines' own grid: linear resampling smears nothing they
+        return False  # would resolve (a jittered 1 kHz stream took minutes of smoothing splines per block)
     return float(np.std(d)) > IRREGULAR_SPREAD * dt and _regular_grid(np.asarray(t, dtype=float)) is None
 
 
