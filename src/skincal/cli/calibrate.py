@@ -155,7 +155,7 @@ def calibrate(
                          options, force)  # fmt: skip
         return
     dataset = datasets[0]
-    check_output(out, force=force, inputs=(dataset,))
+    check_output(out, force=force, inputs=(dataset, *((links,) if links is not None else ())))
     ds = read_dataset(dataset)
     link_map = read_links_file(links) if links is not None else None
     names = unit or ds.units
@@ -328,7 +328,7 @@ def _calibrate_fleet(
         use_truth_links=use_truth_links, use_dataset_qdd=use_dataset_qdd, options=options,
     )  # fmt: skip
     for job in jobs:
-        check_output(job.out, force=force, inputs=tuple(datasets))
+        check_output(job.out, force=force, inputs=(*datasets, *((links,) if links is not None else ())))
     with Progress(console=console, transient=True, disable=not console.is_terminal) as progress:
         task = progress.add_task(f"calibrating {len(jobs)} datasets ({method})", total=len(jobs))
         records = calibrate_fleet(jobs, workers=workers, dask=dask, progress=lambda _r: progress.advance(task))

@@ -68,9 +68,11 @@ def record(
     from skincal.hw.net import check_bind
     from skincal.hw.recorder import MAX_UNIT_SAMPLES
     from skincal.hw.session import record as run_record
+    from skincal.io.atomic import check_output
     from skincal.kinematics.presets import get_robot
 
     max_unit_samples = MAX_UNIT_SAMPLES if max_unit_samples is None else max_unit_samples
+    check_output(out, force=force)  # before binding: a FIFO, a device or a missing folder loses no session
     check_bind(bind, public, "--bind", "receive from beyond this machine")
     chain = get_robot(robot) if robot else None
     if not (math.isfinite(flush_every) and flush_every > 0):  # NaN would never flush

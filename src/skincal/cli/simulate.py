@@ -74,7 +74,7 @@ def simulate(
     from skincal.kinematics import get_robot
     from skincal.workflows.session import simulate_dataset
 
-    check_output(out, force=force)
+    check_output(out, force=force, inputs=tuple(Path(p) for p in (robot, protocol) if Path(p).is_file()))
     chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
     start = time.perf_counter()
     with Progress(console=err_console, transient=True, disable=not err_console.is_terminal) as bar:
