@@ -119,3 +119,35 @@ def test_an_input_is_never_an_output_even_with_force(files, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "is the input" in err[0], err
     assert _digest(urdf) == before and as_h5.is_symlink()
+
+
+OSC = "\x1b]0;owned\x07"
+"""An OSC sequence: a terminal that receives it raw sets its window title (and worse sequences exist)."""
+
+
+def _raw_control(text: str) -> bool:
+    return any(ord(ch) < 0x20 and ch not in "\n" or 0x7F <= ord(ch) < 0xA0 for ch in text)
+
+
+def test_report_shows_control_characters_in_free_text_as_escapes(files, tmp_path):
+    """A result's warning with ``ESC ] 0;title BEL`` reached the terminal raw through ``report``
+    (markdown on stdout) and the HTML table raw; ``evaluate`` and ``export`` already escaped it."""
+    import json
+
+    from cli_subprocess import run_cli
+
+    _, data, result = files
+    doc = json.loads(result.read_text())
+    unit = next(iter(doc["units"]))
+    doc["units"][unit]["warnings"] = [f"poor fit {OSC}\rcleared"]
+    hostile = tmp_path / "hostile.json"
+    hostile.write_text(json.dumps(doc))
+    proc = run_cli(["report", str(hostile), "--dataset", str(data)], tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "poor fit \\x1b]0;owned\\x07\\rcleared" in proc.stdout
+    assert not _raw_control(proc.stdout + proc.stderr)
+    page = tmp_path / "r.html"
+    proc = run_cli(["report", str(hostile), "--dataset", str(data), "--out", str(page)], tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    html = page.read_text()
+    assert "poor fit \\x1b]0;owned\\x07\\rcleared" in html and not _raw_control(html)
