@@ -151,3 +151,32 @@ def test_report_shows_control_characters_in_free_text_as_escapes(files, tmp_path
     assert proc.returncode == 0, proc.stderr
     html = page.read_text()
     assert "poor fit \\x1b]0;owned\\x07\\rcleared" in html and not _raw_control(html)
+
+
+ABSURD = [
+    (["simulate", "--protocol", "fast", "--seed", "-1", "-o", "{tmp}/s.h5"], "--seed -1: a seed is an integer >= 0"),
+    (["simulate", "--handheld", "--seed", "-1", "-o", "{tmp}/s.h5"], "--seed -1: a seed is an integer >= 0"),
+    (["protocol", "--robot", "panda", "--seed", "-1", "-o", "{tmp}/p.json"], "--seed -1: a seed is an integer >= 0"),
+    (["avoid", "--seed", "-1"], "--seed -1: a seed is an integer >= 0"),
+    (["calibrate", "{data}", "--seed", "-1", "-o", "{tmp}/c.json"], "--seed -1: a seed is an integer >= 0"),
+    (["emulate", "{data}", "--port", "9", "--seed", "-1"], "--seed -1: a seed is an integer >= 0"),
+    (["emulate", "{data}", "--port", "9", "--jitter", "inf"], "--jitter inf s must be a mean delay in [0, 60] s"),
+    (["emulate", "{data}", "--port", "9", "--jitter", "1e308"], "--jitter 1e+308 s must be a mean delay in [0, 60]"),
+    (["emulate", "{data}", "--port", "9", "--jitter", "nan"], "--jitter nan s must be a mean delay in [0, 60] s"),
+    (["record", "--out", "{tmp}/r.h5", "--port", "0", "--max-unit-samples", str(10**20)],
+     "--max-unit-samples 100000000000000000000 must be at most 2^40"),
+]
+
+
+@pytest.mark.parametrize(("command", "message"), ABSURD, ids=[" ".join(c[:1] + c[-2:]) for c, _ in ABSURD])
+def test_absurd_numbers_are_one_line_usage_errors(command, message, files, tmp_path, capsys):
+    """``--seed -1``, ``emulate --jitter inf / 1e308`` and ``record --max-unit-samples 1e20`` were internal
+    errors (exit 3, NumPy's or h5py's exception) after the work had started: now exit 2, one line, nothing written."""
+    _, data, _ = files
+    args = [a.format(data=data, tmp=tmp_path) for a in command]
+    capsys.readouterr()
+    assert main(args) == 2
+    out = capsys.readouterr()
+    err = out.err.strip().splitlines()
+    assert err == [f"error: {message}"] or (len(err) == 1 and message in err[0]), out.err
+    assert "sending" not in out.out and not list(tmp_path.iterdir())

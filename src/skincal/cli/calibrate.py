@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console, console_warning, shown
+from skincal.cli.app import app, console, console_warning, seed_option, shown
 from skincal.errors import ConfigError
 
 NO_UNIT_EXIT = 1
@@ -79,7 +79,7 @@ def calibrate(
         ..., "--out", "-o", help="result file to write (.json); with several datasets a folder (<stem>.json each)"
     ),
     method: str = typer.Option("mle", help="mle (default), om (paper), om-joint, mmm, mm"),
-    seed: int = typer.Option(0, min=0, help="seed for methods with random starts"),
+    seed: int = typer.Option(0, callback=seed_option, help="seed for methods with random starts"),
     links: Path | None = typer.Option(None, help="YAML/JSON file mapping unit -> 1-based link"),
     use_truth_links: bool = typer.Option(False, help="take each unit's link from the dataset truth"),
     use_dataset_qdd: bool = typer.Option(False, help="use the dataset's qdd instead of estimating it"),

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console, err_console
+from skincal.cli.app import app, console, err_console, seed_option
 
 ROBOT_HELP = "robot preset (panda, iiwa14, gen3, sawyer, ur5, ur5e, ur10e, xarm7), a .urdf file, or a DH chain file"
 
@@ -35,7 +35,7 @@ def simulate(
         help="protocol preset: paper-sim, paper-real, fast (fitted to the robot), or a motion .json written by "
         "skincal protocol (simulated as it is: the rehearsal of a real session)",
     ),
-    seed: int = typer.Option(0, help="random seed (placements, poses, noise)"),
+    seed: int = typer.Option(0, callback=seed_option, help="random seed (placements, poses, noise)"),
     backend: str = typer.Option("analytic", help="analytic (exact, fast) or mujoco (independent physics)"),
     mujoco_mode: str = typer.Option(
         "kinematic", help="mujoco backend: kinematic (imposed motion) or dynamic (1 kHz velocity servos)"
