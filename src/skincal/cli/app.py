@@ -69,3 +69,14 @@ def at_rate(traj, rate: float):  # noqa: ANN001, ANN201  (a skincal.protocol.Tra
 def joint_names(chain) -> tuple[str, ...]:  # noqa: ANN001
     """The chain's joint names (``joint1``... when it has none)."""
     return tuple(chain.joint_names or tuple(f"joint{i + 1}" for i in range(chain.n_joints)))
+
+
+def seed_option(value: int) -> int:
+    """Option callback of every ``--seed``: a NumPy seed is an integer >= 0, so ``--seed -1`` is a
+    one-line usage error (exit 2) before any work, not NumPy's ``ValueError`` deep in a run."""
+    if value < 0:
+        from skincal.errors import ConfigError
+
+        raise ConfigError(f"--seed {value}: a seed is an integer >= 0")
+    return value
+

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console
+from skincal.cli.app import app, console, seed_option
 
 ROBOT_HELP = "robot preset (panda, iiwa14, ur5e, ...), a .urdf file, or a DH chain file"
 DESCRIPTION_SHOWN = 200
@@ -45,7 +45,7 @@ def avoid(
     ),
     resume: bool = typer.Option(False, "--resume", help="the task waits while a person is within S_p + a band"),
     duration: float | None = typer.Option(None, help="run length, s (default: the scenario's)"),
-    seed: int = typer.Option(0, help="random seed (sensor noise, degradation)"),
+    seed: int = typer.Option(0, callback=seed_option, help="random seed (sensor noise, degradation)"),
     plot: Path | None = typer.Option(None, help="write a Fig.-4-like plot with clearance and S_p (.png also .svg)"),
     force: bool = typer.Option(False, "--force", help="overwrite an existing --plot"),
     as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),

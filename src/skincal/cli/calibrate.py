@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console, console_warning, require_file, shown
+from skincal.cli.app import app, console, console_warning, require_file, seed_option, shown
 from skincal.errors import ConfigError
 from skincal.io.files import DATASET_FILE, RESULT_FILE
 
@@ -80,7 +80,7 @@ def calibrate(
         ..., "--out", "-o", help="result file to write (.json); with several datasets a folder (<stem>.json each)"
     ),
     method: str = typer.Option("mle", help="mle (default), om (paper), om-joint, mmm, mm"),
-    seed: int = typer.Option(0, min=0, help="seed for methods with random starts"),
+    seed: int = typer.Option(0, callback=seed_option, help="seed for methods with random starts"),
     links: Path | None = typer.Option(None, help="YAML/JSON file mapping unit -> 1-based link"),
     use_truth_links: bool = typer.Option(False, help="take each unit's link from the dataset truth"),
     use_dataset_qdd: bool = typer.Option(False, help="use the dataset's qdd instead of estimating it"),
@@ -158,7 +158,7 @@ def calibrate(
     from skincal.io.atomic import check_output
 
     dataset = datasets[0]
-    check_output(out, force=force, inputs=(dataset,))
+    check_output(out, force=force, inputs=(dataset, *((links,) if links is not None else ())))
     ds = read_dataset(dataset)
     link_map = read_links_file(links) if links is not None else None
     names = unit or ds.units
@@ -331,7 +331,7 @@ def _calibrate_fleet(
         use_truth_links=use_truth_links, use_dataset_qdd=use_dataset_qdd, options=options,
     )  # fmt: skip
     for job in jobs:
-        check_output(job.out, force=force, inputs=tuple(datasets))
+        check_output(job.out, force=force, inputs=(*datasets, *((links,) if links is not None else ())))
     with Progress(console=console, transient=True, disable=not console.is_terminal) as progress:
         task = progress.add_task(f"calibrating {len(jobs)} datasets ({method})", total=len(jobs))
         records = calibrate_fleet(jobs, workers=workers, dask=dask, progress=lambda _r: progress.advance(task))

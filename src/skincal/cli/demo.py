@@ -6,14 +6,14 @@ import time
 
 import typer
 
-from skincal.cli.app import app, console, shown
+from skincal.cli.app import app, console, seed_option, shown
 
 
 @app.command()
 def demo(
     noise: str = typer.Option("realistic", help="IMU preset: none, datasheet or realistic"),
     method: str = typer.Option("mle", help="calibration method (mle default; om is the paper's, minutes)"),
-    seed: int = typer.Option(0, help="random seed"),
+    seed: int = typer.Option(0, callback=seed_option, help="random seed"),
     protocol: str = typer.Option("paper-sim", help="protocol preset"),
 ) -> None:
     """Simulate the paper's Panda with six skin units, calibrate, and compare with the truth."""

@@ -12,7 +12,7 @@ import typer
 from rich.live import Live
 from rich.table import Table
 
-from skincal.cli.app import app, console
+from skincal.cli.app import app, console, seed_option
 from skincal.errors import ConfigError
 
 
@@ -31,6 +31,10 @@ def _status_table(stats, recorder, receiver) -> Table:  # noqa: ANN001  (types f
     bad = ", ".join(f"{k} {v}" for k, v in sorted(stats.malformed.items())) or "none"
     table.caption = f"datagrams {stats.datagrams}; malformed: {bad}; refused (beyond --max-units): {stats.refused}"
     return table
+
+
+MAX_UNIT_SAMPLES_BOUND = 1 << 40
+"""Largest ``record --max-unit-samples``: far beyond any session, well within HDF5's 64-bit sizes."""
 
 
 @app.command()
@@ -68,15 +72,21 @@ def record(
     from skincal.hw.net import check_bind
     from skincal.hw.recorder import MAX_UNIT_SAMPLES
     from skincal.hw.session import record as run_record
+    from skincal.io.atomic import check_output
     from skincal.kinematics.presets import get_robot
 
     max_unit_samples = MAX_UNIT_SAMPLES if max_unit_samples is None else max_unit_samples
+    check_output(out, force=force)  # before binding: a FIFO, a device or a missing folder loses no session
     check_bind(bind, public, "--bind", "receive from beyond this machine")
     chain = get_robot(robot) if robot else None
     if not (math.isfinite(flush_every) and flush_every > 0):  # NaN would never flush
         raise ConfigError(f"--flush-every {flush_every} s must be a finite number > 0")
     if max_units < 1 or max_unit_samples < 1:
         raise ConfigError(f"--max-units {max_units} and --max-unit-samples {max_unit_samples} must be >= 1")
+    if max_unit_samples > MAX_UNIT_SAMPLES_BOUND:  # an HDF5 size is a 64-bit integer; 1e20 was an internal error
+        raise ConfigError(f"--max-unit-samples {max_unit_samples} must be at most 2^40 "
+                          f"({MAX_UNIT_SAMPLES_BOUND}: 348 years at 100 Hz)")
+
     if live:
         _record_live(out, chain, target, result, keep_recording, force,
                      dict(host=bind, port=port, duration_s=duration, overwrite=force, flush_every_s=flush_every,
@@ -221,7 +231,7 @@ def emulate(
     clock_offset: float = typer.Option(0.0, "--clock-offset", help="device clock offset of every unit, s"),
     drift_ppm: float = typer.Option(0.0, "--drift-ppm", help="device clock drift of every unit, ppm"),
     no_joints: bool = typer.Option(False, "--no-joints", help="do not send the joint-state stream"),
-    seed: int = typer.Option(0, "--seed", help="seed of the fault generator"),
+    seed: int = typer.Option(0, "--seed", callback=seed_option, help="seed of the fault generator"),
 ) -> None:
     """Play a dataset as skin units over UDP with optional loss, duplication, reordering and corruption."""
     import numpy as np

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, at_rate, console, joint_names
+from skincal.cli.app import app, at_rate, console, joint_names, seed_option
 
 
 @app.command("protocol")
@@ -17,7 +17,7 @@ def protocol_cmd(
     base_link: str | None = typer.Option(None, help="URDF link the chain starts from (with --robot arm.urdf)"),
     tip_link: str | None = typer.Option(None, help="URDF link the chain ends at (with --robot arm.urdf)"),
     protocol: str = typer.Option("fast", "--protocol", help="preset protocol: fast, paper-real or paper-sim"),
-    seed: int = typer.Option(0, help="seed of the static-pose draw"),
+    seed: int = typer.Option(0, callback=seed_option, help="seed of the static-pose draw"),
     rate: float = typer.Option(
         100.0,
         "--rate",

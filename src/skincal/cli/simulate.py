@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console, err_console
+from skincal.cli.app import app, console, err_console, seed_option
 
 ROBOT_HELP = "robot preset (panda, iiwa14, gen3, sawyer, ur5, ur5e, ur10e, xarm7), a .urdf file, or a DH chain file"
 
@@ -35,7 +35,7 @@ def simulate(
         help="protocol preset: paper-sim, paper-real, fast (fitted to the robot), or a motion .json written by "
         "skincal protocol (simulated as it is: the rehearsal of a real session)",
     ),
-    seed: int = typer.Option(0, help="random seed (placements, poses, noise)"),
+    seed: int = typer.Option(0, callback=seed_option, help="random seed (placements, poses, noise)"),
     backend: str = typer.Option("analytic", help="analytic (exact, fast) or mujoco (independent physics)"),
     mujoco_mode: str = typer.Option(
         "kinematic", help="mujoco backend: kinematic (imposed motion) or dynamic (1 kHz velocity servos)"
@@ -74,7 +74,7 @@ def simulate(
     from skincal.kinematics import get_robot
     from skincal.workflows.session import simulate_dataset
 
-    check_output(out, force=force)
+    check_output(out, force=force, inputs=tuple(Path(p) for p in (robot, protocol) if Path(p).is_file()))
     chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
     start = time.perf_counter()
     with Progress(console=err_console, transient=True, disable=not err_console.is_terminal) as bar:

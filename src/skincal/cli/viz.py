@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console, console_warning, err_console, require_file, shown
+from skincal.cli.app import app, console, console_warning, err_console, require_file, seed_option, shown
 from skincal.errors import ConfigError
 from skincal.io.files import DATASET_FILE, RESULT_FILE
 
@@ -39,7 +39,7 @@ def view(
     scenario: str | None = typer.Option(
         None, help="run this avoidance scenario (skincal avoid) with the result's poses (or truth) and play it"
     ),
-    seed: int = typer.Option(0, help="sensor-noise seed of the --scenario run"),
+    seed: int = typer.Option(0, callback=seed_option, help="sensor-noise seed of the --scenario run"),
     placement: str = typer.Option("ring", help="the --scenario run's skin: ring (dense) or paper (Table II)"),
     allow_other: bool = typer.Option(
         False, "--allow-other-dataset",

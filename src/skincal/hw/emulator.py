@@ -37,6 +37,10 @@ StreamKey = tuple[str, int]
 _IMU, _TOF, _JOINTS = 0, 1, 2
 
 
+MAX_JITTER_S = 60.0
+"""Largest mean extra send delay accepted (s): a datagram a minute late is already lost to any receiver."""
+
+
 @dataclass(frozen=True)
 class Faults:
     """Fault probabilities per packet/datagram, reorder depth (datagrams) and mean jitter (s)."""
@@ -52,8 +56,10 @@ class Faults:
         for name in ("loss", "duplicate", "reorder", "corrupt"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ConfigError(f"emulator: --{name} {getattr(self, name)} must be a probability in [0, 1]")
-        if self.reorder_depth < 1 or self.jitter_s < 0:
-            raise ConfigError("emulator: reorder_depth must be >= 1 datagram and jitter_s >= 0 s")
+        if self.reorder_depth < 1:
+            raise ConfigError(f"emulator: --reorder-depth {self.reorder_depth} must be >= 1 datagram")
+        if not 0.0 <= self.jitter_s <= MAX_JITTER_S:  # NaN, inf and 1e308 too (no send time beyond time_t)
+            raise ConfigError(f"emulator: --jitter {self.jitter_s} s must be a mean delay in [0, {MAX_JITTER_S:g}] s")
 
 
 @dataclass(frozen=True)

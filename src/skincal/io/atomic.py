@@ -14,6 +14,7 @@ import os
 import re
 import secrets
 import shutil
+import stat
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -88,8 +89,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     removed and ``path`` keeps its previous contents. The temporary is created empty with the usual
     permissions (``0o666`` minus the umask) so the final file is not private by accident. Its name
     ``.<name>.<pid>.<hex>.tmp`` carries this process's pid; debris of dead writers of the same
-    target is removed first (:func:`remove_debris`). A target that is a folder, or in a folder that
-    does not exist or cannot be written, is refused with a one-line :class:`~skincal.errors.ConfigError`
+    target is removed first (:func:`remove_debris`). A target that is a folder, a FIFO, a device or
+    anything else but a regular file, or in a folder that does not exist or cannot be written, is
+    refused with a one-line :class:`~skincal.errors.ConfigError`
     (callers that do work before writing should call :func:`check_output` first).
     """
     from skincal.errors import ConfigError
@@ -98,6 +100,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     directory = target.parent if str(target.parent) else Path(".")
     if target.is_dir():  # os.replace would fail only after all the writing, naming the temporary
         raise ConfigError(f"{target} is a folder; give a file name")
+    _refuse_special(target)
     remove_debris(target)
     tmp = directory / f".{target.name}.{os.getpid()}.{secrets.token_hex(6)}.tmp"
     try:
@@ -126,10 +129,29 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> None:
         os.fsync(fh.fileno())
 
 
+def _refuse_special(target: Path) -> None:
+    """Refuse ``target`` when it exists and is not a regular file or a folder (a FIFO, a character
+    or block device, a socket), following symlinks: only regular files are ever replaced."""
+    from skincal.errors import ConfigError
+
+    try:
+        mode = os.stat(target).st_mode
+    except OSError:  # absent (or a dangling symlink, which the rename replaces): nothing to protect
+        return
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return
+    kind = ("a FIFO" if stat.S_ISFIFO(mode) else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+            else "a socket" if stat.S_ISSOCK(mode) else "not a regular file")  # fmt: skip
+    raise ConfigError(f"{target} is {kind}; outputs are regular files only (never replaced, even with --force)")
+
+
 def check_output(path: str | Path, *, force: bool = False, inputs: tuple[str | Path, ...] = ()) -> Path:
     """Refuse an output path before any work is done, with a one-line :class:`ConfigError`:
-    one of the command's ``inputs`` (never overwritten, even with ``force``), an existing file
-    unless ``force``, a directory, or a file in a folder that does not exist."""
+    one of the command's ``inputs`` (the same file after resolving symlinks and hard links; never
+    overwritten, even with ``force``), an existing file unless ``force``, a directory, anything else
+    that is not a regular file (a FIFO, a device node such as ``/dev/null``, a socket: the rename of
+    :func:`atomic_path` would replace it with a regular file, so ``force`` never applies to it), or a
+    file in a folder that does not exist."""
     from skincal.errors import ConfigError
 
     out = Path(path)
@@ -139,6 +161,7 @@ def check_output(path: str | Path, *, force: bool = False, inputs: tuple[str | P
                 raise ConfigError(f"{out} is the input {source}; write the output to another file")
     if out.is_dir():
         raise ConfigError(f"{out} is a folder; give a file name")
+    _refuse_special(out)
     parent = out.parent if str(out.parent) else Path(".")
     if not parent.is_dir():
         raise ConfigError(f"{out}: the folder {parent} does not exist")

@@ -21,6 +21,7 @@ import numpy as np
 from skincal.data.dataset import Dataset
 from skincal.data.result import CalibrationResult
 from skincal.io.atomic import write_bytes_atomic
+from skincal.names import printable
 from skincal.viz.content import WORST_SHOWN, ReportContent, UnitRow, collect
 
 _CSS = """
@@ -38,7 +39,9 @@ code{background:#f3f4f6;padding:0 .25em}
 
 
 def _e(text: object) -> str:
-    return html.escape(str(text), quote=True)
+    """Free text (names, warnings, the description) for HTML: control characters shown as escapes
+    (:func:`skincal.names.printable`: an ESC or BEL is never written raw), then HTML-escaped."""
+    return html.escape(printable(str(text)), quote=True)
 
 
 def _vec(values, fmt: str, scale: float = 1.0) -> str:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from skincal.names import printable
 from skincal.viz.content import WORST_SHOWN, ReportContent
 
 
@@ -45,7 +46,7 @@ def _worst(content: ReportContent, n: int) -> list[str]:
 def render_markdown(content: ReportContent, worst: int = WORST_SHOWN) -> str:
     """The summary: header line, the ``worst`` worst units by the key figure, per-unit table (pose,
     std, residual, sensor parameters, warnings), errors against the truth when available, data
-    coverage (joints that moved each unit)."""
+    coverage (joints that moved each unit). Control characters in its free text are shown as escapes."""
     res, ds = content.result, content.dataset
     out = [f"# skincal calibration: {res.method} on {res.robot}", ""]
     out.append(f"{len(res.units)} unit(s), runtime {res.runtime_s:.2f} s; dataset {ds.duration:.1f} s"
@@ -83,4 +84,6 @@ def render_markdown(content: ReportContent, worst: int = WORST_SHOWN) -> str:
     crow = [[r.name] + ["?" if not np.isfinite(a) else ("x" if a >= 1 else ".") for a in content.activity[i]]
             for i, r in enumerate(content.rows)]
     out += _table(["unit"] + [f"j{j + 1}" for j in range(n)], crow)
-    return "\n".join(out) + "\n"
+    # free text (warnings, reasons, the description) reaches a terminal: every control character in
+    # a line (ESC, BEL, CR, a newline inside a piece of text) is shown as an escape, never sent raw
+    return "\n".join(printable(line) for line in out) + "\n"
