@@ -46,6 +46,9 @@ def test_domain_comes_from_the_option_else_ros_domain_id():
         (["ros2", "--target", "3"], {}, "error: --target '3'"),
         (["ros2", "--duration", "-1"], {}, "error: --duration -1.0: a number of seconds > 0"),
         (["ros2-play", "missing.h5"], {}, "error: missing.h5: no such file"),
+        (["ros2-play", "missing.h5", "--origin-ns", "99999999999999999999"], {}, "error: --origin-ns 9999999"),
+        (["ros2-play", "missing.h5", "--origin-ns", "-5"], {}, "error: --origin-ns -5: ns since the epoch"),
+        (["ros2", "--record", "/nonexist/dir/bag", "--duration", "1"], {}, "error: --record /nonexist/dir/bag:"),
     ],
 )  # fmt: skip
 def test_bad_input_is_one_line_and_exit_2(argv, env, message, monkeypatch, capsys, tmp_path):

@@ -59,6 +59,8 @@ def ros2_play(
 
     if not math.isfinite(rate) or rate < 0:
         raise ConfigError(f"--rate {rate}: a finite number >= 0 (0: as fast as possible)")
+    if origin_ns is not None and not 0 <= origin_ns < 2**31 * 10**9:  # builtin_interfaces/Time: int32 s
+        raise ConfigError(f"--origin-ns {origin_ns}: ns since the epoch, in [0, 2^31 s)")
     ds = read_dataset(dataset)
     ds.require_joints("ros2-play (a robot's joint states)", source=str(dataset))
     urdf = None
@@ -121,8 +123,14 @@ def ros2(
                           watch=watch)  # fmt: skip
     if result is not None:
         check_output(result, force=force)
-    if record is not None and record.exists():
-        raise ConfigError(f"--record {shown(str(record))}: exists (a bag is written to a new folder)")
+    if record is not None:
+        import os
+
+        if record.exists() or record.is_symlink():
+            raise ConfigError(f"--record {shown(str(record))}: exists (a bag is written to a new folder)")
+        parent = record.resolve().parent
+        if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+            raise ConfigError(f"--record {shown(str(record))}: {shown(str(parent))} is not a writable folder")
     chain = None
     if robot is not None:
         from skincal.kinematics import get_robot
