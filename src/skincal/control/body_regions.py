@@ -9,7 +9,7 @@ Values per body region (SI units in code; the standard's N/mm for the spring con
   times its transient multiplier 2 (the regions where the standard allows transient contact), None for
   the head regions where transient contact is not permitted (the robot's allowed speed toward them is 0).
 
-The figures are the ones the public summaries of the standard give (``/work/shared/reference/field.md``:
+The figures are the ones the public summaries of the standard give (ISO/TS 15066:2016 Annex A as summarised:
 spring constants, effective masses, the 2x transient forces of one public calculator) and the standard's
 quasi-static forces they are twice of. The standard's permissible *pressures* (Table A.2, 29 body
 points, N/cm^2) are not in this table: a pressure limit needs the contact area of the robot part, which
