@@ -486,6 +486,18 @@ def test_shared_loaders_accept_ordinary_files(tmp_path: Path) -> None:
     assert load_json(j) == {"a": [1, 2.5, {"b": None, "s": "[{"}], "t": True}
 
 
+def test_yaml_reads_exponent_floats_as_json_does(tmp_path: Path) -> None:
+    """YAML 1.1 wants a dot in a float: ``sigma: 5e-2`` in a scenario stayed the string '5e-2' and was refused
+    as not a number. Read as YAML 1.2 and JSON read it; ints, dotted floats and quoted strings unchanged."""
+    y = tmp_path / "numbers.yaml"
+    y.write_text("a: 5e-2\nb: -1E3\nc: .5e+1\nd: 1.5\ne: 1_000\nf: '5e-2'\ng: 1e\nh: e5\n")
+    got = load_yaml(y)
+    assert got == {"a": 0.05, "b": -1000.0, "c": 5.0, "d": 1.5, "e": 1000, "f": "5e-2", "g": "1e", "h": "e5"}
+    assert isinstance(got["a"], float) and isinstance(got["e"], int)
+    for key in "abcd":  # as JSON reads the same numbers
+        assert got[key] == json.loads(str(got[key]))
+
+
 # ---------------------------------------------------------------------- fuzzing
 @pytest.fixture(scope="module")
 def valid_result_bytes(tmp_path_factory: pytest.TempPathFactory) -> bytes:

@@ -149,6 +149,9 @@ def load_json(path: str | Path, what: str = "JSON file", error: type[SkincalErro
 
 
 # ---------------------------------------------------------------------- YAML
+_EXPONENT_FLOAT = re.compile(r"^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+$")
+"""A float with an exponent and no dot (``5e-2``, ``-1E3``), YAML 1.2's core schema."""
+
 def _strict_loader() -> type:
     import yaml
 
@@ -184,6 +187,11 @@ def _strict_loader() -> type:
                     raise _Refused(f"has the key {shown} twice in one mapping (line {key_node.start_mark.line + 1})")
             return super().construct_mapping(node, deep=deep)
 
+    # YAML 1.1's float needs a dot ("5e-2" stayed the string '5e-2'); YAML 1.2 and JSON read it as 0.05.
+    # Added after the 1.1 resolvers, so "1_000" stays an int and "1.5" a float as before.
+    StrictLoader.add_implicit_resolver(
+        "tag:yaml.org,2002:float", _EXPONENT_FLOAT, list("-+0123456789.")
+    )
     return StrictLoader
 
 
