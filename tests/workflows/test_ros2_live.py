@@ -286,7 +286,8 @@ def test_hostile_decoded_messages_are_dropped_and_counted_never_fatal():
     me.close()
     assert outcome is not None
     dropped = session.drops.as_dict()
-    assert dropped["/joint_states"] == {"not the robot's joints": 1, "stamp jump": 2}
+    assert dropped["/joint_states"] == {"not the robot's joints": 1, "not finite": 1, "stamp jump": 2}
+    assert dropped["/skin/su1/imu"] == {"not finite": 1}  # counted, not taken in silently
     assert dropped["/skin/many/imu"]["no unit name"] >= 50  # beyond MAX_SOURCES sources
     units = session.stats.units
     assert units["/skin/su1/imu su1"] == "su1" and units["/skin/esc/imu \x1b[2J"] == "skin_esc"

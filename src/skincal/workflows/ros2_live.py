@@ -362,6 +362,9 @@ class Ros2Calibration:
                     self.drops.add(topic, "not the robot's joints")
                     continue
                 pos = np.asarray(msg.position, dtype=float)
+                if not np.all(np.isfinite(pos[cols])):
+                    self.drops.add(topic, "not finite")
+                    continue
                 rows_t.append(t)
                 rows_q.append(pos[cols])
                 rows_qd.append(np.asarray(msg.velocity, dtype=float)[cols] if len(msg.velocity) else np.full(len(cols),
@@ -372,7 +375,11 @@ class Ros2Calibration:
                 self.drops.add(topic, "no unit name")
                 continue
             a, w = msg.linear_acceleration, msg.angular_velocity
-            imu.setdefault(unit, []).append((t, (a.x, a.y, a.z, w.x, w.y, w.z)))
+            reading = (a.x, a.y, a.z, w.x, w.y, w.z)
+            if not all(math.isfinite(x) for x in reading):
+                self.drops.add(topic, "not finite")
+                continue
+            imu.setdefault(unit, []).append((t, reading))
         if rows_t:
             qd = np.array(rows_qd)
             self.feed.add_joints(np.array(rows_t), np.array(rows_q), None if np.isnan(qd).any() else qd)
