@@ -169,6 +169,20 @@ def test_a_continuous_joint_is_a_revolute_joint_without_position_limits(tmp_path
         ),
         ("".join(map(_link, "ab")) + _joint("j1", "a", "b", "floating"), {}, "joint 'j1' is floating"),
         ("".join(map(_link, "ab")) + _joint("j1", "a", "b", "fixed"), {}, "no moving joint between 'a'"),
+        (
+            "".join(map(_link, "abc"))
+            + _joint("j1", "a", "b")
+            + _joint("j2", "b", "c").replace("0 0 0.1", "0 0 1e300"),
+            {},
+            r"T_parent_joint of joint 2 is 1e\+300 m from its parent",
+        ),
+        (
+            "".join(map(_link, "abc"))
+            + _joint("j1", "a", "b")
+            + _joint("j2", "b", "c", "fixed").replace("0 0 0.1", "-2e3 0 0"),
+            {"tip_link": "c"},
+            r"T_link_flange is 2e\+03 m from its parent",
+        ),
         ("<link name='a'", {}, "not a valid URDF"),
         ('<!DOCTYPE r [<!ENTITY x "y">]><link name="&x;"/>', {}, "not a valid URDF"),
     ],

@@ -322,3 +322,19 @@ def test_a_pose_no_collision_free_move_leaves_is_drawn_again(seed):
     assert traj.poses.shape[0] == 6
     model = CollisionModel(session.chain)
     assert model.free(traj.q[::10]).all()
+
+
+def test_a_velocity_fraction_protocol_on_a_chain_without_velocity_limits_names_the_way_out():
+    """A URDF with one joint's ``<limit velocity="0">`` has no velocity limits as a chain: ``fast`` cannot scale
+    its amplitudes and says why, and which presets need none."""
+    from skincal.kinematics.urdf import chain_from_urdf
+
+    limit = '<limit lower="-1" upper="1" velocity="{}" effort="1"/>'
+    joint = '<joint name="j{0}" type="revolute"><parent link="l{1}"/><child link="l{0}"/><axis xyz="0 0 1"/>{2}</joint>'
+    text = ('<robot name="r"><link name="l0"/><link name="l1"/><link name="l2"/>'
+            + joint.format(1, 0, limit.format(2)) + joint.format(2, 1, limit.format(0)) + "</robot>")  # fmt: skip
+    chain = chain_from_urdf(text=text)
+    assert chain.velocity_limit is None
+    with pytest.raises(ConfigError, match=r"every joint's <limit velocity> is above 0.*\(paper-sim, paper-real\)"):
+        get_protocol("fast").for_chain(chain)
+    get_protocol("paper-sim").for_chain(chain)  # fixed amplitudes: no velocity limits needed

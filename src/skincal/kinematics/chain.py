@@ -56,10 +56,28 @@ def _as_joint_vector(
     return arr
 
 
+MAX_OFFSET_M = 1000.0
+"""Largest translation of a joint or flange transform, m: an origin beyond 1 km is a typo (``1e300`` overflowed
+in every product of the chain), not an arm."""
+
+
+def _check_offsets(p: FloatArray, name: str, chain: str) -> None:
+    """Refuse a translation ``p`` ``(n, 3)`` beyond :data:`MAX_OFFSET_M` (joint ``i`` named, 1-based)."""
+    far = np.abs(p).max(axis=1) > MAX_OFFSET_M
+    if np.any(far):
+        i = int(np.argmax(far))
+        which = f"{name} of joint {i + 1}" if p.shape[0] > 1 or name != "T_link_flange" else name
+        raise ConfigError(
+            f"robot '{chain}': {which} is {np.abs(p[i]).max():.3g} m from its parent "
+            f"(more than {MAX_OFFSET_M:g} m: a typo in an origin or a DH length?)"
+        )
+
+
 def _as_transforms(values: ArrayLike, n: int, name: str, chain: str) -> FloatArray:
     T = np.array(values, dtype=float)
     if T.shape != (n, 4, 4) or not np.all(np.isfinite(T)):
         raise ConfigError(f"robot '{chain}': {name} must be finite transforms of shape ({n}, 4, 4), got {T.shape}")
+    _check_offsets(T[:, :3, 3], name, chain)
     if not np.allclose(T[:, 3], [0.0, 0.0, 0.0, 1.0], atol=1e-9) or not np.allclose(
         T[:, :3, :3] @ np.swapaxes(T[:, :3, :3], 1, 2), np.eye(3), atol=1e-6
     ):
@@ -166,6 +184,7 @@ class SerialChain:
         T = np.array(self.T_link_flange, dtype=float)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ConfigError(f"robot '{self.name}': T_link_flange must be a finite (4, 4) transform")
+        _check_offsets(T[None, :3, 3], "T_link_flange", self.name)
         T.setflags(write=False)
         object.__setattr__(self, "T_link_flange", T)
         object.__setattr__(self, "joint_names", _names(self.joint_names, n, "joint", self.name))

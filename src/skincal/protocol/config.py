@@ -154,7 +154,8 @@ class ProtocolConfig:
         if chain.velocity_limit is None:
             raise ConfigError(
                 f"protocol '{self.name}' sets amplitudes as a fraction of the velocity limits, "
-                f"but robot '{chain.name}' has none"
+                f"but robot '{chain.name}' has none (a URDF chain has them when every joint's <limit velocity> is "
+                "above 0): state them, or take a protocol with fixed amplitudes (paper-sim, paper-real)"
             )
         from dataclasses import replace
 
