@@ -49,6 +49,8 @@ def test_domain_comes_from_the_option_else_ros_domain_id():
         (["ros2-play", "missing.h5", "--origin-ns", "99999999999999999999"], {}, "error: --origin-ns 9999999"),
         (["ros2-play", "missing.h5", "--origin-ns", "-5"], {}, "error: --origin-ns -5: ns since the epoch"),
         (["ros2", "--record", "/nonexist/dir/bag", "--duration", "1"], {}, "error: --record /nonexist/dir/bag:"),
+        # root may "access" /proc for writing, yet no folder can be made there: tried, not assumed
+        (["ros2", "--record", "/proc/bag", "--duration", "1"], {}, "error: --record /proc/bag: /proc is not a"),
     ],
 )  # fmt: skip
 def test_bad_input_is_one_line_and_exit_2(argv, env, message, monkeypatch, capsys, tmp_path):

@@ -4,6 +4,7 @@ dataset published as a robot and its skin would publish it)."""
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import threading
 from collections.abc import Iterator
@@ -124,12 +125,10 @@ def ros2(
     if result is not None:
         check_output(result, force=force)
     if record is not None:
-        import os
-
         if record.exists() or record.is_symlink():
             raise ConfigError(f"--record {shown(str(record))}: exists (a bag is written to a new folder)")
         parent = record.resolve().parent
-        if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK) or not _can_make_folder_in(parent):
             raise ConfigError(f"--record {shown(str(record))}: {shown(str(parent))} is not a writable folder")
     chain = None
     if robot is not None:
@@ -195,3 +194,15 @@ def ros2(
         console.print(f"wrote {shown(str(result))}", highlight=False)
     if record is not None:
         console.print(f"recorded {shown(str(record))}", highlight=False)
+
+
+def _can_make_folder_in(parent: Path) -> bool:
+    """Whether a folder can be made in ``parent`` (tried and removed): ``os.access`` answers yes for root on
+    ``/proc``, where the bag's folder then failed in the receiving thread."""
+    import tempfile
+
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".skincal-", dir=parent))
+    except OSError:
+        return False
+    return True

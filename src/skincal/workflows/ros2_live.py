@@ -192,8 +192,9 @@ class Ros2Calibration:
     def _open_bag(self, path: Path) -> None:
         from rosbags.rosbag2 import Writer
 
-        self._bag = Writer(path, version=9)
-        self._bag.open()
+        bag = Writer(path, version=9)
+        bag.open()  # a bag that could not be opened is not kept: closing it would fail too
+        self._bag = bag
 
     def _record(self, topic: str, kind: Any, data: bytes) -> None:
         if self._bag is None:
