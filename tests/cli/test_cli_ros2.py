@@ -96,3 +96,23 @@ def test_another_interface_is_named_when_joined(capsys):
     domain = random.Random().randint(1, 200)
     assert main(["ros2", "--robot", "panda", "--interface", "lo", "--domain", str(domain), "--duration", "0.3"]) == 2
     assert f"joined ROS 2 domain {domain} on interface lo (127.0.0.1" in capsys.readouterr().out
+
+
+@pytest.mark.adversarial
+def test_a_robot_description_no_calibrator_could_use_is_refused_before_publishing(tmp_path, capsys):
+    """``ros2-play --robot-description``: not XML, or a URDF whose chain lacks the dataset's joints, is one line
+    and exit 2 before the domain is joined (it was published as it was; the calibrator then dropped every joint
+    state as another robot's)."""
+    from registry_robots import registry_urdf
+
+    data = tmp_path / "s.h5"
+    assert main(["simulate", "--robot", "panda", "--protocol", "fast", "--units", "1", "--placement", "random",
+                 "--noise", "none", "-o", str(data)]) == 0  # fmt: skip
+    capsys.readouterr()
+    (tmp_path / "bad.urdf").write_text("not xml")
+    cases = ((tmp_path / "bad.urdf", "not a valid URDF"),
+             (registry_urdf("ur5"), "lacks the dataset's joint(s) panda_joint1"))  # fmt: skip
+    for path, message in cases:
+        assert main(["ros2-play", str(data), "--robot-description", str(path), "--domain", "231"]) == 2
+        err = capsys.readouterr()
+        assert message in err.err and "\n" not in err.err.strip() and "joined" not in err.out, err

@@ -66,10 +66,7 @@ def ros2_play(
     ds.require_joints("ros2-play (a robot's joint states)", source=str(dataset))
     urdf = None
     if robot_description is not None:
-        try:
-            urdf = robot_description.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"--robot-description {shown(str(robot_description))}: cannot read it ({exc})") from None
+        urdf = _checked_description(robot_description, ds.robot)
     joined = join(domain, interface)
     console.print(f"joined {joined.joined}", highlight=False)
     with _stop_on_signals() as stop:
@@ -176,7 +173,7 @@ def ros2(
             live.stop()
     joined.close()
     if outcome is None:
-        waiting = "the robot (/robot_description; or give --robot)" if session.chain is None else (
+        waiting = "robot description on /robot_description (or give --robot)" if session.chain is None else (
             "joint states on /joint_states and sensor_msgs/Imu topics")  # fmt: skip
         raise ConfigError(f"ended ({why}) before the calibrator started: no {waiting}")
     info = outcome.result.extras["ros2"]
@@ -206,3 +203,26 @@ def _can_make_folder_in(parent: Path) -> bool:
     except OSError:
         return False
     return True
+
+
+def _checked_description(path: Path, robot: object) -> str:
+    """The URDF text of ``--robot-description`` ``path``, read as the live calibrator will read it
+    (:func:`~skincal.kinematics.urdf.chain_from_urdf`), whose chain must hold the joints of the dataset's
+    ``robot``: a description that no calibrator could use is refused before anything is published."""
+    from skincal.kinematics.urdf import chain_from_urdf, read_urdf_text
+
+    what = f"--robot-description {shown(str(path))}"
+    try:
+        text = read_urdf_text(path)
+        chain = chain_from_urdf(text=text)
+    except ConfigError as exc:
+        raise ConfigError(f"{what}: {exc}") from None
+    wanted = tuple(getattr(robot, "joint_names", None) or ())
+    missing = [n for n in wanted if n not in chain.joint_names]
+    if missing:
+        shown_names = ", ".join(shown(n) for n in missing[:3]) + (", ..." if len(missing) > 3 else "")
+        raise ConfigError(
+            f"{what}: its chain {shown(chain.link_name(0))} -> {shown(chain.link_name(chain.n_joints))} lacks "
+            f"the dataset's joint(s) {shown_names}: the calibrator would find no robot joints"
+        )
+    return text
