@@ -14,6 +14,7 @@ name is accepted or refused the same way wherever it enters.
 
 from __future__ import annotations
 
+import re
 import unicodedata
 
 MAX_NAME_CHARS = 128
@@ -45,6 +46,24 @@ def name_problem(name: object) -> str | None:
     if name != name.strip():
         return "starts or ends with white space"
     return None
+
+
+LONG_WORD = 240
+"""A one-line message shows a run of non-space characters longer than this (a 5000-character name or
+path echoed back) shortened in its middle by :func:`shortened`."""
+_LONG_WORD = re.compile(rf"\S{{{LONG_WORD + 1},}}")
+
+
+def shortened(text: str) -> str:
+    """``text`` with every run of non-space characters longer than :data:`LONG_WORD` cut in its middle
+    (``aaaa...[4870 characters]...aaaa``), so that an echoed input never buries the reason after it."""
+
+    def cut(m: re.Match[str]) -> str:
+        word = m.group(0)
+        head, tail = 120, 60
+        return f"{word[:head]}...[{len(word) - head - tail} characters]...{word[-tail:]}"
+
+    return _LONG_WORD.sub(cut, text)
 
 
 def printable(text: str) -> str:

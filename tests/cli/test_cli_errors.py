@@ -601,3 +601,31 @@ def test_impossible_option_values_are_errors_not_hangs(args, small, tmp_path):
     assert "internal error" not in done.stderr and "Traceback" not in done.stderr
     assert done.stderr.strip().splitlines()[-1].lower().startswith("error")
     assert not (tmp_path / "r.json").exists()
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["info", "a" * 5000], ["calibrate", "x.h5", "-o", "r.json", "--option", "b" * 5000 + "=1"],
+     ["protocol", "--robot", "c" * 5000, "-o", "p.json"]],  # fmt: skip
+)
+def test_a_huge_echoed_input_is_shortened_and_the_reason_still_shows(argv, tmp_path, monkeypatch, capsys):
+    """A 5000-character name or path was echoed whole: a 5000-character error line that buries its reason.
+    The echoed run is cut in its middle (head and tail kept, the count named); the reason after it stays."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "x.h5").write_bytes(b"")
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and "\n" not in err and len(err) < 800, (len(err), err[:300])
+    assert "characters]..." in err
+    assert err.endswith(("(File name too long)", ", consistency)", "DH chain file)")), err[-200:]
+
+
+def test_shortened_keeps_ordinary_messages_unchanged():
+    from skincal.names import LONG_WORD, shortened
+
+    ordinary = "/tmp/" + "d" * (LONG_WORD - 6) + ": no such file"  # the colon is part of the run
+    assert shortened(ordinary) == ordinary
+    long = "x" * 1000
+    out = shortened(f"name '{long}' is refused")
+    # the quotes are part of the run: 1002 - 120 - 60 characters cut
+    assert out.startswith("name 'xxx") and out.endswith("' is refused") and "[822 characters]" in out

@@ -24,17 +24,17 @@ err_console = Console(stderr=True)
 def console_error(message: str) -> None:
     """Print a one-line error to stderr: no markup interpretation of user text, and control
     characters (ESC sequences, newlines) shown escaped so the message stays one line."""
-    from skincal.names import printable
+    from skincal.names import printable, shortened
 
-    err_console.print(f"error: {printable(message)}", markup=False, highlight=False, soft_wrap=True)
+    err_console.print(f"error: {shortened(printable(message))}", markup=False, highlight=False, soft_wrap=True)
 
 
 def console_warning(message: str) -> None:
     """Print a one-line warning to stderr (kept off stdout, where ``--json`` output goes), escaped as
     :func:`console_error` escapes."""
-    from skincal.names import printable
+    from skincal.names import printable, shortened
 
-    err_console.print(f"warning: {printable(message)}", markup=False, highlight=False, soft_wrap=True)
+    err_console.print(f"warning: {shortened(printable(message))}", markup=False, highlight=False, soft_wrap=True)
 
 
 def require_file(path: Path, what: str) -> None:
