@@ -27,7 +27,7 @@ from test_data_result import make_result
 
 from skincal.cli import main
 from skincal.data import CalibrationResult, Dataset, read_dataset, read_result, write_dataset, write_result
-from skincal.data import hdf5 as hdf5_module
+from skincal.data import hdf5_reader as hdf5_module
 from skincal.data.hdf5 import open_dataset
 from skincal.errors import ConfigError, DatasetError, SkincalError
 from skincal.io.jsonio import MAX_DEPTH, MAX_TEXT_BYTES, load_json, load_yaml
