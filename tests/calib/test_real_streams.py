@@ -124,6 +124,13 @@ def test_accelerometer_in_raw_counts_is_an_error(session):
         calibrate(ds, "mle")
 
 
+def test_accelerometer_in_milli_g_is_named_and_refused(session):
+    """1000 per g (a common serial-protocol unit) put units 24-300 m from their link with no error: now named."""
+    ds = _with_imu(session, accel=session.imu[session.units[0]].accel / 9.80665 * 1000.0)
+    with pytest.raises(DatasetError, match=r"in milli-g, not m/s\^2 \(multiply by 0.009"):
+        calibrate(ds, "mle")
+
+
 def test_accelerometer_off_by_a_plausible_factor_is_a_warning(session):
     accel = session.imu[session.units[0]].accel
     assert check_accel_units("u", accel, 9.81) == []

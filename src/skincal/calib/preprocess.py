@@ -871,6 +871,8 @@ RAW_COUNT_MIN = 50.0
 +-2 g is 1670 times gravity in m/s^2)..."""
 PLAUSIBLE_G_RANGE = (0.7, 1.4)
 """...while one outside this range of gravity (but neither of the above) is only suspicious."""
+MILLI_G_RANGE = (80.0, 125.0)
+"""Raw counts whose median is this multiple of gravity (1000 / 9.81 = 102) are named as milli-g."""
 
 
 def check_accel_units(unit: str, accel: FloatArray, gravity_mps2: float) -> list[str]:
@@ -891,6 +893,11 @@ def check_accel_units(unit: str, accel: FloatArray, gravity_mps2: float) -> list
         raise DatasetError(
             f"unit '{unit}': accelerometer reads |f| = {m:.3g} (median), {r:.3f} of gravity: it is in g, not m/s^2 "
             f"(multiply by {gravity_mps2:.5g})"
+        )
+    if MILLI_G_RANGE[0] <= r <= MILLI_G_RANGE[1]:
+        raise DatasetError(
+            f"unit '{unit}': accelerometer reads |f| = {m:.4g} (median), {r:.0f} times gravity: it is in milli-g, "
+            f"not m/s^2 (multiply by {gravity_mps2 / 1000:.4g})"
         )
     if r > RAW_COUNT_MIN:
         raise DatasetError(
