@@ -125,7 +125,7 @@ def ros2(
         if record.exists() or record.is_symlink():
             raise ConfigError(f"--record {shown(str(record))}: exists (a bag is written to a new folder)")
         parent = record.resolve().parent
-        if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK) or not _can_make_folder_in(parent):
+        if not parent.is_dir() or not _can_make_folder_in(parent):
             raise ConfigError(f"--record {shown(str(record))}: {shown(str(parent))} is not a writable folder")
     chain = None
     if robot is not None:
@@ -194,8 +194,8 @@ def ros2(
 
 
 def _can_make_folder_in(parent: Path) -> bool:
-    """Whether a folder can be made in ``parent`` (tried and removed): ``os.access`` answers yes for root on
-    ``/proc``, where the bag's folder then failed in the receiving thread."""
+    """Whether a folder can be made in ``parent`` (tried and removed, not asked of ``os.access``, which
+    answers yes for root on ``/proc``, where the bag's folder then failed in the receiving thread)."""
     import tempfile
 
     try:

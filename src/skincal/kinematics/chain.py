@@ -61,12 +61,12 @@ MAX_OFFSET_M = 1000.0
 in every product of the chain), not an arm."""
 
 
-def _check_offsets(p: FloatArray, name: str, chain: str) -> None:
-    """Refuse a translation ``p`` ``(n, 3)`` beyond :data:`MAX_OFFSET_M` (joint ``i`` named, 1-based)."""
+def _check_offsets(p: FloatArray, name: str, chain: str, per_joint: bool = True) -> None:
+    """Refuse a translation ``p`` ``(n, 3)`` beyond :data:`MAX_OFFSET_M` (``per_joint``: joint ``i`` named, 1-based)."""
     far = np.abs(p).max(axis=1) > MAX_OFFSET_M
     if np.any(far):
         i = int(np.argmax(far))
-        which = f"{name} of joint {i + 1}" if p.shape[0] > 1 or name != "T_link_flange" else name
+        which = f"{name} of joint {i + 1}" if per_joint else name
         raise ConfigError(
             f"robot '{chain}': {which} is {np.abs(p[i]).max():.3g} m from its parent "
             f"(more than {MAX_OFFSET_M:g} m: a typo in an origin or a DH length?)"
@@ -184,7 +184,7 @@ class SerialChain:
         T = np.array(self.T_link_flange, dtype=float)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ConfigError(f"robot '{self.name}': T_link_flange must be a finite (4, 4) transform")
-        _check_offsets(T[None, :3, 3], "T_link_flange", self.name)
+        _check_offsets(T[None, :3, 3], "T_link_flange", self.name, per_joint=False)
         T.setflags(write=False)
         object.__setattr__(self, "T_link_flange", T)
         object.__setattr__(self, "joint_names", _names(self.joint_names, n, "joint", self.name))
