@@ -231,7 +231,10 @@ def test_record_live_with_the_emulator_writes_the_result(data, tmp_path):
     result = read_result(res)
     assert result.method == "online" and len(result.units) == 6 and result.dataset_sha256 == sha256_file(rec)
     back = read_dataset(rec)
-    assert back.duration < 29.0  # stopped at the target, before the emulator's 30 s ended
+    # the target was met by the data before the emulator's 30 s ended (on a loaded machine the calibrator
+    # may catch up only after the stream, so the recording can hold all of it), and the recording has it
+    reached = float(re.search(r"reached by every unit after ([0-9.]+) s", out).group(1))
+    assert reached < 29.0 and back.duration >= reached - 1.0, (reached, back.duration)
     recorded = {u: f"su{i}" for u, i in emu.plan.unit_ids.items()}  # the recorder names unit id k 'su<k>'
     assert {u: r.pose.link for u, r in result.units.items()} == {recorded[u]: p.link for u, p in ds.truth.items()}
 
