@@ -56,19 +56,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
 FORBIDDEN = {("calib", "sim"), ("calib", "protocol"), ("control", "sim")}
 """Downward edges that are still not allowed: (importer, imported) packages."""
 
-KNOWN_VIOLATIONS = {
-    # lead fixes in calib refactor: the calib tests reach private helpers (robust.py / timing.py / rest.py
-    # made public, or the cases tested through the public functions)
-    "private name: calib/test_calib_conditioning.py imports _regular_grid from skincal.calib.preprocess",
-    "private name: calib/test_calib_solver.py imports _accel_rows from skincal.calib.mle.solver",
-    "private name: calib/test_calib_solver.py imports _apply from skincal.calib.mle.solver",
-    "private name: calib/test_calib_solver.py imports _gyro_rows from skincal.calib.mle.solver",
-    "private name: calib/test_calib_solver.py imports _prior from skincal.calib.mle.solver",
-    "private name: calib/test_calib_timing.py imports _normalised_xcorr from skincal.calib.timing",
-    "private name: calib/test_calib_timing.py imports _parabola_peak from skincal.calib.timing",
-    "private name: calib/test_imu_only.py imports _symmetric from skincal.calib.imu_only",
-    "private name: calib/test_mle_model.py imports _accel_rows from skincal.calib.mle.solver",
-}
+KNOWN_VIOLATIONS: set[str] = set()
 """Violations still present, one entry each; delete an entry when its import is gone (the test says so)."""
 
 

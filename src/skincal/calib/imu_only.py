@@ -52,6 +52,7 @@ from scipy.optimize import minimize_scalar
 from scipy.signal import savgol_filter
 
 from skincal.calib.closed_form import wahba
+from skincal.calib.model import sym_from_e
 from skincal.calib.preprocess import white_noise_std
 from skincal.calib.rest import imu_still_mask, runs
 from skincal.calib.robust import huber_weights, pinv, residual_correlation, robust_sigma
@@ -166,13 +167,6 @@ class AccelFit:
 _OFF_DIAGONAL = ((0, 1), (0, 2), (1, 2))
 
 
-def _symmetric(p: FloatArray) -> FloatArray:
-    C = np.diag(p[:3])
-    for k, (i, j) in enumerate(_OFF_DIAGONAL):
-        C[i, j] = C[j, i] = p[3 + k]
-    return C
-
-
 def common_rests(streams: dict[str, ImuStream], reference: str) -> FloatArray:
     """``(S, 2)`` start and end (reference stamps, s) of the rests of the body: where the reference is
     still (``rest.imu_still_mask``) and so is every other unit that is still for at least half of that time
@@ -235,7 +229,7 @@ def _ellipsoid_start(means: FloatArray, gravity: float, model: str) -> tuple[Flo
     scale = np.linalg.norm(D, axis=0)
     z = np.linalg.svd(D / scale, full_matrices=False)[2][-1] / scale
     nq = len(quad)
-    Q = _symmetric(np.concatenate([z[:nq], np.zeros(6 - nq)]))
+    Q = sym_from_e(np.concatenate([z[:nq], np.zeros(6 - nq)]))
     L, k = z[nq : nq + 3], z[-1]
     eig = np.linalg.eigvalsh(Q)
     if eig[0] * eig[-1] <= 0:
@@ -280,7 +274,7 @@ def fit_accel_ellipsoid(
     H = np.eye(9)
     e = np.zeros(len(means))
     for _ in range(iterations):
-        fit = AccelFit(_symmetric(p[:6]), p[6:], np.zeros((9, 9)), model, len(means), 0, 0.0)
+        fit = AccelFit(sym_from_e(p[:6]), p[6:], np.zeros((9, 9)), model, len(means), 0, 0.0)
         f = fit.apply(means)
         norm = np.linalg.norm(f, axis=1)
         n = f / norm[:, None]
@@ -298,7 +292,7 @@ def fit_accel_ellipsoid(
     inflate = max(1.0, chi2 / dof) if dof >= 3 else 1.0
     cov = np.zeros((9, 9))
     cov[np.ix_(free, free)] = pinv(H) * inflate
-    return AccelFit(_symmetric(p[:6]), p[6:], cov, model, len(means), distinct_orientations(means),
+    return AccelFit(sym_from_e(p[:6]), p[6:], cov, model, len(means), distinct_orientations(means),
                     float(np.sqrt(np.mean(e**2))))  # fmt: skip
 
 

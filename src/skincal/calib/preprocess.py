@@ -103,7 +103,7 @@ extrapolated with."""
 def is_low_rate(t: FloatArray) -> bool:
     """Whether stamps ``t`` ``(N,)`` are those of a low-rate stream (median rate below
     :data:`LOW_RATE_HZ`) or of an irregular one slower than :data:`FINE_RATE_HZ` (spacing std above
-    :data:`IRREGULAR_SPREAD` of its median and no regular grid under it, :func:`_regular_grid`).
+    :data:`IRREGULAR_SPREAD` of its median and no regular grid under it, :func:`regular_grid`).
     Judged from the stamps alone."""
     d = np.diff(np.asarray(t, dtype=float))
     dt = float(np.median(d))
@@ -113,7 +113,7 @@ def is_low_rate(t: FloatArray) -> bool:
         return True
     if 1.0 / dt >= FINE_RATE_HZ:  # as fast as the splines' own grid: linear resampling smears nothing they
         return False  # would resolve (a jittered 1 kHz stream took minutes of smoothing splines per block)
-    return float(np.std(d)) > IRREGULAR_SPREAD * dt and _regular_grid(np.asarray(t, dtype=float)) is None
+    return float(np.std(d)) > IRREGULAR_SPREAD * dt and regular_grid(np.asarray(t, dtype=float)) is None
 
 
 def spline_condition(joints: JointStates) -> tuple[JointStates, JointConditioning]:
@@ -300,7 +300,7 @@ def _line(x: FloatArray, y: FloatArray) -> tuple[float, float]:
     return b, ym - b * xm
 
 
-def _regular_grid(t: FloatArray, chunk: int = 200) -> tuple[FloatArray, float] | None:
+def regular_grid(t: FloatArray, chunk: int = 200) -> tuple[FloatArray, float] | None:
     """A regular grid ``a + b k`` fitted to stamps ``t`` that jitter around one (``k`` the sample's
     grid index; dropped samples allowed), and the stamps' std about it; ``None`` when ``t`` is not
     such a stream.
@@ -364,7 +364,7 @@ def condition_joint_stream(
     dt = float(np.median(np.diff(t)))
     regularised, jitter = False, 0.0
     if np.max(np.abs(np.diff(t) - dt)) > 0.01 * dt:
-        fitted = _regular_grid(t)
+        fitted = regular_grid(t)
         if fitted is not None:
             grid, jitter = fitted
             ref = 0.5 * (qd[1:] + qd[:-1])
