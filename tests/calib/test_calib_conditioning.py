@@ -66,7 +66,7 @@ def test_regular_grid_recovers_a_jittered_stream_without_losses():
 def test_regular_grid_recovers_a_jittered_stream_with_lost_samples():
     """500 Hz, 5 minutes, 0.2 ms Gaussian stamp jitter, 1 % of the samples lost.
 
-    Fails: ``regular_grid`` (src/skincal/calib/preprocess.py, ``dt = float(np.median(np.diff(t)))``,
+    Fails: ``regular_grid`` (src/skincal/calib/preprocess/conditioning.py, ``dt = float(np.median(np.diff(t)))``,
     line 132 at commit af07595) takes the period as the median of the stamp differences. Each lost
     sample adds a 2 dt difference, which biases that median upward by about ``p / (2 f(0))`` =
     0.005 / 1410 = 3.5e-6 s (``f`` the density of the N(dt, 2 jitter^2) differences; measured
