@@ -24,7 +24,7 @@ Streamed (``open_dataset``: the joints, then one unit's IMU data at a time; 2 fo
 default ``--workers 2``): ``fast`` 6.7 s wall, 8.8 s CPU, 212 MB; ``paper-sim`` 20.0 s wall, 31.7 s
 CPU, 382 MB (one worker: 31 s, 385 MB; the peak RSS is the largest single process, the forked
 workers share the parent's pages: the summed PSS of parent and workers peaks at ~420 MB). The
-paper-sim peak is the joint interpolator's construction (``calib/preprocess.py``, ~165 MB for
+paper-sim peak is the joint interpolator's construction (``calib/preprocess/interpolate.py``, ~165 MB for
 340k x 7 joint samples) on top of the imports (~120 MB) and the joint stream (~40 MB).
 
 (``skincal info`` alone: 159 MB and 522 MB; the paper-sim page is the issue's 6.3 MB one.)

@@ -11,6 +11,7 @@ Every import counts: at module level, inside functions (a lazy import is still a
 * ``calib`` imports neither ``sim`` nor ``protocol`` (a calibrator needs neither the simulator nor motion
   plans), and ``control`` no ``sim``;
 * ``import skincal.control`` and ``import skincal.kinematics`` load no ``h5py`` (checked in a subprocess).
+* no module is longer than :data:`MAX_MODULE_LINES` (600) lines.
 * ``skincal --help`` and a command whose input file is missing load none of :data:`HEAVY` (NumPy, h5py,
   SciPy, MuJoCo, viser, Dask, ...; checked in a subprocess): the command answers at start-up speed.
 
@@ -56,19 +57,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
 FORBIDDEN = {("calib", "sim"), ("calib", "protocol"), ("control", "sim")}
 """Downward edges that are still not allowed: (importer, imported) packages."""
 
-KNOWN_VIOLATIONS = {
-    # lead fixes in calib refactor: the calib tests reach private helpers (robust.py / timing.py / rest.py
-    # made public, or the cases tested through the public functions)
-    "private name: calib/test_calib_conditioning.py imports _regular_grid from skincal.calib.preprocess",
-    "private name: calib/test_calib_solver.py imports _accel_rows from skincal.calib.mle.solver",
-    "private name: calib/test_calib_solver.py imports _apply from skincal.calib.mle.solver",
-    "private name: calib/test_calib_solver.py imports _gyro_rows from skincal.calib.mle.solver",
-    "private name: calib/test_calib_solver.py imports _prior from skincal.calib.mle.solver",
-    "private name: calib/test_calib_timing.py imports _normalised_xcorr from skincal.calib.timing",
-    "private name: calib/test_calib_timing.py imports _parabola_peak from skincal.calib.timing",
-    "private name: calib/test_imu_only.py imports _symmetric from skincal.calib.imu_only",
-    "private name: calib/test_mle_model.py imports _accel_rows from skincal.calib.mle.solver",
-}
+KNOWN_VIOLATIONS: set[str] = set()
 """Violations still present, one entry each; delete an entry when its import is gone (the test says so)."""
 
 
@@ -248,6 +237,34 @@ def test_every_package_has_a_floor():
     names = {p.name for p in SRC.iterdir() if p.is_dir() and (p / "__init__.py").exists()}
     names |= {p.stem for p in SRC.glob("*.py") if p.name != "__init__.py"}
     assert names == {n for floor in FLOORS for n in floor}
+
+
+MAX_MODULE_LINES = 600
+"""No module of ``src/skincal`` is longer than this (issue 25): a longer one holds more than one job."""
+
+
+def long_modules(src: Path | None = None, limit: int = MAX_MODULE_LINES) -> list[str]:
+    """``"path: N lines"`` for every module under ``src`` longer than ``limit`` lines."""
+    src = SRC if src is None else src
+    out = []
+    for path in sorted(src.rglob("*.py")):
+        n = len(path.read_text(encoding="utf-8").splitlines())
+        if n > limit:
+            out.append(f"{path.relative_to(src.parent)}: {n} lines")
+    return out
+
+
+def test_no_module_is_longer_than_600_lines():
+    found = long_modules()
+    assert not found, f"modules over {MAX_MODULE_LINES} lines (split them by job):\n" + "\n".join(found)
+
+
+def test_checker_finds_a_long_module(tmp_path):
+    root = tmp_path / "skincal"
+    root.mkdir()
+    (root / "short.py").write_text("x = 1\n" * MAX_MODULE_LINES)
+    (root / "long.py").write_text("x = 1\n" * (MAX_MODULE_LINES + 1))
+    assert long_modules(root) == [f"skincal/long.py: {MAX_MODULE_LINES + 1} lines"]
 
 
 @pytest.mark.parametrize("package", ["skincal.control", "skincal.kinematics"])

@@ -15,8 +15,8 @@ from scipy.signal import savgol_coeffs, savgol_filter
 from skincal.calib.preprocess import (
     POSITION_POLYORDER,
     JointInterpolator,
-    _regular_grid,
     condition_joint_stream,
+    regular_grid,
 )
 from skincal.data.dataset import JointStates
 
@@ -41,7 +41,7 @@ def _stamps(minutes: float, jitter_s: float, drop: float, seed: int):
 
 
 def _check_grid(stamps, true, k, jitter_s):
-    fitted = _regular_grid(stamps)
+    fitted = regular_grid(stamps)
     assert fitted is not None, "the jittered stream was not recognised as a regular grid"
     grid, jitter = fitted
     # Indices recovered exactly: the grid is the least-squares line through the true indices...
@@ -66,7 +66,7 @@ def test_regular_grid_recovers_a_jittered_stream_without_losses():
 def test_regular_grid_recovers_a_jittered_stream_with_lost_samples():
     """500 Hz, 5 minutes, 0.2 ms Gaussian stamp jitter, 1 % of the samples lost.
 
-    Fails: ``_regular_grid`` (src/skincal/calib/preprocess.py, ``dt = float(np.median(np.diff(t)))``,
+    Fails: ``regular_grid`` (src/skincal/calib/preprocess/conditioning.py, ``dt = float(np.median(np.diff(t)))``,
     line 132 at commit af07595) takes the period as the median of the stamp differences. Each lost
     sample adds a 2 dt difference, which biases that median upward by about ``p / (2 f(0))`` =
     0.005 / 1410 = 3.5e-6 s (``f`` the density of the N(dt, 2 jitter^2) differences; measured
@@ -93,7 +93,7 @@ def test_regular_grid_with_smaller_jitter_or_fewer_losses(jitter_s, drop):
 def test_regular_grid_rejects_stamps_that_are_not_a_grid():
     rng = np.random.default_rng(3)
     t = np.cumsum(rng.uniform(0.5e-3, 3.5e-3, 5000))  # a random walk of periods, no grid
-    assert _regular_grid(t) is None
+    assert regular_grid(t) is None
 
 
 # ---------------------------------------------------------------------------- source of qd, qdd
@@ -172,7 +172,7 @@ def test_jittered_controller_stamps_are_put_back_on_their_grid():
 
 
 def test_controller_stream_with_lost_samples_keeps_the_position_path():
-    """The consequence of the ``_regular_grid`` bug (see above) on a controller stream with 1 % of
+    """The consequence of the ``regular_grid`` bug (see above) on a controller stream with 1 % of
     its samples lost: the stamps are not regularised, the stream counts as uneven and the
     accelerations come from the noisy velocities instead of the encoder positions (expected qdd
     noise 0.10 instead of 0.053 rad/s^2, and velocities resampled onto a grid from jittered stamps)."""

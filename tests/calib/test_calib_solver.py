@@ -1,7 +1,7 @@
 """The ``mle`` solver's Jacobians and priors (``skincal.calib.mle.solver``) against finite differences
 and closed forms.
 
-Jacobians: every column of ``_accel_rows`` and ``_gyro_rows`` (rotation ``R <- R Exp(dtheta)``,
+Jacobians: every column of ``accel_rows`` and ``gyro_rows`` (rotation ``R <- R Exp(dtheta)``,
 position, biases, scale/misalignment in both parametrisations, time offset, clock drift, bias
 drift, gravity scale) is compared with a central difference of the residual on random states and
 random linearisation arrays. The time columns are linearised around ``(tau_k, d_k)``: they are
@@ -29,10 +29,10 @@ from skincal.calib.mle.solver import (
     Linearisation,
     Rows,
     State,
-    _accel_rows,
-    _apply,
-    _gyro_rows,
-    _prior,
+    accel_rows,
+    apply_step,
+    gyro_rows,
+    prior_terms,
     sandwich_inflation,
     solve,
 )
@@ -88,7 +88,7 @@ def _random_state(rng, scale: str) -> State:
 
 
 def _perturb(state: State, blocks: Blocks, name: str, i: int, h: float) -> State:
-    """``state`` with component ``i`` of block ``name`` moved by ``h`` (written out, not ``_apply``)."""
+    """``state`` with component ``i`` of block ``name`` moved by ``h`` (written out, not ``apply_step``)."""
     if name == "theta":
         return replace(state, R=state.R @ Rotation.from_rotvec(h * np.eye(3)[i]).as_matrix())
     if name in ("p", "b", "bg", "c"):
@@ -135,9 +135,9 @@ def test_accelerometer_jacobian_by_finite_differences(scale, seed):
     rows, lin, rng = _random_problem(seed)
     blocks = Blocks(scale=scale, **ALL)
     state = _random_state(rng, scale)
-    _check_jacobian(_accel_rows, state, blocks, lin, rows)
+    _check_jacobian(accel_rows, state, blocks, lin, rows)
     # static rows only (no linearisation): rotation, bias, scale, bias drift and gravity columns
-    _check_jacobian(_accel_rows, state, replace(blocks, time_offset=False, clock_drift=False), None, rows)
+    _check_jacobian(accel_rows, state, replace(blocks, time_offset=False, clock_drift=False), None, rows)
 
 
 @pytest.mark.parametrize("scale", [SCALE_SYM, SCALE_FULL])
@@ -145,8 +145,8 @@ def test_gyroscope_jacobian_by_finite_differences(scale):
     rows, lin, rng = _random_problem(2)
     blocks = Blocks(scale=scale, **ALL)
     state = _random_state(rng, scale)
-    _check_jacobian(_gyro_rows, state, blocks, lin, rows)
-    _, J = _gyro_rows(state, blocks, lin, rows)
+    _check_jacobian(gyro_rows, state, blocks, lin, rows)
+    _, J = gyro_rows(state, blocks, lin, rows)
     sl = blocks.slices()
     for name in ("p", "b", "e", "c", "k"):  # the gyroscope model does not depend on these
         assert np.all(J[:, :, sl[name]] == 0.0), name
@@ -154,7 +154,7 @@ def test_gyroscope_jacobian_by_finite_differences(scale):
     S = len(rows.static_u)
     dtau = (state.tau - lin.tau_k) + (state.d - lin.d_k) * rows.moving_t
     w = lin.w - dtau[:, None] * lin.dw
-    r, _ = _gyro_rows(state, blocks, lin, rows)
+    r, _ = gyro_rows(state, blocks, lin, rows)
     np.testing.assert_allclose(r[S:], w @ state.R + state.bg - rows.moving_g, atol=1e-12)
     np.testing.assert_allclose(r[:S], state.bg - rows.static_g, atol=1e-12)
 
@@ -165,7 +165,7 @@ def test_accelerometer_residual_is_the_model_written_out():
     blocks = Blocks(scale=SCALE_FULL, **ALL)
     st = _random_state(rng, SCALE_FULL)
     S = len(rows.static_u)
-    r, _ = _accel_rows(st, blocks, lin, rows)
+    r, _ = accel_rows(st, blocks, lin, rows)
     A = np.eye(3) + st.E
     dtau = (st.tau - lin.tau_k) + (st.d - lin.d_k) * rows.moving_t
     for m in (0, 7, 39):
@@ -178,8 +178,8 @@ def test_accelerometer_residual_is_the_model_written_out():
 
 
 @pytest.mark.parametrize("scale", [SCALE_SYM, SCALE_FULL])
-def test_apply_moves_each_block_as_the_jacobian_assumes(scale):
-    """``_apply`` with a unit step in one component equals the perturbation the Jacobian columns were
+def test_apply_step_moves_each_block_as_the_jacobian_assumes(scale):
+    """``apply_step`` with a unit step in one component equals the perturbation the Jacobian columns were
     differentiated along (so the solver steps where its Jacobian points)."""
     rows, lin, rng = _random_problem(4)
     blocks = Blocks(scale=scale, **ALL)
@@ -188,7 +188,7 @@ def test_apply_moves_each_block_as_the_jacobian_assumes(scale):
         for i in range(sl.stop - sl.start):
             delta = np.zeros(blocks.size)
             delta[sl.start + i] = 1e-3
-            a, b = _apply(st, blocks, delta), _perturb(st, blocks, name, i, 1e-3)
+            a, b = apply_step(st, blocks, delta), _perturb(st, blocks, name, i, 1e-3)
             for field in ("R", "p", "b", "E", "bg", "c"):
                 np.testing.assert_allclose(getattr(a, field), getattr(b, field), atol=1e-15, err_msg=(name, i))
             for field in ("tau", "d", "k"):
@@ -233,7 +233,7 @@ def test_time_columns_match_the_signals_reevaluated_at_shifted_instants():
 
     blocks = Blocks(scale=SCALE_FULL, **ALL)
     st = replace(_random_state(rng, SCALE_FULL), tau=0.02, d=5e-5)
-    for fn in (_accel_rows, _gyro_rows):
+    for fn in (accel_rows, gyro_rows):
         _, J = fn(st, blocks, linearise(st.tau, st.d), rows)
         sl = blocks.slices()
         for name, h in (("tau", 1e-6), ("d", 1e-8)):
@@ -247,11 +247,11 @@ def test_time_columns_match_the_signals_reevaluated_at_shifted_instants():
 
 # ---------------------------------------------------------------------------- priors
 @pytest.mark.parametrize("scale", [SCALE_SYM, SCALE_FULL])
-def test_prior_information_and_gradient(scale):
+def test_prior_terms_information_and_gradient(scale):
     rng = np.random.default_rng(6)
     blocks = Blocks(scale=scale, **ALL)
     st = _random_state(rng, scale)
-    H, g = _prior(st, blocks)
+    H, g = prior_terms(st, blocks)
     sl = blocks.slices()
     expected_H = np.zeros(blocks.size)
     expected_g = np.zeros(blocks.size)
@@ -278,7 +278,7 @@ def _static_rows(R: np.ndarray, b: np.ndarray, scale: float = 1.0, n: int = 8, s
     )
 
 
-def test_prior_pulls_an_undetermined_block_to_zero_with_the_prior_std():
+def test_prior_terms_pull_an_undetermined_block_to_zero_with_the_prior_std():
     """All rest runs at one instant: the bias drift ``c`` has no data. It goes to zero from wherever
     it starts and its std is the prior's (1e-3 m/s^3), while rotation and bias are recovered and the
     position (static data only) is reported as a null-space direction."""
@@ -302,7 +302,7 @@ def test_prior_pulls_an_undetermined_block_to_zero_with_the_prior_std():
     np.testing.assert_allclose(fit.state.p, 0.0, atol=1e-9)  # left at the start
 
 
-def test_prior_splits_an_isotropic_scale_between_gravity_and_accelerometer_scale():
+def test_prior_terms_split_an_isotropic_scale_between_gravity_and_accelerometer_scale():
     """Rest runs read ``(1 + s)`` times the true gravity: from rest data alone a gravity error ``k``
     and an accelerometer scale ``E = e I`` are indistinguishable (``(1 + k)(1 + e) = 1 + s``). The MAP
     estimate then minimises the priors ``3 e^2 / 0.05^2 + k^2 / 0.01^2`` along that curve; its std

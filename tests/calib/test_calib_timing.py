@@ -14,10 +14,10 @@ from skincal.calib.mle.method import prepare
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.timing import (
     MAX_OFFSET_S,
-    _normalised_xcorr,
-    _parabola_peak,
     coarse_time_offset,
     motion_profile,
+    normalised_xcorr,
+    parabola_peak,
 )
 from skincal.kinematics import panda
 from skincal.protocol import ProtocolConfig, build_trajectory
@@ -112,7 +112,7 @@ def test_cached_spectra_give_the_direct_correlation(session):
     # np.correlate at a few lags, against the FFT with the profile's cached conjugate spectrum
     k = ds.truth[name].link
     p = profile.angular_speed[:, k - 1]
-    c_fft = _normalised_xcorr(m, profile.spectra["gyroscope"][:, k - 1], p, profile.fft_size, max_lag)
+    c_fft = normalised_xcorr(m, profile.spectra["gyroscope"][:, k - 1], p, profile.fft_size, max_lag)
     m0, p0 = m - m.mean(), p - p.mean()
     full = np.correlate(m0, p0, mode="full")  # full[L + G - 1] = sum_i m0[i] p0[i - L]
     G = m.size
@@ -121,7 +121,7 @@ def test_cached_spectra_give_the_direct_correlation(session):
         assert c_fft[lag + max_lag] == pytest.approx(direct, abs=1e-10), lag
     # the accelerometer spectra likewise (joint-speed signal)
     pa = profile.joint_speed[:, k - 1]
-    ca = _normalised_xcorr(m, profile.spectra["accelerometer"][:, k - 1], pa, profile.fft_size, max_lag)
+    ca = normalised_xcorr(m, profile.spectra["accelerometer"][:, k - 1], pa, profile.fft_size, max_lag)
     np.testing.assert_allclose(ca, _direct_correlation(m, pa, max_lag), atol=1e-10)
 
 
@@ -146,7 +146,7 @@ def test_offset_correlation_and_sharpness_match_a_direct_search(session):
     # parabola through the three correlations around the peak, written out
     y0, y1, y2 = c[i - 1], c[i], c[i + 1]
     vertex = i + 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
-    assert _parabola_peak(c, i) == pytest.approx(vertex)
+    assert parabola_peak(c, i) == pytest.approx(vertex)
     offset = (vertex - max_lag) * dt
     assert found.offset_s == pytest.approx(offset, abs=1e-12)
     lags = (np.arange(c.size) - max_lag) * dt
@@ -157,8 +157,8 @@ def test_offset_correlation_and_sharpness_match_a_direct_search(session):
 def test_parabola_peak_is_exact_on_a_parabola():
     x = np.arange(9.0)
     c = -(x - 4.3) ** 2 + 1.0
-    assert _parabola_peak(c, 4) == pytest.approx(4.3, abs=1e-12)
-    assert _parabola_peak(c, 0) == 0.0  # at an end: no refinement
+    assert parabola_peak(c, 4) == pytest.approx(4.3, abs=1e-12)
+    assert parabola_peak(c, 0) == 0.0  # at an end: no refinement
 
 
 def test_a_unit_that_never_moves_gives_no_sharp_peak(session):

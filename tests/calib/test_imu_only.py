@@ -9,7 +9,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from skincal.calib import calibrate_relative, compare_with_joint_result
-from skincal.calib.imu_only import _symmetric, coarse_offset, common_rests, fit_accel_ellipsoid
+from skincal.calib.imu_only import coarse_offset, common_rests, fit_accel_ellipsoid
+from skincal.calib.model import sym_from_e
 from skincal.calib.rest import imu_still_mask as still_mask
 from skincal.cli import main
 from skincal.data.hdf5 import write_dataset
@@ -290,7 +291,7 @@ def test_position_std_carries_the_fitted_scale():
         step = np.zeros(9)
         step[k] = h
         q = p + step
-        moved = AccelFit(_symmetric(q[:6]), q[6:], acc.cov, acc.model, acc.rests, acc.orientations, 0.0)
+        moved = AccelFit(sym_from_e(q[:6]), q[6:], acc.cov, acc.model, acc.rests, acc.orientations, 0.0)
         other = fit_relative(dc_replace(ref, accel=moved.apply(ref.accel)), unit)
         assert not isinstance(other, str)
         numeric, linear = (other.r - base.r) / h, base.gauge_jacobian[:, k]

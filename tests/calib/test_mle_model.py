@@ -18,7 +18,7 @@ import pytest
 from skincal.calib.api import METHODS, calibrate_unit
 from skincal.calib.mle import method as mle
 from skincal.calib.mle.problem import arrange
-from skincal.calib.mle.solver import State, _accel_rows
+from skincal.calib.mle.solver import State, accel_rows
 from skincal.calib.model import link_specific_force, predict_specific_force
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.timing import motion_instants
@@ -80,7 +80,7 @@ def _method_residuals(unit, problem):
         c=imu.accel_bias_drift_mps3,
         k=imu.gravity_mps2 / np.linalg.norm(problem.gravity) - 1.0,
     )
-    r, _ = _accel_rows(state, mle._blocks(problem, p), p.linearise(tau, d), p.data.rows)
+    r, _ = accel_rows(state, mle._blocks(problem, p), p.linearise(tau, d), p.data.rows)
     return r, p, state
 
 

@@ -13,6 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from skincal.calib.model import predict_specific_force
 from skincal.calib.online import OnlineCalibrator, OnlineOptions, replay, stats
+from skincal.calib.online.clock import realign
 from skincal.errors import ConfigError
 from skincal.kinematics.transforms import skew
 
@@ -292,7 +293,7 @@ def test_a_clock_realignment_is_absorbed_before_the_status_is_given(realistic):
     st = cal._u["su3"]
     good = st.offset
     st.offset -= 0.006
-    cal._realign(st, 0.0, 0.0)  # the last minute absorbed again with the wrong offset
+    realign(st, 0.0, 0.0)  # the last minute absorbed again with the wrong offset
     cal._absorb_unit("su3")
     status = cal.status()["su3"]
     assert status.pose is not None and status.missing == "" and st.realigned >= 1

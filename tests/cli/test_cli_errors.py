@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import signal
+import stat
 import subprocess
 import sys
 import textwrap
@@ -99,6 +100,19 @@ def test_atomic_path_refuses_a_folder_and_a_missing_folder_naming_the_target(tmp
         with atomic_path(tmp_path / "nowhere" / "r.json") as tmp:
             tmp.write_bytes(b"x")
     assert [p.name for p in tmp_path.iterdir()] == ["adir"] and list((tmp_path / "adir").iterdir()) == []
+
+
+@pytest.mark.skipif(os.name != "posix", reason="FIFOs and device nodes are POSIX")
+def test_atomic_write_refuses_a_fifo_even_without_check_output(tmp_path):
+    """The writer itself (not only the CLI's early check) never renames over a FIFO."""
+    from skincal.errors import ConfigError
+    from skincal.io.atomic import write_bytes_atomic
+
+    fifo = tmp_path / "p.json"
+    os.mkfifo(fifo)
+    with pytest.raises(ConfigError, match="is a FIFO"):
+        write_bytes_atomic(fifo, b"{}")
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode) and os.listdir(tmp_path) == ["p.json"]
 
 
 SLOW_WRITER = """
@@ -629,3 +643,64 @@ def test_shortened_keeps_ordinary_messages_unchanged():
     out = shortened(f"name '{long}' is refused")
     # the quotes are part of the run: 1002 - 120 - 60 characters cut
     assert out.startswith("name 'xxx") and out.endswith("' is refused") and "[822 characters]" in out
+
+
+OSC = "\x1b]0;owned\x07"
+"""An OSC sequence: a terminal that receives it raw sets its window title (and worse sequences exist)."""
+
+
+def _raw_control_char(text: str) -> bool:
+    return any(ord(ch) < 0x20 and ch not in "\n" or 0x7F <= ord(ch) < 0xA0 for ch in text)
+
+
+def test_report_shows_control_characters_in_free_text_as_escapes(files, tmp_path):
+    """A result's warning with ``ESC ] 0;title BEL`` reached the terminal raw through ``report``
+    (markdown on stdout) and the HTML table raw; ``evaluate`` and ``export`` already escaped it."""
+    import json
+
+    from cli_subprocess import run_cli
+
+    _, data, result = files
+    doc = json.loads(result.read_text())
+    unit = next(iter(doc["units"]))
+    doc["units"][unit]["warnings"] = [f"poor fit {OSC}\rcleared"]
+    hostile = tmp_path / "hostile.json"
+    hostile.write_text(json.dumps(doc))
+    proc = run_cli(["report", str(hostile), "--dataset", str(data)], tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "poor fit \\x1b]0;owned\\x07\\rcleared" in proc.stdout
+    assert not _raw_control_char(proc.stdout + proc.stderr)
+    page = tmp_path / "r.html"
+    proc = run_cli(["report", str(hostile), "--dataset", str(data), "--out", str(page)], tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    html = page.read_text()
+    assert "poor fit \\x1b]0;owned\\x07\\rcleared" in html and not _raw_control_char(html)
+
+
+ABSURD = [
+    (["simulate", "--protocol", "fast", "--seed", "-1", "-o", "{tmp}/s.h5"], "--seed -1: a seed is an integer >= 0"),
+    (["simulate", "--handheld", "--seed", "-1", "-o", "{tmp}/s.h5"], "--seed -1: a seed is an integer >= 0"),
+    (["protocol", "--robot", "panda", "--seed", "-1", "-o", "{tmp}/p.json"], "--seed -1: a seed is an integer >= 0"),
+    (["avoid", "--seed", "-1"], "--seed -1: a seed is an integer >= 0"),
+    (["calibrate", "{data}", "--seed", "-1", "-o", "{tmp}/c.json"], "--seed -1: a seed is an integer >= 0"),
+    (["emulate", "{data}", "--port", "9", "--seed", "-1"], "--seed -1: a seed is an integer >= 0"),
+    (["emulate", "{data}", "--port", "9", "--jitter", "inf"], "--jitter inf s must be a mean delay in [0, 60] s"),
+    (["emulate", "{data}", "--port", "9", "--jitter", "1e308"], "--jitter 1e+308 s must be a mean delay in [0, 60]"),
+    (["emulate", "{data}", "--port", "9", "--jitter", "nan"], "--jitter nan s must be a mean delay in [0, 60] s"),
+    (["record", "--out", "{tmp}/r.h5", "--port", "0", "--max-unit-samples", str(10**20)],
+     "--max-unit-samples 100000000000000000000 must be at most 2^40"),
+]
+
+
+@pytest.mark.parametrize(("command", "message"), ABSURD, ids=[" ".join(c[:1] + c[-2:]) for c, _ in ABSURD])
+def test_absurd_numbers_are_one_line_usage_errors(command, message, files, tmp_path, capsys):
+    """``--seed -1``, ``emulate --jitter inf / 1e308`` and ``record --max-unit-samples 1e20`` were internal
+    errors (exit 3, NumPy's or h5py's exception) after the work had started: now exit 2, one line, nothing written."""
+    _, data, _ = files
+    args = [a.format(data=data, tmp=tmp_path) for a in command]
+    capsys.readouterr()
+    assert main(args) == 2
+    out = capsys.readouterr()
+    err = out.err.strip().splitlines()
+    assert err == [f"error: {message}"] or (len(err) == 1 and message in err[0]), out.err
+    assert "sending" not in out.out and not list(tmp_path.iterdir())

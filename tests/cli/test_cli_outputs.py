@@ -1,29 +1,25 @@
-"""Outputs are never clobbered silently: every command that writes a file refuses its own input,
-an existing file (unless --force), a folder and a missing folder, before doing any work."""
+"""Outputs are never clobbered silently: every command that writes a file refuses its own input (also through
+a symlink), an existing file (unless --force), a folder and a missing folder, before doing any work, and
+never replaces a FIFO or a device node even with --force (each a real file: FIFOs by ``os.mkfifo``, device
+nodes by ``os.mknod`` when allowed). The ``files`` fixture is in ``conftest.py``."""
 
 from __future__ import annotations
 
 import hashlib
+import os
+import shutil
+import stat
 from pathlib import Path
 
 import pytest
 
 from skincal.cli import main
 
+from registry_robots import registry_urdf
+
 
 def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-@pytest.fixture(scope="module")
-def files(tmp_path_factory):
-    root = tmp_path_factory.mktemp("outputs")
-    data = root / "data.h5"
-    assert main(["simulate", "--robot", "panda", "--placement", "random", "--units", "2", "--protocol", "fast",
-                 "--out", str(data)]) == 0
-    result = root / "result.json"
-    assert main(["calibrate", str(data), "--out", str(result)]) == 0
-    return root, data, result
 
 
 def test_calibrate_refuses_its_input_an_existing_file_and_bad_folders(files, capsys):
@@ -101,3 +97,80 @@ def test_robustness_in_a_pipe_says_each_finished_job(tmp_path):
                     "--faults", "qd-1e-3", "--workers", "1"], tmp_path)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "1/1 robustness: panda analytic qd-1e-3" in proc.stderr.splitlines()
+
+
+def _special_outputs(root: Path, suffix: str) -> list[tuple[str, Path]]:
+    """A FIFO, a symlink to ``/dev/null`` (with wrong code only the link would be replaced, never the
+    system's ``/dev/null``) and, when this process may create one, a character device node (1, 3)."""
+    fifo, null, node = (root / f"{name}{suffix}" for name in ("pipe", "null", "node"))
+    os.mkfifo(fifo)
+    null.symlink_to("/dev/null")
+    cases = [("FIFO", fifo), ("device", null)]
+    try:
+        os.mknod(node, 0o600 | stat.S_IFCHR, os.makedev(1, 3))
+        cases.append(("device", node))
+    except OSError:  # not root (or no CAP_MKNOD): the symlink covers the device case
+        pass
+    return cases
+
+
+COMMANDS = [
+    (".h5", ["simulate", "--protocol", "fast", "--out", "{out}"]),
+    (".h5", ["simulate", "--handheld", "--out", "{out}"]),
+    (".json", ["calibrate", "{data}", "--out", "{out}"]),
+    (".json", ["segment", "{data}", "--out", "{out}"]),
+    (".csv", ["export", "{result}", "-f", "csv", "-o", "{out}"]),
+    (".html", ["report", "{result}", "--dataset", "{data}", "--out", "{out}"]),
+    (".json", ["protocol", "--robot", "panda", "--rate", "10", "--out", "{out}"]),
+    (".h5", ["record", "--out", "{out}", "--duration", "0.1", "--port", "0"]),
+]
+
+
+IDS = [c[0] + ("-handheld" if "--handheld" in c else "") for _, c in COMMANDS]
+
+
+@pytest.mark.skipif(os.name != "posix", reason="FIFOs and device nodes are POSIX")
+@pytest.mark.parametrize(("suffix", "command"), COMMANDS, ids=IDS)
+def test_force_never_replaces_a_fifo_or_a_device(suffix, command, files, tmp_path, capsys):
+    """``--out X --force`` replaced a FIFO or a device node with a regular file (as root ``-o /dev/null
+    --force`` would replace the system's ``/dev/null``): only regular files are overwritten."""
+    _, data, result = files
+    for kind, out in _special_outputs(tmp_path, suffix):
+        args = [a.format(data=data, result=result, out=out) for a in command]
+        capsys.readouterr()
+        assert main([*args, "--force"]) == 2, (kind, args)
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error:"), err
+        assert f"is a {kind}" in err[0] and "regular files only" in err[0], err
+        mode = os.stat(out).st_mode
+        assert stat.S_ISFIFO(mode) if kind == "FIFO" else stat.S_ISCHR(mode), (kind, out)
+    assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+@pytest.mark.skipif(os.name != "posix", reason="FIFOs and device nodes are POSIX")
+def test_an_input_is_never_an_output_even_with_force(files, tmp_path, capsys):
+    """``calibrate --links L.yaml -o L.yaml --force`` overwrote the links file; ``simulate --robot arm.urdf``
+    into a name that is (through a symlink) the URDF it reads would replace the robot."""
+    _, data, _ = files
+    links = tmp_path / "links.yaml"
+    links.write_text("su1: 3\nsu2: 5\n")
+    alias = tmp_path / "alias.json"
+    alias.symlink_to(links)
+    before = _digest(links)
+    for out in (links, alias):
+        capsys.readouterr()
+        assert main(["calibrate", str(data), "--links", str(links), "-o", str(out), "--force"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "is the input" in err[0], err
+    assert _digest(links) == before and alias.is_symlink()
+
+    urdf = tmp_path / "arm.urdf"
+    shutil.copy(registry_urdf("ur5"), urdf)
+    before = _digest(urdf)
+    as_h5 = tmp_path / "arm.h5"
+    as_h5.symlink_to(urdf)
+    capsys.readouterr()
+    assert main(["simulate", "--robot", str(urdf), "--protocol", "fast", "-o", str(as_h5), "--force"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is the input" in err[0], err
+    assert _digest(urdf) == before and as_h5.is_symlink()

@@ -43,6 +43,12 @@ def link_specific_force(
     return v
 
 
+def sym_from_e(e: FloatArray) -> FloatArray:
+    """Symmetric ``(3, 3)`` matrix from its six elements ``e = (xx, yy, zz, xy, xz, yz)`` (the symmetric
+    scale/misalignment ``E`` of ``A = I + E``; ``imu_only``'s ellipsoid matrix)."""
+    return np.array([[e[0], e[3], e[4]], [e[3], e[1], e[5]], [e[4], e[5], e[2]]])
+
+
 def accelerometer(
     f: FloatArray, A: FloatArray, b: FloatArray, c: FloatArray | None = None, t_rel: FloatArray | None = None
 ) -> FloatArray:

@@ -106,7 +106,7 @@ class OffsetSearch:
     source: str
 
 
-def _normalised_xcorr(m: FloatArray, spectrum: FloatArray, p: FloatArray, size: int, max_lag: int) -> FloatArray:
+def normalised_xcorr(m: FloatArray, spectrum: FloatArray, p: FloatArray, size: int, max_lag: int) -> FloatArray:
     """Normalised correlation ``c[L]`` of ``m(t)`` with ``p(t - L)`` for ``L = -max_lag .. max_lag``
     (``spectrum`` the conjugate FFT of the mean-removed ``p``)."""
     m = m - m.mean()
@@ -117,7 +117,9 @@ def _normalised_xcorr(m: FloatArray, spectrum: FloatArray, p: FloatArray, size: 
     return c / denom if denom > 0 else np.zeros_like(c)
 
 
-def _parabola_peak(c: FloatArray, i: int) -> float:
+def parabola_peak(c: FloatArray, i: int) -> float:
+    """The fractional index of the vertex of the parabola through ``c[i - 1], c[i], c[i + 1]`` (a peak's
+    sub-sample position); ``i`` itself at an end of ``c`` or where the three points are not concave."""
     if 0 < i < c.size - 1:
         den = c[i - 1] - 2 * c[i] + c[i + 1]
         if den < 0:
@@ -174,11 +176,11 @@ def coarse_time_offset(
     corr = np.full(n, np.nan)
     spectra = profile.spectra[source]
     for k in candidates:
-        c = _normalised_xcorr(m, spectra[:, k - 1], predicted[:, k - 1], profile.fft_size, max_lag)
+        c = normalised_xcorr(m, spectra[:, k - 1], predicted[:, k - 1], profile.fft_size, max_lag)
         i = int(np.argmax(c))
         corr[k - 1] = float(c[i])
         if c[i] > best[0]:
-            best = (float(c[i]), (_parabola_peak(c, i) - max_lag) * dt, k, c)
+            best = (float(c[i]), (parabola_peak(c, i) - max_lag) * dt, k, c)
     peak, offset, link, c = best
     lags = (np.arange(c.size) - max_lag) * dt
     far = np.abs(lags - offset) > 0.25

@@ -12,7 +12,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from skincal.data.dataset import DYNAMIC, STATIC, BodyPose, Dataset, Segments
-from skincal.data.result import MAX_POSITION_M
+from skincal.data.events import MAX_POSITION_M
 from skincal.errors import DatasetError
 from skincal.kinematics.chain import CONVENTIONS, SerialChain
 from skincal.names import name_problem, printable

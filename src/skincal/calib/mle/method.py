@@ -54,8 +54,8 @@ from skincal.calib.mle.solver import (
     Blocks,
     Fit,
     Rows,
-    sym_from_e,
 )
+from skincal.calib.model import sym_from_e
 from skincal.calib.preprocess import check_gyro_units
 from skincal.calib.timing import (
     OffsetSearch,

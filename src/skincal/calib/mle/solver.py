@@ -45,7 +45,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from skincal.calib.model import accelerometer, link_specific_force
+from skincal.calib.model import accelerometer, link_specific_force, sym_from_e
 from skincal.calib.robust import huber_weights, pinv, pinv_step, residual_correlation, robust_sigma
 from skincal.kinematics.transforms import FloatArray, skew
 
@@ -69,11 +69,6 @@ a tenth of it for the gyroscope, rad/s): noise-free data must not make the data'
 large that the priors vanish below round-off."""
 
 SCALE_NONE, SCALE_SYM, SCALE_FULL = "none", "sym", "full"
-
-
-def sym_from_e(e: FloatArray) -> FloatArray:
-    """Symmetric ``E`` from ``e = (xx, yy, zz, xy, xz, yz)``."""
-    return np.array([[e[0], e[3], e[4]], [e[3], e[1], e[5]], [e[4], e[5], e[2]]])
 
 
 @dataclass(frozen=True)
@@ -206,7 +201,7 @@ def _scale_columns(J: FloatArray, f: FloatArray, scale: str, sl: slice) -> None:
     J[:, 1, c + 5], J[:, 2, c + 5] = fz, fy
 
 
-def _accel_rows(
+def accel_rows(
     state: State, blocks: Blocks, lin: Linearisation | None, rows: Rows
 ) -> tuple[FloatArray, FloatArray]:
     """Accelerometer residuals ``(S + M, 3)`` and Jacobian ``(S + M, 3, P)`` (static rows first)."""
@@ -250,7 +245,7 @@ def _accel_rows(
     return r, J
 
 
-def _gyro_rows(
+def gyro_rows(
     state: State, blocks: Blocks, lin: Linearisation | None, rows: Rows
 ) -> tuple[FloatArray, FloatArray]:
     """Gyroscope residuals ``(S + M, 3)`` and Jacobian ``(S + M, 3, P)`` (static rows: ``w = 0``)."""
@@ -263,7 +258,7 @@ def _gyro_rows(
 def _gyro_rows_compact(
     state: State, blocks: Blocks, lin: Linearisation | None, rows: Rows
 ) -> tuple[FloatArray, FloatArray, np.ndarray]:
-    """:func:`_gyro_rows` with only the columns the gyroscope depends on (rotation, time offset,
+    """:func:`gyro_rows` with only the columns the gyroscope depends on (rotation, time offset,
     clock drift, gyroscope bias): residuals, Jacobian ``(S + M, 3, C)`` and the ``C`` column indices."""
     sl = blocks.slices()
     names = [n for n in ("theta", "tau", "d", "bg") if n in sl and (lin is not None or n in ("theta", "bg"))]
@@ -293,7 +288,9 @@ def _gyro_rows_compact(
     return r, J, cols
 
 
-def _apply(state: State, blocks: Blocks, delta: FloatArray) -> State:
+def apply_step(state: State, blocks: Blocks, delta: FloatArray) -> State:
+    """``state`` moved by the parameter step ``delta`` ``(P,)`` (rotation on the manifold, ``R <- R Exp(dtheta)``;
+    the other blocks added)."""
     sl = blocks.slices()
     R = state.R @ Rotation.from_rotvec(delta[sl["theta"]]).as_matrix()
     E = state.E
@@ -308,7 +305,7 @@ def _apply(state: State, blocks: Blocks, delta: FloatArray) -> State:
     )
 
 
-def _prior(state: State, blocks: Blocks) -> tuple[FloatArray, FloatArray]:
+def prior_terms(state: State, blocks: Blocks) -> tuple[FloatArray, FloatArray]:
     """Information ``(P, P)`` and gradient ``(P,)`` of the zero-mean priors (:data:`PRIOR_STD`)."""
     sl = blocks.slices()
     H = np.zeros((blocks.size, blocks.size))
@@ -374,7 +371,7 @@ def solve(
     for _outer in range(max_outer):
         for _inner in range(max_inner):
             iterations += 1
-            r, J = _accel_rows(state, blocks, lin, rows)
+            r, J = accel_rows(state, blocks, lin, rows)
             base = np.concatenate([sw_static, np.ones(len(r) - S)])
             norm = np.linalg.norm(r, axis=1) * base
             sigma = max(robust_sigma(norm[S:] if len(r) > S else norm), sigma_floor)
@@ -392,10 +389,10 @@ def solve(
                 H = H + H_gyro
                 g[cols_g] += g_g
                 cost += float(np.sum(w_g * np.sum(r_g * r_g, axis=1)))
-            H_p, g_p = _prior(state, blocks)
+            H_p, g_p = prior_terms(state, blocks)
             H, g = H + H_p, g + g_p
             delta, null = pinv_step(H, g)
-            state = _apply(state, blocks, _limit_step(delta, blocks))
+            state = apply_step(state, blocks, _limit_step(delta, blocks))
             if float(delta @ H @ delta) < tol:  # the step moves less than 1e-3 std in every direction
                 break
         max_inner = min(max_inner, 3)  # later outer loops only follow the small change of tau
@@ -407,7 +404,7 @@ def solve(
     # Covariance from the last iteration's normal matrix (the final step changes it negligibly),
     # each sensor's information divided by its residuals' autocorrelation factor.
     rho = residual_correlation(r[S:])
-    H_p, _ = _prior(state, blocks)
+    H_p, _ = prior_terms(state, blocks)
     if use_gyro:
         rho_g = residual_correlation(r_g[S:])
         info = (H - H_gyro - H_p) / rho + H_gyro / rho_g + H_p

@@ -29,26 +29,31 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from skincal.calib import rest
-from skincal.calib.online import stats
+from skincal.calib.online import design, stats
+from skincal.calib.online.clock import (
+    ALIGN_RETRY_S,
+    ALIGN_SHARPNESS,
+    MAX_REALIGN,
+    align,
+    clock_off,
+    instants,
+    realign,
+    track_steps,
+)
+from skincal.calib.online.design import excitation
+from skincal.calib.online.fit import JOINT_ACTIVE_RPS, decide, inflation, residuals, solve_unit, window_means
+from skincal.calib.online.options import OnlineOptions, UnitStatus, is_settled
+from skincal.calib.online.unit import Grid, UnitState, keep_pending, signals_at, take_pending, unsaturated
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.rest import link_moving
-from skincal.calib.signals import frame_signals, hermite
-from skincal.calib.timing import (
-    ClockSteps,
-    coarse_time_offset,
-    compose_clock,
-    find_clock_steps,
-    motion_instants,
-    motion_profile,
-)
-from skincal.data.dataset import Dataset, JointStates
+from skincal.calib.signals import frame_signals
+from skincal.calib.timing import compose_clock
+from skincal.data.dataset import JointStates
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.result import CalibrationResult, UnitResult, with_events
 from skincal.errors import ConfigError
@@ -57,52 +62,16 @@ from skincal.kinematics.transforms import FloatArray
 from skincal.names import name_problem
 from skincal.skin.pose import SkinUnitPose
 
-REST, MOVING = 0, 1
-"""Rest and moving samples are two classes with their own noise level (a resting unit's residual is its sensor
-noise; a moving one's adds the errors of the joint-derived accelerations), so the Grams are kept per class
-(:func:`~skincal.calib.rest.link_moving`)."""
-ALIGN_SHARPNESS = 0.1
-"""A unit's clock is aligned once the cross-correlation peak stands out by this much (correlation units)...
-"""
-ALIGN_WAIT_FRACTION = 0.8
-"""...or once its pending stream spans this fraction of the history (then with a warning in the result)."""
-REALIGN_S = 0.004
-"""A decided unit whose residual clock error (offset and drift, at either end of its data) exceeds this (s)
-is re-aligned (its clock mapping composed with the residual, :func:`~skincal.calib.timing.compose_clock`)
-and its statistics restarted: the first-order clock model holds for a few ms only."""
-ALIGN_RETRY_S = 2.0
-"""A unit not yet aligned tries again after this much more of its stream, s."""
-MAX_REALIGN = 6
-"""Re-alignments allowed per unit."""
+__all__ = ["OnlineCalibrator", "OnlineOptions", "UnitStatus", "excitation"]
+"""``OnlineOptions``, ``UnitStatus`` (:mod:`~skincal.calib.online.options`) and ``excitation``
+(:mod:`~skincal.calib.online.design`) are re-exported: their import path from here is kept."""
+
 DRIFT_UNDETERMINED_PPM = 100.0
 """A residual clock drift whose std exceeds this (ppm) is not determined yet: the result says so."""
 DRIFT_NOTE_SIGMAS, DRIFT_NOTE_PPM = 4.0, 20.0
 """A drift beyond this many std and ppm is named in the result (``mle``'s rule)."""
-SCALE_STD_LIMIT = 0.01
-"""The accelerometer's scale/misalignment is estimated only when each of its 9 elements is determined to
-this std (else held at the identity: a weakly determined scale absorbs what the pose should explain)."""
-JOINT_ACTIVE_RPS = 0.1
-JOINT_ACTIVE_MIN_S = 1.0
-"""A joint counts as moved once it has turned faster than ``JOINT_ACTIVE_RPS`` (rad/s) for
-``JOINT_ACTIVE_MIN_S`` (s) in all; two candidate links are told apart only after a joint between them moved."""
 MIN_MOVING = 200
 """Moving samples of the best link before its link is decided."""
-SATURATION_FLOOR = (1.5 * 9.80665, 2.0)
-"""A recurring largest reading is taken as the sensor's range only from 1.5 g (m/s^2) and 2 rad/s up:
-no accelerometer used on skin saturates below 2 g, nor a gyroscope below 250 deg/s."""
-LINK_CHI2_MARGIN = 25.0
-"""Two links are told apart when their costs (chi-square, correlation-inflated) differ by this much...
-"""
-LINK_RELATIVE_MARGIN = 0.05
-"""...and by this fraction of the best one's (the joint-derived model errors are not white noise: a
-few % of cost between two links is not evidence). A decision is final: the other links' statistics are
-then dropped, so it waits for clear evidence."""
-CORRELATION_MAX = 100.0
-WINDOW_SAMPLES = 100
-"""Samples per window of the correlation inflation (1 s at 100 Hz)."""
-MIN_WINDOWS = 5
-"""Windows before the inflation is applied."""
-"""Largest variance inflation applied for autocorrelated residuals."""
 GATE_SIGMAS = 6.0
 """Once a unit's link is decided, samples whose residual exceeds this many std are not absorbed."""
 UNDETERMINED_M = 0.05
@@ -110,160 +79,14 @@ UNDETERMINED_DEG = 20.0
 """Std beyond these (m, deg) counts as undetermined."""
 
 
-@dataclass(frozen=True)
-class OnlineOptions:
-    """Parameters of :class:`OnlineCalibrator` (SI units).
-
-    Attributes:
-        block_s: the joint stream is conditioned and absorbed in blocks of this length, s.
-        margin_s: joint data each side of a block used to condition it (edge effects of the
-            acceleration filter), s.
-        lookback_s: joint data before a block used to condition it: the conditioning's decisions (stamps
-            back on their grid, accelerations from positions or velocities, the noise levels) are made
-            on this much of the stream, not on one short block, so that they do not change from block
-            to block, s.
-        max_delay_s: joint states may arrive out of order up to this late; a block is processed
-            when the joint stream has reached its end plus ``margin_s + max_delay_s``.
-        grid_hz: rate of the link-signal grid the units' samples are interpolated on, Hz.
-        history_s: how long the grid (and each unit's per-chunk statistics, for :meth:`restart_unit`)
-            is kept, s.
-        align_s: span of a unit's stream (with motion) before its time offset is estimated, s.
-        target_position_m, target_rotation_deg: std a unit must reach on every axis.
-        links: candidate links (None: all of the chain's).
-        accel_sigma, gyro_sigma: starting noise levels (m/s^2, rad/s); the fits' residual std take over.
-        solve_every_s: each unit's estimate is refreshed during :meth:`update` after this much new data, s
-            (its link decision, outlier gate and residual statistics follow it).
-    """
-
-    block_s: float = 1.0
-    margin_s: float = 0.5
-    lookback_s: float = 10.0
-    max_delay_s: float = 0.5
-    grid_hz: float = 125.0
-    history_s: float = 60.0
-    align_s: float = 10.0
-    target_position_m: float = 3e-4
-    target_rotation_deg: float = 0.05
-    links: tuple[int, ...] | None = None
-    accel_sigma: float = 0.05
-    gyro_sigma: float = 0.005
-    solve_every_s: float = 2.0
-
-    def __post_init__(self) -> None:
-        for name in ("block_s", "grid_hz", "history_s", "align_s", "target_position_m", "target_rotation_deg"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ConfigError(f"online calibrator: {name} must be a positive number, got {v}")
-        for name in ("margin_s", "max_delay_s", "lookback_s"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v >= 0):
-                raise ConfigError(f"online calibrator: {name} must be a non-negative number, got {v}")
-        if self.history_s < 2 * self.align_s:
-            raise ConfigError("online calibrator: history_s must be at least twice align_s")
-
-
-@dataclass(frozen=True)
-class UnitStatus:
-    """What the stream says about one unit now (see :class:`OnlineCalibrator`).
-
-    Attributes:
-        unit: name; link: the best link so far (None: undecided or no data); link_margin: cost of
-            the second-best link over the best's (inf: no rival left, nan: nothing fitted).
-        pose: the estimate (None: none yet); position_std_m ``(3,)`` m, rotation_std_deg ``(3,)``
-            deg (link axes; inf: undetermined).
-        samples, moving_samples: samples absorbed (on the best link), those while its link moved.
-        missing: '' when the pose is determined, else why not.
-        best_joint: 0-based joint whose excitation would help most (None: nothing to gain).
-        reached: std within the target on every axis; t_last: newest absorbed instant, s.
-        aligned: the unit's time offset is known (its samples are being absorbed).
-    """
-
-    unit: str
-    link: int | None
-    link_margin: float
-    pose: SkinUnitPose | None
-    position_std_m: FloatArray
-    rotation_std_deg: FloatArray
-    samples: int
-    moving_samples: int
-    missing: str
-    best_joint: int | None
-    reached: bool
-    t_last: float
-    aligned: bool
-
-
-@dataclass(frozen=True)
-class _Grid:
-    """The link signals of every link on the streaming calibrator's uniform grid.
-
-    Attributes:
-        t: ``(G,)`` grid instants on the joint clock, s.
-        y: ``(G, n, 18)`` per link ``[u (3), K (9, row-major), w (3), u_g (3)]``
-            (:func:`~skincal.calib.signals.frame_signals`, link frame).
-        dy: ``(G, n, 18)`` their time derivatives (per block: only ``dw`` ``(G, n, 3)``, exact).
-        ok: ``(G,)`` the joint accelerations are reliable there.
-        speed: ``(G, n)`` ``sum_{j <= k} |qd_j|``, rad/s (the clock search without a gyroscope).
-    """
-
-    t: FloatArray
-    y: FloatArray
-    dy: FloatArray
-    ok: np.ndarray
-    speed: FloatArray
-
-
-@dataclass
-class _Unit:
-    links: list[int]
-    Za: FloatArray  # (L, 2, NA, NA): per candidate link, rest and moving samples
-    Zg: FloatArray  # (L, 2, NG, NG)
-    moving: FloatArray  # (L,) moving samples per candidate link
-    pending_t: list[FloatArray] = field(default_factory=list)
-    pending_a: list[FloatArray] = field(default_factory=list)
-    pending_g: list[FloatArray | None] = field(default_factory=list)
-    offset: float | None = None
-    offset_sharpness: float = float("nan")
-    has_gyro: bool | None = None
-    chunks: deque = field(default_factory=deque)  # (t_min, t_max, Za, Zg, moving) per absorb call
-    t_last: float = float("-inf")
-    t_first: float = float("inf")
-    dirty: bool = True
-    solutions: dict[int, stats.Solution] = field(default_factory=dict)
-    # link (0: the common weights of undecided candidates) -> [accel rest, accel moving, gyro rest, gyro moving]
-    sigmas: dict[int, FloatArray] = field(default_factory=dict)
-    decided: bool = False
-    win_sum: FloatArray = field(default_factory=lambda: np.zeros(3))  # normalised residuals of the open window
-    win_n: int = 0
-    win_stat: float = 0.0  # sum over closed windows of n |mean|^2 (3 per window for white residuals)
-    win_count: int = 0
-    outliers: int = 0
-    status: UnitStatus | None = None
-    best_joint_t: float = float("-inf")
-    best_joint: int | None = None
-    peak: FloatArray = field(default_factory=lambda: np.zeros(2))  # largest |reading| seen: accel, gyro
-    peak_count: FloatArray = field(default_factory=lambda: np.zeros(2))  # how often exactly that value came
-    saturated: int = 0
-    t_solved: float = float("-inf")
-    align_tried: float = float("-inf")
-    raw: deque = field(default_factory=deque)  # absorbed (stamps, accel, gyro) within the history, for _realign
-    realigned: int = 0
-    scale_estimated: bool = False
-    # the clock mapping s = t' - offset - drift (t' - t_ref), t' the stamps less their re-sync steps
-    drift: float = 0.0
-    t_ref: float = 0.0
-    steps: ClockSteps | None = None
-    t_seen: float = float("-inf")  # newest stamp searched for re-sync steps
-
-
 class OnlineCalibrator:
     """Streaming calibration of skin units on ``chain`` (module docstring).
 
     ``units``: names of the units to follow (others are refused). ``gravity``: ``(3,)`` base frame,
     m/s^2. ``on_residuals(unit, t, r)`` (set by a change monitor): called per absorbed chunk of a
-    unit whose estimate has settled (:func:`_settled`: decided, std within 1 mm / 0.2 deg), with the
-    chunk's instants ``(M,)`` and accelerometer residuals ``(M, 3)`` divided by the unit's residual
-    std (of its class: resting or moving), at the current estimate.
+    unit whose estimate has settled (:func:`~skincal.calib.online.options.is_settled`: decided, std
+    within 1 mm / 0.2 deg), with the chunk's instants ``(M,)`` and accelerometer residuals ``(M, 3)``
+    divided by the unit's residual std (of its class: resting or moving), at the current estimate.
     """
 
     def __init__(
@@ -291,7 +114,7 @@ class OnlineCalibrator:
         self.gravity = np.asarray(gravity, dtype=float).reshape(3)
         L = len(links)
         self._u = {
-            u: _Unit(
+            u: UnitState(
                 list(links), np.zeros((L, 2, stats.NA, stats.NA)), np.zeros((L, 2, stats.NG, stats.NG)), np.zeros(L)
             )
             for u in names
@@ -301,8 +124,8 @@ class OnlineCalibrator:
         self._jqd: list[FloatArray | None] = []
         self._joints: tuple[FloatArray, FloatArray, FloatArray] | None = None
         self._frontier: float | None = None  # end of the processed joint blocks
-        self._grid: list[_Grid] = []  # per block, every link
-        self._grid_cat: _Grid | None = None
+        self._grid: list[Grid] = []  # per block, every link
+        self._grid_cat: Grid | None = None
         self.q_now: FloatArray | None = None
         self.late = 0
         self.joint_active_s = np.zeros(chain.n_joints)
@@ -449,11 +272,11 @@ class OnlineCalibrator:
         u, K, w, dw, ug = frame_signals(self.chain.link_motion(qg, qdg, qddg), self.gravity)  # (G, n, ...) links 1..n
         y = np.concatenate([u, K.reshape(*K.shape[:2], 9), w, ug], axis=2)
         self.joint_active_s += (np.abs(qdg) > JOINT_ACTIVE_RPS).sum(axis=0) * dt
-        self._grid.append(_Grid(tg, y, dw, interp.reliable(tg), np.cumsum(np.abs(qdg), axis=1)))
+        self._grid.append(Grid(tg, y, dw, interp.reliable(tg), np.cumsum(np.abs(qdg), axis=1)))
         self._grid_cat = None
 
-    def _grid_arrays(self) -> _Grid | None:
-        """The kept grid blocks as one :class:`_Grid` whose ``dy`` holds the time derivatives of the
+    def _grid_arrays(self) -> Grid | None:
+        """The kept grid blocks as one :class:`Grid` whose ``dy`` holds the time derivatives of the
         table (central differences along the whole grid, continuous across blocks; ``w``'s exact)."""
         if not self._grid:
             return None
@@ -462,161 +285,50 @@ class OnlineCalibrator:
             y = np.concatenate([b.y for b in self._grid])
             dy = np.gradient(y, tg, axis=0) if tg.size > 1 else np.zeros_like(y)
             dy[..., 12:15] = np.concatenate([b.dy for b in self._grid])  # dw/ds from the kinematics
-            self._grid_cat = _Grid(
+            self._grid_cat = Grid(
                 tg, y, dy, np.concatenate([b.ok for b in self._grid]), np.concatenate([b.speed for b in self._grid])
             )
         return self._grid_cat
-
-    def _take_pending(self, st: _Unit) -> tuple[FloatArray, FloatArray, FloatArray | None]:
-        t = np.concatenate(st.pending_t) if st.pending_t else np.zeros(0)
-        a = np.concatenate(st.pending_a) if st.pending_a else np.zeros((0, 3))
-        g = np.concatenate(st.pending_g) if st.has_gyro and st.pending_g else None  # type: ignore[arg-type]
-        order = np.argsort(t, kind="stable")
-        return t[order], a[order], None if g is None else g[order]
-
-    def _align(self, name: str, st: _Unit, grid: _Grid, t: FloatArray, a: FloatArray,
-               g: FloatArray | None) -> None:  # fmt: skip
-        tg, w, speed = grid.t, grid.y[..., 12:15], grid.speed
-        o = self.options
-        inside = (t >= tg[0]) & (t <= tg[-1])
-        if inside.sum() < 20 or t[inside][-1] - t[inside][0] < o.align_s:
-            return
-        lo, hi = np.searchsorted(tg, [t[inside][0], t[inside][-1]])
-        ang = np.linalg.norm(w[lo:hi], axis=2)
-        if ang.shape[0] < 20 or float(ang.max()) < 5 * rest.MOVING_RPS:
-            return  # no motion to align on yet
-        profile = motion_profile(tg[lo:hi], ang, speed[lo:hi])
-        search = coarse_time_offset(profile, t[inside], a[inside], None if g is None else g[inside])
-        span = t[inside][-1] - t[inside][0]
-        if search.sharpness < ALIGN_SHARPNESS and span < ALIGN_WAIT_FRACTION * o.history_s:
-            return  # the peak is not distinct yet: wait for more motion (the samples stay pending)
-        st.offset, st.offset_sharpness = float(search.offset_s), float(search.sharpness)
-        st.t_ref = float(t[inside][0])
-        st.steps = find_clock_steps(t)
-        st.t_seen = float(t[-1])
 
     def _absorb_unit(self, name: str, final: bool = False) -> int:
         st = self._u[name]
         grid = self._grid_arrays()
         if grid is None or not st.pending_t:
             return 0
-        t, a, g = self._take_pending(st)
+        t, a, g = take_pending(st)
         st.pending_t, st.pending_a, st.pending_g = [], [], []
         if st.offset is None:
             if final or t[-1] - st.align_tried >= ALIGN_RETRY_S:
                 st.align_tried = float(t[-1])
-                self._align(name, st, grid, t, a, g)
+                align(st, grid, t, a, g, self.options)
             if st.offset is None:
                 if final:
                     st.offset, st.offset_sharpness = 0.0, 0.0  # no motion to align on: the stamps as they are
                 else:
-                    self._keep(st, t, a, g)
+                    keep_pending(st, t, a, g)
                     return 0
         assert st.offset is not None
-        self._track_steps(st, t)
-        s = self._instants(st, t)
+        track_steps(st, t)
+        s = instants(st, t)
         tg = grid.t
         late = s < tg[0]
         self.late += int(late.sum())
         ready = (s >= tg[0]) & (s <= tg[-1])
         if not final:
-            self._keep(st, t[~ready & ~late], a[~ready & ~late], None if g is None else g[~ready & ~late])
+            keep_pending(st, t[~ready & ~late], a[~ready & ~late], None if g is None else g[~ready & ~late])
         if not ready.any():
             return 0
         st.raw.append((t[ready], a[ready], None if g is None else g[ready]))
-        while st.raw and self._instants(st, st.raw[0][0][-1:])[0] < tg[0]:
+        while st.raw and instants(st, st.raw[0][0][-1:])[0] < tg[0]:
             st.raw.popleft()  # its part of the grid is gone: it could not be absorbed again
         return self._absorb(name, st, grid, s[ready], a[ready], None if g is None else g[ready])
 
-    @staticmethod
-    def _track_steps(st: _Unit, t: FloatArray) -> None:
-        """Search the unit's stamps ``t`` newer than any seen for further re-sync steps."""
-        if st.steps is not None:
-            new = t > st.t_seen
-            if new.any():
-                st.steps = st.steps.extend(st.t_seen, t[new])
-                st.t_seen = float(t[new][-1])
-
-    @staticmethod
-    def _instants(st: _Unit, t: FloatArray) -> FloatArray:
-        """Joint-clock instants of the unit's stamps ``t`` under its clock mapping (:mod:`skincal.calib.timing`:
-        re-sync steps removed, then offset and drift)."""
-        assert st.offset is not None
-        if st.steps is not None:
-            t = st.steps.correct(t)
-        return motion_instants(t, st.offset, st.drift, st.t_ref)
-
-    def _realign(self, st: _Unit, tau: float, drift: float) -> None:
-        """Compose the unit's clock mapping with the residual offset ``tau`` (s) and drift and absorb its kept
-        raw samples again from scratch."""
-        assert st.offset is not None
-        st.offset, st.drift = compose_clock(st.offset, st.drift, tau, drift)
-        st.realigned += 1
-        raw = list(st.raw)
-        if st.steps is None and raw:  # re-sync steps seen since the alignment
-            st.steps = find_clock_steps(np.concatenate([r[0] for r in raw]))
-            st.t_seen = float(raw[-1][0][-1])
-        st.raw = deque()
-        L = len(st.links)
-        st.Za, st.Zg, st.moving = np.zeros_like(st.Za), np.zeros_like(st.Zg), np.zeros(L)
-        st.chunks = deque()
-        st.solutions, st.status, st.dirty = {}, None, True
-        st.win_sum, st.win_n, st.win_stat, st.win_count = np.zeros(3), 0, 0.0, 0
-        st.t_last, st.t_first = float("-inf"), float("inf")
-        for t, a, g in raw[::-1]:
-            st.pending_t.insert(0, t)
-            st.pending_a.insert(0, a)
-            st.pending_g.insert(0, g)
-
-    @staticmethod
-    def _keep(st: _Unit, t: FloatArray, a: FloatArray, g: FloatArray | None) -> None:
-        if t.size:
-            st.pending_t.append(t)
-            st.pending_a.append(a)
-            st.pending_g.append(g)
-
-    @staticmethod
-    def _signals_at(grid: _Grid, s: FloatArray, links: Sequence[int]):
-        """Link signals of ``links`` at instants ``s`` (M,) from the grid, as ``mle``'s signal table does
-        (:func:`~skincal.calib.signals.hermite`: cubic Hermite for the values with their derivatives,
-        linear for the derivatives). Returns u, K, w, dw_dt, du_dt, dK_dt, u_g (each ``(L, M, ...)``)
-        and ok ``(M,)``."""
-        y, dy, i = hermite(grid.t, grid.y, grid.dy, s, np.asarray(links) - 1)  # (M, L, 18)
-        y, dy = np.moveaxis(y, 1, 0), np.moveaxis(dy, 1, 0)
-        L, M = y.shape[:2]
-        sig = (
-            y[..., :3], y[..., 3:12].reshape(L, M, 3, 3), y[..., 12:15], dy[..., 12:15],
-            dy[..., :3], dy[..., 3:12].reshape(L, M, 3, 3), y[..., 15:18],
-        )  # fmt: skip
-        return (*sig, grid.ok[i] & grid.ok[i + 1])
-
-    @staticmethod
-    def _unsaturated(st: _Unit, a: FloatArray, g: FloatArray | None) -> np.ndarray:
-        """``(M,)`` samples below the sensors' saturation: a largest reading that recurs exactly (a
-        clipped register) is taken as the range, and every sample reaching it on any axis is dropped."""
-        keep = np.ones(a.shape[0], dtype=bool)
-        for i, x in enumerate((a, g)):
-            if x is None or x.size == 0:
-                continue
-            if np.abs(x).max() < SATURATION_FLOOR[i] and st.peak_count[i] < 2:
-                continue  # a quantised reading at rest repeats its largest value too: not a range
-            m = np.abs(x)
-            top = float(m.max())
-            if top > st.peak[i]:
-                st.peak[i], st.peak_count[i] = top, float((m == top).sum())
-            else:
-                st.peak_count[i] += float((m == st.peak[i]).sum())
-            if st.peak_count[i] >= 2 and st.peak[i] >= SATURATION_FLOOR[i]:
-                keep &= np.all(m < st.peak[i], axis=1)
-        st.saturated += int((~keep).sum())
-        return keep
-
-    def _absorb(self, name: str, st: _Unit, grid: _Grid, s: FloatArray, a: FloatArray,
+    def _absorb(self, name: str, st: UnitState, grid: Grid, s: FloatArray, a: FloatArray,
                 g: FloatArray | None) -> int:  # fmt: skip
-        unsat = self._unsaturated(st, a, g)
+        unsat = unsaturated(st, a, g)
         if not unsat.all():
             s, a, g = s[unsat], a[unsat], None if g is None else g[unsat]
-        u, K, w, dw, du, dK, ug, ok = self._signals_at(grid, s, st.links)
+        u, K, w, dw, du, dK, ug, ok = signals_at(grid, s, st.links)
         if not ok.all():
             s, a, u, K, w, dw, du, dK = s[ok], a[ok], u[:, ok], K[:, ok], w[:, ok], dw[:, ok], du[:, ok], dK[:, ok]
             ug = ug[:, ok]
@@ -626,10 +338,10 @@ class OnlineCalibrator:
         moving = link_moving(w, dw)  # (L, M)
         sol = st.solutions.get(st.links[0]) if st.decided else None
         if sol is not None:
-            r = self._residuals(sol, a, u[0], K[0], du[0], dK[0], ug[0], s - st.t_ref)
+            r = residuals(sol, a, u[0], K[0], du[0], dK[0], ug[0], s - st.t_ref)
             sig = st.sigmas[st.links[0]]
             rn = r / np.maximum(np.where(moving[0], sig[1], sig[0]), 1e-9)[:, None]
-            settled = st.status is not None and _settled(st.status)
+            settled = st.status is not None and is_settled(st.status)
             keep = np.linalg.norm(rn, axis=1) <= GATE_SIGMAS * np.sqrt(3.0) if settled else np.ones(s.size, bool)
             if self.on_residuals is not None and settled:
                 self.on_residuals(name, s, rn)
@@ -639,7 +351,7 @@ class OnlineCalibrator:
                 du, dK, ug = du[:, keep], dK[:, keep], ug[:, keep]
                 g, moving = None if g is None else g[keep], moving[:, keep]
                 rn = rn[keep]
-            self._window_means(st, rn)
+            window_means(st, rn)
         if s.size == 0:
             return 0
         L, M = u.shape[0], s.size
@@ -664,181 +376,13 @@ class OnlineCalibrator:
         st.dirty = True
         return int(M)
 
-    @staticmethod
-    def _residuals(
-        sol: stats.Solution,
-        a: FloatArray,
-        u: FloatArray,
-        K: FloatArray,
-        du: FloatArray,
-        dK: FloatArray,
-        ug: FloatArray,
-        elapsed: FloatArray,
-    ) -> FloatArray:
-        """``(M, 3)`` residuals of equation (1) of :mod:`~skincal.calib.online.stats` at ``sol``, m/s^2
-        (``elapsed`` ``(M,)`` = ``s - t_ref``, s)."""
-        G = sol.R @ np.linalg.inv(sol.A)
-        h = G @ sol.b
-        T = (sol.tau + sol.drift * elapsed)[:, None]  # residual clock error per sample, s
-        Kp = np.einsum("mij,j->mi", (1.0 + sol.gravity_scale) * K, sol.p) + T * np.einsum("mij,j->mi", dK, sol.p)
-        return a @ G.T - h - Kp - du * T - sol.gravity_scale * (u - ug) - u
-
     # ---------------------------------------------------------------- estimates
-    @staticmethod
-    def _window_means(st: _Unit, rn: FloatArray) -> None:
-        """Add normalised residuals ``rn`` ``(M, 3)`` to the unit's windows of :data:`WINDOW_SAMPLES`."""
-        i = 0
-        while i < rn.shape[0]:
-            take = min(WINDOW_SAMPLES - st.win_n, rn.shape[0] - i)
-            st.win_sum += rn[i : i + take].sum(axis=0)
-            st.win_n += take
-            i += take
-            if st.win_n >= WINDOW_SAMPLES:
-                st.win_stat += float(st.win_sum @ st.win_sum) / st.win_n
-                st.win_count += 1
-                st.win_sum, st.win_n = np.zeros(3), 0
-
-    def _inflation(self, st: _Unit) -> float:
-        """Variance inflation for correlated residuals: the variance of the residuals' means over windows
-        of :data:`WINDOW_SAMPLES` consecutive samples against white noise's (``n |mean|^2`` averages 3
-        for white residuals of unit variance). It covers every correlation shorter than a window, incl.
-        the slow errors of joint-derived accelerations, which a lag-1 autocorrelation misses."""
-        if st.win_count < MIN_WINDOWS:
-            return 1.0
-        return float(np.clip(st.win_stat / (3.0 * st.win_count), 1.0, CORRELATION_MAX))
-
-    def _weighted(self, st: _Unit, k: int, sig: FloatArray) -> tuple[FloatArray, FloatArray | None]:
-        """Candidate ``k``'s Grams with each class weighted by its noise level (so ``solve`` runs with 1, 1),
-        corrected for the readings' own noise.
-
-        The readings are regressors of ``G`` (``R``): their white noise adds ``n sigma^2`` to each
-        diagonal element of the ``vec(G)`` block of a class's Gram (``sum a a^T = sum f f^T + n
-        sigma^2 I``), which biases ``G`` toward zero along axes with little signal (errors in
-        variables: a unit axis that never sees gravity at rest would read a scale several % too
-        large). The rest class's residual std is the sensor noise (nothing else is left at rest), so
-        ``n sigma_rest^2`` is removed from that block of both classes (bias-corrected least squares),
-        once the unit's link is decided (a wrong candidate's rest residual is not the sensor's noise).
-        """
-
-        def corrected(Z: FloatArray, noise: float) -> FloatArray:
-            Z = Z.copy()
-            d = np.arange(9)
-            Z[d, d] -= min(Z[9, 9] * noise**2, 0.5 * float(np.min(Z[d, d])))  # Z[9, 9]: the class's samples
-            return Z
-
-        if not st.decided:  # a wrong candidate's rest residual is not the sensor noise: no correction yet
-            Za = st.Za[k, REST] / sig[0] ** 2 + st.Za[k, MOVING] / sig[1] ** 2
-            Zg = st.Zg[k, REST] / sig[2] ** 2 + st.Zg[k, MOVING] / sig[3] ** 2 if st.has_gyro else None
-            return Za, Zg
-        Za = corrected(st.Za[k, REST], sig[0]) / sig[0] ** 2 + corrected(st.Za[k, MOVING], sig[0]) / sig[1] ** 2
-        Zg = None
-        if st.has_gyro:
-            Zg = corrected(st.Zg[k, REST], sig[2]) / sig[2] ** 2 + corrected(st.Zg[k, MOVING], sig[2]) / sig[3] ** 2
-        return Za, Zg
-
-    def _class_sigmas(self, st: _Unit, k: int, sol: stats.Solution, prior: FloatArray) -> FloatArray:
-        """Residual std per class ``[accel rest, accel moving, gyro rest, gyro moving]`` at ``sol``
-        (a class with too few samples keeps ``prior``'s value)."""
-        out = prior.copy()
-        for c in (REST, MOVING):
-            n = st.Za[k, c, 9, 9]
-            if n >= 20:
-                out[c] = max(
-                    np.sqrt(
-                        stats.residual_sum(st.Za[k, c], sol.x_a)
-                        / max(3 * n - 16.0 * n / max(st.Za[k, :, 9, 9].sum(), 1), 1.0)
-                    ),
-                    1e-5,
-                )
-            ng = st.Zg[k, c, 9, 9]
-            if st.has_gyro and ng >= 20:
-                out[2 + c] = max(
-                    np.sqrt(
-                        stats.residual_sum(st.Zg[k, c], sol.x_g)
-                        / max(3 * ng - 13.0 * ng / max(st.Zg[k, :, 9, 9].sum(), 1), 1.0)
-                    ),
-                    1e-6,
-                )
-        return out
-
-    def _solve(self, st: _Unit) -> None:
-        """Solve every candidate link. Undecided, all candidates are weighted with the same noise
-        levels (those the best candidate fitted last time): a wrong link must not set its own weights,
-        or it could shrink one class's noise level until it fits that class alone. Decided, the one
-        link's fit sets its own levels."""
-        if not st.dirty:
-            return
-        o = self.options
-        default = np.array([o.accel_sigma, o.accel_sigma, o.gyro_sigma, o.gyro_sigma])
-        common = st.sigmas.get(0, default)
-        sols: dict[int, stats.Solution] = {}
-        for k, link in enumerate(st.links):
-            if st.Za[k, :, 9, 9].sum() < 10:
-                continue
-            prev = st.solutions.get(link)
-            sig = st.sigmas.get(link, common) if st.decided else common
-            Za, Zg = self._weighted(st, k, sig)
-            sol = stats.solve(Za, Zg, 1.0, 1.0, R0=None if prev is None else prev.R)
-            if sol is None:
-                continue
-            if st.decided:
-                for _ in range(1 if prev is not None else 2):  # re-weight with the fit's own noise levels
-                    sig = self._class_sigmas(st, k, sol, sig)
-                    Za, Zg = self._weighted(st, k, sig)
-                    sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R) or sol
-                # like mle: the scale/misalignment is kept only where the data determine every element of it
-                st.scale_estimated = bool(np.sqrt(np.clip(np.diag(sol.cov)[3:12], 0.0, None)).max() <= SCALE_STD_LIMIT)
-                if not st.scale_estimated:
-                    sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R, scale_prior=stats.SCALE_FIXED) or sol
-            st.sigmas[link] = sig if st.decided else self._class_sigmas(st, k, sol, common)
-            sols[link] = sol
-        st.solutions = sols
-        if sols and not st.decided:
-            best = min(sols, key=lambda link: self._cost(st, link, common))
-            st.sigmas[0] = st.sigmas[best]  # the weights of the next solve of every candidate
-        st.dirty = False
-
-    def _decide(self, st: _Unit) -> tuple[int | None, float, list[int]]:
-        """Best link, its margin and the links still ambiguous with it."""
-        if not st.solutions:
-            return None, float("nan"), []
-        if len(st.solutions) == 1:
-            (link,) = st.solutions
-            return link, float("inf"), [link]
-        # every candidate on one chi-square scale: the noise levels they were all weighted with
-        ref = st.sigmas.get(0, np.min(np.stack([st.sigmas[k] for k in st.solutions]), axis=0))
-        costs = {k: self._cost(st, k, ref) for k in st.solutions}
-        best_link = min(costs, key=costs.__getitem__)
-        c0 = costs[best_link]
-        kappa = self._inflation(st)
-        others = sorted(v for k, v in costs.items() if k != best_link)
-        margin = others[0] / c0 if c0 > 0 else float("inf")
-        ambiguous = [k for k, v in costs.items() if v - c0 < max(LINK_CHI2_MARGIN * kappa, LINK_RELATIVE_MARGIN * c0)]
-        # links joined by joints that have not moved yet are one rigid body: their costs differ only by the
-        # noise of those joints' derived accelerations, which is no evidence
-        active = self.joint_active_s >= JOINT_ACTIVE_MIN_S
-        for k in costs:
-            lo, hi = min(k, best_link), max(k, best_link)
-            if k not in ambiguous and not active[lo:hi].any():  # joints lo+1..hi (0-based lo..hi-1)
-                ambiguous.append(k)
-        ambiguous.sort()
-        return best_link, float(margin), sorted(ambiguous)
-
-    def _cost(self, st: _Unit, link: int, sig: FloatArray) -> float:
-        """Chi-square of ``link``'s fit with the noise levels ``sig`` (:meth:`_class_sigmas` order)."""
-        sol = st.solutions[link]
-        k = st.links.index(link)
-        cost = sum(stats.residual_sum(st.Za[k, c], sol.x_a) / sig[c] ** 2 for c in (REST, MOVING))
-        if st.has_gyro:
-            cost += sum(stats.residual_sum(st.Zg[k, c], sol.x_g) / sig[2 + c] ** 2 for c in (REST, MOVING))
-        return float(cost)
-
     def _status(self, name: str, advise: bool = True) -> UnitStatus:
         st = self._u[name]
         o = self.options
         inf3 = np.full(3, np.inf)
-        self._solve(st)
-        link, margin, ambiguous = self._decide(st)
+        solve_unit(st, self.options)
+        link, margin, ambiguous = decide(st, self.joint_active_s)
         if link is None:
             why = "no samples yet" if not np.isfinite(st.t_last) and st.offset is not None else (
                 "waiting for motion to align its clock" if st.offset is None else "too few samples"
@@ -848,14 +392,14 @@ class OnlineCalibrator:
                               st.t_last, st.offset is not None)  # fmt: skip
         sol = st.solutions[link]
         k = st.links.index(link)
-        kappa = self._inflation(st)
+        kappa = inflation(st)
         cov = sol.pose_covariance() * kappa
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         pos_std, rot_std = std[:3], np.degrees(std[3:])
         determined = bool(np.all(pos_std < UNDETERMINED_M) and np.all(rot_std < UNDETERMINED_DEG))
         undecided = len(ambiguous) > 1
-        if determined and not undecided and st.realigned < MAX_REALIGN and self._clock_off(st, sol):
-            self._realign(st, sol.tau, sol.drift)
+        if determined and not undecided and st.realigned < MAX_REALIGN and clock_off(st, sol):
+            realign(st, sol.tau, sol.drift)
             self._absorb_unit(name)  # the kept samples again, at once: the status (and a result) never shows the gap
             return self._status(name, advise)
         if not undecided and not st.decided and len(st.links) > 1 and st.moving[k] > MIN_MOVING and determined:
@@ -879,27 +423,14 @@ class OnlineCalibrator:
             if undecided:
                 best_joint = max(ambiguous) - 1
             elif advise:  # the joint to move next (a design computation a result does not need)
-                best_joint = self._best_joint(name, st, link, sol)
+                best_joint = design.best_joint(self.chain, self.gravity, self.q_now, st, link, sol)
         pose = SkinUnitPose(link, sol.R, sol.p)
         status = UnitStatus(name, link, margin, pose, pos_std, rot_std, int(st.Za[k, :, 9, 9].sum()), int(st.moving[k]),
                             missing, best_joint, reached, st.t_last, True)  # fmt: skip
         st.status = status
         return status
 
-    @staticmethod
-    def _clock_off(st: _Unit, sol: stats.Solution) -> bool:
-        """The residual clock error ``tau + d (s - t_ref)`` at either end of the unit's data exceeds
-        :data:`REALIGN_S` and is determined (its std below a quarter of it)."""
-        i = [stats.TAU, stats.DRIFT]
-        C = sol.cov[np.ix_(i, i)]
-        for s in (st.t_first, st.t_last):
-            e = np.array([1.0, s - st.t_ref])
-            T = sol.tau + sol.drift * e[1]
-            if abs(T) > REALIGN_S and np.sqrt(max(float(e @ C @ e), 0.0)) < 0.25 * abs(T):
-                return True
-        return False
-
-    def _keep_only(self, st: _Unit, link: int) -> None:
+    def _keep_only(self, st: UnitState, link: int) -> None:
         k = st.links.index(link)
         st.links = [link]
         st.Za, st.Zg, st.moving = st.Za[k : k + 1].copy(), st.Zg[k : k + 1].copy(), st.moving[k : k + 1].copy()
@@ -912,23 +443,18 @@ class OnlineCalibrator:
         return {u: self._status(u) for u in self.units}
 
     # ---------------------------------------------------------------- design support
-    @staticmethod
-    def _normal(sol: stats.Solution, Za: FloatArray, Zg: FloatArray | None, sig: FloatArray) -> FloatArray:
-        """Normal matrix ``(NP, NP)`` of the Grams ``Za``, ``Zg`` of moving samples at ``sol`` (no prior)."""
-        return stats.normal_matrix(sol.R, sol.state, Za / sig[1] ** 2, None if Zg is None else Zg / sig[3] ** 2)
-
     def information(self, unit: str) -> tuple[int | None, FloatArray]:
         """``(link, (6, 6))``: the current information about the pose ``[rotation (rad, unit axes),
         position (m)]`` of ``unit`` (the inverse of the marginal covariance, correlation-inflated);
         zeros when nothing is known yet."""
         st = self._u[unit]
-        self._solve(st)
-        link, _, _ = self._decide(st)
+        solve_unit(st, self.options)
+        link, _, _ = decide(st, self.joint_active_s)
         if link is None:
             return None, np.zeros((6, 6))
         sol = st.solutions[link]
         idx = np.r_[0:3, 15:18]
-        C = sol.cov[np.ix_(idx, idx)] * self._inflation(st)
+        C = sol.cov[np.ix_(idx, idx)] * inflation(st)
         return link, np.linalg.inv(C)
 
     def pose_information_rate(
@@ -939,46 +465,13 @@ class OnlineCalibrator:
         ``link`` at its current estimate (the full-parameter information's Schur complement, i.e.
         with the IMU errors and offset as nuisance). Zeros when the unit has no estimate yet."""
         st = self._u[unit]
-        self._solve(st)
+        solve_unit(st, self.options)
         sol = st.solutions.get(link)
         if sol is None:
             return np.zeros((6, 6))
-        H = self._design_normal(sol, st.sigmas[link], link, q, qd, qdd, dt, st.has_gyro is not False)
-        return _pose_block(H)
-
-    def _design_normal(
-        self, sol: stats.Solution, sig: FloatArray, link: int, q, qd, qdd, dt: float, gyro: bool
-    ) -> FloatArray:
-        u, K, w, dw, ug = frame_signals(self.chain.link_motion(q, qd, qdd, upto=link), self.gravity, link)
-        du = np.gradient(u, dt, axis=0) if u.shape[0] > 1 else np.zeros_like(u)
-        dK = np.gradient(K, dt, axis=0) if u.shape[0] > 1 else np.zeros_like(K)
-        f = ug + (1.0 + sol.gravity_scale) * (u - ug + np.einsum("mij,j->mi", K, sol.p))
-        a = (f @ sol.R) @ sol.A.T + sol.b
-        Za = stats.gram(stats.accel_rows(a, u, K, du, dK, ug))
-        Zg = None
-        if gyro:
-            g = w @ sol.R + sol.gyro_bias
-            Zg = stats.gram(stats.gyro_rows(g, w, dw))
-        return self._normal(sol, Za, Zg, sig)
-
-    def _best_joint(self, name: str, st: _Unit, link: int, sol: stats.Solution) -> int | None:
-        """The joint (0-based, up to ``link``) whose 2 s excitation at the current posture adds the
-        most D-optimal information (log det of the pose's marginal information); cached for 2 s."""
-        if self.q_now is None:
-            return None
-        if st.t_last - st.best_joint_t < 2.0 and st.best_joint is not None:
-            return st.best_joint
-        H0 = sol.information
-        base = _logdet(_pose_block(H0))
-        best, gain = None, 0.0
-        for j in range(link):
-            q, qd, qdd, dt = excitation(self.chain, self.q_now, j)
-            dH = self._design_normal(sol, st.sigmas[link], link, q, qd, qdd, dt, st.has_gyro is not False)
-            g = _logdet(_pose_block(H0 + dH)) - base
-            if g > gain:
-                best, gain = j, g
-        st.best_joint, st.best_joint_t = best, st.t_last
-        return best
+        H = design.design_normal(self.chain, self.gravity, sol, st.sigmas[link], link, q, qd, qdd, dt,
+                                 st.has_gyro is not False)  # fmt: skip
+        return design.pose_block(H)
 
     # ---------------------------------------------------------------- moved units
     def restart_unit(self, unit: str, t_from: float) -> None:
@@ -1015,7 +508,7 @@ class OnlineCalibrator:
                 failed[name] = s.missing or "no estimate"
                 continue
             sol = st.solutions[s.link]
-            kappa = self._inflation(st)
+            kappa = inflation(st)
             cov = sol.pose_covariance() * kappa
             idx_b = slice(12, 15)
             G = sol.R @ np.linalg.inv(sol.A)
@@ -1087,99 +580,3 @@ class OnlineCalibrator:
                 e["T_link_su_after"] = np.asarray(units[name].pose.T_link_su, dtype=float).tolist()
                 e["t_recalibrated_s"] = float(self._u[name].t_last)
         return out
-
-
-SETTLED_POSITION_M = 1e-3
-SETTLED_ROTATION_DEG = 0.2
-"""Std (every axis) from which a unit's estimate is stable enough to gate outliers and to be watched
-for a move (looser than a calibration target: a unit that never reaches 0.3 mm is still watched)."""
-
-
-def _settled(status: UnitStatus) -> bool:
-    """The unit's link is decided and its pose known to :data:`SETTLED_POSITION_M` / :data:`SETTLED_ROTATION_DEG`."""
-    return bool(
-        status.pose is not None
-        and not status.missing
-        and np.all(status.position_std_m <= SETTLED_POSITION_M)
-        and np.all(status.rotation_std_deg <= SETTLED_ROTATION_DEG)
-    )
-
-
-def _pose_block(H: FloatArray) -> FloatArray:
-    """Information about ``[dtheta, p]`` with the other unknowns as nuisance (Schur complement)."""
-    idx = np.r_[0:3, 15:18]
-    rest = np.setdiff1d(np.arange(H.shape[0]), idx)
-    A, B, D = H[np.ix_(idx, idx)], H[np.ix_(idx, rest)], H[np.ix_(rest, rest)]
-    return A - B @ np.linalg.pinv(D) @ B.T
-
-
-def _logdet(M: FloatArray) -> float:
-    sign, ld = np.linalg.slogdet(M + 1e-12 * np.eye(M.shape[0]))
-    return float(ld) if sign > 0 else -np.inf
-
-
-def excitation(
-    chain: SerialChain, q0: FloatArray, joint: int, duration: float = 2.0, fraction: float = 0.3, rate_hz: float = 100.0
-) -> tuple[FloatArray, FloatArray, FloatArray, float]:
-    """A short excitation of ``joint`` from ``q0``: ``qd_j = A sin(2 pi t / duration)`` with
-    ``A = fraction`` of its velocity limit (one period: starts and ends at rest), sampled at
-    ``rate_hz``. Returns ``q, qd, qdd`` ``(M, n)`` and the period ``dt``."""
-    dt = 1.0 / rate_hz
-    t = dt * np.arange(int(duration * rate_hz))
-    w = 2 * np.pi / duration
-    vmax = chain.velocity_limit[joint] if chain.velocity_limit is not None else 1.0
-    A = fraction * float(vmax)
-    q = np.repeat(np.asarray(q0, dtype=float)[None], t.size, axis=0)
-    qd, qdd = np.zeros_like(q), np.zeros_like(q)
-    q[:, joint] += A / w * (1 - np.cos(w * t))
-    qd[:, joint] = A * np.sin(w * t)
-    qdd[:, joint] = A * w * np.cos(w * t)
-    return q, qd, qdd, dt
-
-
-def replay(
-    dataset: Dataset,
-    calibrator: OnlineCalibrator,
-    chunk_s: float = 0.1,
-    speed: float | None = None,
-    on_chunk: Callable[[float], bool | None] | None = None,
-) -> None:
-    """Feed ``dataset``'s joint states and IMU streams to ``calibrator`` in arrival order, ``chunk_s``
-    of data at a time (each unit's samples by their stamps), at ``speed`` times real time (None: as
-    fast as possible), calling ``update()`` per chunk and ``on_chunk(t_end)``; stops early when
-    ``on_chunk`` returns True; ``finish()`` at the end (also after an early stop)."""
-    if dataset.joints is None:
-        raise ConfigError("online calibration needs the dataset's joint states")
-    if not (np.isfinite(chunk_s) and chunk_s > 0):
-        raise ConfigError(f"chunk must be a positive number of seconds, got {chunk_s}")
-    j = dataset.joints
-    tj = np.asarray(j.t, dtype=float)
-    streams = {u: dataset.imu[u] for u in calibrator.units if u in dataset.imu}
-    t0 = float(tj[0])
-    t_end = max([float(tj[-1])] + [float(np.asarray(s.t)[-1]) for s in streams.values() if len(s.t)])
-    wall0 = time.perf_counter()
-    cursor_j = 0
-    cursors = dict.fromkeys(streams, 0)
-    edge = t0
-    while edge < t_end:
-        edge = min(edge + chunk_s, t_end)
-        last = edge >= t_end
-        k = int(np.searchsorted(tj, edge, side="right")) if not last else tj.size
-        if k > cursor_j:
-            calibrator.add_joint_states(tj[cursor_j:k], j.q[cursor_j:k], j.qd[cursor_j:k])
-            cursor_j = k
-        for u, s in streams.items():
-            ts = np.asarray(s.t, dtype=float)
-            k = int(np.searchsorted(ts, edge, side="right")) if not last else ts.size
-            c = cursors[u]
-            if k > c:
-                calibrator.add_imu(u, ts[c:k], s.accel[c:k], None if s.gyro is None else s.gyro[c:k])
-                cursors[u] = k
-        calibrator.update()
-        if speed is not None and speed > 0:
-            ahead = (edge - t0) / speed - (time.perf_counter() - wall0)
-            if ahead > 0:
-                time.sleep(ahead)
-        if on_chunk is not None and on_chunk(edge):
-            break
-    calibrator.finish()

@@ -1,55 +1,13 @@
-"""Calibration result files: JSON ``format = "skincal-result"``, ``version = 1`` (``docs/interfaces.md``).
-
-Example::
-
-    {"format": "skincal-result", "version": 1, "method": "mle", "robot": "panda",
-     "dataset_sha256": "...", "runtime_s": 0.41,
-     "units": {"su1": {"link": 3, "position_m": [0.05, 0.0, 0.12], "quaternion_wxyz": [1, 0, 0, 0],
-                       "observable": true, "position_std_m": [1e-5, 1e-5, 2e-5],
-                       "rotation_std_deg": [0.01, 0.01, 0.02], "warnings": []}}}
-
-Poses are in link frame ``link`` (a URDF robot's link frame, or DH frame {link}; ``docs/interfaces.md``),
-named by ``link_name`` too; quaternions are (w, x, y, z). The IMU calibration of a unit
-(``accel_bias_mps2``, ``accel_scale_misalignment``, ``time_offset_s``, ``clock_drift_ppm``,
-``gyro_bias_rps``, their std, ...: :data:`~skincal.data.imu_calibration.IMU_KEYS`) is written next to
-the contract fields from ``UnitResult.imu`` and read back into it (a unit with none of those fields
-gets ``imu = None``; a malformed one is refused).
-
-The facts every method gives have typed fields, under the file's keys (checked on write and read):
-``CalibrationResult.failed_units`` (``failed_units``), ``.notes`` (``notes``), ``.events`` (``events``,
-:class:`~skincal.data.events.MoveEvent`), ``.reference`` (``reference``); ``UnitResult.link_confidence``,
-``.pose_covariance`` (6x6, ``null`` -> NaN), ``.notes``, ``.moved_at_s``. Other fields beyond the
-contract (per unit, e.g. ``dh6``; at the top level, e.g. ``seed``) are the method's own: written next to
-the contract fields and read back into ``extras`` (which may not hold a typed fact). In extras,
-NumPy arrays become JSON lists (non-finite numbers become ``null``) and numeric lists come back as
-float64 arrays (``null`` -> NaN). Floats are written with full (round-trip) precision.
-
-Undetermined std components: a NaN component of ``position_std_m`` / ``rotation_std_deg`` is written
-as ``null`` and read back as NaN (the other components must be finite and >= 0).
-
-Units without a pose ("never lose a result"): each unit of ``failed_units`` (name -> reason) that is
-not in ``units`` is also written under ``units`` as ``{"link": null, "position_m": null,
-"quaternion_wxyz": null, "observable": false, "position_std_m": null, "rotation_std_deg": null,
-"warnings": [reason]}``; the top-level ``failed_units`` is written as before. On read, a unit entry
-with a ``null`` ``position_m`` or ``quaternion_wxyz`` must have ``observable: false``; it is returned
-in ``failed_units`` (name -> its warnings joined with ``"; "``), not in ``CalibrationResult.units``,
-so every unit in ``units`` has a pose.
-
-Moved units (``docs/interfaces.md``): a top-level ``events`` list and a per-unit ``moved_at_s`` list are
-optional; they are checked on write and read (:func:`~skincal.data.events.check_events`).
-
-Relative results (``skincal.calib.imu_only``): a top-level ``reference`` names a unit of ``units``; every
-pose is then ``T_ref_su`` in that unit's frame and ``link`` may be 0 (:data:`REFERENCE_LINK`), which
-means exactly that; without ``reference``, link 0 is refused as before.
-"""
+"""A result to and from its JSON document, checked both ways (:func:`result_to_dict`,
+:func:`result_from_dict`), and its file (:func:`write_result`, :func:`read_result`, :func:`sha256_file`;
+the format in the package docstring)."""
 
 from __future__ import annotations
 
 import hashlib
 import json
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -57,6 +15,29 @@ import numpy as np
 
 from skincal.data.events import MAX_POSITION_M, MoveEvent, check_events
 from skincal.data.imu_calibration import IMU_KEYS, IMU_SHAPES, INTEGER_KEYS, ImuCalibration, imu_to_fields
+from skincal.data.result.types import (
+    EVENTS,
+    FAILED_UNITS,
+    FORMAT,
+    LINK_CONFIDENCE,
+    MOVED_AT,
+    NOTES,
+    POSE_COVARIANCE,
+    POSITION_DETERMINED,
+    REFERENCE,
+    REFERENCE_LINK,
+    TYPED_TOP,
+    TYPED_UNIT,
+    VERSION,
+    CalibrationResult,
+    UnitResult,
+    check_moved_at,
+    check_pose_covariance,
+    checked_notes,
+    has_position,
+    none_to_nan,
+    short_repr,
+)
 from skincal.errors import ConfigError, DatasetError
 from skincal.io.atomic import write_bytes_atomic
 from skincal.io.files import RESULT_FILE, regular_file
@@ -65,179 +46,10 @@ from skincal.kinematics.transforms import FloatArray
 from skincal.names import MAX_NAME_CHARS, name_problem
 from skincal.skin.pose import SkinUnitPose
 
-FORMAT = "skincal-result"
-VERSION = 1
-FAILED_UNITS = "failed_units"
-REFERENCE = "reference"
-"""Top-level field of a relative (IMU-only) result: the unit whose frame every pose is given in."""
-REFERENCE_LINK = 0
-"""``link`` of a pose in the reference unit's frame (allowed only in a result with ``reference``)."""
 _NO_REASON = "no pose (the result file gives no reason)"
 _TOP_KEYS = ("format", "version", "method", "robot", "dataset_sha256", "runtime_s", "units")
 _UNIT_KEYS = ("link", "position_m", "quaternion_wxyz", "observable", "position_std_m", "rotation_std_deg", "warnings")
 _QUAT_NORM_TOL = 1e-3
-EVENTS = "events"
-"""Top-level field: the moved-unit events of the session, a list of objects (:class:`MoveEvent`)."""
-MOVED_AT = "moved_at_s"
-"""Per-unit field: the change times of the unit's moved-unit events, s (a list of numbers)."""
-NOTES = "notes"
-"""Top-level and per-unit field: what was found in the data and done about it (a list of strings)."""
-LINK_CONFIDENCE = "link_confidence"
-"""Per-unit field: the link discovery's confidence in [0, 1]."""
-POSE_COVARIANCE = "pose_covariance"
-"""Per-unit field: the 6x6 covariance of ``(x, y, z, rx, ry, rz)`` in the link frame's axes, m^2 and rad^2."""
-_TYPED_TOP = (REFERENCE, FAILED_UNITS, NOTES, EVENTS)
-_TYPED_UNIT = (LINK_CONFIDENCE, NOTES, POSE_COVARIANCE, MOVED_AT)
-
-
-def _check_moved_at(value: Any, where: str) -> None:
-    items = value.tolist() if isinstance(value, np.ndarray) else value
-    if not isinstance(items, list | tuple) or not all(
-        isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in items
-    ):
-        raise DatasetError(f"{where}.{MOVED_AT} must be a list of finite numbers (s), got {_short(value)}")
-
-
-def check_pose_covariance(value: Any, where: str) -> FloatArray:
-    """``value`` as a ``(6, 6)`` float covariance (NaN/``null`` where undetermined), symmetric (to 1e-9 of
-    ``sqrt(C_ii C_jj)``) with a non-negative diagonal where known; else a one-line :class:`DatasetError`
-    starting with ``where``."""
-    try:
-        arr = None if isinstance(value, str) else np.array(_none_to_nan(value), dtype=float)
-    except (TypeError, ValueError):
-        arr = None
-    if arr is None or arr.shape != (6, 6):
-        raise DatasetError(f"{where} must be a 6x6 matrix of numbers (null where undetermined)")
-    known = np.isfinite(arr)
-    both = known & known.T
-    diag = np.abs(np.where(np.isfinite(np.diag(arr)), np.diag(arr), 0.0))
-    scale = np.sqrt(np.outer(diag, diag))  # asymmetry measured against the std product: rounding, not data
-    asym = np.abs(np.where(both, arr - arr.T, 0.0))
-    if np.any(np.diag(arr)[np.diag(known)] < 0) or np.any(asym > 1e-9 * scale):
-        raise DatasetError(f"{where} must be symmetric with a non-negative diagonal")
-    return arr
-
-
-def _notes(value: Any, where: str) -> tuple[str, ...]:
-    if not isinstance(value, list | tuple) or not all(isinstance(n, str) for n in value):
-        raise DatasetError(f"{where} must be a list of strings, got {_short(value)}")
-    return tuple(value)
-
-
-def _readonly(value: Any) -> FloatArray:
-    arr = np.array(value, dtype=float)
-    arr.setflags(write=False)
-    return arr
-
-
-@dataclass(frozen=True)
-class UnitResult:
-    """Calibrated pose of one skin unit.
-
-    Attributes:
-        pose: the estimated pose in its link frame (link, ``R_link_su``, ``p_link_su`` in m).
-        observable: False where the data cannot determine the full pose (e.g. a unit on link 1).
-        position_std_m: ``(3,)`` standard deviation of ``p_link_su`` per axis, m, or None; NaN in a
-            component the data cannot determine (``null`` in JSON).
-        rotation_std_deg: ``(3,)`` standard deviation of the rotation about the link axes, deg, or
-            None; NaN in an undetermined component.
-        warnings: human-readable notes (which part is unobservable and why, poor fit, ...).
-        extras: further per-unit fields of the method written next to the contract fields (numbers,
-            strings, lists, arrays, nested dicts), e.g. ``dh6``; not the fields of ``imu``
-            (:data:`~skincal.data.imu_calibration.IMU_KEYS`) nor the typed fields below.
-        imu: the unit's IMU calibration (bias, scale/misalignment, time offset, clock drift, ...),
-            or None where the method estimates none.
-        link_confidence: the link discovery's confidence in [0, 1] (``link_confidence``), None where the
-            link was given (NaN: written ``null``).
-        pose_covariance: ``(6, 6)`` covariance of ``(x, y, z, rx, ry, rz)`` in the link frame's axes,
-            m^2 and rad^2 (``pose_covariance``; NaN where undetermined), or None (only the std).
-        notes: what was found in the unit's data and corrected (``notes``); unlike ``warnings``,
-            nothing the estimate or its std has to answer for.
-        moved_at_s: change times of the unit's moved-unit events, s (``moved_at_s``).
-    """
-
-    pose: SkinUnitPose
-    observable: bool = True
-    position_std_m: FloatArray | None = None
-    rotation_std_deg: FloatArray | None = None
-    warnings: tuple[str, ...] = ()
-    extras: dict[str, Any] = field(default_factory=dict)
-    imu: ImuCalibration | None = None
-    link_confidence: float | None = None
-    pose_covariance: FloatArray | None = None
-    notes: tuple[str, ...] = ()
-    moved_at_s: tuple[float, ...] = ()
-
-    def __post_init__(self) -> None:
-        for name in ("position_std_m", "rotation_std_deg", "pose_covariance"):
-            value = getattr(self, name)
-            if value is not None:
-                object.__setattr__(self, name, _readonly(value))
-        if self.link_confidence is not None:
-            object.__setattr__(self, "link_confidence", float(self.link_confidence))
-        object.__setattr__(self, "warnings", tuple(self.warnings))
-        object.__setattr__(self, "notes", tuple(self.notes))
-        object.__setattr__(self, "moved_at_s", tuple(float(t) for t in self.moved_at_s))
-
-
-@dataclass(frozen=True)
-class CalibrationResult:
-    """Result of one calibration run.
-
-    Attributes:
-        method: method name (``mle``, ``om``, ``mmm``, ``mm``, ``online``, ``imu-only``).
-        robot: robot name of the dataset.
-        dataset_sha256: SHA-256 hex digest of the dataset file (:func:`sha256_file`), or ``""``.
-        runtime_s: wall-clock time of the calibration, s.
-        units: per-unit results keyed by unit name (every one has a pose).
-        extras: further top-level fields of the method (e.g. ``seed``, ``cpu_s``, ``accel_scale_fit``);
-            not the typed fields below.
-        failed_units: units that could not be calibrated, name -> reason (``failed_units``); the JSON
-            file also lists each one not in ``units`` under ``units`` with ``null`` pose fields and
-            ``observable: false``.
-        notes: what was done to the whole dataset (``notes``), e.g. segments found automatically.
-        events: the session's moved-unit events (``events``).
-        reference: the unit whose frame every pose is given in (a relative, IMU-only result:
-            ``reference``; poses at link :data:`REFERENCE_LINK`), or None (poses in link frames).
-    """
-
-    method: str
-    robot: str
-    dataset_sha256: str
-    runtime_s: float
-    units: dict[str, UnitResult]
-    extras: dict[str, Any] = field(default_factory=dict)
-    failed_units: Mapping[str, str] = field(default_factory=dict)
-    notes: tuple[str, ...] = ()
-    events: tuple[MoveEvent, ...] = ()
-    reference: str | None = None
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "failed_units", {str(k): str(v) for k, v in self.failed_units.items()})
-        object.__setattr__(self, "notes", tuple(self.notes))
-        object.__setattr__(self, "events", tuple(self.events))
-
-
-POSITION_DETERMINED = "position_determined"
-"""Per-unit extra: ``False`` for a unit whose position the data do not determine at all (rests only)."""
-
-
-def has_position(unit: UnitResult) -> bool:
-    """False for a unit whose position the data do not determine at all (``extras["position_determined"]
-    is False``, e.g. from static poses only; never for an observable unit). Its ``position_m`` is written
-    as ``null`` (link and rotation kept) and read back as ``p_link_su = 0`` with NaN std."""
-    return unit.observable or unit.extras.get(POSITION_DETERMINED, True) is not False
-
-
-def with_events(result: CalibrationResult, events: Sequence[MoveEvent | Mapping[str, Any]]) -> CalibrationResult:
-    """``result`` with the moved-unit events recorded (``docs/interfaces.md``): ``events`` (each checked,
-    :func:`~skincal.data.events.move_event`) and each moved unit's ``moved_at_s`` (the input is kept)."""
-    typed = check_events(list(events), EVENTS)
-    units = dict(result.units)
-    for name in dict.fromkeys(e.unit for e in typed):
-        if name in units:
-            units[name] = replace(units[name], moved_at_s=tuple(e.t_change_s for e in typed if e.unit == name))
-    return replace(result, units=units, events=typed)
 
 
 def sha256_file(path: str | Path) -> str:
@@ -251,19 +63,13 @@ def sha256_file(path: str | Path) -> str:
         raise DatasetError(f"{path}: cannot read file ({exc.strerror or exc})") from None
 
 
-# ---------------------------------------------------------------------- JSON <-> Python values
-def _short(value: object) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
 def _to_json(value: Any, source: str, where: str) -> Any:
     """Plain JSON value of ``value``: arrays and NumPy scalars to lists/numbers, non-finite floats to None."""
     if isinstance(value, dict):
         out = {}
         for k, v in value.items():
             if not isinstance(k, str):
-                raise DatasetError(f"{source}: {where} has a non-string key {_short(k)}")
+                raise DatasetError(f"{source}: {where} has a non-string key {short_repr(k)}")
             out[k] = _to_json(v, source, f"{where}.{k}")
         return out
     if isinstance(value, np.ndarray):
@@ -294,12 +100,6 @@ def _numeric_leaves(value: Any) -> tuple[bool, bool]:
     return is_num, is_num
 
 
-def _none_to_nan(value: Any) -> Any:
-    if isinstance(value, list):
-        return [_none_to_nan(v) for v in value]
-    return math.nan if value is None else value
-
-
 def _from_json(value: Any) -> Any:
     """Inverse of :func:`_to_json` for extras: numeric (possibly nested, rectangular) lists -> float arrays."""
     if isinstance(value, dict):
@@ -308,7 +108,7 @@ def _from_json(value: Any) -> Any:
         all_numeric, any_number = _numeric_leaves(value)
         if all_numeric and any_number:
             try:
-                return np.array(_none_to_nan(value), dtype=float)
+                return np.array(none_to_nan(value), dtype=float)
             except ValueError:  # ragged
                 pass
         return [_from_json(v) for v in value]
@@ -330,7 +130,7 @@ class _Checker:
 
     def string(self, value: Any, where: str) -> str:
         if not isinstance(value, str):
-            raise self.fail(where, f"must be a string, got {_short(value)}")
+            raise self.fail(where, f"must be a string, got {short_repr(value)}")
         return value
 
     def name(self, value: Any, where: str) -> str:
@@ -349,10 +149,10 @@ class _Checker:
         ok = isinstance(value, list) and len(value) == n and all(number(v) or (nulls and v is None) for v in value)
         if not ok:
             what = f"{n} finite numbers or null (undetermined)" if nulls else f"{n} finite numbers"
-            raise self.fail(where, f"must be a list of {what}, got {_short(value)}")
+            raise self.fail(where, f"must be a list of {what}, got {short_repr(value)}")
         arr = np.array([math.nan if v is None else v for v in value], dtype=float)
         if nonneg and np.any(arr < 0):
-            raise self.fail(where, f"must not be negative, got {_short(value)}")
+            raise self.fail(where, f"must not be negative, got {short_repr(value)}")
         return arr
 
     def document(self, doc: Any) -> None:
@@ -360,10 +160,10 @@ class _Checker:
             raise DatasetError(f"{self.source}: top level must be a JSON object, got {type(doc).__name__}")
         fmt = self.get(doc, "format", "")
         if fmt != FORMAT:
-            raise self.fail("format", f"is {_short(fmt)}, expected '{FORMAT}'")
+            raise self.fail("format", f"is {short_repr(fmt)}, expected '{FORMAT}'")
         version = self.get(doc, "version", "")
         if isinstance(version, bool) or not isinstance(version, int):
-            raise self.fail("version", f"must be an integer, got {_short(version)}")
+            raise self.fail("version", f"must be an integer, got {short_repr(version)}")
         if version != VERSION:
             raise self.fail("version", f"is {version}; this skincal reads version {VERSION}")
         if not self.string(self.get(doc, "method", ""), "method"):
@@ -372,23 +172,23 @@ class _Checker:
         self.name(self.string(self.get(doc, "robot", ""), "robot"), "robot")
         sha = self.string(self.get(doc, "dataset_sha256", ""), "dataset_sha256")
         if sha and (len(sha) != 64 or any(c not in "0123456789abcdefABCDEF" for c in sha)):
-            raise self.fail("dataset_sha256", f"must be 64 hex digits or empty, got {_short(sha)}")
+            raise self.fail("dataset_sha256", f"must be 64 hex digits or empty, got {short_repr(sha)}")
         runtime = self.get(doc, "runtime_s", "")
         number = isinstance(runtime, int | float) and not isinstance(runtime, bool)
         if not number or not math.isfinite(runtime) or runtime < 0:
-            raise self.fail("runtime_s", f"must be a non-negative number of seconds, got {_short(runtime)}")
+            raise self.fail("runtime_s", f"must be a non-negative number of seconds, got {short_repr(runtime)}")
         units = self.get(doc, "units", "")
         if not isinstance(units, dict):
-            raise self.fail("units", f"must be an object of unit name -> result, got {_short(units)}")
+            raise self.fail("units", f"must be an object of unit name -> result, got {short_repr(units)}")
         if not units:
             raise self.fail("units", "is empty (a result lists every unit of its dataset, calibrated or not)")
         reference = doc.get(REFERENCE)
         if reference is not None:
             self.name(self.string(reference, REFERENCE), REFERENCE)
             if reference not in units:
-                raise self.fail(REFERENCE, f"names unit {_short(reference)}, which is not in units")
+                raise self.fail(REFERENCE, f"names unit {short_repr(reference)}, which is not in units")
         for name, unit in units.items():
-            self.name(name, f"units key {_short(name)}")
+            self.name(name, f"units key {short_repr(name)}")
             self.unit(unit, f"units.{name}", relative=reference is not None)
         links = self.robot_links(doc["robot"])
         if links is not None:
@@ -407,7 +207,7 @@ class _Checker:
 
     def unit(self, unit: Any, where: str, relative: bool = False) -> None:
         if not isinstance(unit, dict):
-            raise self.fail(where, f"must be an object, got {_short(unit)}")
+            raise self.fail(where, f"must be an object, got {short_repr(unit)}")
         link = self.get(unit, "link", where)
         position = self.get(unit, "position_m", where)
         quaternion = self.get(unit, "quaternion_wxyz", where)
@@ -416,11 +216,11 @@ class _Checker:
             pass  # a relative result: the pose is in the reference unit's frame
         elif not (link is None and not posed) and (isinstance(link, bool) or not isinstance(link, int) or link < 1):
             also = "" if posed else " or null"
-            raise self.fail(f"{where}.link", f"must be a positive integer (1-based link){also}, got {_short(link)}")
+            raise self.fail(f"{where}.link", f"must be a positive integer (1-based link){also}, got {short_repr(link)}")
         if position is not None:
             p = self.vector(position, 3, f"{where}.position_m")
             if np.any(np.abs(p) > MAX_POSITION_M):
-                problem = f"has a component beyond {MAX_POSITION_M:g} m, got {_short(position)}"
+                problem = f"has a component beyond {MAX_POSITION_M:g} m, got {short_repr(position)}"
                 raise self.fail(f"{where}.position_m", problem)
         if quaternion is not None:
             quat = self.vector(quaternion, 4, f"{where}.quaternion_wxyz")
@@ -429,7 +229,7 @@ class _Checker:
                 raise self.fail(f"{where}.quaternion_wxyz", f"is not a unit quaternion (norm {norm:.6g})")
         observable = self.get(unit, "observable", where)
         if not isinstance(observable, bool):
-            raise self.fail(f"{where}.observable", f"must be true or false, got {_short(observable)}")
+            raise self.fail(f"{where}.observable", f"must be true or false, got {short_repr(observable)}")
         if observable and not posed:
             raise self.fail(
                 f"{where}.observable", "must be false for a unit without a pose (position_m or quaternion_wxyz is null)"
@@ -440,7 +240,7 @@ class _Checker:
                 self.vector(value, 3, f"{where}.{key}", nonneg=True, nulls=True)
         warnings = self.get(unit, "warnings", where)
         if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
-            raise self.fail(f"{where}.warnings", f"must be a list of strings, got {_short(warnings)}")
+            raise self.fail(f"{where}.warnings", f"must be a list of strings, got {short_repr(warnings)}")
         self.imu(unit, where)
 
     def imu(self, unit: dict, where: str) -> ImuCalibration | None:
@@ -456,17 +256,17 @@ class _Checker:
                 continue
             if key in INTEGER_KEYS:
                 if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                    raise self.fail(f"{where}.{key}", f"must be a whole number >= 0 or null, got {_short(value)}")
+                    raise self.fail(f"{where}.{key}", f"must be a whole number >= 0 or null, got {short_repr(value)}")
                 values[key] = value
             elif shape == ():
                 if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-                    raise self.fail(f"{where}.{key}", f"must be a finite number or null, got {_short(value)}")
+                    raise self.fail(f"{where}.{key}", f"must be a finite number or null, got {short_repr(value)}")
                 values[key] = float(value)
             elif len(shape) == 1:
                 values[key] = self.vector(value, shape[0], f"{where}.{key}", nulls=True)
             else:
                 if not isinstance(value, list) or len(value) != shape[0]:
-                    problem = f"must be {shape[0]} rows of {shape[1]} numbers, got {_short(value)}"
+                    problem = f"must be {shape[0]} rows of {shape[1]} numbers, got {short_repr(value)}"
                     raise self.fail(f"{where}.{key}", problem)
                 rows = [self.vector(row, shape[1], f"{where}.{key}[{i}]", nulls=True) for i, row in enumerate(value)]
                 values[key] = np.array(rows)
@@ -484,14 +284,14 @@ def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[
         "dataset_sha256": result.dataset_sha256,
         "runtime_s": _to_json(result.runtime_s, source, "runtime_s"),
     }
-    _no_clash(result.extras, _TOP_KEYS, _TYPED_TOP, source, "extras", "CalibrationResult")
+    _no_clash(result.extras, _TOP_KEYS, TYPED_TOP, source, "extras", "CalibrationResult")
     if result.reference is not None:
         doc[REFERENCE] = result.reference
     doc.update(_to_json(result.extras, source, "extras"))
     if result.failed_units:
         doc[FAILED_UNITS] = dict(result.failed_units)
     if result.notes:
-        doc[NOTES] = list(_notes(result.notes, f"{source}: {NOTES}"))
+        doc[NOTES] = list(checked_notes(result.notes, f"{source}: {NOTES}"))
     if result.events:
         events = check_events(result.events, f"{source}: {EVENTS}")
         doc[EVENTS] = _to_json([e.fields() for e in events], source, EVENTS)
@@ -500,7 +300,7 @@ def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[
         where = f"units.{name}"
         if not isinstance(unit, UnitResult):
             raise DatasetError(f"{source}: {where} must be a UnitResult, got {type(unit).__name__}")
-        _no_clash(unit.extras, _UNIT_KEYS, _TYPED_UNIT, source, f"{where} extras", "UnitResult")
+        _no_clash(unit.extras, _UNIT_KEYS, TYPED_UNIT, source, f"{where} extras", "UnitResult")
         clash = sorted(set(unit.extras) & set(IMU_KEYS))
         if clash:
             raise DatasetError(
@@ -524,7 +324,7 @@ def result_to_dict(result: CalibrationResult, source: str = "<result>") -> dict[
             cov = check_pose_covariance(unit.pose_covariance, f"{source}: {where}.{POSE_COVARIANCE}")
             entry[POSE_COVARIANCE] = _to_json(cov, source, f"{where}.{POSE_COVARIANCE}")
         if unit.notes:
-            entry[NOTES] = list(_notes(unit.notes, f"{source}: {where}.{NOTES}"))
+            entry[NOTES] = list(checked_notes(unit.notes, f"{source}: {where}.{NOTES}"))
         if unit.moved_at_s:
             entry[MOVED_AT] = _to_json(list(unit.moved_at_s), source, f"{where}.{MOVED_AT}")
         units[name] = entry
@@ -563,7 +363,7 @@ def _check_event_fields(doc: dict[str, Any], source: str) -> tuple[MoveEvent, ..
     per-unit ``moved_at_s``; returns the events (none without ``events``)."""
     for name, entry in doc["units"].items():
         if MOVED_AT in entry:
-            _check_moved_at(entry[MOVED_AT], f"{source}: units.{name}")
+            check_moved_at(entry[MOVED_AT], f"{source}: units.{name}")
     if EVENTS not in doc:
         return ()
     return check_events(doc[EVENTS], f"{source}: {EVENTS}", units=set(doc["units"]))
@@ -579,7 +379,7 @@ def _failed_units(doc: dict[str, Any], source: str, unposed: bool) -> dict[str, 
         return {k: str(v) for k, v in listed.items()}
     if not unposed and isinstance(listed, list) and all(isinstance(k, str) for k in listed):
         return dict.fromkeys(listed, "not calibrated")
-    raise DatasetError(f"{source}: {FAILED_UNITS} must be an object of unit name -> reason, got {_short(listed)}")
+    raise DatasetError(f"{source}: {FAILED_UNITS} must be an object of unit name -> reason, got {short_repr(listed)}")
 
 
 def _unit_fields(entry: dict[str, Any], source: str, where: str) -> dict[str, Any]:
@@ -590,13 +390,13 @@ def _unit_fields(entry: dict[str, Any], source: str, where: str) -> dict[str, An
         number = isinstance(value, int | float) and not isinstance(value, bool)
         if value is not None and not (number and 0.0 <= value <= 1.0):
             raise DatasetError(
-                f"{source}: {where}.{LINK_CONFIDENCE} must be a number in [0, 1] or null, got {_short(value)}"
+                f"{source}: {where}.{LINK_CONFIDENCE} must be a number in [0, 1] or null, got {short_repr(value)}"
             )
         out["link_confidence"] = math.nan if value is None else float(value)
     if entry.get(POSE_COVARIANCE) is not None:
         out["pose_covariance"] = check_pose_covariance(entry[POSE_COVARIANCE], f"{source}: {where}.{POSE_COVARIANCE}")
     if entry.get(NOTES) is not None:
-        out["notes"] = _notes(entry[NOTES], f"{source}: {where}.{NOTES}")
+        out["notes"] = checked_notes(entry[NOTES], f"{source}: {where}.{NOTES}")
     if MOVED_AT in entry:
         out["moved_at_s"] = tuple(float(t) for t in entry[MOVED_AT])
     return out
@@ -608,7 +408,7 @@ def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
     events = _check_event_fields(doc, source)
     units = {}
     unposed: dict[str, str] = {}
-    skip = (*_UNIT_KEYS, *IMU_KEYS, *_TYPED_UNIT)
+    skip = (*_UNIT_KEYS, *IMU_KEYS, *TYPED_UNIT)
     for name, entry in doc["units"].items():
         rotation_only = entry["position_m"] is None and entry["link"] is not None  # no position (has_position)
         if entry["quaternion_wxyz"] is None or (entry["position_m"] is None and not rotation_only):
@@ -619,7 +419,7 @@ def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
             pose = SkinUnitPose.from_quaternion(entry["link"], position, entry["quaternion_wxyz"])
         except ConfigError as exc:
             raise DatasetError(f"{source}: units.{name} is not a valid pose: {exc}") from None
-        stds = {k: None if entry[k] is None else np.array(_none_to_nan(entry[k]), dtype=float) for k in _UNIT_KEYS[4:6]}
+        stds = {k: None if entry[k] is None else np.array(none_to_nan(entry[k]), dtype=float) for k in _UNIT_KEYS[4:6]}
         extras_pos: dict[str, Any] = {}
         if rotation_only:
             stds["position_std_m"] = np.full(3, np.nan)
@@ -640,9 +440,9 @@ def result_from_dict(doc: Any, source: str = "<result>") -> CalibrationResult:
         dataset_sha256=doc["dataset_sha256"],
         runtime_s=float(doc["runtime_s"]),
         units=units,
-        extras={k: _from_json(v) for k, v in doc.items() if k not in _TOP_KEYS and k not in _TYPED_TOP},
+        extras={k: _from_json(v) for k, v in doc.items() if k not in _TOP_KEYS and k not in TYPED_TOP},
         failed_units={**listed, **unposed},
-        notes=_notes(doc[NOTES], f"{source}: {NOTES}") if doc.get(NOTES) is not None else (),
+        notes=checked_notes(doc[NOTES], f"{source}: {NOTES}") if doc.get(NOTES) is not None else (),
         events=events,
         reference=doc.get(REFERENCE),
     )
@@ -668,13 +468,3 @@ def read_result(path: str | Path) -> CalibrationResult:
     """
     doc = load_json(path, RESULT_FILE, DatasetError)
     return result_from_dict(doc, source=str(path))
-
-
-def check_links(result: CalibrationResult, chain: Any, source: str = "<result>") -> None:
-    """Refuse a result whose units sit on links ``chain`` does not have (``1..chain.n_joints``), with
-    a one-line :class:`DatasetError`; call it where a result meets a robot (evaluation, viewers)."""
-    n = int(chain.n_joints)
-    for name, unit in result.units.items():
-        link = unit.pose.link
-        if not 1 <= link <= n:
-            raise DatasetError(f"{source}: units.{name}.link is {link}; robot '{chain.name}' has links 1..{n}")

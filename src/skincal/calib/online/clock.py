@@ -1,0 +1,108 @@
+"""Each unit's clock in the streaming calibrator: its coarse alignment on the motion (:func:`align`),
+the mapping of its stamps to joint-clock instants (:func:`instants`, re-sync steps tracked by
+:func:`track_steps`) and its re-alignment when the fitted residual clock error grows
+(:func:`clock_off`, :func:`realign`); the clock model itself is :mod:`skincal.calib.timing`'s."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from skincal.calib import rest
+from skincal.calib.online import stats
+from skincal.calib.online.options import OnlineOptions
+from skincal.calib.online.unit import Grid, UnitState
+from skincal.calib.timing import coarse_time_offset, compose_clock, find_clock_steps, motion_instants, motion_profile
+from skincal.kinematics.transforms import FloatArray
+
+ALIGN_SHARPNESS = 0.1
+"""A unit's clock is aligned once the cross-correlation peak stands out by this much (correlation units)...
+"""
+ALIGN_WAIT_FRACTION = 0.8
+"""...or once its pending stream spans this fraction of the history (then with a warning in the result)."""
+REALIGN_S = 0.004
+"""A decided unit whose residual clock error (offset and drift, at either end of its data) exceeds this (s)
+is re-aligned (its clock mapping composed with the residual, :func:`~skincal.calib.timing.compose_clock`)
+and its statistics restarted: the first-order clock model holds for a few ms only."""
+ALIGN_RETRY_S = 2.0
+"""A unit not yet aligned tries again after this much more of its stream, s."""
+MAX_REALIGN = 6
+"""Re-alignments allowed per unit."""
+
+
+def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray | None, o: OnlineOptions) -> None:
+    """Find the unit's coarse time offset on the grid's motion (:func:`~skincal.calib.timing.coarse_time_offset`)
+    once its samples ``t, a, g`` span ``o.align_s`` with motion and the peak is distinct (or the history is
+    nearly full); else leave ``st.offset`` None."""
+    tg, w, speed = grid.t, grid.y[..., 12:15], grid.speed
+    inside = (t >= tg[0]) & (t <= tg[-1])
+    if inside.sum() < 20 or t[inside][-1] - t[inside][0] < o.align_s:
+        return
+    lo, hi = np.searchsorted(tg, [t[inside][0], t[inside][-1]])
+    ang = np.linalg.norm(w[lo:hi], axis=2)
+    if ang.shape[0] < 20 or float(ang.max()) < 5 * rest.MOVING_RPS:
+        return  # no motion to align on yet
+    profile = motion_profile(tg[lo:hi], ang, speed[lo:hi])
+    search = coarse_time_offset(profile, t[inside], a[inside], None if g is None else g[inside])
+    span = t[inside][-1] - t[inside][0]
+    if search.sharpness < ALIGN_SHARPNESS and span < ALIGN_WAIT_FRACTION * o.history_s:
+        return  # the peak is not distinct yet: wait for more motion (the samples stay pending)
+    st.offset, st.offset_sharpness = float(search.offset_s), float(search.sharpness)
+    st.t_ref = float(t[inside][0])
+    st.steps = find_clock_steps(t)
+    st.t_seen = float(t[-1])
+
+
+def track_steps(st: UnitState, t: FloatArray) -> None:
+    """Search the unit's stamps ``t`` newer than any seen for further re-sync steps."""
+    if st.steps is not None:
+        new = t > st.t_seen
+        if new.any():
+            st.steps = st.steps.extend(st.t_seen, t[new])
+            st.t_seen = float(t[new][-1])
+
+
+def instants(st: UnitState, t: FloatArray) -> FloatArray:
+    """Joint-clock instants of the unit's stamps ``t`` under its clock mapping (:mod:`skincal.calib.timing`:
+    re-sync steps removed, then offset and drift)."""
+    assert st.offset is not None
+    if st.steps is not None:
+        t = st.steps.correct(t)
+    return motion_instants(t, st.offset, st.drift, st.t_ref)
+
+
+def realign(st: UnitState, tau: float, drift: float) -> None:
+    """Compose the unit's clock mapping with the residual offset ``tau`` (s) and drift and absorb its kept
+    raw samples again from scratch."""
+    assert st.offset is not None
+    st.offset, st.drift = compose_clock(st.offset, st.drift, tau, drift)
+    st.realigned += 1
+    raw = list(st.raw)
+    if st.steps is None and raw:  # re-sync steps seen since the alignment
+        st.steps = find_clock_steps(np.concatenate([r[0] for r in raw]))
+        st.t_seen = float(raw[-1][0][-1])
+    st.raw = deque()
+    L = len(st.links)
+    st.Za, st.Zg, st.moving = np.zeros_like(st.Za), np.zeros_like(st.Zg), np.zeros(L)
+    st.chunks = deque()
+    st.solutions, st.status, st.dirty = {}, None, True
+    st.win_sum, st.win_n, st.win_stat, st.win_count = np.zeros(3), 0, 0.0, 0
+    st.t_last, st.t_first = float("-inf"), float("inf")
+    for t, a, g in raw[::-1]:
+        st.pending_t.insert(0, t)
+        st.pending_a.insert(0, a)
+        st.pending_g.insert(0, g)
+
+
+def clock_off(st: UnitState, sol: stats.Solution) -> bool:
+    """The residual clock error ``tau + d (s - t_ref)`` at either end of the unit's data exceeds
+    :data:`REALIGN_S` and is determined (its std below a quarter of it)."""
+    i = [stats.TAU, stats.DRIFT]
+    C = sol.cov[np.ix_(i, i)]
+    for s in (st.t_first, st.t_last):
+        e = np.array([1.0, s - st.t_ref])
+        T = sol.tau + sol.drift * e[1]
+        if abs(T) > REALIGN_S and np.sqrt(max(float(e @ C @ e), 0.0)) < 0.25 * abs(T):
+            return True
+    return False

@@ -1,0 +1,207 @@
+"""The streaming calibrator's fit of one unit from its Grams: the residuals (:func:`residuals`), their
+correlation inflation (:func:`window_means`, :func:`inflation`), each candidate link's pose solved with
+per-class noise levels (:func:`solve_unit`) and the link decision (:func:`decide`, :func:`cost`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from skincal.calib.online import stats
+from skincal.calib.online.options import OnlineOptions
+from skincal.calib.online.unit import MOVING, REST, UnitState
+from skincal.kinematics.transforms import FloatArray
+
+SCALE_STD_LIMIT = 0.01
+"""The accelerometer's scale/misalignment is estimated only when each of its 9 elements is determined to
+this std (else held at the identity: a weakly determined scale absorbs what the pose should explain)."""
+JOINT_ACTIVE_RPS = 0.1
+JOINT_ACTIVE_MIN_S = 1.0
+"""A joint counts as moved once it has turned faster than ``JOINT_ACTIVE_RPS`` (rad/s) for
+``JOINT_ACTIVE_MIN_S`` (s) in all; two candidate links are told apart only after a joint between them moved."""
+LINK_CHI2_MARGIN = 25.0
+"""Two links are told apart when their costs (chi-square, correlation-inflated) differ by this much...
+"""
+LINK_RELATIVE_MARGIN = 0.05
+"""...and by this fraction of the best one's (the joint-derived model errors are not white noise: a
+few % of cost between two links is not evidence). A decision is final: the other links' statistics are
+then dropped, so it waits for clear evidence."""
+CORRELATION_MAX = 100.0
+"""Largest variance inflation applied for autocorrelated residuals."""
+WINDOW_SAMPLES = 100
+"""Samples per window of the correlation inflation (1 s at 100 Hz)."""
+MIN_WINDOWS = 5
+"""Windows before the inflation is applied."""
+
+
+def residuals(
+    sol: stats.Solution,
+    a: FloatArray,
+    u: FloatArray,
+    K: FloatArray,
+    du: FloatArray,
+    dK: FloatArray,
+    ug: FloatArray,
+    elapsed: FloatArray,
+) -> FloatArray:
+    """``(M, 3)`` residuals of equation (1) of :mod:`~skincal.calib.online.stats` at ``sol``, m/s^2
+    (``elapsed`` ``(M,)`` = ``s - t_ref``, s)."""
+    G = sol.R @ np.linalg.inv(sol.A)
+    h = G @ sol.b
+    T = (sol.tau + sol.drift * elapsed)[:, None]  # residual clock error per sample, s
+    Kp = np.einsum("mij,j->mi", (1.0 + sol.gravity_scale) * K, sol.p) + T * np.einsum("mij,j->mi", dK, sol.p)
+    return a @ G.T - h - Kp - du * T - sol.gravity_scale * (u - ug) - u
+
+
+def window_means(st: UnitState, rn: FloatArray) -> None:
+    """Add normalised residuals ``rn`` ``(M, 3)`` to the unit's windows of :data:`WINDOW_SAMPLES`."""
+    i = 0
+    while i < rn.shape[0]:
+        take = min(WINDOW_SAMPLES - st.win_n, rn.shape[0] - i)
+        st.win_sum += rn[i : i + take].sum(axis=0)
+        st.win_n += take
+        i += take
+        if st.win_n >= WINDOW_SAMPLES:
+            st.win_stat += float(st.win_sum @ st.win_sum) / st.win_n
+            st.win_count += 1
+            st.win_sum, st.win_n = np.zeros(3), 0
+
+
+def inflation(st: UnitState) -> float:
+    """Variance inflation for correlated residuals: the variance of the residuals' means over windows
+    of :data:`WINDOW_SAMPLES` consecutive samples against white noise's (``n |mean|^2`` averages 3
+    for white residuals of unit variance). It covers every correlation shorter than a window, incl.
+    the slow errors of joint-derived accelerations, which a lag-1 autocorrelation misses."""
+    if st.win_count < MIN_WINDOWS:
+        return 1.0
+    return float(np.clip(st.win_stat / (3.0 * st.win_count), 1.0, CORRELATION_MAX))
+
+
+def weighted(st: UnitState, k: int, sig: FloatArray) -> tuple[FloatArray, FloatArray | None]:
+    """Candidate ``k``'s Grams with each class weighted by its noise level (so ``solve`` runs with 1, 1),
+    corrected for the readings' own noise.
+
+    The readings are regressors of ``G`` (``R``): their white noise adds ``n sigma^2`` to each
+    diagonal element of the ``vec(G)`` block of a class's Gram (``sum a a^T = sum f f^T + n
+    sigma^2 I``), which biases ``G`` toward zero along axes with little signal (errors in
+    variables: a unit axis that never sees gravity at rest would read a scale several % too
+    large). The rest class's residual std is the sensor noise (nothing else is left at rest), so
+    ``n sigma_rest^2`` is removed from that block of both classes (bias-corrected least squares),
+    once the unit's link is decided (a wrong candidate's rest residual is not the sensor's noise).
+    """
+
+    def corrected(Z: FloatArray, noise: float) -> FloatArray:
+        Z = Z.copy()
+        d = np.arange(9)
+        Z[d, d] -= min(Z[9, 9] * noise**2, 0.5 * float(np.min(Z[d, d])))  # Z[9, 9]: the class's samples
+        return Z
+
+    if not st.decided:  # a wrong candidate's rest residual is not the sensor noise: no correction yet
+        Za = st.Za[k, REST] / sig[0] ** 2 + st.Za[k, MOVING] / sig[1] ** 2
+        Zg = st.Zg[k, REST] / sig[2] ** 2 + st.Zg[k, MOVING] / sig[3] ** 2 if st.has_gyro else None
+        return Za, Zg
+    Za = corrected(st.Za[k, REST], sig[0]) / sig[0] ** 2 + corrected(st.Za[k, MOVING], sig[0]) / sig[1] ** 2
+    Zg = None
+    if st.has_gyro:
+        Zg = corrected(st.Zg[k, REST], sig[2]) / sig[2] ** 2 + corrected(st.Zg[k, MOVING], sig[2]) / sig[3] ** 2
+    return Za, Zg
+
+
+def class_sigmas(st: UnitState, k: int, sol: stats.Solution, prior: FloatArray) -> FloatArray:
+    """Residual std per class ``[accel rest, accel moving, gyro rest, gyro moving]`` at ``sol``
+    (a class with too few samples keeps ``prior``'s value)."""
+    out = prior.copy()
+    for c in (REST, MOVING):
+        n = st.Za[k, c, 9, 9]
+        if n >= 20:
+            out[c] = max(
+                np.sqrt(
+                    stats.residual_sum(st.Za[k, c], sol.x_a)
+                    / max(3 * n - 16.0 * n / max(st.Za[k, :, 9, 9].sum(), 1), 1.0)
+                ),
+                1e-5,
+            )
+        ng = st.Zg[k, c, 9, 9]
+        if st.has_gyro and ng >= 20:
+            out[2 + c] = max(
+                np.sqrt(
+                    stats.residual_sum(st.Zg[k, c], sol.x_g)
+                    / max(3 * ng - 13.0 * ng / max(st.Zg[k, :, 9, 9].sum(), 1), 1.0)
+                ),
+                1e-6,
+            )
+    return out
+
+
+def solve_unit(st: UnitState, o: OnlineOptions) -> None:
+    """Solve every candidate link. Undecided, all candidates are weighted with the same noise
+    levels (those the best candidate fitted last time): a wrong link must not set its own weights,
+    or it could shrink one class's noise level until it fits that class alone. Decided, the one
+    link's fit sets its own levels."""
+    if not st.dirty:
+        return
+    default = np.array([o.accel_sigma, o.accel_sigma, o.gyro_sigma, o.gyro_sigma])
+    common = st.sigmas.get(0, default)
+    sols: dict[int, stats.Solution] = {}
+    for k, link in enumerate(st.links):
+        if st.Za[k, :, 9, 9].sum() < 10:
+            continue
+        prev = st.solutions.get(link)
+        sig = st.sigmas.get(link, common) if st.decided else common
+        Za, Zg = weighted(st, k, sig)
+        sol = stats.solve(Za, Zg, 1.0, 1.0, R0=None if prev is None else prev.R)
+        if sol is None:
+            continue
+        if st.decided:
+            for _ in range(1 if prev is not None else 2):  # re-weight with the fit's own noise levels
+                sig = class_sigmas(st, k, sol, sig)
+                Za, Zg = weighted(st, k, sig)
+                sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R) or sol
+            # like mle: the scale/misalignment is kept only where the data determine every element of it
+            st.scale_estimated = bool(np.sqrt(np.clip(np.diag(sol.cov)[3:12], 0.0, None)).max() <= SCALE_STD_LIMIT)
+            if not st.scale_estimated:
+                sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R, scale_prior=stats.SCALE_FIXED) or sol
+        st.sigmas[link] = sig if st.decided else class_sigmas(st, k, sol, common)
+        sols[link] = sol
+    st.solutions = sols
+    if sols and not st.decided:
+        best = min(sols, key=lambda link: cost(st, link, common))
+        st.sigmas[0] = st.sigmas[best]  # the weights of the next solve of every candidate
+    st.dirty = False
+
+
+def decide(st: UnitState, joint_active_s: FloatArray) -> tuple[int | None, float, list[int]]:
+    """Best link, its margin and the links still ambiguous with it (``joint_active_s`` ``(n,)``: how long each
+    joint has moved, s)."""
+    if not st.solutions:
+        return None, float("nan"), []
+    if len(st.solutions) == 1:
+        (link,) = st.solutions
+        return link, float("inf"), [link]
+    # every candidate on one chi-square scale: the noise levels they were all weighted with
+    ref = st.sigmas.get(0, np.min(np.stack([st.sigmas[k] for k in st.solutions]), axis=0))
+    costs = {k: cost(st, k, ref) for k in st.solutions}
+    best_link = min(costs, key=costs.__getitem__)
+    c0 = costs[best_link]
+    kappa = inflation(st)
+    others = sorted(v for k, v in costs.items() if k != best_link)
+    margin = others[0] / c0 if c0 > 0 else float("inf")
+    ambiguous = [k for k, v in costs.items() if v - c0 < max(LINK_CHI2_MARGIN * kappa, LINK_RELATIVE_MARGIN * c0)]
+    # links joined by joints that have not moved yet are one rigid body: their costs differ only by the
+    # noise of those joints' derived accelerations, which is no evidence
+    active = joint_active_s >= JOINT_ACTIVE_MIN_S
+    for k in costs:
+        lo, hi = min(k, best_link), max(k, best_link)
+        if k not in ambiguous and not active[lo:hi].any():  # joints lo+1..hi (0-based lo..hi-1)
+            ambiguous.append(k)
+    ambiguous.sort()
+    return best_link, float(margin), sorted(ambiguous)
+
+
+def cost(st: UnitState, link: int, sig: FloatArray) -> float:
+    """Chi-square of ``link``'s fit with the noise levels ``sig`` (:func:`class_sigmas` order)."""
+    sol = st.solutions[link]
+    k = st.links.index(link)
+    cost = sum(stats.residual_sum(st.Za[k, c], sol.x_a) / sig[c] ** 2 for c in (REST, MOVING))
+    if st.has_gyro:
+        cost += sum(stats.residual_sum(st.Zg[k, c], sol.x_g) / sig[2 + c] ** 2 for c in (REST, MOVING))
+    return float(cost)

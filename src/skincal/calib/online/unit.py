@@ -1,0 +1,144 @@
+"""What the streaming calibrator keeps: the link signals on its grid (:class:`Grid`, read back at the
+samples' instants by :func:`signals_at`) and per unit its statistics, pending samples and clock
+(:class:`UnitState`), with the sample screening (:func:`unsaturated`)."""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from skincal.calib.online import stats
+from skincal.calib.online.options import UnitStatus
+from skincal.calib.signals import hermite
+from skincal.calib.timing import ClockSteps
+from skincal.kinematics.transforms import FloatArray
+
+REST, MOVING = 0, 1
+"""Rest and moving samples are two classes with their own noise level (a resting unit's residual is its sensor
+noise; a moving one's adds the errors of the joint-derived accelerations), so the Grams are kept per class
+(:func:`~skincal.calib.rest.link_moving`)."""
+SATURATION_FLOOR = (1.5 * 9.80665, 2.0)
+"""A recurring largest reading is taken as the sensor's range only from 1.5 g (m/s^2) and 2 rad/s up:
+no accelerometer used on skin saturates below 2 g, nor a gyroscope below 250 deg/s."""
+
+
+@dataclass(frozen=True)
+class Grid:
+    """The link signals of every link on the streaming calibrator's uniform grid.
+
+    Attributes:
+        t: ``(G,)`` grid instants on the joint clock, s.
+        y: ``(G, n, 18)`` per link ``[u (3), K (9, row-major), w (3), u_g (3)]``
+            (:func:`~skincal.calib.signals.frame_signals`, link frame).
+        dy: ``(G, n, 18)`` their time derivatives (per block: only ``dw`` ``(G, n, 3)``, exact).
+        ok: ``(G,)`` the joint accelerations are reliable there.
+        speed: ``(G, n)`` ``sum_{j <= k} |qd_j|``, rad/s (the clock search without a gyroscope).
+    """
+
+    t: FloatArray
+    y: FloatArray
+    dy: FloatArray
+    ok: np.ndarray
+    speed: FloatArray
+
+
+@dataclass
+class UnitState:
+    """One unit's state in the streaming calibrator: per candidate link its Grams (rest and moving
+    classes) and fits, its pending samples, its clock mapping and its residual statistics."""
+
+    links: list[int]
+    Za: FloatArray  # (L, 2, NA, NA): per candidate link, rest and moving samples
+    Zg: FloatArray  # (L, 2, NG, NG)
+    moving: FloatArray  # (L,) moving samples per candidate link
+    pending_t: list[FloatArray] = field(default_factory=list)
+    pending_a: list[FloatArray] = field(default_factory=list)
+    pending_g: list[FloatArray | None] = field(default_factory=list)
+    offset: float | None = None
+    offset_sharpness: float = float("nan")
+    has_gyro: bool | None = None
+    chunks: deque = field(default_factory=deque)  # (t_min, t_max, Za, Zg, moving) per absorb call
+    t_last: float = float("-inf")
+    t_first: float = float("inf")
+    dirty: bool = True
+    solutions: dict[int, stats.Solution] = field(default_factory=dict)
+    # link (0: the common weights of undecided candidates) -> [accel rest, accel moving, gyro rest, gyro moving]
+    sigmas: dict[int, FloatArray] = field(default_factory=dict)
+    decided: bool = False
+    win_sum: FloatArray = field(default_factory=lambda: np.zeros(3))  # normalised residuals of the open window
+    win_n: int = 0
+    win_stat: float = 0.0  # sum over closed windows of n |mean|^2 (3 per window for white residuals)
+    win_count: int = 0
+    outliers: int = 0
+    status: UnitStatus | None = None
+    best_joint_t: float = float("-inf")
+    best_joint: int | None = None
+    peak: FloatArray = field(default_factory=lambda: np.zeros(2))  # largest |reading| seen: accel, gyro
+    peak_count: FloatArray = field(default_factory=lambda: np.zeros(2))  # how often exactly that value came
+    saturated: int = 0
+    t_solved: float = float("-inf")
+    align_tried: float = float("-inf")
+    raw: deque = field(default_factory=deque)  # absorbed (stamps, accel, gyro) within the history, to realign
+    realigned: int = 0
+    scale_estimated: bool = False
+    # the clock mapping s = t' - offset - drift (t' - t_ref), t' the stamps less their re-sync steps
+    drift: float = 0.0
+    t_ref: float = 0.0
+    steps: ClockSteps | None = None
+    t_seen: float = float("-inf")  # newest stamp searched for re-sync steps
+
+
+def keep_pending(st: UnitState, t: FloatArray, a: FloatArray, g: FloatArray | None) -> None:
+    """Put samples ``t``, ``a``, ``g`` back among the unit's pending ones."""
+    if t.size:
+        st.pending_t.append(t)
+        st.pending_a.append(a)
+        st.pending_g.append(g)
+
+
+def take_pending(st: UnitState) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+    """The unit's pending samples in stamp order: stamps, accelerometer, gyroscope (None: none)."""
+    t = np.concatenate(st.pending_t) if st.pending_t else np.zeros(0)
+    a = np.concatenate(st.pending_a) if st.pending_a else np.zeros((0, 3))
+    g = np.concatenate(st.pending_g) if st.has_gyro and st.pending_g else None  # type: ignore[arg-type]
+    order = np.argsort(t, kind="stable")
+    return t[order], a[order], None if g is None else g[order]
+
+
+def signals_at(grid: Grid, s: FloatArray, links: Sequence[int]):
+    """Link signals of ``links`` at instants ``s`` (M,) from the grid, as ``mle``'s signal table does
+    (:func:`~skincal.calib.signals.hermite`: cubic Hermite for the values with their derivatives,
+    linear for the derivatives). Returns u, K, w, dw_dt, du_dt, dK_dt, u_g (each ``(L, M, ...)``)
+    and ok ``(M,)``."""
+    y, dy, i = hermite(grid.t, grid.y, grid.dy, s, np.asarray(links) - 1)  # (M, L, 18)
+    y, dy = np.moveaxis(y, 1, 0), np.moveaxis(dy, 1, 0)
+    L, M = y.shape[:2]
+    sig = (
+        y[..., :3], y[..., 3:12].reshape(L, M, 3, 3), y[..., 12:15], dy[..., 12:15],
+        dy[..., :3], dy[..., 3:12].reshape(L, M, 3, 3), y[..., 15:18],
+    )  # fmt: skip
+    return (*sig, grid.ok[i] & grid.ok[i + 1])
+
+
+def unsaturated(st: UnitState, a: FloatArray, g: FloatArray | None) -> np.ndarray:
+    """``(M,)`` samples below the sensors' saturation: a largest reading that recurs exactly (a
+    clipped register) is taken as the range, and every sample reaching it on any axis is dropped."""
+    keep = np.ones(a.shape[0], dtype=bool)
+    for i, x in enumerate((a, g)):
+        if x is None or x.size == 0:
+            continue
+        if np.abs(x).max() < SATURATION_FLOOR[i] and st.peak_count[i] < 2:
+            continue  # a quantised reading at rest repeats its largest value too: not a range
+        m = np.abs(x)
+        top = float(m.max())
+        if top > st.peak[i]:
+            st.peak[i], st.peak_count[i] = top, float((m == top).sum())
+        else:
+            st.peak_count[i] += float((m == st.peak[i]).sum())
+        if st.peak_count[i] >= 2 and st.peak[i] >= SATURATION_FLOOR[i]:
+            keep &= np.all(m < st.peak[i], axis=1)
+    st.saturated += int((~keep).sum())
+    return keep

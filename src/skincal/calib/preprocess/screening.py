@@ -1,0 +1,255 @@
+"""Reading screening of every channel (saturation, stuck rails: :func:`screen_readings`,
+:func:`screen_channels`) and the unit checks of a stream (:func:`check_accel_units`: m/s^2, not g,
+milli-g or raw counts; :func:`check_gyro_units`: rad/s, not deg/s)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from skincal.errors import CalibrationError
+from skincal.kinematics.transforms import FloatArray
+
+SATURATION_FRACTION = 0.002
+"""An axis whose extreme value repeats in more than this fraction of samples is saturating..."""
+SATURATION_MIN = 11.0
+"""...if that value is beyond this magnitude, m/s^2 (above 1 g plus any bias: a unit at rest
+repeats its reading too, but never saturates there)."""
+GYRO_SATURATION_MIN = 1.0
+"""A gyroscope extreme repeated as often as :data:`SATURATION_FRACTION` says is a rail if it lies
+beyond this rate, rad/s (57 deg/s: below every MEMS gyroscope's smallest range, 125 deg/s, and far
+above any reading at rest)."""
+
+
+@dataclass(frozen=True)
+class Screening:
+    """The outcome of :func:`screen_channels`: ``keep`` ``(M,)`` usable samples, ``saturated``
+    ``(M,)`` samples at a channel's rail, and the warnings."""
+
+    keep: np.ndarray
+    saturated: np.ndarray
+    warnings: tuple[str, ...]
+
+
+RAIL_BAND = 0.05
+"""With ``pile_up``, the samples within this fraction of an extreme are its neighbourhood..."""
+RAIL_SHARE = 0.5
+"""...of which a rail holds more than this share (a clipped channel piles up at its rail; a
+quantised one merely repeats its peak a few times among many readings close to it)."""
+
+
+def _rails(x: FloatArray, minimum: float, pile_up: bool = False) -> list[tuple[int, float, np.ndarray]]:
+    """Per axis of ``x`` ``(M, 3)``: the extremes beyond ``minimum`` in magnitude that repeat exactly
+    in more than :data:`SATURATION_FRACTION` of the samples (and more than 3) and, with ``pile_up``,
+    hold more than :data:`RAIL_SHARE` of the samples within :data:`RAIL_BAND` of them: ``(axis,
+    value, mask)``. A saturating channel clips at its rail and reports the same value every time."""
+    out = []
+    for k in range(x.shape[1]):
+        a = x[:, k]
+        fin = a[np.isfinite(a)]
+        if fin.size == 0:
+            continue
+        for extreme in (fin.max(), fin.min()):
+            hits = a == extreme
+            n_hits = np.count_nonzero(hits)
+            if not (abs(extreme) > minimum and hits.mean() > SATURATION_FRACTION and n_hits > 3):
+                continue
+            if pile_up and n_hits <= RAIL_SHARE * np.count_nonzero(np.abs(fin - extreme) <= RAIL_BAND * abs(extreme)):
+                continue
+            out.append((k, float(extreme), hits))
+    return out
+
+
+def screen_channels(
+    unit: str, accel: FloatArray, gyro: FloatArray | None = None, t: FloatArray | None = None, **stuck: float
+) -> Screening:
+    """:func:`screen_readings` of the accelerometer, and the same saturation test on the gyroscope
+    (rails beyond :data:`GYRO_SATURATION_MIN`): a gyroscope at its rail under-reads the rotation
+    exactly when it matters most. ``stuck``: the stuck-axis test's options."""
+    keep, warnings = screen_readings(unit, accel, t, **stuck)
+    saturated = np.zeros(len(keep), dtype=bool)
+    for _, _, hits in _rails(np.asarray(accel, dtype=float), SATURATION_MIN):
+        saturated |= hits
+    if gyro is not None:
+        for k, value, hits in _rails(np.asarray(gyro, dtype=float), GYRO_SATURATION_MIN, pile_up=True):
+            keep &= ~hits
+            saturated |= hits
+            warnings.append(
+                f"gyroscope {'xyz'[k]} axis saturates at {value:+.4g} rad/s ({np.degrees(value):+.0f} deg/s) in "
+                f"{100 * hits.mean():.1f}% of samples; those samples are ignored"
+            )
+    return Screening(keep, saturated & ~keep, tuple(warnings))
+
+
+def screen_readings(
+    unit: str,
+    accel: FloatArray,
+    t: FloatArray | None = None,
+    *,
+    stuck_min_s: float = 1.0,
+    stuck_min_fraction: float = 0.02,
+    stuck_others_ptp: float = 0.2,
+) -> tuple[np.ndarray, list[str]]:
+    """Reject what no method can use: a stuck accelerometer axis and saturated samples. Returns the
+    mask of usable samples and the warnings.
+
+    An axis constant over the whole stream is an error. An axis that holds one value from some
+    instant on (a register that stopped updating) shows as a run of exactly repeated consecutive
+    values that lasts at least ``stuck_min_s`` (needs the stamps ``t`` ``(M,)``, s) or
+    ``stuck_min_fraction`` of the samples (at least 10 samples), while another axis of the same
+    samples varies by more than ``stuck_others_ptp`` m/s^2 peak to peak: those samples are not
+    usable (a unit at rest whose noise stays below one LSB repeats its readings too, but then its
+    other axes do not move). A repeated value at the axis' saturating extreme is left to the
+    saturation test: samples at an extreme beyond ``SATURATION_MIN`` that repeats in more than
+    ``SATURATION_FRACTION`` of the samples are dropped, with a warning.
+    """
+    accel = np.asarray(accel, dtype=float)
+    n = len(accel)
+    keep = np.ones(n, dtype=bool)
+    warnings: list[str] = []
+    t = None if t is None else np.asarray(t, dtype=float)
+    min_run = stuck_min_fraction * n
+    if t is not None and n > 1:
+        dt = float(np.median(np.diff(t)))
+        if dt > 0:
+            min_run = min(min_run, stuck_min_s / dt)
+    min_run = max(min_run, 10.0)
+    rows = np.flatnonzero(np.all(np.isfinite(accel), axis=1))  # runs are judged on the complete samples
+    fin = accel[rows]
+    for k, axis in enumerate("xyz"):
+        a = accel[:, k]
+        if a.size > 10 and np.ptp(a) < 1e-9:
+            raise CalibrationError(f"unit '{unit}': accelerometer {axis} axis is stuck at {a[0]:.4g} m/s^2")
+        af, others = fin[:, k], np.delete(fin, k, axis=1)
+        same = np.concatenate([[False], af[1:] == af[:-1], [False]])  # same[i]: sample i repeats sample i - 1
+        edges = np.flatnonzero(np.diff(same.astype(np.int8)))
+        for i0, i1 in zip(edges[::2], edges[1::2], strict=True):
+            start, end = int(i0), int(i1) + 1  # finite samples [start, end) hold one value
+            value = float(af[start])
+            if end - start < min_run:
+                continue
+            if abs(value) > SATURATION_MIN and value in (af.max(), af.min()):
+                continue  # a rail: the saturation test below judges it
+            if not np.max(np.ptp(others[start:end], axis=0)) > stuck_others_ptp:
+                continue  # the whole unit is still: repeated readings below one LSB of noise
+            i, j = rows[start], rows[end - 1]
+            keep[i : j + 1] = False
+            last = end == rows.size
+            if t is None:
+                span = f"from sample {i} " + ("to the end" if last else f"to sample {j}")
+            else:
+                span = f"from {t[i]:.1f} s " + ("to the end" if last else f"to {t[j]:.1f} s")
+            warnings.append(
+                f"accelerometer {axis} axis stuck at {value:.4g} m/s^2 {span} ({end - start} samples ignored)"
+            )
+        for extreme in (a.max(), a.min()):
+            hits = a == extreme
+            if abs(extreme) > SATURATION_MIN and hits.mean() > SATURATION_FRACTION and np.count_nonzero(hits) > 3:
+                keep &= ~hits
+                warnings.append(
+                    f"accelerometer {axis} axis saturates at {extreme:+.4g} m/s^2 in {100 * hits.mean():.1f}% "
+                    "of samples; those samples are ignored"
+                )
+    return keep, warnings
+
+
+G_UNIT_RANGE = (0.08, 0.125)
+"""A median specific-force magnitude this fraction of gravity (1/9.81 = 0.102) is an accelerometer
+in g..."""
+RAW_COUNT_MIN = 50.0
+"""...and one beyond this multiple of gravity a stream of raw counts (an MPU's 16384 LSB/g at
++-2 g is 1670 times gravity in m/s^2)..."""
+PLAUSIBLE_G_RANGE = (0.7, 1.4)
+"""...while one outside this range of gravity (but neither of the above) is only suspicious."""
+MILLI_G_RANGE = (80.0, 125.0)
+"""Raw counts whose median is this multiple of gravity (1000 / 9.81 = 102) are named as milli-g."""
+
+
+def check_accel_units(unit: str, accel: FloatArray, gravity_mps2: float) -> list[str]:
+    """The accelerometer's unit from the magnitude of its readings: a robot accelerates its links
+    by a fraction of gravity, so the median ``|f|`` over the stream is gravity within tens of
+    percent in m/s^2 (:data:`PLAUSIBLE_G_RANGE`). About 1/9.81 of it (:data:`G_UNIT_RANGE`) is a
+    stream in g and beyond :data:`RAW_COUNT_MIN` times it raw counts: both are certain and raise a
+    one-line :class:`~skincal.errors.DatasetError`; anything else outside the plausible range is a
+    warning. Without gravity (``gravity_mps2 < 1``) nothing is checked."""
+    from skincal.errors import DatasetError
+
+    accel = np.asarray(accel, dtype=float)
+    if gravity_mps2 < 1.0 or accel.shape[0] < 10:
+        return []
+    m = float(np.median(np.linalg.norm(accel, axis=1)))
+    r = m / gravity_mps2
+    if G_UNIT_RANGE[0] <= r <= G_UNIT_RANGE[1]:
+        raise DatasetError(
+            f"unit '{unit}': accelerometer reads |f| = {m:.3g} (median), {r:.3f} of gravity: it is in g, not m/s^2 "
+            f"(multiply by {gravity_mps2:.5g})"
+        )
+    if MILLI_G_RANGE[0] <= r <= MILLI_G_RANGE[1]:
+        raise DatasetError(
+            f"unit '{unit}': accelerometer reads |f| = {m:.4g} (median), {r:.0f} times gravity: it is in milli-g, "
+            f"not m/s^2 (multiply by {gravity_mps2 / 1000:.4g})"
+        )
+    if r > RAW_COUNT_MIN:
+        raise DatasetError(
+            f"unit '{unit}': accelerometer reads |f| = {m:.4g} (median), {r:.0f} times gravity: raw counts? "
+            "convert them to m/s^2 with the sensor's sensitivity"
+        )
+    if not PLAUSIBLE_G_RANGE[0] <= r <= PLAUSIBLE_G_RANGE[1]:
+        return [
+            f"accelerometer reads |f| = {m:.3g} m/s^2 (median), {r:.2f} of gravity: wrong unit or scale? "
+            "(the estimated scale/misalignment absorbs a few percent, not this)"
+        ]
+    return []
+
+
+DEG_PER_RAD = 180.0 / np.pi
+GYRO_SCALE_TOLERANCE = 0.25
+"""A gyroscope whose readings are within this fraction of 180/pi times the robot's rotation rate is
+in deg/s; within it of 1 the unit is right."""
+GYRO_RAW_MIN = 100.0
+"""A gyroscope reading more than this many times the rotation rate is raw counts (an MPU's 131
+LSB per deg/s is 7506 per rad/s)."""
+GYRO_CHECK_MIN_RATE = 0.1
+"""The check needs the link to turn at least this fast (rms), rad/s, and..."""
+GYRO_CHECK_MIN_CORRELATION = 0.7
+"""...the gyroscope's magnitude to follow the link's rotation rate this closely (correlation)."""
+
+
+def check_gyro_units(unit: str, gyro_speed: FloatArray, link_speed: FloatArray) -> list[str]:
+    """The gyroscope's unit from its rate ``|w_meas - b|`` ``(M,)`` against its link's rotation rate
+    from the chain ``|w_link|`` ``(M,)`` (rad/s; any frame: magnitudes need no alignment, only the
+    time offset), at the same instants. ``s = <|w_meas|, |w_link|> / <|w_link|, |w_link|>`` (least
+    squares) is 1 within a consumer part's scale error; ``s ~ 57.3`` (within
+    :data:`GYRO_SCALE_TOLERANCE`) is a stream in deg/s and ``s >`` :data:`GYRO_RAW_MIN` raw counts:
+    both raise a one-line :class:`~skincal.errors.DatasetError` when the link turns enough and the
+    magnitudes correlate (:data:`GYRO_CHECK_MIN_RATE`, :data:`GYRO_CHECK_MIN_CORRELATION`); any
+    other ``s`` outside ``1 +- GYRO_SCALE_TOLERANCE`` is a warning."""
+    from skincal.errors import DatasetError
+
+    g, w = np.asarray(gyro_speed, dtype=float), np.asarray(link_speed, dtype=float)
+    ok = np.isfinite(g) & np.isfinite(w)
+    g, w = g[ok], w[ok]
+    if g.size < 20 or float(np.sqrt(np.mean(w * w))) < GYRO_CHECK_MIN_RATE or np.std(g) == 0 or np.std(w) == 0:
+        return []
+    s = float(g @ w / (w @ w))
+    rho = float(np.corrcoef(g, w)[0, 1])
+    certain = rho >= GYRO_CHECK_MIN_CORRELATION
+    if abs(s / DEG_PER_RAD - 1.0) <= GYRO_SCALE_TOLERANCE and certain:
+        raise DatasetError(
+            f"unit '{unit}': gyroscope reads {s:.1f} times the robot's rotation rate: it is in deg/s, not rad/s "
+            f"(multiply by pi/180)"
+        )
+    if s > GYRO_RAW_MIN and certain:
+        raise DatasetError(
+            f"unit '{unit}': gyroscope reads {s:.0f} times the robot's rotation rate: raw counts? convert them to "
+            "rad/s with the sensor's sensitivity"
+        )
+    if not certain:
+        return [
+            f"gyroscope rate follows its link's rotation rate poorly (correlation {rho:.2f}, ratio {s:.2f}): the "
+            "joint stream misrepresents the rotation between its reports, or the clock is off"
+        ]
+    if abs(s - 1.0) > GYRO_SCALE_TOLERANCE:
+        return [f"gyroscope reads {s:.2f} times its link's rotation rate (correlation {rho:.2f}): wrong unit or scale?"]
+    return []
