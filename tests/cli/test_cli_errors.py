@@ -183,6 +183,125 @@ def test_sigterm_landing_in_a_finalizer_still_terminates(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+OTHER_THREAD_WRITER = """
+    import signal, sys, threading, time
+    from pathlib import Path
+    from skincal.cli import app, main
+    from skincal.io.atomic import atomic_path
+
+    def elsewhere():  # the signal handled by another thread while the main one is already in sleep()
+        time.sleep(0.5)
+        signal.pthread_kill(threading.get_ident(), signal.SIGTERM)
+
+    @app.command("slow-write")
+    def slow_write(out: Path) -> None:
+        with atomic_path(out) as tmp:
+            tmp.write_bytes(b"x" * 1000)
+            threading.Thread(target=elsewhere, daemon=True).start()
+            print("writing", flush=True)
+            time.sleep(120)
+
+    sys.exit(main(["slow-write", sys.argv[1]]))
+"""
+
+
+@pytest.mark.skipif(not LINUX, reason="POSIX threads and signals")
+def test_a_signal_that_lands_outside_the_main_threads_blocking_call_still_ends_it(tmp_path):
+    """The C-level handler runs in another thread (or just before the main thread enters ``sleep``):
+    Python's handler would wait for the call to return, 120 s; the watcher breaks the call."""
+    proc = _python(OTHER_THREAD_WRITER, str(tmp_path / "out.bin"))
+    try:
+        assert proc.stdout.readline().strip() == "writing", proc.stderr.read()
+        start = time.monotonic()
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143 and err.strip() == "error: terminated", err
+    assert time.monotonic() - start < 10
+    assert list(tmp_path.iterdir()) == []
+
+
+SLOW_CLEANUP_WRITER = """
+    import sys, time
+    from pathlib import Path
+    from skincal.cli import app, main
+    from skincal.io.atomic import atomic_path
+
+    @app.command("slow-write")
+    def slow_write(out: Path) -> None:
+        with atomic_path(out) as tmp:
+            tmp.write_bytes(b"x" * 1000)
+            try:
+                print("writing", flush=True)
+                time.sleep(120)
+            finally:  # a clean-up that takes a moment (an HDF5 file closing)
+                print("cleaning", flush=True)
+                time.sleep(1.0)
+
+    sys.exit(main(["slow-write", sys.argv[1]]))
+"""
+
+
+@pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
+@pytest.mark.parametrize(("first", "second", "code", "message"), [
+    (signal.SIGTERM, signal.SIGINT, 143, "error: terminated"),
+    (signal.SIGINT, signal.SIGTERM, 130, "error: interrupted"),
+    (signal.SIGTERM, signal.SIGTERM, 143, "error: terminated"),
+])
+def test_a_second_signal_does_not_break_the_first_ones_clean_up(first, second, code, message, tmp_path):
+    """SIGTERM then Ctrl-C 20 ms later ended by the Ctrl-C, raised inside the clean-up (a traceback, or
+    its temporary left): the first signal wins."""
+    proc = _python(SLOW_CLEANUP_WRITER, str(tmp_path / "out.bin"))
+    try:
+        assert proc.stdout.readline().strip() == "writing", proc.stderr.read()
+        proc.send_signal(first)
+        assert proc.stdout.readline().strip() == "cleaning"
+        proc.send_signal(second)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == code and err.strip() == message, err
+    assert list(tmp_path.iterdir()) == []
+
+
+ASYNC_THEN_WRITE = """
+    import asyncio, signal, sys, time
+    from pathlib import Path
+    from skincal.cli import app, main
+    from skincal.cli.signals import run_async
+    from skincal.io.atomic import atomic_path
+
+    async def session():  # as record does: the loop handles SIGTERM while it runs
+        asyncio.get_running_loop().add_signal_handler(signal.SIGTERM, lambda: None)
+
+    @app.command("async-write")
+    def async_write(out: Path) -> None:
+        run_async(session())  # the loop's close left SIGTERM at its default
+        with atomic_path(out) as tmp:
+            tmp.write_bytes(b"x" * 1000)
+            print("writing", flush=True)
+            time.sleep(120)
+
+    sys.exit(main(["async-write", sys.argv[1]]))
+"""
+
+
+@pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
+def test_sigterm_after_an_event_loop_still_unwinds(tmp_path):
+    """``asyncio.run`` with ``add_signal_handler`` leaves SIGTERM at its default when the loop closes:
+    a SIGTERM during the work after the loop (record --live's calibration and result) killed the
+    command without clean-up, its temporary left."""
+    proc = _python(ASYNC_THEN_WRITE, str(tmp_path / "out.bin"))
+    try:
+        assert proc.stdout.readline().strip() == "writing", proc.stderr.read()
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143 and err.strip() == "error: terminated", err
+    assert list(tmp_path.iterdir()) == []
+
+
 # ------------------------------------------------------------------------------ workers
 POOL_PARENT = """
     import sys, time

@@ -13,6 +13,7 @@ from rich.live import Live
 from rich.table import Table
 
 from skincal.cli.app import app, console, seed_option
+from skincal.cli.signals import run_async
 from skincal.errors import ConfigError
 
 
@@ -109,7 +110,7 @@ def record(
                 on_tick=lambda st, rec, rx: live.update(_status_table(st, rec, rx)),
             )
 
-    summary, stats = asyncio.run(main())
+    summary, stats = run_async(main())
     if not console.is_terminal:
         console.line()
     _print_summary(summary, stats, chain)
@@ -189,7 +190,7 @@ def _record_live(out: Path, chain, target_text: str | None, result: Path | None,
             if live_view is not None:
                 live_view.stop()
 
-    summary, stats, feed = asyncio.run(main())
+    summary, stats, feed = run_async(main())
     _print_summary(summary, stats, chain)
     outcome = feed.outcome()
     if outcome is None:
