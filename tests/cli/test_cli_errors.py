@@ -748,3 +748,28 @@ def test_shortened_keeps_ordinary_messages_unchanged():
     out = shortened(f"name '{long}' is refused")
     # the quotes are part of the run: 1002 - 120 - 60 characters cut
     assert out.startswith("name 'xxx") and out.endswith("' is refused") and "[822 characters]" in out
+
+
+# ------------------------------------------------------------------------------ absurd figures
+@pytest.mark.parametrize(("args", "option"), [
+    (["--port", "0"], "--port 0 must be in 1..65535"),
+    (["--port", "70000"], "--port 70000 must be in 1..65535"),
+    (["--duration", "-1"], "--duration -1 s must be a finite number > 0"),
+    (["--duration", "nan"], "--duration nan s"),
+    (["--duration", "inf"], "--duration inf s"),
+    (["--drift-ppm", "1e12"], "--drift-ppm 1e+12 must be a finite number in [-10000, 10000]"),
+    (["--drift-ppm", "nan"], "--drift-ppm nan"),
+    (["--clock-offset", "nan"], "--clock-offset nan s must be a finite number in"),
+    (["--clock-offset", "inf"], "--clock-offset inf s"),
+    (["--clock-offset", "1e300"], "--clock-offset 1e+300 s"),
+])
+def test_emulate_refuses_absurd_figures_naming_the_option_before_reading(args, option, tmp_path, capsys):
+    """Port 0 sent to nowhere and exited 0, a negative or NaN duration played nothing or everything, a NaN
+    offset or drift was a NumPy warning and a packet error after 'sending ...'."""
+    data = tmp_path / "data.h5"
+    data.write_bytes(b"not read: the figures are checked first")
+    port = [] if args[0] == "--port" else ["--port", "45999"]
+    assert main(["emulate", str(data), *port, *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"error: {option}") and "\n" not in err, err
+    assert data.read_bytes() == b"not read: the figures are checked first"
