@@ -773,3 +773,17 @@ def test_emulate_refuses_absurd_figures_naming_the_option_before_reading(args, o
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"error: {option}") and "\n" not in err, err
     assert data.read_bytes() == b"not read: the figures are checked first"
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--placement", "random", "--units", "100000"], "--units 100000 must be in 1..256"),
+    (["--handheld", "--units", "0"], "--units 0 must be in 1..256"),
+    (["--handheld", "--units", "100000"], "--units 100000 must be in 1..256"),
+    (["--handheld", "--other-body", "100000"], "--other-body 100000 must be in 0..256"),
+])
+def test_simulate_refuses_unit_counts_beyond_its_bound_at_once(args, message, tmp_path, capsys):
+    """``--handheld --units 0`` wrote 2 units; ``--units 100000`` still ran at 60 s."""
+    start = time.monotonic()
+    assert main(["simulate", "--out", str(tmp_path / "x.h5"), *args]) == 2
+    assert capsys.readouterr().err.strip() == f"error: {message}"
+    assert time.monotonic() - start < 5 and list(tmp_path.iterdir()) == []
