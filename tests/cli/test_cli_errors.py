@@ -787,3 +787,14 @@ def test_simulate_refuses_unit_counts_beyond_its_bound_at_once(args, message, tm
     assert main(["simulate", "--out", str(tmp_path / "x.h5"), *args]) == 2
     assert capsys.readouterr().err.strip() == f"error: {message}"
     assert time.monotonic() - start < 5 and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(os.name != "posix", reason="FIFOs")
+def test_import_of_a_fifo_is_refused_at_once_instead_of_blocking(tmp_path, capsys):
+    fifo = tmp_path / "recording.bag"
+    os.mkfifo(fifo)  # nobody writes: opening it for reading blocks forever
+    start = time.monotonic()
+    assert main(["import", str(fifo), "--out", str(tmp_path / "d.h5")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"error: {fifo}: is a FIFO (named pipe), expected a ROS bag", err
+    assert time.monotonic() - start < 10 and sorted(p.name for p in tmp_path.iterdir()) == ["recording.bag"]
