@@ -197,6 +197,125 @@ def test_sigterm_landing_in_a_finalizer_still_terminates(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+OTHER_THREAD_WRITER = """
+    import signal, sys, threading, time
+    from pathlib import Path
+    from skincal.cli import app, main
+    from skincal.io.atomic import atomic_path
+
+    def elsewhere():  # the signal handled by another thread while the main one is already in sleep()
+        time.sleep(0.5)
+        signal.pthread_kill(threading.get_ident(), signal.SIGTERM)
+
+    @app.command("slow-write")
+    def slow_write(out: Path) -> None:
+        with atomic_path(out) as tmp:
+            tmp.write_bytes(b"x" * 1000)
+            threading.Thread(target=elsewhere, daemon=True).start()
+            print("writing", flush=True)
+            time.sleep(120)
+
+    sys.exit(main(["slow-write", sys.argv[1]]))
+"""
+
+
+@pytest.mark.skipif(not LINUX, reason="POSIX threads and signals")
+def test_a_signal_that_lands_outside_the_main_threads_blocking_call_still_ends_it(tmp_path):
+    """The C-level handler runs in another thread (or just before the main thread enters ``sleep``):
+    Python's handler would wait for the call to return, 120 s; the watcher breaks the call."""
+    proc = _python(OTHER_THREAD_WRITER, str(tmp_path / "out.bin"))
+    try:
+        assert proc.stdout.readline().strip() == "writing", proc.stderr.read()
+        start = time.monotonic()
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143 and err.strip() == "error: terminated", err
+    assert time.monotonic() - start < 10
+    assert list(tmp_path.iterdir()) == []
+
+
+SLOW_CLEANUP_WRITER = """
+    import sys, time
+    from pathlib import Path
+    from skincal.cli import app, main
+    from skincal.io.atomic import atomic_path
+
+    @app.command("slow-write")
+    def slow_write(out: Path) -> None:
+        with atomic_path(out) as tmp:
+            tmp.write_bytes(b"x" * 1000)
+            try:
+                print("writing", flush=True)
+                time.sleep(120)
+            finally:  # a clean-up that takes a moment (an HDF5 file closing)
+                print("cleaning", flush=True)
+                time.sleep(1.0)
+
+    sys.exit(main(["slow-write", sys.argv[1]]))
+"""
+
+
+@pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
+@pytest.mark.parametrize(("first", "second", "code", "message"), [
+    (signal.SIGTERM, signal.SIGINT, 143, "error: terminated"),
+    (signal.SIGINT, signal.SIGTERM, 130, "error: interrupted"),
+    (signal.SIGTERM, signal.SIGTERM, 143, "error: terminated"),
+])
+def test_a_second_signal_does_not_break_the_first_ones_clean_up(first, second, code, message, tmp_path):
+    """SIGTERM then Ctrl-C 20 ms later ended by the Ctrl-C, raised inside the clean-up (a traceback, or
+    its temporary left): the first signal wins."""
+    proc = _python(SLOW_CLEANUP_WRITER, str(tmp_path / "out.bin"))
+    try:
+        assert proc.stdout.readline().strip() == "writing", proc.stderr.read()
+        proc.send_signal(first)
+        assert proc.stdout.readline().strip() == "cleaning"
+        proc.send_signal(second)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == code and err.strip() == message, err
+    assert list(tmp_path.iterdir()) == []
+
+
+ASYNC_THEN_WRITE = """
+    import asyncio, signal, sys, time
+    from pathlib import Path
+    from skincal.cli import app, main
+    from skincal.cli.signals import run_async
+    from skincal.io.atomic import atomic_path
+
+    async def session():  # as record does: the loop handles SIGTERM while it runs
+        asyncio.get_running_loop().add_signal_handler(signal.SIGTERM, lambda: None)
+
+    @app.command("async-write")
+    def async_write(out: Path) -> None:
+        run_async(session())  # the loop's close left SIGTERM at its default
+        with atomic_path(out) as tmp:
+            tmp.write_bytes(b"x" * 1000)
+            print("writing", flush=True)
+            time.sleep(120)
+
+    sys.exit(main(["async-write", sys.argv[1]]))
+"""
+
+
+@pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
+def test_sigterm_after_an_event_loop_still_unwinds(tmp_path):
+    """``asyncio.run`` with ``add_signal_handler`` leaves SIGTERM at its default when the loop closes:
+    a SIGTERM during the work after the loop (record --live's calibration and result) killed the
+    command without clean-up, its temporary left."""
+    proc = _python(ASYNC_THEN_WRITE, str(tmp_path / "out.bin"))
+    try:
+        assert proc.stdout.readline().strip() == "writing", proc.stderr.read()
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143 and err.strip() == "error: terminated", err
+    assert list(tmp_path.iterdir()) == []
+
+
 # ------------------------------------------------------------------------------ workers
 POOL_PARENT = """
     import sys, time
@@ -704,3 +823,53 @@ def test_absurd_numbers_are_one_line_usage_errors(command, message, files, tmp_p
     err = out.err.strip().splitlines()
     assert err == [f"error: {message}"] or (len(err) == 1 and message in err[0]), out.err
     assert "sending" not in out.out and not list(tmp_path.iterdir())
+
+
+# ------------------------------------------------------------------------------ absurd figures
+@pytest.mark.parametrize(("args", "option"), [
+    (["--port", "0"], "--port 0 must be in 1..65535"),
+    (["--port", "70000"], "--port 70000 must be in 1..65535"),
+    (["--duration", "-1"], "--duration -1 s must be a finite number > 0"),
+    (["--duration", "nan"], "--duration nan s"),
+    (["--duration", "inf"], "--duration inf s"),
+    (["--drift-ppm", "1e12"], "--drift-ppm 1e+12 must be a finite number in [-10000, 10000]"),
+    (["--drift-ppm", "nan"], "--drift-ppm nan"),
+    (["--clock-offset", "nan"], "--clock-offset nan s must be a finite number in"),
+    (["--clock-offset", "inf"], "--clock-offset inf s"),
+    (["--clock-offset", "1e300"], "--clock-offset 1e+300 s"),
+])
+def test_emulate_refuses_absurd_figures_naming_the_option_before_reading(args, option, tmp_path, capsys):
+    """Port 0 sent to nowhere and exited 0, a negative or NaN duration played nothing or everything, a NaN
+    offset or drift was a NumPy warning and a packet error after 'sending ...'."""
+    data = tmp_path / "data.h5"
+    data.write_bytes(b"not read: the figures are checked first")
+    port = [] if args[0] == "--port" else ["--port", "45999"]
+    assert main(["emulate", str(data), *port, *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"error: {option}") and "\n" not in err, err
+    assert data.read_bytes() == b"not read: the figures are checked first"
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--placement", "random", "--units", "100000"], "--units 100000 must be in 1..256"),
+    (["--handheld", "--units", "0"], "--units 0 must be in 1..256"),
+    (["--handheld", "--units", "100000"], "--units 100000 must be in 1..256"),
+    (["--handheld", "--other-body", "100000"], "--other-body 100000 must be in 0..256"),
+])
+def test_simulate_refuses_unit_counts_beyond_its_bound_at_once(args, message, tmp_path, capsys):
+    """``--handheld --units 0`` wrote 2 units; ``--units 100000`` still ran at 60 s."""
+    start = time.monotonic()
+    assert main(["simulate", "--out", str(tmp_path / "x.h5"), *args]) == 2
+    assert capsys.readouterr().err.strip() == f"error: {message}"
+    assert time.monotonic() - start < 5 and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(os.name != "posix", reason="FIFOs")
+def test_import_of_a_fifo_is_refused_at_once_instead_of_blocking(tmp_path, capsys):
+    fifo = tmp_path / "recording.bag"
+    os.mkfifo(fifo)  # nobody writes: opening it for reading blocks forever
+    start = time.monotonic()
+    assert main(["import", str(fifo), "--out", str(tmp_path / "d.h5")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"error: {fifo}: is a FIFO (named pipe), expected a ROS bag", err
+    assert time.monotonic() - start < 10 and sorted(p.name for p in tmp_path.iterdir()) == ["recording.bag"]

@@ -7,14 +7,9 @@ one-line message on stderr and exit code 2; no traceback reaches the user.
 
 from __future__ import annotations
 
-import contextlib
-import functools
 import importlib
 import os
-import signal
 import sys
-import threading
-from collections.abc import Iterator
 
 from skincal.cli import avoid as _avoid  # noqa: E402,F401
 from skincal.cli import bench_robustness as _bench_robustness  # noqa: E402,F401
@@ -31,8 +26,9 @@ from skincal.cli import ros2 as _ros2  # noqa: E402,F401
 from skincal.cli import simulate as _simulate  # noqa: E402,F401
 from skincal.cli import viz as _viz  # noqa: E402,F401
 from skincal.cli.app import app, console_error
+from skincal.cli.signals import Terminated, unwinds
 
-__all__ = ["app", "main"]
+__all__ = ["Terminated", "app", "main"]
 
 
 def _click_exceptions() -> tuple[tuple[type, ...], tuple[type, ...], tuple[type, ...]]:
@@ -48,62 +44,10 @@ def _click_exceptions() -> tuple[tuple[type, ...], tuple[type, ...], tuple[type,
     return pick("ClickException"), pick("Abort"), pick("NoArgsIsHelpError")
 
 
-class Terminated(SystemExit):
-    """Raised in the main thread when the process receives SIGTERM: it unwinds the command like an
-    exception, so every ``finally`` and :func:`skincal.io.atomic.atomic_path` clean-up runs (no
-    temporary file is left); exit code 143 (128 + SIGTERM), as if killed by the signal."""
-
-    def __init__(self) -> None:
-        super().__init__(128 + signal.SIGTERM)
-
-
-def _raise_terminated(_signum: int, _frame: object) -> None:
-    raise Terminated()
-
-
-_REDELIVER_S = 0.01
-"""Delay before a swallowed signal is sent again, s."""
-
-
-def _redeliver(unraisable: object, *, fallback: object) -> None:
-    """``sys.unraisablehook`` while a command runs: a signal's exception raised where Python can only
-    ignore it (a weakref callback, a ``__del__``: it would print "Exception ignored" and carry on, the
-    signal lost) is sent again a moment later, so it surfaces in the command's own code instead."""
-    exc = getattr(unraisable, "exc_value", None)
-    if isinstance(exc, Terminated):
-        sig = signal.SIGTERM
-    elif isinstance(exc, KeyboardInterrupt):
-        sig = signal.SIGINT
-    else:
-        fallback(unraisable)  # type: ignore[operator]
-        return
-    # from another thread, a moment later: delivered now, it would be raised inside this hook again
-    threading.Timer(_REDELIVER_S, os.kill, (os.getpid(), sig)).start()
-
-
-@contextlib.contextmanager
-def _sigterm_unwinds() -> Iterator[None]:
-    """SIGTERM raises :class:`Terminated` while the command runs (main thread only; the previous
-    handler is restored afterwards), and a signal's exception swallowed by a finalizer is delivered
-    again (:func:`_redeliver`). Commands that handle SIGTERM themselves (``record``) install their
-    own handler inside."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGTERM, _raise_terminated)
-    previous_hook = sys.unraisablehook
-    sys.unraisablehook = functools.partial(_redeliver, fallback=previous_hook)
-    try:
-        yield
-    finally:
-        sys.unraisablehook = previous_hook
-        signal.signal(signal.SIGTERM, previous)
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the process exit code."""
     try:
-        with _sigterm_unwinds():
+        with unwinds():
             return _run(argv)
     except Terminated as exc:  # between the command's end and the handler's removal
         console_error("terminated")

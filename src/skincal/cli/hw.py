@@ -13,6 +13,7 @@ from rich.live import Live
 from rich.table import Table
 
 from skincal.cli.app import app, console, seed_option
+from skincal.cli.signals import run_async
 from skincal.errors import ConfigError
 
 
@@ -109,7 +110,7 @@ def record(
                 on_tick=lambda st, rec, rx: live.update(_status_table(st, rec, rx)),
             )
 
-    summary, stats = asyncio.run(main())
+    summary, stats = run_async(main())
     if not console.is_terminal:
         console.line()
     _print_summary(summary, stats, chain)
@@ -189,7 +190,7 @@ def _record_live(out: Path, chain, target_text: str | None, result: Path | None,
             if live_view is not None:
                 live_view.stop()
 
-    summary, stats, feed = asyncio.run(main())
+    summary, stats, feed = run_async(main())
     _print_summary(summary, stats, chain)
     outcome = feed.outcome()
     if outcome is None:
@@ -214,6 +215,28 @@ def _record_live(out: Path, chain, target_text: str | None, result: Path | None,
         console.print(f"wrote {shown(result)}", highlight=False)
 
 
+MAX_CLOCK_OFFSET_S = 1e6
+"""Largest ``--clock-offset`` of ``emulate``, s (11.6 days: a device clock started long before the session)."""
+MAX_DRIFT_PPM = 1e4
+"""Largest ``--drift-ppm`` of ``emulate`` (1 %: real oscillators drift by well under 100 ppm)."""
+
+
+def _check_emulate_figures(port: int, duration: float | None, clock_offset: float, drift_ppm: float) -> None:
+    """Refuse ``emulate``'s absurd figures before the dataset is read, each naming its option and range: port 0
+    sent to nowhere, a negative or NaN duration played nothing or everything, a NaN/inf offset or drift was a
+    NumPy warning and a packet error after 'sending ...' (issue 27, absurd numeric options)."""
+    if not 1 <= port <= 65535:
+        raise ConfigError(f"--port {port} must be in 1..65535")
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise ConfigError(f"--duration {duration:g} s must be a finite number > 0 (leave it out to play everything)")
+    if not (math.isfinite(clock_offset) and abs(clock_offset) <= MAX_CLOCK_OFFSET_S):
+        raise ConfigError(f"--clock-offset {clock_offset:g} s must be a finite number in "
+                          f"[-{MAX_CLOCK_OFFSET_S:g}, {MAX_CLOCK_OFFSET_S:g}]")
+    if not (math.isfinite(drift_ppm) and abs(drift_ppm) <= MAX_DRIFT_PPM):
+        raise ConfigError(f"--drift-ppm {drift_ppm:g} must be a finite number in "
+                          f"[-{MAX_DRIFT_PPM:g}, {MAX_DRIFT_PPM:g}]")
+
+
 @app.command()
 def emulate(
     data: Path = typer.Argument(..., help="dataset to play (.h5)"),
@@ -234,6 +257,7 @@ def emulate(
     seed: int = typer.Option(0, "--seed", callback=seed_option, help="seed of the fault generator"),
 ) -> None:
     """Play a dataset as skin units over UDP with optional loss, duplication, reordering and corruption."""
+    _check_emulate_figures(port, duration, clock_offset, drift_ppm)
     import numpy as np
 
     from skincal.data.hdf5 import read_dataset

@@ -119,9 +119,12 @@ def import_bag(
     from skincal.data.segment import segment_dataset
     from skincal.errors import ConfigError
     from skincal.io.atomic import check_output
+    from skincal.io.files import regular_file
     from skincal.kinematics import PRESETS
     from skincal.names import printable
 
+    if not bag.is_dir():  # a ROS 2 bag folder, else a file: a FIFO or a device would block the reader (issue 27)
+        regular_file(bag, "ROS bag")
     robot_file = (Path(robot),) if robot is not None and robot not in PRESETS else ()
     check_output(out, force=force, inputs=(bag, *robot_file, *((protocol,) if protocol else ())))
     tmap = topic_map(imu_topic, joint_topic, range_topic, path=map_file)

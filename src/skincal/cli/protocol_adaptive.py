@@ -18,6 +18,7 @@ import math
 from pathlib import Path
 
 from skincal.cli.app import at_rate, console, joint_names, shown
+from skincal.cli.signals import run_async
 from skincal.errors import ConfigError
 
 
@@ -179,7 +180,7 @@ def _live(chain, out: Path, result_path: Path, *, rate: float, seed: int, goal, 
                                  overwrite=force,
                                  on_start=lambda p: _say(f"listening on {bind}:{p}"))  # fmt: skip
 
-    _summary, _stats, feed = asyncio.run(main())
+    _summary, _stats, feed = run_async(main())
     outcome = feed.outcome()
     if outcome is None:
         _say("note: no joint states or no skin unit received: nothing calibrated")

@@ -64,8 +64,10 @@ def simulate(
         from skincal.errors import ConfigError
 
         raise ConfigError(f"{out}: a dataset is an HDF5 file; name it .h5 (or .hdf5)")
+    _check_unit_counts(units, other_body)
     if handheld:
-        _simulate_handheld(out, units or 2, spacing, duration, noise, clock, seed, other_body, force)
+        _simulate_handheld(out, 2 if units is None else units, spacing, duration, noise, clock, seed, other_body,
+                           force)  # fmt: skip
         return
     from rich.progress import Progress
 
@@ -96,6 +98,22 @@ def simulate(
             f"  note: --placement paper is the paper's Table II on the Panda; on {chain.name} its unit poses are "
             f"reused in the frames of links 2..{len(ds.units) + 1} as they are (--placement random fits any robot)"
         ), highlight=False, markup=False)  # fmt: skip
+
+
+MAX_SIMULATED_UNITS = 256
+"""Most units ``simulate`` places on a robot or a hand-held body (256: a dense skin; 100,000 ran for minutes,
+1,000 takes a minute)."""
+
+
+def _check_unit_counts(units: int | None, other_body: int) -> None:
+    """``--units`` in 1..:data:`MAX_SIMULATED_UNITS` and ``--other-body`` in 0.. of it, refused with one line
+    before any work (``--handheld --units 0`` wrote 2 units; 100,000 still ran at 60 s) (issue 27)."""
+    from skincal.errors import ConfigError
+
+    if units is not None and not 1 <= units <= MAX_SIMULATED_UNITS:
+        raise ConfigError(f"--units {units} must be in 1..{MAX_SIMULATED_UNITS}")
+    if not 0 <= other_body <= MAX_SIMULATED_UNITS:
+        raise ConfigError(f"--other-body {other_body} must be in 0..{MAX_SIMULATED_UNITS}")
 
 
 def _simulate_handheld(
