@@ -503,3 +503,18 @@ def test_a_recording_and_a_written_dataset_read_identically(tmp_path):
         return {n for n in names if not n.startswith("clock") and not n.endswith(("device_t_us", "host_receive_t"))}
 
     assert layout(rec_path) == layout(ds_path)
+
+
+def test_a_description_over_the_contracts_1_mib_is_refused_before_anything_is_written(tmp_path: Path) -> None:
+    """A 2 MiB description was written although every reader refuses an attribute over 1 MiB; the file
+    at the path stays as it was. 1 MiB exactly is written and read back."""
+    path = tmp_path / "d.h5"
+    path.write_bytes(b"earlier file")
+    big = dataclasses.replace(make_dataset(), description="x" * (2 << 20))
+    with pytest.raises(DatasetError, match=r"root attr 'description'.*2097152 bytes \(at most 1048576"):
+        write_dataset(big, path)
+    assert path.read_bytes() == b"earlier file" and sorted(p.name for p in tmp_path.iterdir()) == ["d.h5"]
+    limit = dataclasses.replace(make_dataset(), description="y" * (1 << 20))
+    out = tmp_path / "limit.h5"
+    write_dataset(limit, out)
+    assert read_dataset(out).description == limit.description

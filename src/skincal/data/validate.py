@@ -34,6 +34,9 @@ _TRUTH_POSE_ATTRS = ("link", "position", "quaternion_wxyz")
 TRUTH_BODY_ATTRS = ("body", "T_body_su")
 """``/truth/<unit>`` attrs of an IMU-only true pose (:class:`~skincal.data.dataset.BodyPose`)."""
 _BODY_ROTATION_TOL = 1e-6
+MAX_DESCRIPTION_BYTES = 1 << 20
+"""Largest root ``description`` (UTF-8 bytes): the contract's 1 MiB bound on any attribute, which every
+reader enforces, so a longer one is refused when written rather than giving a file nobody reads."""
 GRAVITY_NORM_MPS2 = (1.0, 100.0)
 """Accepted magnitude of the dataset's gravity, m/s^2: the accelerometers' only reference (zero
 leaves a unit's orientation undetermined), about 9.81 on Earth."""
@@ -253,6 +256,9 @@ def validate_dataset(ds: Dataset, source: str = "<dataset>") -> None:
         validate_gravity(ds.gravity, source, "root attr 'gravity'")
     if not isinstance(ds.description, str):
         raise _fail(source, "root attr 'description'", "must be a string")
+    size = len(ds.description.encode("utf-8", "surrogatepass"))
+    if size > MAX_DESCRIPTION_BYTES:
+        raise _fail(source, "root attr 'description'", f"has {size} bytes (at most {MAX_DESCRIPTION_BYTES}, 1 MiB)")
 
     js = ds.joints
     if js is not None:
