@@ -552,3 +552,22 @@ def test_cli_import_robot_urdf_and_robot_description(ur5_urdf_session, tmp_path,
                  str(tmp_path / "c.h5")]) == 2  # fmt: skip
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "--base-link and --tip-link apply to a URDF robot only" in err
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("imu:\n  /skin/a/imu: 3\n", "'imu' entry 3 is a int, not a unit name; quote it"),
+    ("imu:\n  - 3\n", "'imu' entry 3 is a int, not a topic"),
+    ("range:\n  /skin/a/range: yes\n", "'range' entry True is a bool, not a unit name"),
+    ("joints: 7\n", "'joints' must be the joint-state topic, got 7"),
+    ("joint_names: [1, 2]\n", "'joint_names' must be a list of the robot's joint names"),
+])
+def test_a_topic_map_entry_that_yaml_reads_as_a_number_is_refused(tmp_path, text, message):
+    """``/skin/a/imu: 3`` became a unit named "3" (YAML reads 3 as a number): a name is never made from one."""
+    path = tmp_path / "map.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=f"^{path}: .*") as info:
+        topic_map(path=path)
+    assert message in str(info.value) and "\n" not in str(info.value)
+    path.write_text("imu:\n  /skin/a/imu: '3'\njoints: /joint_states\njoint_names: [j1, j2]\n")  # quoted: fine
+    tmap = topic_map(path=path)
+    assert tmap.imu == {"/skin/a/imu": "3"} and tmap.joints == "/joint_states" and tmap.joint_names == ("j1", "j2")

@@ -59,10 +59,17 @@ def topic_map(
     for key in ("imu", "range"):
         value = doc.get(key) or {}
         if isinstance(value, list):
-            value = {str(t): "" for t in value}
+            value = {t: None for t in value}
         if not isinstance(value, dict):
             raise ConfigError(f"{where}'{key}' must map topics to unit names or list topics")
-        maps[key] = {str(k): "" if v is None else str(v) for k, v in value.items()}
+        for k, v in value.items():  # YAML reads `3` or `yes` as a number or a bool: never a name by accident
+            if not isinstance(k, str) or not (v is None or isinstance(v, str)):
+                bad = k if not isinstance(k, str) else v
+                raise ConfigError(printable(
+                    f"{where}'{key}' entry {bad!r} is a {type(bad).__name__}, not a "
+                    f"{'topic' if bad is k else 'unit name'}; quote it in the YAML ('{bad}')"
+                ))
+        maps[key] = {k: "" if v is None else v for k, v in value.items()}
     maps["imu"].update(_parse_topic_spec(imu))
     maps["range"].update(_parse_topic_spec(range_))
     for key, mapping in maps.items():
@@ -71,8 +78,10 @@ def topic_map(
             if problem is not None:
                 raise ConfigError(printable(f"{where}{key} topic {topic}: unit name {unit!r} {problem}"))
     names = joint_names or doc.get("joint_names")
-    if names is not None and not isinstance(names, list | tuple):
+    if names is not None and not (isinstance(names, list | tuple) and all(isinstance(n, str) for n in names)):
         raise ConfigError(f"{where}'joint_names' must be a list of the robot's joint names in kinematic order")
+    if "joints" in doc and doc["joints"] is not None and not isinstance(doc["joints"], str):
+        raise ConfigError(printable(f"{where}'joints' must be the joint-state topic, got {doc['joints']!r:.80}"))
     return TopicMap(
         imu=maps["imu"],
         joints=joints or doc.get("joints"),
