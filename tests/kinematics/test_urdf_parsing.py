@@ -159,3 +159,31 @@ def test_z1_fast_protocol_finds_its_poses():
     config = replace(fit_to_limits(chain, get_protocol("fast")), collision_check=True, pose_selection="diverse")
     traj = build_trajectory(chain, config, np.random.default_rng(0))
     assert traj.poses.shape == (config.n_poses, 6)
+
+
+@pytest.mark.adversarial
+def test_a_urdf_of_ten_thousand_joints_is_refused_before_it_is_built():
+    """A 10,000-joint URDF (2.4 MB) took `protocol` to 2.5 GB and beyond: refused at the XML count, at once."""
+    import time
+
+    from skincal.kinematics.urdf import MAX_URDF_JOINTS
+
+    n = 10_000
+    text = urdf([f"l{i}" for i in range(n + 1)], [(f"j{i}", f"l{i}", f"l{i + 1}") for i in range(n)])
+    start = time.process_time()
+    with pytest.raises(ConfigError, match=rf": 10000 joints is too many for a URDF \(at most {MAX_URDF_JOINTS}\)$"):
+        chain_from_urdf(text=text)
+    assert time.process_time() - start < 5.0
+
+
+@pytest.mark.adversarial
+def test_a_chain_of_more_movable_joints_than_any_arm_is_one_line_error():
+    """100 revolute joints from base to tip: a chain, but of no robot skincal can calibrate or plan for."""
+    from skincal.kinematics.chain import MAX_JOINTS
+
+    n = 100
+    text = urdf([f"l{i}" for i in range(n + 1)], [(f"j{i}", f"l{i}", f"l{i + 1}") for i in range(n)])
+    with pytest.raises(ConfigError, match=rf"100 joints in one chain \(at most {MAX_JOINTS}\)"):
+        chain_from_urdf(text=text)
+    ok = urdf([f"l{i}" for i in range(MAX_JOINTS + 1)], [(f"j{i}", f"l{i}", f"l{i + 1}") for i in range(MAX_JOINTS)])
+    assert chain_from_urdf(text=ok).n_joints == MAX_JOINTS

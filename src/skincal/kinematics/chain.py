@@ -56,6 +56,9 @@ def _as_joint_vector(
     return arr
 
 
+MAX_JOINTS = 64
+"""Most movable joints of a chain: a 7-joint arm on a 3-joint base has 10, a long snake robot a few tens; a
+chain of thousands is a wrong base/tip choice or a hostile file, and every design and fit grows with it."""
 MAX_OFFSET_M = 1000.0
 """Largest translation of a joint or flange transform, m: an origin beyond 1 km is a typo (``1e300`` overflowed
 in every product of the chain), not an arm."""
@@ -155,6 +158,8 @@ class SerialChain:
         n = axis.shape[0]
         if n == 0:
             raise ConfigError(f"robot '{self.name}': a chain needs at least one joint")
+        if n > MAX_JOINTS:
+            raise ConfigError(f"robot '{self.name}': {n} joints in one chain (at most {MAX_JOINTS})")
         norm = np.linalg.norm(axis, axis=1)
         if not np.all(np.isfinite(norm)) or np.any(norm < 1e-9):
             raise ConfigError(f"robot '{self.name}': joint axes must be finite and non-zero")

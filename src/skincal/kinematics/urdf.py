@@ -50,6 +50,9 @@ from skincal.names import name_problem, printable
 _MOVING = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
 MAX_URDF_BYTES = 32 * 1024 * 1024
 """Largest URDF text read, bytes (robot descriptions are kilobytes; meshes live in other files)."""
+MAX_URDF_JOINTS = 5000
+"""Most ``<joint>`` elements a URDF may have (fixed ones included): a humanoid with hands has about a hundred,
+a long run of fixed frames a few thousand."""
 
 
 def parse_urdf(text: str, source: str):  # -> yourdfpy.URDF
@@ -72,6 +75,9 @@ def parse_urdf(text: str, source: str):  # -> yourdfpy.URDF
         root = etree.fromstring(data, parser=etree.XMLParser(resolve_entities=False, no_network=True, recover=False))
     except etree.XMLSyntaxError as exc:
         raise ConfigError(f"{source}: not a valid URDF (XML: {exc})") from None
+    joints = sum(1 for _ in root.iterchildren("joint"))
+    if joints > MAX_URDF_JOINTS:  # before yourdfpy builds them all (the chain takes at most MAX_JOINTS)
+        raise ConfigError(f"{source}: {joints} joints is too many for a URDF (at most {MAX_URDF_JOINTS})")
     docinfo = root.getroottree().docinfo
     dtd = docinfo.internalDTD
     if docinfo.public_id or docinfo.system_url or (dtd is not None and any(True for _ in dtd.iterentities())):
