@@ -518,3 +518,29 @@ def test_a_description_over_the_contracts_1_mib_is_refused_before_anything_is_wr
     out = tmp_path / "limit.h5"
     write_dataset(limit, out)
     assert read_dataset(out).description == limit.description
+
+
+def test_a_compressed_stream_of_the_wrong_length_is_refused_before_it_is_decompressed(tmp_path: Path) -> None:
+    """A gzip bomb of zeros (200 MB declared, a few hundred kB stored) whose row count is not its stamps'
+    was decompressed whole and only then refused: the declared shape is now checked first."""
+    import tracemalloc
+
+    path = tmp_path / "bomb.h5"
+    write_dataset(make_dataset(), path)
+    with h5py.File(path, "a") as f:
+        unit = next(iter(f["imu"]))
+        del f[f"imu/{unit}/accel"]
+        rows = 200_000_000 // 24
+        bomb = f.create_dataset(f"imu/{unit}/accel", shape=(rows, 3), dtype="f8", chunks=(1 << 17, 3),
+                                compression="gzip", compression_opts=9)  # fmt: skip
+        zeros = np.zeros((1 << 17, 3))
+        for start in range(0, rows, 1 << 17):
+            bomb[start : start + zeros.shape[0]] = zeros[: rows - start]
+    tracemalloc.start()
+    try:
+        with pytest.raises(DatasetError, match=rf"/imu/{unit}/accel has shape \({rows}, 3\), expected \(\d+, 3\)"):
+            read_dataset(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 20e6, peak  # nothing near the 200 MB was allocated

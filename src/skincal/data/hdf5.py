@@ -113,7 +113,7 @@ def _build(r: DatasetReader, lazy: bool) -> Dataset:
     try:
         description = r.header()
         robot, gravity = r.robot_if_any(has_joints=r.link("/joints"))
-        joints = r.joints()
+        joints = r.joints(None if robot is None else robot.n_joints)
         imu = cast("dict[str, ImuStream]", LazyImu(r, r.imu_names())) if lazy else r.imu()
         tof = r.tof()
         segments = r.segments()

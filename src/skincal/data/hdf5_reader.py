@@ -154,11 +154,19 @@ class DatasetReader:
         return names
 
     @overload
-    def array(self, path: str, required: Literal[True] = True, dtype: type | None = None) -> np.ndarray: ...
+    def array(
+        self, path: str, required: Literal[True] = True, dtype: type | None = None,
+        shape: tuple[int | None, ...] | None = None,
+    ) -> np.ndarray: ...
     @overload
-    def array(self, path: str, required: bool, dtype: type | None = None) -> np.ndarray | None: ...
-    def array(self, path: str, required: bool = True, dtype: type | None = None) -> np.ndarray | None:
-        """Dataset ``path`` as an array; numbers are converted to ``dtype`` (float64 by default)."""
+    def array(
+        self, path: str, required: bool, dtype: type | None = None, shape: tuple[int | None, ...] | None = None
+    ) -> np.ndarray | None: ...
+    def array(
+        self, path: str, required: bool = True, dtype: type | None = None, shape: tuple[int | None, ...] | None = None
+    ) -> np.ndarray | None:
+        """Dataset ``path`` as an array; numbers are converted to ``dtype`` (float64 by default). ``shape``
+        (``None`` entries free) is checked on the declared shape, before anything is read or decompressed."""
         obj = self.node(path, h5py.Dataset, required)
         if obj is None:
             return None
@@ -172,6 +180,13 @@ class DatasetReader:
         if declared_dtype.kind not in allowed:  # checked before reading: no strings or objects are read
             raise self.fail(path, f"has dtype {declared_dtype}, expected {what}")
         self.check_declared(path, obj)
+        if shape is not None:
+            declared = obj.shape or ()
+            fits = len(declared) == len(shape) and all(w in (None, d) for w, d in zip(shape, declared, strict=False))
+            if not fits:
+                sizes = ", ".join("N" if w is None else str(w) for w in shape)
+                expected = f"({sizes},)" if len(shape) == 1 else f"({sizes})"
+                raise self.fail(path, f"has shape {declared}, expected {expected}")
         try:
             value = np.asarray(obj[()])
         except (OSError, KeyError, ValueError, TypeError) as exc:
@@ -348,14 +363,18 @@ class DatasetReader:
             return None, GRAVITY_BASE.copy()
         return None, self.num_attr("/", "gravity", (3,))
 
-    def joints(self) -> JointStates | None:
+    def joints(self, n: int | None = None) -> JointStates | None:
+        """``/joints`` (``n``: the robot's joint count, checked on the declared shapes with the samples of
+        ``t`` before the arrays are read), or ``None`` for an IMU-only dataset."""
         if self.group("/joints", required=False) is None:
             return None  # an IMU-only dataset
+        t = self.array("/joints/t", shape=(None,))
+        rows = (t.shape[0], n)
         return JointStates(
-            t=self.array("/joints/t"),
-            q=self.array("/joints/q"),
-            qd=self.array("/joints/qd"),
-            qdd=self.array("/joints/qdd", required=False),
+            t=t,
+            q=self.array("/joints/q", shape=rows),
+            qd=self.array("/joints/qd", shape=rows),
+            qdd=self.array("/joints/qdd", required=False, shape=rows),
         )
 
     def imu_names(self) -> list[str]:
@@ -365,10 +384,11 @@ class DatasetReader:
         """The IMU stream of one unit (``/imu/<unit>``), read with every check of :meth:`array`."""
         base = f"/imu/{unit}"
         self.group(base)
-        return ImuStream(
-            t=self.array(f"{base}/t"),
-            accel=self.array(f"{base}/accel"),
-            gyro=self.array(f"{base}/gyro", required=False),
+        t = self.array(f"{base}/t", shape=(None,))
+        return ImuStream(  # the (M, 3) streams' shapes checked before they are read or decompressed
+            t=t,
+            accel=self.array(f"{base}/accel", shape=(t.shape[0], 3)),
+            gyro=self.array(f"{base}/gyro", required=False, shape=(t.shape[0], 3)),
         )
 
     def imu(self) -> dict[str, ImuStream]:
