@@ -116,6 +116,7 @@ def _unit_record(unit: Any) -> dict[str, Any]:
         "rotation_std_deg": r_std,
         "time_offset_ms": offset,
         "n_moving_samples": unit.extras.get("n_moving_samples"),
+        "joint_rate": unit.extras.get("joint_rate"),
         "warnings": list(unit.warnings),
     }
 
@@ -271,6 +272,7 @@ def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
                     "rotation_std_deg": _finite_or_none(e["rotation_std_deg"]),
                     "time_offset_ms": _finite_or_none(e["time_offset_ms"]),
                     "motion_kept": _finite_or_none(e.get("motion_kept")),
+                    "joint_rate": e.get("joint_rate"),
                 }
                 for e, d in zip(same, delta, strict=True)
             ],

@@ -304,6 +304,20 @@ def calibrate(
             return CalibrationResult(method, dataset.chain.name, "", 0.0, units, failed_units=part_failed)
 
         result = check(tagged, result, refit)
+    if getattr(parsed, "joint_rate", False):  # the report-spacing check (skincal.calib.joint_rate)
+        from skincal.calib.joint_rate import check as joint_rate_check
+
+        thinned_options = dataclasses.asdict(dataclasses.replace(parsed, consistency=False, joint_rate=False))
+
+        def refit_thinned(thinned: Dataset, thinned_links: dict[str, int]) -> CalibrationResult:
+            """The method from scratch on a dataset whose joint stream is thinned (its conditioning and
+            tables are its own), the units on their links, without the checks."""
+            return calibrate(
+                thinned, method, seed=seed, links=thinned_links, use_dataset_qdd=use_dataset_qdd,
+                qdd_window_s=qdd_window_s, units=list(thinned_links), **thinned_options,
+            )  # fmt: skip
+
+        result = joint_rate_check(tagged, result, refit_thinned)
     return result
 
 

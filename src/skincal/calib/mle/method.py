@@ -136,6 +136,8 @@ class MleOptions:
         detect_move: look for a unit that moved on its link during the session.
         consistency: calibrate independent parts of the recording too and inflate the std where they
             disagree beyond it (:mod:`skincal.calib.consistency`).
+        joint_rate: on a low-rate joint stream, calibrate with every second and third report too and
+            add the error the report spacing leaves in the pose to its std (:mod:`skincal.calib.joint_rate`).
     """
 
     scale: bool = True
@@ -146,6 +148,7 @@ class MleOptions:
     gyro: bool = True
     detect_move: bool = True
     consistency: bool = True
+    joint_rate: bool = True
 
 
 GYRO_MOVING_RPS = 0.1
