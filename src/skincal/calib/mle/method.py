@@ -162,7 +162,7 @@ def _gyro_scale(problem: UnitProblem, link: int) -> GyroScale | None:
     inside = (s.t >= table.t[0]) & (s.t <= table.t[-1]) & shared.interpolator.reliable(s.t)
     if inside.sum() < 12:
         return None
-    w = table.at(link, s.t[inside])[4]
+    w = table.omega_at(link, s.t[inside])
     moving = np.linalg.norm(w, axis=1) > GYRO_MOVING_RPS
     if moving.sum() < 12:
         return None

@@ -228,12 +228,12 @@ def accel_rows(
     J = np.zeros((len(v), 3, blocks.size))
     J[:, :, sl["theta"]] = A @ skew(f)  # d/d dtheta of A R^T v with R <- R Exp(dtheta): A [f]x
     if lin is not None:
-        J[S:, :, sl["p"]] = np.einsum("ij,mjk->mik", A @ R.T, Kd)
+        J[S:, :, sl["p"]] = (A @ R.T) @ Kd
     J[:, :, sl["b"]] = np.eye(3)
     if "e" in sl:
         _scale_columns(J, f, blocks.scale, sl["e"])
     if lin is not None and ("tau" in sl or "d" in sl):
-        dv = lin.du + np.einsum("mij,j->mi", lin.dK, state.p)
+        dv = lin.du + _times_vector(lin.dK, state.p)
         col = -(dv @ R) @ A.T
         if "tau" in sl:
             J[S:, :, sl["tau"].start] = col
@@ -457,6 +457,11 @@ def sandwich_inflation(
         cov_sw = cov_sw * (moving_blocks / (moving_blocks - 1.0))
     ratio = np.sqrt(np.maximum(np.diag(cov_sw), 0.0) / np.maximum(np.diag(cov), 1e-300))
     return np.where(ratio > 1.0 + 2.33 * np.sqrt(0.5 / nb), ratio, 1.0)
+
+
+def _times_vector(K: FloatArray, p: FloatArray) -> FloatArray:
+    """``(M, 3)`` ``K_m p`` of ``K`` ``(M, 3, 3)`` and ``p`` ``(3,)`` (one matrix-vector product over the rows)."""
+    return (K.reshape(-1, 3) @ p).reshape(-1, 3)
 
 
 def _normal_equations(J: FloatArray, r: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
