@@ -97,9 +97,18 @@ def _hermite_eval(
     h = (grid.take(i + 1) - g0).reshape(shape)
     s = ((t - g0).reshape(shape)) / h
     s2, s3 = s * s, s * s * s
-    out = (2 * s3 - 3 * s2 + 1) * a + (s3 - 2 * s2 + s) * h * da
-    out += (-2 * s3 + 3 * s2) * b + (s3 - s2) * h * db
-    return out, (1 - s) * da + s * db
+    # out = h00 a + h10 h da + h01 b + h11 h db, evaluated in place (as (h00 a + h10 h da) + (h01 b + h11 h db))
+    out = np.multiply(2 * s3 - 3 * s2 + 1, a)
+    tmp = np.multiply((s3 - 2 * s2 + s) * h, da)
+    out += tmp
+    rest = np.multiply(-2 * s3 + 3 * s2, b)
+    np.multiply((s3 - s2) * h, db, out=tmp)
+    rest += tmp
+    out += rest
+    d = np.multiply(1 - s, da)
+    np.multiply(s, db, out=tmp)
+    d += tmp
+    return out, d
 
 
 def hermite_rows(grid: FloatArray, table: FloatArray, t: FloatArray, k: int) -> tuple[FloatArray, FloatArray]:
