@@ -214,7 +214,7 @@ def _accel_rows_with_residual(
     state: State, blocks: Blocks, lin: Linearisation | None, rows: Rows
 ) -> tuple[FloatArray, FloatArray]:
     """:func:`accel_rows` with the residuals as a last column of the Jacobian, ``(S + M, 3, P + 1)``
-    (one product :func:`_normal_equations` then gives ``J^T W J`` and ``J^T W r``)."""
+    (one product :func:`normal_equations` then gives ``J^T W J`` and ``J^T W r``)."""
     sl = blocks.slices()
     R, A = state.R, state.A
     S = len(rows.static_u)
@@ -389,14 +389,14 @@ def solve(
             norm = np.linalg.norm(r, axis=1) * base
             sigma = max(robust_sigma(norm[S:] if len(r) > S else norm), sigma_floor)
             w = (base**2) * huber_weights(norm, sigma) / sigma**2
-            H, g = _normal_equations(J, w)
+            H, g = normal_equations(J, w)
             cost = float(np.sum(w * np.sum(r * r, axis=1)))
             if use_gyro:
                 r_g, J_g, cols_g = _gyro_rows_compact(state, blocks, lin, rows)
                 norm_g = np.linalg.norm(r_g, axis=1) * base
                 sigma_g = max(robust_sigma(norm_g[S:] if len(r_g) > S else norm_g), 0.1 * sigma_floor)
                 w_g = (base**2) * huber_weights(norm_g, sigma_g) / sigma_g**2
-                H_g_c, g_g = _normal_equations(J_g, w_g)
+                H_g_c, g_g = normal_equations(J_g, w_g)
                 H_gyro = np.zeros_like(H)
                 H_gyro[np.ix_(cols_g, cols_g)] = H_g_c
                 H = H + H_gyro
@@ -476,7 +476,7 @@ def _times_vector(K: FloatArray, p: FloatArray) -> FloatArray:
     return (K.reshape(-1, 3) @ p).reshape(-1, 3)
 
 
-def _normal_equations(Jr: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
+def normal_equations(Jr: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
     """``H = J^T W J`` and ``g = J^T W r`` for row weights ``w`` (per sample, all 3 components), from
     ``Jr = [J | r]`` ``(N, 3, P + 1)``: one product ``(W^1/2 Jr)^T (W^1/2 Jr)``, whose last column is ``g``."""
     sw = np.sqrt(w)[:, None, None]
