@@ -113,3 +113,12 @@ def test_the_parts_reuse_the_full_runs_alignment_to_the_same_result(short):
         assert a.extras["consistency"] == b.extras["consistency"]
         assert np.array_equal(a.pose.p_link_su, b.pose.p_link_su)
         assert np.array_equal(a.position_std_m, b.position_std_m)
+
+
+def test_a_column_range_of_the_table_rows_is_the_same_interpolation(rng):
+    grid = np.arange(30) * 0.008
+    table = rng.normal(size=(30, 12))
+    t = rng.uniform(0.0, grid[-1], 50)
+    y, dy = hermite_rows(grid, table, t, 6)
+    y_c, dy_c = hermite_rows(grid, table, t, 6, slice(2, 5))
+    assert np.array_equal(y_c, y[:, 2:5]) and np.array_equal(dy_c, dy[:, 2:5])

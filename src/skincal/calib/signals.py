@@ -111,12 +111,15 @@ def _hermite_eval(
     return out, d
 
 
-def hermite_rows(grid: FloatArray, table: FloatArray, t: FloatArray, k: int) -> tuple[FloatArray, FloatArray]:
+def hermite_rows(
+    grid: FloatArray, table: FloatArray, t: FloatArray, k: int, cols: slice = slice(None)
+) -> tuple[FloatArray, FloatArray]:
     """:func:`hermite` of a table whose rows ``(G, 2 k)`` hold the values (``[:k]``) and then their
-    derivatives (``[k:]``): each instant's two rows gathered once (contiguous), the same arithmetic."""
+    derivatives (``[k:]``): each instant's two rows gathered once (contiguous), the same arithmetic;
+    ``cols``: only these of the ``k`` values (and their derivatives)."""
     i = np.clip(np.searchsorted(grid, t) - 1, 0, grid.size - 2)
     lo, hi = table.take(i, axis=0), table.take(i + 1, axis=0)
-    return _hermite_eval(grid, t, i, lo[:, :k], lo[:, k:], hi[:, :k], hi[:, k:])
+    return _hermite_eval(grid, t, i, lo[:, :k][:, cols], lo[:, k:][:, cols], hi[:, :k][:, cols], hi[:, k:][:, cols])
 
 
 class SignalTable:
@@ -180,5 +183,4 @@ class SignalTable:
     def omega_at(self, link: int, t: FloatArray) -> FloatArray:
         """``(M, 3)`` the link's angular velocity in link frame at instants ``t`` (M,) inside the grid, rad/s:
         the ``w`` of :meth:`at` alone (the same interpolation of its three columns)."""
-        table = self._link(link)
-        return hermite(self.t, table[:, 12:15], table[:, 30:33], t)[0]
+        return hermite_rows(self.t, self._link(link), t, 18, slice(12, 15))[0]
