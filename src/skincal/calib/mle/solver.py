@@ -389,14 +389,14 @@ def solve(
             norm = np.linalg.norm(r, axis=1) * base
             sigma = max(robust_sigma(norm[S:] if len(r) > S else norm), sigma_floor)
             w = (base**2) * huber_weights(norm, sigma) / sigma**2
-            H, g = normal_equations(J, w)
+            H, g = normal_equations(J, w, overwrite=True)  # J is W^1/2 [J | r] from here
             cost = float(np.sum(w * np.sum(r * r, axis=1)))
             if use_gyro:
                 r_g, J_g, cols_g = _gyro_rows_compact(state, blocks, lin, rows)
                 norm_g = np.linalg.norm(r_g, axis=1) * base
                 sigma_g = max(robust_sigma(norm_g[S:] if len(r_g) > S else norm_g), 0.1 * sigma_floor)
                 w_g = (base**2) * huber_weights(norm_g, sigma_g) / sigma_g**2
-                H_g_c, g_g = normal_equations(J_g, w_g)
+                H_g_c, g_g = normal_equations(J_g, w_g, overwrite=True)
                 H_gyro = np.zeros_like(H)
                 H_gyro[np.ix_(cols_g, cols_g)] = H_g_c
                 H = H + H_gyro
@@ -426,9 +426,10 @@ def solve(
     cov = pinv(info)
     factors = np.ones(blocks.size)
     if sandwich and len(r) > S + 20:
-        scores = np.einsum("nkp,nk->np", J[:, :, :-1], r * w[:, None])
+        # a row's score J^T W r from the weighted rows W^1/2 [J | r] of the last iteration
+        scores = np.einsum("nkp,nk->np", J[:, :, :-1], J[:, :, -1])
         if use_gyro:
-            scores[:, cols_g] += np.einsum("nkp,nk->np", J_g[:, :, :-1], r_g * w_g[:, None])
+            scores[:, cols_g] += np.einsum("nkp,nk->np", J_g[:, :, :-1], J_g[:, :, -1])
         factors = sandwich_inflation(cov, pinv(H), scores, rows.moving_t, S)
         cov = cov * np.outer(factors, factors)
     return Fit(
@@ -476,10 +477,15 @@ def _times_vector(K: FloatArray, p: FloatArray) -> FloatArray:
     return (K.reshape(-1, 3) @ p).reshape(-1, 3)
 
 
-def normal_equations(Jr: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
+def normal_equations(Jr: FloatArray, w: FloatArray, overwrite: bool = False) -> tuple[FloatArray, FloatArray]:
     """``H = J^T W J`` and ``g = J^T W r`` for row weights ``w`` (per sample, all 3 components), from
-    ``Jr = [J | r]`` ``(N, 3, P + 1)``: one product ``(W^1/2 Jr)^T (W^1/2 Jr)``, whose last column is ``g``."""
+    ``Jr = [J | r]`` ``(N, 3, P + 1)``: one product ``(W^1/2 Jr)^T (W^1/2 Jr)``, whose last column is ``g``.
+    ``overwrite``: scale ``Jr`` itself to ``W^1/2 Jr`` (no copy)."""
     sw = np.sqrt(w)[:, None, None]
-    Jw = (Jr * sw).reshape(-1, Jr.shape[2])
+    if overwrite:
+        Jr *= sw
+        Jw = Jr.reshape(-1, Jr.shape[2])
+    else:
+        Jw = (Jr * sw).reshape(-1, Jr.shape[2])
     G = Jw.T @ Jw
     return G[:-1, :-1].copy(), G[:-1, -1].copy()
