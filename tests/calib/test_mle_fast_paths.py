@@ -122,3 +122,18 @@ def test_a_column_range_of_the_table_rows_is_the_same_interpolation(rng):
     y, dy = hermite_rows(grid, table, t, 6)
     y_c, dy_c = hermite_rows(grid, table, t, 6, slice(2, 5))
     assert np.array_equal(y_c, y[:, 2:5]) and np.array_equal(dy_c, dy[:, 2:5])
+
+
+@pytest.mark.parametrize("n, noise", [(30, 1e-3), (400, 1e-4), (400, 0.0)])
+def test_the_gcv_smoothing_parameter_is_scipys(n, noise):
+    """gcv_lambda against SciPy's own choice (make_smoothing_spline with lam=None), bit for bit."""
+    from scipy.interpolate import make_smoothing_spline
+
+    from skincal.calib.preprocess.gcv import gcv_lambda
+
+    rng = np.random.default_rng(n)
+    t = np.cumsum(rng.uniform(0.5, 1.5, n)) / 14.0
+    y = np.sin(2.1 * t) + 0.3 * np.cos(5.0 * t) + noise * rng.normal(size=n)
+    lam = gcv_lambda(t, y)
+    assert 0.0 <= lam <= n
+    assert np.array_equal(make_smoothing_spline(t, y, lam=lam).c, make_smoothing_spline(t, y).c)

@@ -122,7 +122,7 @@ class Problem:
     """Raise the covariance to the block sandwich's (:func:`~skincal.calib.mle.solver.sandwich_inflation`):
     for a low-rate joint stream, whose interpolated accelerations carry an error that follows the motion
     and that the noise model does not name."""
-    _last: dict = field(default_factory=dict, compare=False, repr=False)
+    _last: dict = field(default_factory=dict, init=False, compare=False, repr=False)
     """The last linearisation, by ``(tau, d)`` (the start and the solver's first step ask for the same one)."""
 
     def linearise(self, tau: float, d: float) -> Linearisation:
