@@ -55,6 +55,8 @@ class UnitProblem:
         time_offset_s: the coarse IMU time offset already removed from ``samples.t`` (methods
             with an ``align`` step), s.
         alignment: that step's outcome (method-specific), or ``None``.
+        diagnostics: ``False`` when the caller keeps only the pose, its std and the link (the
+            consistency check's parts): a method may then skip what only adds warnings and extras.
     """
 
     chain: SerialChain
@@ -68,6 +70,7 @@ class UnitProblem:
     options: Any = field(default_factory=NoOptions)
     time_offset_s: float = 0.0
     alignment: Any = None
+    diagnostics: bool = True
 
 
 class UnitMethod(Protocol):
@@ -211,11 +214,13 @@ def calibrate(
     failed: dict[str, str] = {}
     errors: list[CalibrationError] = []
 
+    alignments: dict[str, Any] = {}  # each unit's clock alignment on its whole stream (in this process), for its parts
+
     def one(k: int, name: str) -> _Outcome:
         try:  # a usage or data error (another SkincalError) concerns every unit: it propagates
             unit = calibrate_unit(
                 tagged, name, spec, link=given.get(name), rng=np.random.default_rng([seed, k]),
-                interpolator=interpolator, shared=shared, options=parsed,
+                interpolator=interpolator, shared=shared, options=parsed, record=alignments,
             )
             return name, unit, None
         except CalibrationError as exc:  # a foreign error in one unit too: it never stops the others
@@ -283,11 +288,12 @@ def calibrate(
         from skincal.calib.consistency import check
 
         part_options = dataclasses.replace(parsed, consistency=False)
-        alignments: dict[str, Any] = {}  # each unit's clock alignment on its whole stream, for its parts
 
         def refit(part: Dataset, part_links: dict[str, int]) -> CalibrationResult:
             """The method on a part of the recording: the same joint conditioning and shared tables (they do
-            not depend on the IMU samples), the units on their links."""
+            not depend on the IMU samples) and each unit's clock alignment on its whole stream (found in the
+            full run when it ran in this process, else here), the units on their links; only their poses,
+            std and links are kept (no diagnostics)."""
             units: dict[str, UnitResult] = {}
             part_failed: dict[str, str] = {}
             for k, name in enumerate(part_links):
@@ -297,7 +303,7 @@ def calibrate(
                     units[name] = calibrate_unit(
                         part, name, spec, link=part_links[name], rng=np.random.default_rng([seed, k]),
                         interpolator=interpolator, shared=shared, options=part_options,
-                        alignment=alignments.get(name),
+                        alignment=alignments.get(name), diagnostics=False,
                     )  # fmt: skip
                 except CalibrationError as exc:
                     part_failed[name] = str(exc)
@@ -422,11 +428,14 @@ def calibrate_unit(
     shared: Any = None,
     options: Any = None,
     alignment: Any = None,
+    record: dict[str, Any] | None = None,
+    diagnostics: bool = True,
 ) -> UnitResult:
     """Calibrate one unit (see :func:`calibrate`); ``options``: the method's parsed options
     (default: the method's defaults); ``alignment``: the unit's clock alignment found on its whole
     stream (``spec.align``), applied to this dataset's stream (a part of it) with its ``for_stream``
-    instead of searching again."""
+    instead of searching again; ``record``: where the alignment this call found (``spec.align``) is
+    kept under the unit's name; ``diagnostics``: :attr:`UnitProblem.diagnostics`."""
     with method_errors():  # a foreign exception: this unit's CalibrationError, raised from it
         if interpolator is None:
             interpolator = JointInterpolator(dataset.joints)
@@ -447,6 +456,8 @@ def calibrate_unit(
         if spec.align is not None and skipped is None:
             if given_alignment is None:
                 alignment = spec.align(shared, dataset.imu[unit])
+                if record is not None:
+                    record[unit] = alignment
             else:
                 alignment = given_alignment.for_stream(dataset.imu[unit])
             offset = float(alignment.offset_s)
@@ -476,6 +487,7 @@ def calibrate_unit(
             options=options,
             time_offset_s=offset,
             alignment=alignment,
+            diagnostics=diagnostics,
         )
         result = spec.run_unit(problem)
         _, screening = screen_readings(unit, dataset.imu[unit].accel, dataset.imu[unit].t)

@@ -31,7 +31,7 @@ false inflation in 1 % of units). The result carries a
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -110,20 +110,31 @@ def lively_windows(dataset: Dataset, link: int) -> np.ndarray:
     which link ``link`` moves more than in the median window: its mean angular speed, or its
     origin's mean speed when no joint up to it turns (base frame, from the joint stream's ``q, qd``
     thinned to :data:`EXCITATION_RATE_HZ`)."""
+    return lively_windows_of(dataset, [link])[link]
+
+
+def lively_windows_of(dataset: Dataset, links: Iterable[int]) -> dict[int, np.ndarray]:
+    """:func:`lively_windows` of each of ``links``, from one forward recursion up to the furthest."""
     j = dataset.joints
     assert j is not None
+    wanted = sorted(set(int(k) for k in links))
+    if not wanted:
+        return {}
     t = np.asarray(j.t, dtype=float)
     step = max(1, int(round(1.0 / (EXCITATION_RATE_HZ * max(float(np.median(np.diff(t))), 1e-9))))) if t.size > 1 else 1
     q, qd = np.asarray(j.q, dtype=float)[::step], np.asarray(j.qd, dtype=float)[::step]
-    motion = dataset.chain.link_motion(q, qd, np.zeros_like(q), upto=link)
-    rotates = bool(dataset.chain.revolute[:link].any())
-    speed = np.linalg.norm((motion.omega if rotates else motion.v_origin)[:, link], axis=1)
+    motion = dataset.chain.link_motion(q, qd, np.zeros_like(q), upto=wanted[-1])
     index = np.floor((t[::step] - t[0]) / EXCITATION_WINDOW_S).astype(int)
     n = int(index.max()) + 1 if index.size else 0
-    total = np.bincount(index, weights=speed, minlength=n)
     count = np.bincount(index, minlength=n)
-    score = np.where(count > 0, total / np.maximum(count, 1), 0.0)
-    return score > np.median(score) if n else np.zeros(0, dtype=bool)
+    out: dict[int, np.ndarray] = {}
+    for link in wanted:
+        rotates = bool(dataset.chain.revolute[:link].any())
+        speed = np.linalg.norm((motion.omega if rotates else motion.v_origin)[:, link], axis=1)
+        total = np.bincount(index, weights=speed, minlength=n)
+        score = np.where(count > 0, total / np.maximum(count, 1), 0.0)
+        out[link] = score > np.median(score) if n else np.zeros(0, dtype=bool)
+    return out
 
 
 def part_masks(
@@ -140,13 +151,19 @@ def part_masks(
     return out
 
 
-def _part(dataset: Dataset, split: str, side: int, links: dict[str, int]) -> Dataset:
+def _part(
+    dataset: Dataset, split: str, side: int, links: dict[str, int], lively: dict[int, np.ndarray] | None = None
+) -> Dataset:
     """``dataset`` with every unit's IMU (and ToF) samples restricted to one part of ``split``
-    (``links``: each unit's link, which the ``excitation`` split ranks the windows by)."""
+    (``links``: each unit's link, which the ``excitation`` split ranks the windows by; ``lively``: their
+    :func:`lively_windows_of`, when already computed)."""
     j = dataset.joints
     assert j is not None
     t0, t1 = float(j.t[0]), float(j.t[-1])
-    lively = {k: lively_windows(dataset, k) for k in set(links.values())} if split == "excitation" else {}
+    if split != "excitation":
+        lively = {}
+    elif lively is None:
+        lively = lively_windows_of(dataset, links.values())
 
     def mask(name: str, t: FloatArray) -> np.ndarray:
         masks = part_masks(np.asarray(t, dtype=float), t0, t1, lively.get(links.get(name, -1)))
@@ -239,10 +256,14 @@ def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> Calibrat
         return result
     outcomes: dict[str, dict[str, list[UnitResult | None]]] = {u: {} for u in links}
     errors: dict[str, list[str]] = {u: [] for u in links}
+    try:  # the excitation split's windows, once for both sides (a failure: each part's own, below)
+        lively: dict[int, np.ndarray] | None = lively_windows_of(dataset, links.values())
+    except Exception:  # noqa: BLE001
+        lively = None
     for split in SPLITS:
         for side in (0, 1):
             try:
-                part = refit(_part(dataset, split, side, links), links)
+                part = refit(_part(dataset, split, side, links, lively), links)
             except Exception as exc:  # noqa: BLE001 - a part that cannot be calibrated is a finding, not a crash
                 for u in links:
                     errors[u].append(f"{split} part {side + 1}: {exc}")

@@ -37,7 +37,7 @@ def link_specific_force(
     (``ug`` is then not needed)."""
     if K is None:
         return (1.0 + gravity_scale) * u
-    v = u + np.einsum("mij,j->mi", K, p)
+    v = u + (K.reshape(-1, 3) @ p).reshape(-1, 3)  # K_m p of every row: one matrix-vector product
     if ug is not None:
         v = v + gravity_scale * ug
     return v

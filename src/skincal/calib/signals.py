@@ -83,13 +83,43 @@ def hermite(
     a, da, b, db = y[i], dy[i], y[i + 1], dy[i + 1]
     if columns is not None:
         a, da, b, db = a[:, columns], da[:, columns], b[:, columns], db[:, columns]
+    out, d = _hermite_eval(grid, t, i, a, da, b, db)
+    return out, d, i
+
+
+def _hermite_eval(
+    grid: FloatArray, t: FloatArray, i: np.ndarray, a: FloatArray, da: FloatArray, b: FloatArray, db: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """The arithmetic of :func:`hermite` on the gathered end values ``a, b`` and derivatives ``da, db``
+    ``(M, ...)`` of each instant's interval ``i``."""
     shape = (-1,) + (1,) * (a.ndim - 1)
-    h = (grid[i + 1] - grid[i]).reshape(shape)
-    s = ((t - grid[i]).reshape(shape)) / h
+    g0 = grid.take(i)
+    h = (grid.take(i + 1) - g0).reshape(shape)
+    s = ((t - g0).reshape(shape)) / h
     s2, s3 = s * s, s * s * s
-    out = (2 * s3 - 3 * s2 + 1) * a + (s3 - 2 * s2 + s) * h * da
-    out += (-2 * s3 + 3 * s2) * b + (s3 - s2) * h * db
-    return out, (1 - s) * da + s * db, i
+    # out = h00 a + h10 h da + h01 b + h11 h db, evaluated in place (as (h00 a + h10 h da) + (h01 b + h11 h db))
+    out = np.multiply(2 * s3 - 3 * s2 + 1, a)
+    tmp = np.multiply((s3 - 2 * s2 + s) * h, da)
+    out += tmp
+    rest = np.multiply(-2 * s3 + 3 * s2, b)
+    np.multiply((s3 - s2) * h, db, out=tmp)
+    rest += tmp
+    out += rest
+    d = np.multiply(1 - s, da)
+    np.multiply(s, db, out=tmp)
+    d += tmp
+    return out, d
+
+
+def hermite_rows(
+    grid: FloatArray, table: FloatArray, t: FloatArray, k: int, cols: slice = slice(None)
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`hermite` of a table whose rows ``(G, 2 k)`` hold the values (``[:k]``) and then their
+    derivatives (``[k:]``): each instant's two rows gathered once (contiguous), the same arithmetic;
+    ``cols``: only these of the ``k`` values (and their derivatives)."""
+    i = np.clip(np.searchsorted(grid, t) - 1, 0, grid.size - 2)
+    lo, hi = table.take(i, axis=0), table.take(i + 1, axis=0)
+    return _hermite_eval(grid, t, i, lo[:, :k][:, cols], lo[:, k:][:, cols], hi[:, :k][:, cols], hi[:, k:][:, cols])
 
 
 class SignalTable:
@@ -143,10 +173,14 @@ class SignalTable:
         """``(u, K, du, dK, w, dw, u_g)`` of ``link`` at instants ``t`` (M,) inside the grid: ``(M, 3)``,
         ``(M, 3, 3)``, ``(M, 3)``, ``(M, 3, 3)``, ``(M, 3)``, ``(M, 3)``, ``(M, 3)`` (``w`` the link's
         angular velocity in link frame, ``dw = R^T dw_base`` its derivative, ``u_g`` gravity's part of ``u``)."""
-        table = self._link(link)
-        y, dy, _ = hermite(self.t, table[:, :18], table[:, 18:], t)
+        y, dy = hermite_rows(self.t, self._link(link), t, 18)
         M = t.shape[0]
         return (
             y[:, :3], y[:, 3:12].reshape(M, 3, 3), dy[:, :3], dy[:, 3:12].reshape(M, 3, 3),
             y[:, 12:15], dy[:, 12:15], y[:, 15:18],
         )
+
+    def omega_at(self, link: int, t: FloatArray) -> FloatArray:
+        """``(M, 3)`` the link's angular velocity in link frame at instants ``t`` (M,) inside the grid, rad/s:
+        the ``w`` of :meth:`at` alone (the same interpolation of its three columns)."""
+        return hermite_rows(self.t, self._link(link), t, 18, slice(12, 15))[0]

@@ -84,7 +84,7 @@ def untagged_motion(problem: UnitProblem) -> np.ndarray | None:
 
 
 def choose_link(
-    problem: UnitProblem,
+    problem: UnitProblem, rates: tuple[FloatArray, FloatArray] | None = None
 ) -> tuple[int, float, list[str], dict[int, float], State | None, GyroLinks | None]:
     """Link discovery by activity and the gyroscope, then model comparison among candidate links.
 
@@ -98,9 +98,11 @@ def choose_link(
     Returns the link, its confidence, warnings, the residual level of each candidate fitted, the
     winner's quick-fit state (a start for the full fit; ``None`` when the activity alone was
     decisive and no candidate had to be fitted) and the gyroscope's verdict (``None`` without one).
+    ``rates``: the unit's :func:`gyro_rates` when the caller has them already.
     """
     n = problem.chain.n_joints
-    rates = gyro_rates(problem)
+    if rates is None:  # not given by the caller (None from gyro_rates: no gyroscope; computing it again is cheap)
+        rates = gyro_rates(problem)
     by_gyro = None if rates is None else gyro_rules_out(*rates)
     allowed = set(range(1, n + 1)) if by_gyro is None else {int(k) + 1 for k in np.flatnonzero(by_gyro.allowed)}
     activity = discover_link(problem.samples, n, use_gyro=True)

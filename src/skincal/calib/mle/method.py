@@ -165,7 +165,7 @@ def _gyro_scale(problem: UnitProblem, link: int) -> GyroScale | None:
     inside = (s.t >= table.t[0]) & (s.t <= table.t[-1]) & shared.interpolator.reliable(s.t)
     if inside.sum() < 12:
         return None
-    w = table.at(link, s.t[inside])[4]
+    w = table.omega_at(link, s.t[inside])
     moving = np.linalg.norm(w, axis=1) > GYRO_MOVING_RPS
     if moving.sum() < 12:
         return None
@@ -294,8 +294,9 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     account = problem.samples.account
     if account is not None:  # the gyroscope's screening (the accelerometer's reaches the result elsewhere)
         warnings += [w for w in account.warnings if not w.startswith("accelerometer ")]
+    rates = gyro_rates(problem)  # once: link discovery and the unit check below share them
     if problem.link == 0:
-        link, confidence, link_warnings, levels, start, by_gyro = choose_link(problem)
+        link, confidence, link_warnings, levels, start, by_gyro = choose_link(problem, rates)
         warnings += link_warnings
         extras["link_residual_mps2"] = {str(k): v for k, v in levels.items()}
         ruled_out = None if by_gyro is None else by_gyro.note()
@@ -303,10 +304,9 @@ def run_unit(problem: UnitProblem) -> UnitResult:
             early_notes.append(ruled_out)
     else:
         link = problem.link
-    rates = gyro_rates(problem)
     if rates is not None:
         warnings += check_gyro_units(problem.samples.unit, rates[0], rates[1][:, link - 1])
-    if use_gyro(problem):  # the gyroscope's scale checked against the robot's rotation rate (calib.gyro)
+    if use_gyro(problem) and problem.diagnostics:  # the gyroscope's scale checked against the rotation (calib.gyro)
         # Checked, not corrected: a gyroscope's misalignment to the accelerometer has an antisymmetric part
         # that only a rotation of its own could absorb; correcting the scale alone made the gyroscope's
         # (misaligned) axes decide the rotation more firmly (simulated: 4.5 % scale, 1 % misalignment).
@@ -367,9 +367,10 @@ def run_unit(problem: UnitProblem) -> UnitResult:
 
     warnings += honesty
     notes = early_notes + notes
-    kept = sample_account(problem, p)
-    extras["samples"] = kept
-    notes.append(describe_account(kept))
+    if problem.diagnostics:  # what became of every sample (extras and a note only)
+        kept = sample_account(problem, p)
+        extras["samples"] = kept
+        notes.append(describe_account(kept))
     observable = fit.null_space.shape[1] == 0
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     pos_std = std[3:6].copy()

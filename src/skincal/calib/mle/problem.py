@@ -4,7 +4,7 @@ closed-form start (:func:`start_state`) and the robust fit (:func:`fit_problem`)
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -122,12 +122,20 @@ class Problem:
     """Raise the covariance to the block sandwich's (:func:`~skincal.calib.mle.solver.sandwich_inflation`):
     for a low-rate joint stream, whose interpolated accelerations carry an error that follows the motion
     and that the noise model does not name."""
+    _last: dict = field(default_factory=dict, init=False, compare=False, repr=False)
+    """The last linearisation, by ``(tau, d)`` (the start and the solver's first step ask for the same one)."""
 
     def linearise(self, tau: float, d: float) -> Linearisation:
-        rows = self.data.rows
-        s = self.data.moving_t - tau - d * rows.moving_t
-        u, K, du, dK, w, dw, ug = self.table.at(self.data.link, s)
-        return Linearisation(tau_k=tau, d_k=d, u=u, K=K, du=du, dK=dK, w=w, dw=dw, ug=ug)
+        """The signals of the moving samples at their physical instants under ``(tau, d)``
+        (:class:`~skincal.calib.mle.solver.Linearisation`; read only)."""
+        key = (float(tau), float(d))
+        if key not in self._last:
+            rows = self.data.rows
+            s = self.data.moving_t - tau - d * rows.moving_t
+            u, K, du, dK, w, dw, ug = self.table.at(self.data.link, s)
+            self._last.clear()
+            self._last[key] = Linearisation(tau_k=tau, d_k=d, u=u, K=K, du=du, dK=dK, w=w, dw=dw, ug=ug)
+        return self._last[key]
 
 
 def decimated(p: Problem, step: int) -> Problem:

@@ -206,6 +206,15 @@ def accel_rows(
     state: State, blocks: Blocks, lin: Linearisation | None, rows: Rows
 ) -> tuple[FloatArray, FloatArray]:
     """Accelerometer residuals ``(S + M, 3)`` and Jacobian ``(S + M, 3, P)`` (static rows first)."""
+    r, Jr = _accel_rows_with_residual(state, blocks, lin, rows)
+    return r, Jr[:, :, :-1]
+
+
+def _accel_rows_with_residual(
+    state: State, blocks: Blocks, lin: Linearisation | None, rows: Rows
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`accel_rows` with the residuals as a last column of the Jacobian, ``(S + M, 3, P + 1)``
+    (one product :func:`normal_equations` then gives ``J^T W J`` and ``J^T W r``)."""
     sl = blocks.slices()
     R, A = state.R, state.A
     S = len(rows.static_u)
@@ -225,15 +234,16 @@ def accel_rows(
     f = v @ R  # rows: (R^T v)^T
     pred = accelerometer(f, A, state.b, state.c, t_rel)
     r = pred - meas
-    J = np.zeros((len(v), 3, blocks.size))
+    J = np.zeros((len(v), 3, blocks.size + 1))
+    J[:, :, -1] = r
     J[:, :, sl["theta"]] = A @ skew(f)  # d/d dtheta of A R^T v with R <- R Exp(dtheta): A [f]x
     if lin is not None:
-        J[S:, :, sl["p"]] = np.einsum("ij,mjk->mik", A @ R.T, Kd)
+        J[S:, :, sl["p"]] = (A @ R.T) @ Kd
     J[:, :, sl["b"]] = np.eye(3)
     if "e" in sl:
         _scale_columns(J, f, blocks.scale, sl["e"])
     if lin is not None and ("tau" in sl or "d" in sl):
-        dv = lin.du + np.einsum("mij,j->mi", lin.dK, state.p)
+        dv = lin.du + _times_vector(lin.dK, state.p)
         col = -(dv @ R) @ A.T
         if "tau" in sl:
             J[S:, :, sl["tau"].start] = col
@@ -252,7 +262,7 @@ def gyro_rows(
     """Gyroscope residuals ``(S + M, 3)`` and Jacobian ``(S + M, 3, P)`` (static rows: ``w = 0``)."""
     r, J_c, cols = _gyro_rows_compact(state, blocks, lin, rows)
     J = np.zeros((len(r), 3, blocks.size))
-    J[:, :, cols] = J_c
+    J[:, :, cols] = J_c[:, :, :-1]
     return r, J
 
 
@@ -260,7 +270,8 @@ def _gyro_rows_compact(
     state: State, blocks: Blocks, lin: Linearisation | None, rows: Rows
 ) -> tuple[FloatArray, FloatArray, np.ndarray]:
     """:func:`gyro_rows` with only the columns the gyroscope depends on (rotation, time offset,
-    clock drift, gyroscope bias): residuals, Jacobian ``(S + M, 3, C)`` and the ``C`` column indices."""
+    clock drift, gyroscope bias): residuals, Jacobian ``(S + M, 3, C + 1)`` (the residuals its last
+    column, as in :func:`_accel_rows_with_residual`) and the ``C`` column indices."""
     sl = blocks.slices()
     names = [n for n in ("theta", "tau", "d", "bg") if n in sl and (lin is not None or n in ("theta", "bg"))]
     cols = np.concatenate([np.arange(sl[n].start, sl[n].stop) for n in names])
@@ -276,7 +287,8 @@ def _gyro_rows_compact(
     w = np.concatenate(parts_w)
     g = w @ R
     r = g + state.bg - np.concatenate(meas)
-    J = np.zeros((len(w), 3, cols.size))
+    J = np.zeros((len(w), 3, cols.size + 1))
+    J[:, :, -1] = r
     J[:, :, local["theta"]] = skew(g)
     J[:, :, local["bg"]] = np.eye(3)
     if lin is not None and ("tau" in sl or "d" in sl):
@@ -372,19 +384,19 @@ def solve(
     for _outer in range(max_outer):
         for _inner in range(max_inner):
             iterations += 1
-            r, J = accel_rows(state, blocks, lin, rows)
+            r, J = _accel_rows_with_residual(state, blocks, lin, rows)
             base = np.concatenate([sw_static, np.ones(len(r) - S)])
             norm = np.linalg.norm(r, axis=1) * base
             sigma = max(robust_sigma(norm[S:] if len(r) > S else norm), sigma_floor)
             w = (base**2) * huber_weights(norm, sigma) / sigma**2
-            H, g = _normal_equations(J, r, w)
+            H, g = normal_equations(J, w, overwrite=True)  # J is W^1/2 [J | r] from here
             cost = float(np.sum(w * np.sum(r * r, axis=1)))
             if use_gyro:
                 r_g, J_g, cols_g = _gyro_rows_compact(state, blocks, lin, rows)
                 norm_g = np.linalg.norm(r_g, axis=1) * base
                 sigma_g = max(robust_sigma(norm_g[S:] if len(r_g) > S else norm_g), 0.1 * sigma_floor)
                 w_g = (base**2) * huber_weights(norm_g, sigma_g) / sigma_g**2
-                H_g_c, g_g = _normal_equations(J_g, r_g, w_g)
+                H_g_c, g_g = normal_equations(J_g, w_g, overwrite=True)
                 H_gyro = np.zeros_like(H)
                 H_gyro[np.ix_(cols_g, cols_g)] = H_g_c
                 H = H + H_gyro
@@ -414,9 +426,10 @@ def solve(
     cov = pinv(info)
     factors = np.ones(blocks.size)
     if sandwich and len(r) > S + 20:
-        scores = np.einsum("nkp,nk->np", J, r * w[:, None])
+        # a row's score J^T W r from the weighted rows W^1/2 [J | r] of the last iteration
+        scores = np.einsum("nkp,nk->np", J[:, :, :-1], J[:, :, -1])
         if use_gyro:
-            scores[:, cols_g] += np.einsum("nkp,nk->np", J_g, r_g * w_g[:, None])
+            scores[:, cols_g] += np.einsum("nkp,nk->np", J_g[:, :, :-1], J_g[:, :, -1])
         factors = sandwich_inflation(cov, pinv(H), scores, rows.moving_t, S)
         cov = cov * np.outer(factors, factors)
     return Fit(
@@ -459,10 +472,20 @@ def sandwich_inflation(
     return np.where(ratio > 1.0 + 2.33 * np.sqrt(0.5 / nb), ratio, 1.0)
 
 
-def _normal_equations(J: FloatArray, r: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """``H = J^T W J`` and ``g = J^T W r`` for row weights ``w`` (per sample, all 3 components)."""
+def _times_vector(K: FloatArray, p: FloatArray) -> FloatArray:
+    """``(M, 3)`` ``K_m p`` of ``K`` ``(M, 3, 3)`` and ``p`` ``(3,)`` (one matrix-vector product over the rows)."""
+    return (K.reshape(-1, 3) @ p).reshape(-1, 3)
+
+
+def normal_equations(Jr: FloatArray, w: FloatArray, overwrite: bool = False) -> tuple[FloatArray, FloatArray]:
+    """``H = J^T W J`` and ``g = J^T W r`` for row weights ``w`` (per sample, all 3 components), from
+    ``Jr = [J | r]`` ``(N, 3, P + 1)``: one product ``(W^1/2 Jr)^T (W^1/2 Jr)``, whose last column is ``g``.
+    ``overwrite``: scale ``Jr`` itself to ``W^1/2 Jr`` (no copy)."""
     sw = np.sqrt(w)[:, None, None]
-    Jw = (J * sw).reshape(-1, J.shape[2])
-    return Jw.T @ Jw, Jw.T @ (r[:, :, None] * sw).reshape(-1)
-
-
+    if overwrite:
+        Jr *= sw
+        Jw = Jr.reshape(-1, Jr.shape[2])
+    else:
+        Jw = (Jr * sw).reshape(-1, Jr.shape[2])
+    G = Jw.T @ Jw
+    return G[:-1, :-1].copy(), G[:-1, -1].copy()
