@@ -138,6 +138,17 @@ def test_accelerometer_off_by_a_plausible_factor_is_a_warning(session):
     assert "wrong unit or scale" in w
 
 
+@pytest.mark.parametrize("method", ["mle", "mmm"])
+def test_accelerometer_off_by_a_large_factor_warns_on_the_result(session, method):
+    """20x gravity's magnitude (a wrong unit or full-scale setting): the unit check's warning was dropped
+    before any result (mle filtered it, no other method read it); a pose 1.2 m off with observable: true
+    carried only 'rest poses disagree' warnings."""
+    name = session.units[0]
+    ds = _with_imu(session, accel=20.0 * session.imu[name].accel)
+    u = calibrate(ds, method, links={name: session.truth[name].link}).units[name]
+    assert sum("20.31 of gravity: wrong unit or scale?" in w for w in u.warnings) == 1
+
+
 def test_gyroscope_in_deg_per_s_is_an_error(session):
     name = session.units[0]
     ds = _with_imu(session, gyro=np.degrees(session.imu[name].gyro))

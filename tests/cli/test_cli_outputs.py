@@ -79,6 +79,27 @@ def test_simulate_writes_only_a_dataset_name(tmp_path, name, capsys):
         assert not out.exists()
 
 
+@pytest.mark.parametrize("command", [
+    ["segment", "{data}", "-o", "{out}.h5"],
+    ["calibrate", "{data}", "-o", "{out}.json"],
+    ["record", "--port", "0", "--duration", "0.5", "--out", "{out}.h5"],
+], ids=lambda c: c[0])
+def test_a_name_too_long_with_its_temporary_is_refused_before_any_work(files, command, tmp_path, capsys):
+    """Issue 27: a 240-byte name fits NAME_MAX (255) but its temporary (.<name>.<pid>.<hex>.tmp) does not:
+    segment and calibrate failed at the write after all the work, record after the whole session (its
+    recording left half-finished under the name)."""
+    _, data, _ = files
+    stem = tmp_path / ("n" * 234)
+    args = [a.format(data=data, out=stem) for a in command]
+    assert main(args) == 2
+    captured = capsys.readouterr()
+    assert "listening" not in captured.out and "mle:" not in captured.out
+    assert captured.err.startswith("error: ") and captured.err.count("\n") == 1
+    assert f"the file name is {len(Path(args[-1]).name)} bytes" in captured.err
+    assert "give a name of at most 229 bytes" in captured.err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_simulate_says_the_paper_placement_is_the_pandas(tmp_path, capsys):
     """Issue 27: ``--placement paper`` (the default) reused the Panda's Table II offsets on any robot silently."""
     assert main(["simulate", "--robot", "ur5e", "--protocol", "fast", "-o", str(tmp_path / "u.h5")]) == 0

@@ -10,6 +10,7 @@ import re
 import shutil
 import subprocess
 import sys
+import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -451,3 +452,34 @@ def test_a_bad_full_covariance_in_the_result_is_one_line(tmp_path, capsys, bad):
     assert err.startswith(f"error: {tmp_path / 'r.json'}: units.su2_0.pose_covariance must be"), err
     assert err.count("\n") == 1, err
     assert not (tmp_path / "o.yaml").exists()
+
+
+@pytest.mark.adversarial
+@pytest.mark.parametrize(("fmt", "variance", "std"), [("json", 1e308, None), ("yaml", 1e200, None),
+                                                     ("json", None, 1e200), ("json", 2e12, None)])
+def test_a_huge_covariance_or_std_exports_as_undetermined(tmp_path, capsys, fmt, variance, std):
+    """A variance of 1e308 (or a std of 1e200) overflowed the frame rotation to inf, then NaN: exit 3 for
+    json, NaN in yaml. Beyond MAX_EXPORT_VARIANCE an axis is exported as undetermined (-1, its row 0); the
+    other axes keep theirs; no numpy warning."""
+    result = _result("panda", 2, per_link=1)
+    write_result(result, tmp_path / "r.json")
+    doc = json.loads((tmp_path / "r.json").read_text())
+    entry = doc["units"]["su2_0"]
+    if variance is not None:
+        cov = np.diag([1e-6, 2e-6, 3e-6, 1e-4, 2e-4, 3e-4])
+        cov[1, 1] = variance
+        entry["pose_covariance"] = cov.tolist()
+    else:
+        entry["position_std_m"][1] = std
+    (tmp_path / "r.json").write_text(json.dumps(doc))
+    capsys.readouterr()
+    out = tmp_path / f"o.{fmt}"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's overflow warning an error too
+        assert main(["export", str(tmp_path / "r.json"), "-f", fmt, "-o", str(out)]) == 0
+    text = out.read_text()
+    assert "nan" not in text.lower() and "inf" not in text.lower()
+    C = np.array((json.loads(text) if fmt == "json" else yaml.safe_load(text))["units"]["su2_0"]["covariance"])
+    assert C[1, 1] == UNKNOWN_VARIANCE and np.count_nonzero(C[1]) == 1 and np.count_nonzero(C[:, 1]) == 1
+    known = [0, 2, 3, 4, 5]
+    assert np.all(np.diag(C)[known] > 0) and np.all(np.diag(C)[known] < 1)

@@ -113,6 +113,9 @@ def test_transformed_moves_the_com_and_rotates_the_tensor():
         (1.0, [0, 0, 0], [1, 1, 1, 2, 0, 0], "semi-definite"),
         (1.0, [0, 0, 0], [1, 1, 3, 0, 0, 0], "triangle"),
         ("heavy", [0, 0, 0], [1, 1, 1, 0, 0, 0], "numbers"),
+        (1e308, [0, 0, 0], [1, 1, 1, 0, 0, 0], "up to 1e\\+06"),  # overflowed a link's sum (issue 27)
+        (1.0, [0, 0, 1e300], [1, 1, 1, 0, 0, 0], "within 1000 m"),
+        (1.0, [0, 0, 0], [1e300, 1e300, 1e300, 0, 0, 0], "within 1e\\+09 kg m\\^2"),
     ],
 )
 def test_link_inertial_refuses_unphysical_bodies(mass, com, inertia, match):
@@ -287,7 +290,7 @@ def test_folded_inertial_matches_mujocos_own_urdf_import():
 
 
 @pytest.mark.adversarial
-@pytest.mark.parametrize("mass", ["-1", "nan"])
+@pytest.mark.parametrize("mass", ["-1", "nan", "1e308"])
 def test_unphysical_urdf_inertial_loads_without_it(mass):
     """A URDF whose inertial is not physical still gives its kinematics; that body has no inertial."""
     bad = L1_MASS.replace('value="1"', f'value="{mass}"')

@@ -491,6 +491,9 @@ def calibrate_unit(
         )
         result = spec.run_unit(problem)
         _, screening = screen_readings(unit, dataset.imu[unit].accel, dataset.imu[unit].t)
+        # the unit check (a stream 20x gravity's magnitude: a wrong unit or scale) on every method's result
+        unit_check = () if samples.account is None else samples.account.unit_warnings
+        screening = [w for w in unit_check if w not in result.warnings] + list(screening)
         if screening:
             result = replace(result, warnings=tuple(screening) + tuple(result.warnings))
         extras = dict(result.extras)

@@ -49,7 +49,8 @@ def record(
     max_unit_samples: int | None = typer.Option(
         None, "--max-unit-samples", help="samples kept per unit stream (imu, tof) and joints; more are ignored "
         "(default 2^22: 11.6 h at 100 Hz)"),
-    robot: str | None = typer.Option(None, "--robot", help="robot preset written to /robot (e.g. panda)"),
+    robot: str | None = typer.Option(None, "--robot", help="robot preset written to /robot (e.g. panda); needed for "
+                                        "joint states: without it the first one stops the recording"),
     flush_every: float = typer.Option(1.0, "--flush-every", help="flush to disk at least every S seconds"),
     force: bool = typer.Option(False, "--force", help="overwrite --out if it exists"),
     live: bool = typer.Option(
@@ -97,20 +98,39 @@ def record(
         if given is not None:
             raise ConfigError(f"{name} applies to --live only")
 
+    joints_without_robot: list[int] = []  # the robot id of the first joint-state packet, when no --robot
+
     async def main() -> tuple:
+        from skincal.hw.packet import JointPacket
+
         stop = asyncio.Event()
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
+
+        def on_delivery(delivery, recorder, receiver) -> None:  # noqa: ANN001
+            # a recording with joints needs its robot: stop at the first joint state, not after the session
+            if isinstance(delivery.packet, JointPacket) and not joints_without_robot:
+                joints_without_robot.append(int(delivery.key[1]))
+                stop.set()
+
         with Live(console=console, refresh_per_second=4, transient=False) as live:
             return await run_record(
                 out, host=bind, port=port, duration_s=duration, stop=stop, robot=chain, overwrite=force,
                 flush_every_s=flush_every, max_units=max_units, max_unit_samples=max_unit_samples,
                 on_start=lambda p: console.print(f"listening on {bind}:{p}", highlight=False),
                 on_tick=lambda st, rec, rx: live.update(_status_table(st, rec, rx)),
+                on_delivery=on_delivery if chain is None else None,
             )
 
     summary, stats = run_async(main())
+    if joints_without_robot:
+        out.unlink(missing_ok=True)
+        raise ConfigError(
+            f"joint states arrived (robot id {joints_without_robot[0]}) but no --robot was given: a recording with "
+            f"joints needs its robot (info and calibrate would refuse it); stopped at once, {out} not kept: "
+            "record again with --robot (e.g. --robot panda)"
+        )
     if not console.is_terminal:
         console.line()
     _print_summary(summary, stats, chain)
@@ -128,9 +148,6 @@ def _print_summary(summary, stats, chain) -> None:  # noqa: ANN001  (types from 
     elif "joints" not in summary.samples:
         console.print("note: no joint-state stream: an IMU-only dataset (calibrate it with --reference UNIT)",
                       highlight=False)
-    elif chain is None:
-        console.print("note: joint states but no --robot: a dataset with joints needs its robot, so read_dataset, "
-                      "skincal info and calibrate will refuse this recording", highlight=False)
 
 
 def _record_live(out: Path, chain, target_text: str | None, result: Path | None, keep_recording: bool, force: bool,

@@ -98,6 +98,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 
     target = Path(path)
     directory = target.parent if str(target.parent) else Path(".")
+    _check_name_length(target)
     if target.is_dir():  # os.replace would fail only after all the writing, naming the temporary
         raise ConfigError(f"{target} is a folder; give a file name")
     _refuse_special(target)
@@ -145,16 +146,40 @@ def _refuse_special(target: Path) -> None:
     raise ConfigError(f"{target} is {kind}; outputs are regular files only (never replaced, even with --force)")
 
 
+TEMP_NAME_EXTRA = len(".") + len(".") + 7 + len(".") + 12 + len(".tmp")
+"""Bytes the temporary ``.<name>.<pid>.<hex>.tmp`` adds to a file name (a pid of up to 7 digits: Linux's
+``pid_max`` is at most 4194304)."""
+
+
+def _check_name_length(target: Path) -> None:
+    """Refuse a file name that the folder's file system cannot hold, or whose temporary it cannot (its
+    ``NAME_MAX``, 255 bytes where it cannot be asked): caught before any work, not at the rename."""
+    from skincal.errors import ConfigError
+
+    directory = target.parent if str(target.parent) else Path(".")
+    try:
+        name_max = int(os.pathconf(directory, "PC_NAME_MAX"))
+    except (OSError, ValueError, AttributeError):  # no such folder (refused elsewhere), no pathconf (Windows)
+        name_max = 255
+    size = len(os.fsencode(target.name))
+    if size + TEMP_NAME_EXTRA > name_max:
+        raise ConfigError(
+            f"{target}: the file name is {size} bytes; the file system here allows {name_max} and the temporary "
+            f"written first adds {TEMP_NAME_EXTRA}: give a name of at most {name_max - TEMP_NAME_EXTRA} bytes"
+        )
+
+
 def check_output(path: str | Path, *, force: bool = False, inputs: tuple[str | Path, ...] = ()) -> Path:
     """Refuse an output path before any work is done, with a one-line :class:`ConfigError`:
     one of the command's ``inputs`` (the same file after resolving symlinks and hard links; never
     overwritten, even with ``force``), an existing file unless ``force``, a directory, anything else
     that is not a regular file (a FIFO, a device node such as ``/dev/null``, a socket: the rename of
-    :func:`atomic_path` would replace it with a regular file, so ``force`` never applies to it), or a
-    file in a folder that does not exist."""
+    :func:`atomic_path` would replace it with a regular file, so ``force`` never applies to it), a
+    file in a folder that does not exist, or a name too long for the file system with its temporary."""
     from skincal.errors import ConfigError
 
     out = Path(path)
+    _check_name_length(out)
     for source in inputs:
         with contextlib.suppress(OSError):
             if Path(source).exists() and out.exists() and os.path.samefile(out, source):

@@ -21,6 +21,13 @@ from numpy.typing import ArrayLike
 from skincal.errors import ConfigError
 from skincal.kinematics.transforms import FloatArray
 
+MAX_MASS_KG = 1e6
+"""A link heavier than this (1000 t) is not a robot's: refused like a negative mass (a URDF mass of 1e308
+overflowed the sum of a link's parts)."""
+MAX_INERTIA_KGM2 = 1e9
+"""Likewise for an inertia tensor entry, kg m^2..."""
+MAX_COM_M = 1000.0
+"""...and a centre of mass beyond 1 km of its link frame (the bound of joint origins)."""
 INERTIA_TOLERANCE = 1e-9
 """Relative slack (of the trace) allowed on the eigenvalue and triangle checks: rounding only."""
 
@@ -45,6 +52,8 @@ def inertia_problem(tensor: ArrayLike) -> str | None:
     t = np.asarray(tensor, dtype=float)
     if t.shape != (3, 3) or not np.all(np.isfinite(t)):
         return "inertia must be 6 finite numbers [Ixx, Iyy, Izz, Ixy, Ixz, Iyz]"
+    if np.any(np.abs(t) > MAX_INERTIA_KGM2):
+        return f"inertia entries must be within {MAX_INERTIA_KGM2:g} kg m^2"
     slack = INERTIA_TOLERANCE * max(float(np.abs(np.trace(t))), 1e-300)
     if np.any(np.abs(t - t.T) > slack):
         return "inertia tensor must be symmetric"
@@ -79,10 +88,10 @@ class LinkInertial:
             inertia = np.array(self.inertia, dtype=float)
         except (TypeError, ValueError):
             raise ConfigError("inertial: mass, com and inertia must be numbers") from None
-        if not (np.isfinite(mass) and mass > 0):
-            raise ConfigError(f"inertial: mass must be a positive number of kg, got {mass!r}")
-        if com.shape != (3,) or not np.all(np.isfinite(com)):
-            raise ConfigError(f"inertial: com must be 3 finite numbers in m, got shape {com.shape}")
+        if not (np.isfinite(mass) and 0 < mass <= MAX_MASS_KG):
+            raise ConfigError(f"inertial: mass must be a positive number of kg up to {MAX_MASS_KG:g}, got {mass!r}")
+        if com.shape != (3,) or not np.all(np.isfinite(com)) or np.any(np.abs(com) > MAX_COM_M):
+            raise ConfigError(f"inertial: com must be 3 finite numbers in m within {MAX_COM_M:g} m (shape {com.shape})")
         if inertia.shape != (6,):
             raise ConfigError(f"inertial: inertia must be [Ixx, Iyy, Izz, Ixy, Ixz, Iyz], got shape {inertia.shape}")
         problem = inertia_problem(tensor_from_six(inertia))

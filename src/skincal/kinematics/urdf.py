@@ -26,8 +26,9 @@ Along it:
   CoM ``origin``, inertia about the CoM in the origin's axes) are combined in the link frame
   (:func:`skincal.kinematics.inertia.combine`: parallel-axis theorem, tensors rotated into the link
   frame) into ``SerialChain.inertials``. A body with no mass (no ``<inertial>``, or mass 0) has
-  ``None``; so has one with an inertial that is not physical (negative or non-finite mass, an
-  inertia that is not positive semi-definite or breaks the triangle inequality): such URDFs exist
+  ``None``; so has one with an inertial that is not physical (negative, non-finite or over 1e6 kg
+  mass, an inertia that is not positive semi-definite or breaks the triangle inequality, bounds of
+  :mod:`skincal.kinematics.inertia`): such URDFs exist
   and their kinematics are still good, the simulator gives those bodies capsule masses instead.
 
 Every failure is one :class:`~skincal.errors.ConfigError` line naming the file.

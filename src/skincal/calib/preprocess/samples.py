@@ -28,6 +28,8 @@ class SampleAccount:
         n_stuck: samples where an accelerometer axis had stopped updating.
         saturated_t: ``(K,)`` instants of the saturated samples (shifted to the joint clock), s.
         warnings: the screening's and the unit check's warnings.
+        unit_warnings: the unit check's alone (:func:`check_accel_units`: a stream whose magnitude is
+            not gravity's); :func:`skincal.calib.api.calibrate_unit` puts them on every method's result.
     """
 
     n_total: int
@@ -37,6 +39,7 @@ class SampleAccount:
     n_stuck: int = 0
     saturated_t: FloatArray | None = None
     warnings: tuple[str, ...] = ()
+    unit_warnings: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -147,6 +150,7 @@ def unit_samples(
         n_stuck=int(np.count_nonzero(~usable & ~screen.saturated)),
         saturated_t=t[screen.saturated],
         warnings=tuple(unit_warnings) + screen.warnings,
+        unit_warnings=tuple(unit_warnings),
     )
     t, accel = t[usable], accel[usable]
     gyro = None if gyro is None else gyro[usable]

@@ -28,6 +28,9 @@ T_SU_RANGE.setflags(write=False)
 COVARIANCE_ORDER = ("x", "y", "z", "rx", "ry", "rz")
 UNKNOWN_VARIANCE = -1.0
 """Diagonal covariance entry of an axis the data do not determine (its row and column are 0)."""
+MAX_EXPORT_VARIANCE = 1e12
+"""A covariance entry beyond this (m^2 or rad^2: a std of 1000 km or rad) says the axis is not determined:
+exported as :data:`UNKNOWN_VARIANCE` (a result's 1e308 overflowed the frame rotation to inf, then NaN)."""
 
 
 @dataclass(frozen=True)
@@ -198,7 +201,8 @@ def pose_covariance(unit: UnitResult, R_frame_link: FloatArray, name: str = "uni
 
     From ``unit.pose_covariance`` when the result holds one (link axes; result field ``pose_covariance``), else
     ``diag(position_std_m^2, rotation_std^2)``; rotated by ``blockdiag(R, R)`` (position and small
-    rotations about the link axes both turn with the frame). An undetermined axis (NaN) gets
+    rotations about the link axes both turn with the frame). An undetermined axis (NaN, or an entry in
+    its row beyond :data:`MAX_EXPORT_VARIANCE`) gets
     :data:`UNKNOWN_VARIANCE` on the diagonal and 0 elsewhere in its row and column; an offset
     frame that mixes it into other axes marks those too. No uncertainty at all: ``[0][0] = -1``."""
     cov = None
@@ -207,12 +211,15 @@ def pose_covariance(unit: UnitResult, R_frame_link: FloatArray, name: str = "uni
         cov, source = check_pose_covariance(unit.pose_covariance, where), "full"
     elif unit.position_std_m is not None and unit.rotation_std_deg is not None:
         std = np.concatenate([np.asarray(unit.position_std_m, float), np.radians(unit.rotation_std_deg)])
-        cov, source = np.diag(std**2), "std"
+        with np.errstate(over="ignore"):
+            cov, source = np.diag(std**2), "std"
     if cov is None:
         out = np.zeros((6, 6))
         out[0, 0] = UNKNOWN_VARIANCE
         return out, "none"
-    unknown = ~np.isfinite(np.diag(cov)) | np.any(~np.isfinite(cov), axis=0)
+    with np.errstate(over="ignore", invalid="ignore"):  # std^2 of a huge std: inf, i.e. undetermined
+        huge = ~np.isfinite(cov) | (np.abs(np.nan_to_num(cov)) > MAX_EXPORT_VARIANCE)
+    unknown = ~np.isfinite(np.diag(cov)) | np.any(huge, axis=0)
     cov = np.where(unknown[:, None] | unknown[None, :], 0.0, cov)
     cov = 0.5 * (cov + cov.T)
     B = np.zeros((6, 6))
