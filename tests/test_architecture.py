@@ -12,6 +12,9 @@ Every import counts: at module level, inside functions (a lazy import is still a
   plans), and ``control`` no ``sim``;
 * ``import skincal.control`` and ``import skincal.kinematics`` load no ``h5py`` (checked in a subprocess).
 * no module is longer than :data:`MAX_MODULE_LINES` (600) lines.
+* every registered calibration method lives in its own module: the name ``N`` in
+  :data:`skincal.calib.METHODS` is registered by ``skincal.calib.methods.N`` (``-`` spelt ``_``), with one
+  ``register`` call there and none anywhere else in ``src`` (:func:`method_home_violations`).
 * ``skincal --help`` and a command whose input file is missing load none of :data:`HEAVY` (NumPy, h5py,
   SciPy, MuJoCo, viser, Dask, ...; checked in a subprocess): the command answers at start-up speed.
 
@@ -265,6 +268,75 @@ def test_checker_finds_a_long_module(tmp_path):
     (root / "short.py").write_text("x = 1\n" * MAX_MODULE_LINES)
     (root / "long.py").write_text("x = 1\n" * (MAX_MODULE_LINES + 1))
     assert long_modules(root) == [f"skincal/long.py: {MAX_MODULE_LINES + 1} lines"]
+
+
+METHODS_PACKAGE = "skincal.calib.methods"
+"""The home of every registered calibration method, one module per name."""
+
+
+def registrations(src: Path | None = None) -> dict[str, list[str]]:
+    """Module -> the method names it registers: calls ``register("name", ...)`` (or ``api.register``) in
+    modules that import ``register`` (or ``api``) from ``skincal.calib.api`` or ``skincal.calib``."""
+    src = SRC if src is None else src
+    out: dict[str, list[str]] = {}
+    for mod, path in source_modules(src).items():
+        pulled = {name for _, target, name in imports(path, src.parent)
+                  if target in ("skincal.calib.api", "skincal.calib") and name in ("register", "api")}  # fmt: skip
+        if not pulled:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.Call) or not node.args:
+                continue
+            func = node.func
+            called = func.id if isinstance(func, ast.Name) else func.attr if isinstance(func, ast.Attribute) else None
+            if called == "register" and (isinstance(func, ast.Name) or "api" in pulled):
+                first = node.args[0]
+                name = first.value if isinstance(first, ast.Constant) else ast.unparse(first)
+                out.setdefault(mod, []).append(str(name))
+    return out
+
+
+def method_home_violations(names: set[str], src: Path | None = None) -> list[str]:
+    """Every way the registered ``names`` break "one module per method under ``calib/methods/``"."""
+    src = SRC if src is None else src
+    bad = []
+    homes = {f"{METHODS_PACKAGE}.{n.replace('-', '_')}": n for n in names}
+    found = registrations(src)
+    for mod, registered in sorted(found.items()):
+        if mod not in homes:
+            bad.append(f"{mod} registers {', '.join(registered)} (a method's home is {METHODS_PACKAGE}.<name>)")
+        elif registered != [homes[mod]]:
+            bad.append(f"{mod} registers {', '.join(registered)}, expected only {homes[mod]}")
+    bad += [f"{n} is registered outside its module {mod}" for mod, n in sorted(homes.items()) if mod not in found]
+    extra = {m for m in source_modules(src) if m.startswith(METHODS_PACKAGE + ".")} - set(homes)
+    bad += [f"{m} is in {METHODS_PACKAGE} but registers no method" for m in sorted(extra)]
+    return bad
+
+
+def test_every_registered_method_lives_in_its_own_module():
+    from skincal.calib import METHODS
+
+    assert {"mle", "om", "om-joint", "mmm", "mm"} <= set(METHODS)
+    found = method_home_violations(set(METHODS))
+    assert not found, "methods out of their homes:\n" + "\n".join(found)
+
+
+def test_checker_finds_a_method_out_of_its_home(tmp_path):
+    calib = tmp_path / "skincal" / "calib"
+    (calib / "methods").mkdir(parents=True)
+    register = "from skincal.calib.api import register\n"
+    (calib / "methods" / "om.py").write_text(register + 'register("om", 1)\n')
+    (calib / "methods" / "helper.py").write_text("")
+    (calib / "paper.py").write_text(register + 'register("om-joint", 2)\nregister("mm", 3)\n')
+    (calib / "other.py").write_text('import atexit\natexit.register(print)\n')
+    assert registrations(tmp_path / "skincal") == {"skincal.calib.methods.om": ["om"],
+                                                   "skincal.calib.paper": ["om-joint", "mm"]}  # fmt: skip
+    assert method_home_violations({"om", "om-joint", "mm"}, tmp_path / "skincal") == [
+        "skincal.calib.paper registers om-joint, mm (a method's home is skincal.calib.methods.<name>)",
+        "mm is registered outside its module skincal.calib.methods.mm",
+        "om-joint is registered outside its module skincal.calib.methods.om_joint",
+        "skincal.calib.methods.helper is in skincal.calib.methods but registers no method",
+    ]
 
 
 @pytest.mark.parametrize("package", ["skincal.control", "skincal.kinematics"])

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from skincal.calib.mle.method import prepare
+from skincal.calib.mle.problem import prepare
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.timing import (
     MAX_OFFSET_S,

@@ -1,14 +1,13 @@
 """Calibration of skin-unit poses behind one door: ``calibrate(dataset, method=...)``.
 
-Methods (registered in :data:`METHODS`): ``mle`` (default), ``om`` and ``om-joint`` (the paper),
-``mmm`` and ``mm`` (the paper's baselines). Shared pieces: preprocessing of the joint and IMU
-streams, link discovery, metrics. ``calibrate_relative(dataset, reference)`` poses units in a
-reference unit's frame from the IMUs alone (no joint states; :mod:`skincal.calib.imu_only`).
+Methods (registered in :data:`METHODS`, one module each in :mod:`skincal.calib.methods`): ``mle``
+(default), ``om`` and ``om-joint`` (the paper), ``mmm`` and ``mm`` (the paper's baselines). Shared
+pieces: preprocessing of the joint and IMU streams, link discovery, metrics.
+``calibrate_relative(dataset, reference)`` poses units in a reference unit's frame from the IMUs
+alone (no joint states; :mod:`skincal.calib.imu_only`).
 """
 
-from skincal.calib import mittendorfer as _mittendorfer  # noqa: F401  (registers mmm, mm)
-from skincal.calib import mle as _mle  # noqa: F401  (registers "mle")
-from skincal.calib import om as _om  # noqa: F401  (registers om, om-joint)
+from skincal.calib import methods as _methods  # noqa: F401  (registers every method, one module each)
 from skincal.calib.api import METHODS, MethodSpec, UnitProblem, calibrate, register
 from skincal.calib.imu_only import calibrate_relative, compare_with_joint_result
 from skincal.calib.links import LinkAssignment, discover_link

@@ -2,7 +2,9 @@
 
 Shared by the paper's method (two stages, :func:`fit_two_stage`) and by the joint problems
 (all six parameters at once on ``E_s + E_d``, :func:`fit_joint`: the paper's "unseparated" variant
-and the Mittendorfer baselines). Parameters follow paper Eq. 1 in the authors' order
+and the Mittendorfer baselines), and the one wrapping of a fit as a unit result
+(:func:`paper_unit_result`) for the methods ``om``, ``om-joint``, ``mmm`` and ``mm``
+(:mod:`skincal.calib.methods`). Parameters follow paper Eq. 1 in the authors' order
 ``[theta_v, d_v, theta_su, d_su, a_su, alpha_su]`` (rad, m).
 
 Settings (:class:`PaperOptions`, all overridable through ``calibrate(..., **options)``):
@@ -32,6 +34,7 @@ from typing import Any
 import nlopt
 import numpy as np
 
+from skincal.calib.api import UnitProblem
 from skincal.calib.paper_model import (
     DynamicData,
     StaticData,
@@ -41,8 +44,9 @@ from skincal.calib.paper_model import (
     static_data,
     static_error,
 )
+from skincal.data.result import UnitResult
 from skincal.kinematics.transforms import FloatArray
-from skincal.skin.pose import dh6_to_transform
+from skincal.skin.pose import SkinUnitPose, dh6_to_transform
 
 LOWER = np.array([-np.pi, -1.0, -np.pi, -1.0, 0.0, -np.pi])
 """Lower bounds of ``[theta_v, d_v, theta_su, d_su, a_su, alpha_su]`` (rad, m), paper Sec. IV."""
@@ -232,3 +236,42 @@ def unit_data(problem: Any, options: PaperOptions) -> tuple[StaticData, DynamicD
     st = static_data(problem.chain, problem.samples, problem.link, problem.gravity)
     dy = dynamic_data(problem.chain, problem.samples, problem.link, problem.gravity, max_samples=cap)
     return st, dy
+
+
+POOR_STATIC_FIT = 0.05
+"""Static error above which a unit gets a warning, (m/s^2)^2 (about 1.3 deg of tilt at 1 g)."""
+
+
+def paper_unit_result(problem: UnitProblem, fit: Fit) -> UnitResult:
+    """Wrap a fit as a :class:`UnitResult` with the paper's parameters and errors in ``extras``."""
+    warnings: list[str] = []
+    if problem.link_assignment is not None:
+        warnings.extend(problem.link_assignment.warnings)
+    observable = problem.link > 1
+    if not observable:
+        warnings.append("on link 1: yaw about and offset along the joint-1 axis are not observable")
+    if fit.static_error > POOR_STATIC_FIT:
+        warnings.append(f"poor static fit: E_s = {fit.static_error:.3g} (m/s^2)^2")
+    extras = {
+        "dh6": fit.params,
+        "static_error": fit.static_error,
+        "dynamic_error": fit.dynamic_error,
+        "n_evals": sum(fit.n_evals.values()),
+        "n_evals_per_stage": dict(fit.n_evals),
+        "nlopt_status": dict(fit.status),
+    }
+    return UnitResult(
+        pose=SkinUnitPose.from_dh6(problem.link, fit.params),
+        observable=observable,
+        warnings=tuple(warnings),
+        extras=extras,
+        link_confidence=None if problem.link_assignment is None else problem.link_assignment.confidence,
+    )
+
+
+def run_joint(problem: UnitProblem, model: str) -> UnitResult:
+    """A unit calibrated with all six parameters at once on ``E_s + E_d`` under the dynamic ``model``
+    (:func:`fit_joint`; ``om`` for ``om-joint``, ``mmm``, ``mm``)."""
+    options: PaperOptions = problem.options
+    static, dynamic = unit_data(problem, options)
+    return paper_unit_result(problem, fit_joint(static, dynamic, problem.rng, options, model))

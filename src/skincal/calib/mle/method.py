@@ -30,7 +30,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from skincal.calib.api import MethodSpec, UnitProblem, register
+from skincal.calib.api import UnitProblem
 from skincal.calib.gyro import GyroScale, gyro_scale
 from skincal.calib.mle.account import NULL_SHARE, describe_account, describe_null, pose_null_basis, sample_account
 from skincal.calib.mle.discovery import choose_link, gyro_rates
@@ -39,12 +39,10 @@ from skincal.calib.mle.problem import (
     Alignment,
     Problem,
     Shared,
-    align,
     arrange,
     decimated,
     fit_problem,
     gyro_bias_start,
-    prepare,
     use_gyro,
 )
 from skincal.calib.mle.solver import (
@@ -471,19 +469,3 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         notes=tuple(notes),
     )
 
-
-register(
-    "mle",
-    MethodSpec(
-        run_unit=run_unit,
-        description="global time alignment + closed-form start + robust joint maximum likelihood "
-        "(pose, IMU errors, clock) with residual tests",
-        discovers_links=True,
-        use_gyro_for_links=True,
-        prepare=prepare,
-        exact_joint_states=False,
-        align=align,
-        needs_segments=False,
-        options=MleOptions,
-    ),
-)
