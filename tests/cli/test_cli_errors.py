@@ -750,7 +750,7 @@ def test_a_huge_echoed_input_is_shortened_and_the_reason_still_shows(argv, tmp_p
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: ") and "\n" not in err and len(err) < 800, (len(err), err[:300])
     assert "characters]..." in err
-    assert err.endswith(("(File name too long)", ", consistency)", "DH chain file)")), err[-200:]
+    assert err.endswith(("(File name too long)", ", joint_rate)", "DH chain file)")), err[-200:]
 
 
 def test_shortened_keeps_ordinary_messages_unchanged():
