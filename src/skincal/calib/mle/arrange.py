@@ -70,18 +70,13 @@ def arrange_unit_data(
     S = len(runs.bounds)
     f_s, g_s, q_s = np.zeros((S, 3)), np.zeros((S, 3)), np.zeros((S, chain.n_joints))
     w_s, tm_s = np.zeros(S), np.zeros(S)
-    if S:  # every run's means at once: sums over each run's samples (runs lie end to end in ``inside``)
-        a, b = np.asarray(runs.bounds[:, 0], dtype=np.intp), np.asarray(runs.bounds[:, 1], dtype=np.intp)
-        n = b - a
-        inside = np.repeat(b - np.cumsum(n), n) + np.arange(int(n.sum()))  # the runs' sample indices, in order
-        starts = np.concatenate([[0], np.cumsum(n)[:-1]])
-        run_mean = lambda x: np.add.reduceat(x[inside], starts, axis=0) / n[:, None]  # noqa: E731
-        f_s = run_mean(accel)
+    for k, (a, b) in enumerate(runs.bounds):  # np.mean per run: its pairwise sums (a rests-only fit's null
+        f_s[k] = accel[a:b].mean(axis=0)  # space is decided at round-off, so keep this arithmetic)
         if gyro is not None:
-            g_s = run_mean(gyro)
-        w_s = n.astype(float)
-        tm_s = 0.5 * (t[a] + t[b - 1])
-        q_s = np.add.reduceat(interpolator.nearest(t[inside])[0], starts, axis=0) / n[:, None]
+            g_s[k] = gyro[a:b].mean(axis=0)
+        w_s[k] = b - a
+        tm_s[k] = 0.5 * (t[a] + t[b - 1])
+        q_s[k] = interpolator.nearest(t[a:b])[0].mean(axis=0)
     zero = np.zeros_like(q_s)
     static_u = link_signals(chain, link, q_s, zero, zero, gravity).u if S else np.zeros((0, 3))
     moving = ~rest_mask & interpolator.reliable(t)
