@@ -180,7 +180,7 @@ def _part(
     return replace(dataset, imu=imu, tof=tof)
 
 
-def _pose_vector(unit: UnitResult) -> tuple[FloatArray, FloatArray, FloatArray]:
+def pose_vector(unit: UnitResult) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Position (m), rotation matrix, and the 6 std (m, rad; NaN: undetermined) of a unit result."""
     def std(x: FloatArray | None, scale: float) -> FloatArray:
         return np.full(3, np.nan) if x is None else np.asarray(x, dtype=float) * scale
@@ -199,7 +199,7 @@ def compare(
     the full result's std (a part without the motion that determines it, such as the calm half of a
     recording for a unit only one joint turns, measures nothing there)."""
     z = np.full((len(SPLITS), 6), np.nan)
-    limit = None if full is None else PART_STD_LIMIT * _pose_vector(full)[2]
+    limit = None if full is None else PART_STD_LIMIT * pose_vector(full)[2]
     named: list[str] = []
     for k, split in enumerate(SPLITS):
         if split not in parts:
@@ -207,8 +207,8 @@ def compare(
         a, b = parts[split]
         if a.pose.link != b.pose.link or not (a.observable and b.observable):
             continue
-        pa, Ra, sa = _pose_vector(a)
-        pb, Rb, sb = _pose_vector(b)
+        pa, Ra, sa = pose_vector(a)
+        pb, Rb, sb = pose_vector(b)
         d = np.r_[pb - pa, Rotation.from_matrix(Rb @ Ra.T).as_rotvec()]
         z[k] = d / np.sqrt(sa**2 + sb**2)
         if limit is not None:

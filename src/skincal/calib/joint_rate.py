@@ -44,6 +44,7 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
+from skincal.calib.consistency import pose_vector
 from skincal.data.dataset import Dataset, JointStates
 from skincal.data.result import CalibrationResult, UnitResult
 from skincal.kinematics.transforms import FloatArray
@@ -123,19 +124,15 @@ def order_from_ratio(ratio: float) -> float:
     return float(brentq(f, lo, hi, xtol=1e-6))
 
 
-def _pose(unit: UnitResult) -> tuple[FloatArray, FloatArray]:
-    return np.asarray(unit.pose.p_link_su, dtype=float), np.asarray(unit.pose.R_link_su, dtype=float)
-
-
 def _shift(full: UnitResult, fits: list[UnitResult]) -> FloatArray | None:
     """``(6,)`` mean over ``fits`` of their pose minus the full result's (position m, rotation vector of
     ``R_fit R_full^T`` about the link axes, rad); None when a fit put the unit on another link."""
-    p0, R0 = _pose(full)
+    p0, R0, _ = pose_vector(full)
     rows = []
     for f in fits:
         if f.pose.link != full.pose.link:
             return None
-        p, R = _pose(f)
+        p, R, _ = pose_vector(f)
         rows.append(np.r_[p - p0, Rotation.from_matrix(R @ R0.T).as_rotvec()])
     return np.mean(rows, axis=0)
 
@@ -158,8 +155,8 @@ def term(
     d3 = _shift(full, third) if len(third) == 3 else None
     if d2 is None or d3 is None:
         return None, "the thinned joint streams could not be calibrated on this unit's link"
-    s = _std(full)
-    ok = np.isfinite(s) & (s > 0)
+    s = pose_vector(full)[2]  # NaN where undetermined or zero
+    ok = np.isfinite(s)
     if not np.any(ok):
         return None, "no pose component has a std"
     n2, n3 = np.linalg.norm(d2[ok] / s[ok]), np.linalg.norm(d3[ok] / s[ok])
