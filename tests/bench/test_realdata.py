@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from skincal.bench.realdata import find_recordings, group_name, normalised_spread, run_realdata_benchmark
+from skincal.calib.api import POSITION_WEAK_STD_M
 from skincal.cli import main
 from skincal.data.hdf5 import write_dataset
 from skincal.sim import simulate
@@ -95,3 +96,9 @@ def test_real_recordings_each_get_an_answer():
             g = by_method[method]
             assert g["recordings"] == 19  # every recording answered: calibrated, or a failure with its reason
             assert g["calibrated"] + len(g["failures"]) == 19 and all(f["reason"] for f in g["failures"])
+        g = by_method["mle"]
+        # a recording whose position std exceeds the limit is told so (the linear 150 mm/s move barely turns
+        # the tool); every offset carries a std, so the offsets are judged by their own std too
+        weak = [e for e in g["per_recording"] if max(e["position_std_mm"]) > 1e3 * POSITION_WEAK_STD_M]
+        assert g["position_weak"] == len(weak) and all(e["position_weak"] for e in weak)
+        assert g["time_offset_deviation_rms_std"] is not None

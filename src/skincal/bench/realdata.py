@@ -20,7 +20,10 @@ Per group and method, over the recordings calibrated on the group's most common 
   each recording's deviation from the weighted mean in its own std (:func:`normalised_spread`: fair to
   a recording that pins little and says so with a large std, which the median hides);
 * motion kept: the moving samples the calibration used over the unit's samples not at rest;
-* time offsets (ms) and their spread; links chosen; failures (recording and reason).
+* time offsets (ms), their spread and the RMS of each one's deviation from the weighted mean in its own
+  std (``time_offset_deviation_rms_std``); links chosen; failures (recording and reason);
+* ``position_weak``: the recordings whose position the calibration calls weakly determined (a std
+  above :data:`~skincal.calib.api.POSITION_WEAK_STD_M` on some axis; kept in every figure above).
 
 Every figure is marked ``simulated`` when the recordings carry a simulation's truth, else ``real``.
 """
@@ -103,6 +106,7 @@ def _unit_record(unit: Any) -> dict[str, Any]:
 
     imu = unit.imu
     offset = None if imu is None or imu.time_offset_s is None else 1e3 * float(imu.time_offset_s)
+    offset_std = None if imu is None or imu.time_offset_std_s is None else 1e3 * float(imu.time_offset_std_s)
     p_std = None if unit.position_std_m is None else 1e3 * np.asarray(unit.position_std_m, dtype=float)
     positioned = has_position(unit)  # rests only: no position (written as null)
     r_std = None if unit.rotation_std_deg is None else np.asarray(unit.rotation_std_deg, dtype=float)
@@ -115,6 +119,8 @@ def _unit_record(unit: Any) -> dict[str, Any]:
         "position_std_mm": p_std,
         "rotation_std_deg": r_std,
         "time_offset_ms": offset,
+        "time_offset_std_ms": offset_std,
+        "position_weak": any(w.startswith("position weakly determined") for w in unit.warnings),
         "n_moving_samples": unit.extras.get("n_moving_samples"),
         "joint_rate": unit.extras.get("joint_rate"),
         "warnings": list(unit.warnings),
@@ -184,12 +190,16 @@ def _finite_or_none(x: Any) -> Any:
 
 def normalised_spread(x: np.ndarray, std: list[Any]) -> np.ndarray:
     """RMS over recordings of ``(x_i - x_w) / s_i`` per axis: each estimate's deviation from the
-    inverse-variance weighted mean ``x_w`` in its own reported std ``s_i`` (``x`` ``(K, 3)``; about 1
-    when the recordings agree within their std, whatever each one's size; NaN with fewer than 2).
-    The weighted mean is fitted, so the expectation is ``sqrt((K - 1) / K)``, not 1."""
+    inverse-variance weighted mean ``x_w`` in its own reported std ``s_i`` (``x`` ``(K, m)``, ``std``
+    ``K`` entries of ``m`` values; about 1 when the recordings agree within their std, whatever each
+    one's size; NaN with fewer than 2). The weighted mean is fitted, so the expectation is
+    ``sqrt((K - 1) / K)``, not 1."""
+    x = np.asarray(x, dtype=float)
+    m = x.shape[1] if x.ndim == 2 else 1
     if len(x) < 2 or any(s is None for s in std):
-        return np.full(3, np.nan)
-    s = np.asarray(std, dtype=float).reshape(-1, 3)
+        return np.full(m, np.nan)
+    x = x.reshape(len(x), m)
+    s = np.asarray(std, dtype=float).reshape(x.shape)
     with np.errstate(all="ignore"):
         w = np.where(np.isfinite(s) & (s > 0), 1.0 / s**2, 0.0)
         mean = np.sum(w * x, axis=0) / np.sum(w, axis=0)
@@ -216,6 +226,7 @@ def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
     out["observable"] = sum(1 for e in same if e["observable"])
     placed = [e for e in same if e["position_mm"] is not None]
     out["position_undetermined"] = len(same) - len(placed)
+    out["position_weak"] = sum(1 for e in placed if e.get("position_weak"))
     P = np.array([e["position_mm"] for e in placed]).reshape(-1, 3)
     Rs = np.array([e["R"] for e in same])
     R_bar = _mean_rotation(Rs)
@@ -241,7 +252,11 @@ def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
     p_rep, r_rep = median_std("position_std_mm", placed), median_std("rotation_std_deg", same)
     with np.errstate(all="ignore"):
         p_ratio, r_ratio = p_std / p_rep, r_std / r_rep
-    offsets = [e["time_offset_ms"] for e in same if e["time_offset_ms"] is not None]
+    timed = [e for e in same if e["time_offset_ms"] is not None]
+    offsets = [e["time_offset_ms"] for e in timed]
+    t_z = normalised_spread(
+        np.array(offsets, dtype=float).reshape(-1, 1), [e.get("time_offset_std_ms") for e in timed]
+    )[0]
     kept = [e["motion_kept"] for e in same if e.get("motion_kept") is not None]
     p_z = normalised_spread(P, [e["position_std_mm"] for e in placed])
     r_z = normalised_spread(delta, [e["rotation_std_deg"] for e in same])
@@ -261,6 +276,7 @@ def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
             "rotation_deviation_rms_std": _finite_or_none(r_z),
             "time_offsets_ms": _finite_or_none(offsets),
             "time_offset_spread_ms": _finite_or_none(np.ptp(offsets)) if offsets else None,
+            "time_offset_deviation_rms_std": _finite_or_none(t_z),
             "motion_kept": _finite_or_none(kept),
             "median_motion_kept": _finite_or_none(np.median(kept)) if kept else None,
             "per_recording": [
@@ -271,6 +287,8 @@ def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
                     "position_std_mm": _finite_or_none(e["position_std_mm"]),
                     "rotation_std_deg": _finite_or_none(e["rotation_std_deg"]),
                     "time_offset_ms": _finite_or_none(e["time_offset_ms"]),
+                    "time_offset_std_ms": _finite_or_none(e.get("time_offset_std_ms")),
+                    "position_weak": bool(e.get("position_weak")),
                     "motion_kept": _finite_or_none(e.get("motion_kept")),
                     "joint_rate": e.get("joint_rate"),
                 }
@@ -339,7 +357,7 @@ def realdata_report(doc: dict[str, Any]) -> list[Any]:
     for col in (
         "IMU", "method", "ok/all", "link", "pos std x y z (mm)", "pos pairwise x y z (mm)", "rot std (deg)",
         "rot pairwise (deg)", "spread/std pos", "spread/std rot", "dev/own std pos", "dev/own std rot",
-        "motion kept", "offsets (ms)", "failures",
+        "motion kept", "offsets (ms) (dev/own std)", "weak pos", "failures",
     ):  # fmt: skip
         table.add_column(col)
     failures: list[str] = []
@@ -348,13 +366,15 @@ def realdata_report(doc: dict[str, Any]) -> list[Any]:
             reasons = sorted({str(f["reason"]) for f in g["failures"]})
             offsets = g.get("time_offsets_ms")
             offset_text = "-" if not offsets else f"{min(offsets):.0f}..{max(offsets):.0f}"
+            if g.get("time_offset_deviation_rms_std") is not None:
+                offset_text += f" ({g['time_offset_deviation_rms_std']:.1f})"
             table.add_row(
                 shown(name), method, f"{g['calibrated']}/{g['recordings']}", str(g.get("link", "-")),
                 _fmt(g.get("position_std_mm")), _fmt(g.get("position_pairwise_mm")),
                 _fmt(g.get("rotation_std_deg"), 2), _fmt(g.get("rotation_pairwise_max_deg"), 2),
                 _fmt(g.get("position_spread_over_std")), _fmt(g.get("rotation_spread_over_std")),
                 _fmt(g.get("position_deviation_rms_std")), _fmt(g.get("rotation_deviation_rms_std")),
-                _fmt(g.get("median_motion_kept"), 2), offset_text,
+                _fmt(g.get("median_motion_kept"), 2), offset_text, str(g.get("position_weak", "-")),
                 str(len(g["failures"])),
             )  # fmt: skip
             for reason in reasons:
