@@ -1,4 +1,5 @@
-"""What the data say of a unit's position, for every method (``calib.api.judge_position``): rests
+"""What the data say of a unit's position, for every method (``calib.api.judge_position``,
+``weak_position``): rests
 alone never determine it (written as null even when a fit's priors left a number), and a std beyond
 ``POSITION_WEAK_STD_M`` on some axis is named in a warning with the estimate kept."""
 
@@ -7,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from skincal.calib.api import POSITION_WEAK_STD_M, judge_position
+from skincal.calib.api import POSITION_WEAK_STD_M, judge_position, weak_position
 from skincal.data.result import UnitResult, has_position
 from skincal.skin.pose import SkinUnitPose
 
@@ -33,7 +34,7 @@ def test_rests_only_null_the_position_even_when_a_fit_left_a_finite_std():
 
 
 def test_a_weak_position_is_named_with_its_axis_and_kept():
-    out = judge_position(_unit([0.005, 0.364, 0.05]), rests_only=False, static_only=False)
+    out = weak_position(_unit([0.005, 0.364, 0.05]))
     assert out.observable and has_position(out)
     np.testing.assert_array_equal(out.pose.p_link_su, [0.01, 0.02, 0.03])
     weak = [w for w in out.warnings if w.startswith("position weakly determined")]
@@ -42,5 +43,5 @@ def test_a_weak_position_is_named_with_its_axis_and_kept():
 
 @pytest.mark.parametrize("std", [POSITION_WEAK_STD_M * 0.99, np.nan])
 def test_a_determined_position_gets_no_warning(std):
-    out = judge_position(_unit([0.001, std, 0.002]), rests_only=False, static_only=False)
-    assert out.warnings == ()
+    unit = _unit([0.001, std, 0.002])
+    assert weak_position(unit).warnings == () and judge_position(unit, rests_only=False, static_only=False) is unit

@@ -23,7 +23,14 @@ Per group and method, over the recordings calibrated on the group's most common 
 * time offsets (ms), their spread and the RMS of each one's deviation from the weighted mean in its own
   std (``time_offset_deviation_rms_std``); links chosen; failures (recording and reason);
 * ``position_weak``: the recordings whose position the calibration calls weakly determined (a std
-  above :data:`~skincal.calib.api.POSITION_WEAK_STD_M` on some axis; kept in every figure above).
+  above :data:`~skincal.calib.api.POSITION_WEAK_STD_M` on some axis; kept in every figure above;
+  ``position_std_firm_mm`` and ``position_spread_over_std_firm`` are the spread without them).
+
+Recordings made at once by several IMUs (one folder per IMU with the same ``V.._S.._`` stem, or one
+dataset with several units) share everything the robot and the host did: their *paired* differences
+per session (:func:`paired`: position and time offset of one IMU minus the other's, judged by the two
+std combined) tell what varies with the recording (the same in both IMUs) from what the calibration of
+each sensor gets wrong (the difference).
 
 Every figure is marked ``simulated`` when the recordings carry a simulation's truth, else ``real``.
 """
@@ -250,6 +257,11 @@ def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
             return np.array([np.median(c[np.isfinite(c)]) if np.any(np.isfinite(c)) else np.nan for c in arr.T])
 
     p_rep, r_rep = median_std("position_std_mm", placed), median_std("rotation_std_deg", same)
+    firm = [e for e in placed if not e.get("position_weak")]  # the same figures without the weak positions
+    P_firm = np.array([e["position_mm"] for e in firm]).reshape(-1, 3)
+    p_std_firm = P_firm.std(axis=0, ddof=1) if len(firm) > 1 else np.full(3, np.nan)
+    with np.errstate(all="ignore"):
+        p_ratio_firm = p_std_firm / median_std("position_std_mm", firm)
     with np.errstate(all="ignore"):
         p_ratio, r_ratio = p_std / p_rep, r_std / r_rep
     timed = [e for e in same if e["time_offset_ms"] is not None]
@@ -271,6 +283,8 @@ def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
             "median_reported_position_std_mm": _finite_or_none(p_rep),
             "median_reported_rotation_std_deg": _finite_or_none(r_rep),
             "position_spread_over_std": _finite_or_none(p_ratio),
+            "position_std_firm_mm": _finite_or_none(p_std_firm),
+            "position_spread_over_std_firm": _finite_or_none(p_ratio_firm),
             "rotation_spread_over_std": _finite_or_none(r_ratio),
             "position_deviation_rms_std": _finite_or_none(p_z),
             "rotation_deviation_rms_std": _finite_or_none(r_z),
@@ -299,6 +313,59 @@ def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def session_name(recording: str, group: str) -> str:
+    """The session a group's recording belongs to: the folder name without its IMU part (``V500_S3``
+    of ``V500_S3_MPU9150``); a dataset holding several units is one session."""
+    suffix = "_" + group
+    return recording[: -len(suffix)] if recording.endswith(suffix) and len(recording) > len(suffix) else recording
+
+
+def _difference(x: np.ndarray, s: np.ndarray) -> dict[str, Any]:
+    """Weighted mean, std across sessions and the RMS deviation over its own std of paired
+    differences ``x`` ``(K, m)`` with std ``s`` (:func:`normalised_spread`)."""
+    with np.errstate(all="ignore"):
+        w = np.where(np.isfinite(s) & (s > 0), 1.0 / s**2, 0.0)
+        mean = np.sum(w * x, axis=0) / np.sum(w, axis=0)
+    return {
+        "mean": _finite_or_none(mean),
+        "std": _finite_or_none(x.std(axis=0, ddof=1) if len(x) > 1 else np.full(x.shape[1], np.nan)),
+        "deviation_rms_std": _finite_or_none(normalised_spread(x, list(s))),
+    }
+
+
+def paired(a_name: str, a: dict[str, Any], b_name: str, b: dict[str, Any]) -> dict[str, Any] | None:
+    """Per session recorded by both groups ``a`` and ``b`` (their :func:`repeatability` blocks, same
+    method, same link), ``a``'s estimate minus ``b``'s: position (link axes, mm; std the two combined,
+    ``sqrt(s_a^2 + s_b^2)``) and time offset (ms). What the robot's stream and the host did is common to
+    both and cancels; a deviation over own std near 1 says each sensor's part of the std is honest.
+    ``None`` when fewer than two sessions are shared."""
+    if a.get("link") is None or a.get("link") != b.get("link"):
+        return None
+    ea = {session_name(e["recording"], a_name): e for e in a.get("per_recording", [])}
+    eb = {session_name(e["recording"], b_name): e for e in b.get("per_recording", [])}
+    both = [k for k in sorted(set(ea) & set(eb))]
+    pos = [k for k in both if ea[k]["position_mm"] is not None and eb[k]["position_mm"] is not None]
+    tim = [k for k in both if ea[k]["time_offset_ms"] is not None and eb[k]["time_offset_ms"] is not None]
+    if len(both) < 2:
+        return None
+
+    def diff(keys: list[str], key: str, std_key: str) -> tuple[np.ndarray, np.ndarray]:
+        x = np.array([np.subtract(ea[k][key], eb[k][key]) for k in keys], dtype=float).reshape(len(keys), -1)
+        sa = np.array([np.nan if ea[k][std_key] is None else ea[k][std_key] for k in keys], dtype=float)
+        sb = np.array([np.nan if eb[k][std_key] is None else eb[k][std_key] for k in keys], dtype=float)
+        return x, np.hypot(sa, sb).reshape(x.shape)
+
+    out: dict[str, Any] = {"groups": [a_name, b_name], "sessions": both}
+    if len(pos) > 1:
+        x, s = diff(pos, "position_mm", "position_std_mm")
+        out["position_difference_mm"] = _difference(x, s)
+    if len(tim) > 1:
+        x, s = diff(tim, "time_offset_ms", "time_offset_std_ms")
+        scalar = _difference(x, s)
+        out["time_offset_difference_ms"] = {k: v[0] if isinstance(v, list) else v for k, v in scalar.items()}
+    return out
+
+
 def run_realdata_benchmark(
     folder: Path,
     methods: Sequence[str] = METHODS,
@@ -323,13 +390,22 @@ def run_realdata_benchmark(
                     {**entry, "recording": r["recording"]}
                 )
     simulated = sorted({bool(r.get("simulated")) for r in records if r["error"] is None})
+    reps = {name: {m: repeatability(v) for m, v in by_m.items()} for name, by_m in sorted(groups.items())}
+    names = list(reps)
     return {
         "folder": str(folder),
         "data": "simulated" if simulated == [True] else "real" if simulated == [False] else "mixed",
         "methods": list(methods),
         "recordings": len(records),
         "errors": [{"recording": r["recording"], "reason": r["error"]} for r in records if r["error"] is not None],
-        "groups": {name: {m: repeatability(v) for m, v in by_m.items()} for name, by_m in sorted(groups.items())},
+        "groups": reps,
+        "paired": [
+            {"method": m, **pair}
+            for i, a in enumerate(names)
+            for b in names[i + 1 :]
+            for m in methods
+            if m in reps[a] and m in reps[b] and (pair := paired(a, reps[a][m], b, reps[b][m])) is not None
+        ],
     }
 
 
@@ -381,6 +457,22 @@ def realdata_report(doc: dict[str, Any]) -> list[Any]:
                 count = sum(1 for f in g["failures"] if f["reason"] == reason)
                 failures.append(f"{shown(name)} {method}: {count} x {shown(reason)}")
     parts: list[Any] = [table, *failures]
+    for pair in doc.get("paired", []):
+        a, b = (shown(n) for n in pair["groups"])
+        text = f"paired {a} - {b} ({pair['method']}, {len(pair['sessions'])} sessions recorded by both):"
+        if "position_difference_mm" in pair:
+            d = pair["position_difference_mm"]
+            text += (
+                f" position mean {_fmt(d['mean'])} mm, std {_fmt(d['std'])} mm, dev/own std "
+                f"{_fmt(d['deviation_rms_std'])};"
+            )
+        if "time_offset_difference_ms" in pair:
+            d = pair["time_offset_difference_ms"]
+            text += (
+                f" time offset mean {_fmt(d['mean'])} ms, std {_fmt(d['std'])} ms, dev/own std "
+                f"{_fmt(d['deviation_rms_std'])}"
+            )
+        parts.append(text)
     for e in doc["errors"]:
         parts.append(f"[red]error[/]: {shown(e['recording'])}: {shown(e['reason'])}")
     return parts

@@ -324,7 +324,8 @@ def calibrate(
             )  # fmt: skip
 
         result = joint_rate_check(tagged, result, refit_thinned)
-    return result
+    # on the final std (after every inflation above)
+    return replace(result, units={name: weak_position(u) for name, u in result.units.items()})
 
 
 @contextmanager
@@ -515,34 +516,34 @@ that pose lands anywhere on a link of a typical arm; the motion, not the estimat
 
 
 def judge_position(result: UnitResult, rests_only: bool, static_only: bool) -> UnitResult:
-    """What ``result``'s data say of its position, for every method.
+    """``result`` with what rests say of a position: nothing. From rests only (``rests_only``: no moving
+    sample used) the accelerometer reads ``f = R^T (-g)``, which holds no ``p``: the position is **not
+    determined**, whatever a fit's priors left, so it is written as ``null`` (``observable: false``, NaN
+    std and covariance rows, ``position_determined: false``) with a warning; the rotation and link (from
+    the rests) are kept. Otherwise ``result`` unchanged."""
+    if not rests_only:
+        return result
+    said = "static poses only" if static_only else "no moving sample used: rests only"
+    warning = f"position not determined ({said}): written as null; the rotation and link come from the rests"
+    cov = result.pose_covariance
+    if cov is not None:  # (x, y, z, rx, ry, rz): the position rows and columns undetermined
+        cov = np.array(cov, dtype=float)
+        cov[:3, :] = cov[:, :3] = np.nan
+    return replace(
+        result,
+        observable=False,
+        position_std_m=np.full(3, np.nan),
+        pose_covariance=cov,
+        warnings=(*result.warnings, warning),
+        extras={**result.extras, POSITION_DETERMINED: False},
+    )
 
-    * From rests only (``rests_only``: no moving sample used), the accelerometer reads
-      ``f = R^T (-g)``, which holds no ``p``: the position is **not determined**, whatever a fit's priors
-      left, so it is written as ``null`` (``observable: false``, NaN std, ``position_determined: false``)
-      with a warning; the rotation and link (from the rests) are kept.
-    * Otherwise a std above :data:`POSITION_WEAK_STD_M` on some link axis is a warning: *weakly
-      determined*, naming the axis and the std (a linear move that barely turns the link, a rotation
-      about the lever arm only).
-    """
+
+def weak_position(result: UnitResult) -> UnitResult:
+    """``result`` with a warning when its position std exceeds :data:`POSITION_WEAK_STD_M` on some link
+    axis (*weakly determined*, naming the axis and the std: a linear move that barely turns the link, a
+    rotation about the lever arm only); the estimate and its std are kept. Judged on the final std."""
     std = result.position_std_m
-    if rests_only:
-        said = "static poses only" if static_only else "no moving sample used: rests only"
-        warning = (
-            f"position not determined ({said}): written as null; the rotation and link come from the rests"
-        )
-        cov = result.pose_covariance
-        if cov is not None:  # (x, y, z, rx, ry, rz): the position rows and columns undetermined
-            cov = np.array(cov, dtype=float)
-            cov[:3, :] = cov[:, :3] = np.nan
-        return replace(
-            result,
-            observable=False,
-            position_std_m=np.full(3, np.nan),
-            pose_covariance=cov,
-            warnings=(*result.warnings, warning),
-            extras={**result.extras, POSITION_DETERMINED: False},
-        )
     if std is None:
         return result
     s = np.asarray(std, dtype=float)
