@@ -68,7 +68,6 @@ def view(
 
     import dataclasses
     import os
-    import time
 
     from skincal.data.hdf5 import read_dataset
     from skincal.data.provenance import check_result_dataset
@@ -136,13 +135,7 @@ def view(
     for note in viewer.notes:
         err_console.print(f"note: {printable(note)}", markup=False, highlight=False, soft_wrap=True)
     console.print(f"skincal viewer: [bold]{shown(viewer.url)}[/]  (Ctrl-C to stop)", highlight=False)
-    if duration is not None:
-        try:
-            time.sleep(duration)
-        finally:
-            viewer.close()
-        return
-    serve_forever(viewer)
+    serve_forever(viewer, duration=duration)
 
 
 def _view_follow(
@@ -200,20 +193,13 @@ def _view_follow(
     except BaseException:
         viewer.close()
         raise
-    if duration is not None:
-        try:
-            time.sleep(max(0.0, duration - (time.monotonic() - start)))
-        finally:
-            viewer.close()
-        return
-    serve_forever(viewer)
+    serve_forever(viewer, duration=None if duration is None else duration - (time.monotonic() - start))
 
 
 def _view_scenario(
     name: str, result: Path | None, seed: int, placement: str, host: str, port: int, duration: float | None
 ) -> None:
     """Run avoidance scenario ``name`` with the result's poses (truth if none) and serve its playback."""
-    import time
 
     import numpy as np
 
@@ -233,13 +219,7 @@ def _view_scenario(
     believed = CalibrationResult(label, chain.name, "", 0.0, {u: UnitResult(p) for u, p in poses.items()})
     viewer = start_viewer(believed, chain, truth=true_poses, recording=recording_from_run(log), host=host, port=port)
     console.print(f"skincal viewer: [bold]{shown(viewer.url)}[/]  (Ctrl-C to stop)", highlight=False)
-    if duration is not None:
-        try:
-            time.sleep(duration)
-        finally:
-            viewer.close()
-        return
-    serve_forever(viewer)
+    serve_forever(viewer, duration=duration)
 
 
 @app.command()

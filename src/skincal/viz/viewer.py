@@ -569,10 +569,12 @@ def _add_gui(viewer: Viewer, result: CalibrationResult, errors: dict[str, float]
     viewer.set_joints(q0)
 
 
-def serve_forever(viewer: Viewer, poll_s: float = 0.5) -> None:
-    """Block until interrupted (Ctrl-C), then stop the server."""
+def serve_forever(viewer: Viewer, poll_s: float = 0.5, duration: float | None = None) -> None:
+    """Block until interrupted (Ctrl-C) or, with ``duration``, for that many seconds; then stop the server."""
     try:
-        while True:
+        if duration is not None:
+            time.sleep(max(0.0, duration))
+        while duration is None:
             time.sleep(poll_s)
     finally:
         viewer.close()
