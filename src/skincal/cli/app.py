@@ -85,6 +85,22 @@ def seed_option(value: int) -> int:
 
 
 
+class Throttle:
+    """A redraw at most every ``period_s`` seconds of wall time (monotonic clock): :meth:`due` says whether
+    to draw now (and counts it as drawn); ``force`` draws regardless (the final view)."""
+
+    def __init__(self, period_s: float) -> None:
+        self.period_s = period_s
+        self._wall = -math.inf
+
+    def due(self, force: bool = False) -> bool:
+        now = time.monotonic()
+        if not force and now - self._wall < self.period_s:
+            return False
+        self._wall = now
+        return True
+
+
 class LiveMeter:
     """The live meter of a command that follows a calibration (``calibrate --follow``, ``ros2``): on a
     terminal a rich table redrawn in place, elsewhere one plain line printed when it changes; drawn at
@@ -95,8 +111,7 @@ class LiveMeter:
         from rich.live import Live
 
         self.target, self.title = target, title
-        self.period = 0.25 if console.is_terminal else 1.0
-        self._wall = -math.inf
+        self.throttle = Throttle(0.25 if console.is_terminal else 1.0)
         self._line: str | None = None
         self.live = Live(console=console, refresh_per_second=4, transient=False) if console.is_terminal else None
 
@@ -114,10 +129,8 @@ class LiveMeter:
         past the throttle (the final view). Without units nothing is printed."""
         from skincal.viz.meter import meter_line, meter_table
 
-        now = time.monotonic()
-        if not force_draw and now - self._wall < self.period:
+        if not self.throttle.due(force_draw):
             return
-        self._wall = now
         goal = self.target
         if self.live is not None:
             self.live.update(meter_table(statuses, goal.position_m, goal.rotation_deg, t_data, t_end, self.title))

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console, console_warning, err_console, require_file, seed_option, shown
+from skincal.cli.app import Throttle, app, console, console_warning, err_console, require_file, seed_option, shown
 from skincal.errors import ConfigError
 from skincal.io.files import DATASET_FILE, RESULT_FILE
 
@@ -166,18 +166,16 @@ def _view_follow(
         err_console.print(f"note: {shown(note)}", highlight=False, soft_wrap=True)
     console.print(f"skincal viewer: [bold]{shown(viewer.url)}[/]  (following {shown(source.name)}; Ctrl-C to stop)",
                   highlight=False)  # fmt: skip
-    last = {"wall": -math.inf}
+    throttle = Throttle(0.25)
 
     class _DurationOver(Exception):
         """``--duration`` ran out during the replay (it counts from the start, replay included)."""
 
     def on_meter(statuses, t_data: float, t_end: float | None) -> None:
-        now = time.monotonic()
-        if duration is not None and now - start >= duration:
+        if duration is not None and time.monotonic() - start >= duration:
             raise _DurationOver
-        if now - last["wall"] < 0.25:
+        if not throttle.due():
             return
-        last["wall"] = now
         q = interp_rows(np.asarray([t0 + t_data]), joints.t, joints.q)[0]
         update_live(viewer, statuses, q, meter_line(statuses, target.position_m, target.rotation_deg, t_data, t_end))
 
