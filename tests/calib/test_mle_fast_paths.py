@@ -11,10 +11,10 @@ import pytest
 
 from skincal.calib import calibrate
 from skincal.calib.api import METHODS, calibrate_unit
+from skincal.calib.hermite import hermite, hermite_rows
 from skincal.calib.mle.problem import Problem, arrange, prepare
 from skincal.calib.mle.solver import normal_equations
 from skincal.calib.preprocess import JointInterpolator
-from skincal.calib.signals import hermite, hermite_rows
 from skincal.protocol.presets import get_protocol
 from skincal.sim import simulate
 from skincal.workflows.session import make_session

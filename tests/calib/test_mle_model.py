@@ -80,7 +80,7 @@ def _method_residuals(unit, problem):
         c=imu.accel_bias_drift_mps3,
         k=imu.gravity_mps2 / np.linalg.norm(problem.gravity) - 1.0,
     )
-    r, _ = accel_rows(state, mle._blocks(problem, p), p.linearise(tau, d), p.data.rows)
+    r, _ = accel_rows(state, mle.fit_blocks(problem, p), p.linearise(tau, d), p.data.rows)
     return r, p, state
 
 

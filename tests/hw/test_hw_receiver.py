@@ -48,7 +48,7 @@ def test_binds_loopback_free_port():
     async def main():
         async with SkinReceiver() as rx:
             assert rx.host == "127.0.0.1" and 0 < rx.port < 65536
-            assert rx._transport.get_extra_info("sockname") == ("127.0.0.1", rx.port)
+            assert rx.bound_address == ("127.0.0.1", rx.port)
 
     _run(main())
 
@@ -235,7 +235,7 @@ def test_emulated_clock_offset_and_drift_recovered():
 
     report, fit = _run(main())
     assert abs(fit.drift - (1 / (1 + eps) - 1)) < 300e-6
-    device_s = emu._sources[0][3] * 1e-6
+    device_s = emu.device_stamps_us("su1") * 1e-6
     t_data = (device_s - 1000.0) / (1 + eps)
     err = fit.to_host(device_s) - (report.start_host_s + t_data)
     assert abs(np.median(err)) < 3e-3 and np.max(np.abs(err)) < 10e-3

@@ -21,6 +21,7 @@ from skincal.kinematics.transforms import matrix_from_quat_wxyz
 from skincal.kinematics.urdf import chain_from_urdf, read_urdf_text
 from skincal.skin.pose import SkinUnitPose
 from skincal.viz.meshes import MAX_MESH_BYTES, MeshRefused, MeshResolver, load_mesh
+from skincal.viz.viewer import scene_nodes
 
 from registry_robots import registry_urdf, robots_dir
 
@@ -78,7 +79,7 @@ def _urdf(base_mesh: str, link_mesh: str) -> str:
 def _world_pose(server, name: str) -> np.ndarray:
     """The world pose of viser scene node ``name``: its ancestors' poses composed (viser's scene
     handles by node name; a missing ancestor is an identity frame)."""
-    handles = server.scene._handle_from_node_name
+    handles = scene_nodes(server)
     parts = name.strip("/").split("/")
     T = np.eye(4)
     for k in range(1, len(parts) + 1):
@@ -95,7 +96,7 @@ def _world_pose(server, name: str) -> np.ndarray:
 def _mesh_nodes(server) -> dict[str, str]:
     """Mesh node name by the URDF link it belongs to (``.../<link>/<link>:visual0``)."""
     out = {}
-    for name, handle in server.scene._handle_from_node_name.items():
+    for name, handle in scene_nodes(server).items():
         if name.startswith("/robot/urdf/") and type(handle).__name__ == "MeshHandle":
             out[name.rsplit("/", 1)[1].split(":visual")[0]] = name
     return out
@@ -290,7 +291,7 @@ def test_viewer_draws_registry_meshes_at_the_chain_kinematics(viser_server):
     rec = Recording(t=t, q=q, tof_t={}, tof_range={}, obstacles={})
     v = viser_server(_empty_result(chain), chain, recording=rec, meshes=MeshResolver.from_options(path.parent))
     assert v.notes == [] and v.urdf is not None
-    names = list(v.server.scene._handle_from_node_name)
+    names = list(scene_nodes(v.server))
     assert not [n for n in names if "/capsule" in n]
     assert any(n.startswith("/robot/link1/est_su1") for n in names)
     assert _check_meshes_at_fk(v, rec.q_at(rec.t_start)) == chain.n_joints  # link 0 ('world') has no visual
@@ -308,7 +309,7 @@ def test_viewer_draws_registry_meshes_at_the_chain_kinematics(viser_server):
     visual = urdf.link_map["link3"].visuals[0]
     raw = trimesh.load(robots_dir() / "xarm_description/meshes/xarm7/visual/link3.stl", force="mesh")
     node = _mesh_nodes(v.server)["link3"]
-    handle = v.server.scene._handle_from_node_name[node]
+    handle = scene_nodes(v.server)[node]
     origin = np.eye(4) if visual.origin is None else visual.origin
     T = chain.link_frames(q_now[None])[0][chain.link_names.index("link3")] @ origin
     drawn = _world_pose(v.server, node)
@@ -355,7 +356,7 @@ def test_a_dataset_urdf_finds_its_meshes_through_package_paths_only(viser_server
     bare = viser_server(_empty_result(chain), chain, meshes=MeshResolver.from_options(None, environ={}))
     assert bare.urdf is None and len(bare.notes) == 1 and "capsules" in bare.notes[0]
     assert "example-robot-data" in bare.notes[0]
-    assert any("/capsule" in n for n in bare.server.scene._handle_from_node_name)
+    assert any("/capsule" in n for n in scene_nodes(bare.server))
     found = viser_server(_empty_result(chain), chain, meshes=MeshResolver.from_options(None, [SHARE], environ={}))
     assert found.notes == [] and _check_meshes_at_fk(found, np.zeros(7)) == chain.n_joints
 
@@ -381,7 +382,7 @@ def test_viewer_with_a_crafted_urdf_draws_capsules_and_reads_nothing_outside(
     assert not [p for p in watch.opened if "outside" in p or p.startswith("/etc")], watch.opened
     assert any(p.endswith("base.stl") for p in watch.opened)  # (the hook does see the reads there are)
     assert v.urdf is None and len(v.notes) == 1 and "robot drawn as capsules" in v.notes[0] and reason in v.notes[0]
-    names = list(v.server.scene._handle_from_node_name)
+    names = list(scene_nodes(v.server))
     assert not [n for n in names if n.startswith("/robot/urdf")] and any("/capsule" in n for n in names)
 
 
@@ -463,7 +464,7 @@ def test_viewer_screenshot_shows_the_meshes(viser_server, tmp_path: Path):
     centres = []
     for name in _mesh_nodes(v.server).values():
         T = _world_pose(v.server, name)
-        centres.append(T[:3, :3] @ np.asarray(v.server.scene._handle_from_node_name[name].vertices).mean(0) + T[:3, 3])
+        centres.append(T[:3, :3] @ np.asarray(scene_nodes(v.server)[name].vertices).mean(0) + T[:3, 3])
     assert len(centres) == 8  # link_base and link1..link7
     width, height = 1280, 800
     cam = (CAMERA_POSITION, CAMERA_LOOK_AT, np.radians(CAMERA_FOV_DEG), width, height)

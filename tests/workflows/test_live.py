@@ -228,7 +228,7 @@ def test_live_viewer_draws_the_units_and_their_ellipsoids_converging(fast_ds):
 
     pytest.importorskip("viser")
     from skincal.viz.model import ELLIPSOID_SIGMA
-    from skincal.viz.viewer import start_live_viewer, update_live
+    from skincal.viz.viewer import scene_nodes, start_live_viewer, update_live
 
     snaps: list[dict] = []
     follow_dataset(fast_ds, speed=None, on_meter=lambda s, t, end: snaps.append(dict(s)))
@@ -236,7 +236,7 @@ def test_live_viewer_draws_the_units_and_their_ellipsoids_converging(fast_ds):
     last = snaps[-1]
     v = start_live_viewer(fast_ds.robot)
     try:
-        nodes = v.server.scene._handle_from_node_name
+        nodes = scene_nodes(v.server)
         update_live(v, first, fast_ds.joints.q[0], "[x](javascript:alert(1)) *su1*")
         early = {n: np.array(nodes[f"/robot/link{s.pose.link}/live_sigma_{n}"].scale) for n, s in first.items()}
         update_live(v, last, fast_ds.joints.q[-1])

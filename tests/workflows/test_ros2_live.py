@@ -279,7 +279,7 @@ def test_hostile_decoded_messages_are_dropped_and_counted_never_fatal():
               ("/skin/x/imu", imu(t0, ""), b"")]  # fmt: skip
     inbox += [("/skin/imus", imu(t0 + k * 10_000_000, f"arm{k % 2}"), b"") for k in range(20)]  # 2 units, 1 topic
     inbox += [("/skin/many/imu", imu(t0, f"f{k}"), b"") for k in range(ros2_live.MAX_SOURCES + 50)]
-    session._inbox.extend(inbox)
+    session.deliver(inbox)
     session.poll()
     session.poll()
     outcome = session.finish()

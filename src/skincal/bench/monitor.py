@@ -9,13 +9,13 @@ from typing import Any
 
 import numpy as np
 
+from skincal.calib.metrics import pose_errors
 from skincal.skin.pose import SkinUnitPose
 from skincal.workflows.monitoring import (
     knocked_dataset,
     monitor_batch,
     monitor_online,
     motion_time,
-    pose_errors,
     simulate_session,
     work_session,
 )
@@ -53,17 +53,16 @@ def knock_case(
     }  # fmt: skip
     if mine:
         e = mine[0]
-        before = (float("nan"), float("nan"))
+        before = after = (float("nan"), float("nan"), float("nan"))  # mm, deg, quaternion distance
         if "T_link_su_before" in e:
-            before = pose_errors(e["T_link_su_before"], as_pose(truth["knock_T_link_su_before"]))
-        after = (float("nan"), float("nan"))
+            before = pose_errors(None, None, as_pose(e["T_link_su_before"]), as_pose(truth["knock_T_link_su_before"]))
         if "T_link_su_after" in e:
-            after = pose_errors(e["T_link_su_after"], as_pose(truth["knock_T_link_su_after"]))
+            after = pose_errors(None, None, as_pose(e["T_link_su_after"]), as_pose(truth["knock_T_link_su_after"]))
         out.update(
             delay_s=e["t_detected_s"] - t_knock,
             delay_motion_s=motion_time(ds, link, t_knock, e["t_detected_s"]),
             t_change_error_s=e["t_change_s"] - t_knock,
-            before_mm=1e3 * before[0], before_deg=before[1], after_mm=1e3 * after[0], after_deg=after[1],
+            before_mm=before[0], before_deg=before[1], after_mm=after[0], after_deg=after[1],
         )  # fmt: skip
     return out
 

@@ -179,13 +179,6 @@ def calibrate_recording(
     return record
 
 
-def _mean_rotation(Rs: np.ndarray) -> np.ndarray:
-    """Chordal L2 mean of rotations ``(K, 3, 3)``: the rotation nearest ``sum_i R_i`` (SVD)."""
-    U, _, Vt = np.linalg.svd(Rs.sum(axis=0))
-    D = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(U @ Vt)))])
-    return U @ D @ Vt
-
-
 def _finite_or_none(x: Any) -> Any:
     if x is None:
         return None
@@ -219,6 +212,8 @@ def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
     per-recording unit records (:func:`calibrate_recording`), each with ``recording``."""
     from scipy.spatial.transform import Rotation
 
+    from skincal.kinematics.transforms import nearest_rotation
+
     ok = [e for e in entries if e.get("calibrated")]
     failures = [{"recording": e["recording"], "reason": e["reason"]} for e in entries if not e.get("calibrated")]
     out: dict[str, Any] = {"recordings": len(entries), "calibrated": len(ok), "failures": failures}
@@ -236,7 +231,7 @@ def repeatability(entries: list[dict[str, Any]]) -> dict[str, Any]:
     out["position_weak"] = sum(1 for e in placed if e.get("position_weak"))
     P = np.array([e["position_mm"] for e in placed]).reshape(-1, 3)
     Rs = np.array([e["R"] for e in same])
-    R_bar = _mean_rotation(Rs)
+    R_bar = nearest_rotation(Rs.sum(axis=0))  # the chordal L2 mean of the rotations
     delta = np.degrees(Rotation.from_matrix(Rs @ R_bar.T).as_rotvec())
     K, KP = len(same), len(P)
     p_std = P.std(axis=0, ddof=1) if KP > 1 else np.full(3, np.nan)

@@ -276,21 +276,6 @@ def config_from_options(
     return Table1Config.quick(**overrides) if quick else Table1Config(**overrides)
 
 
-def run_benchmark(
-    config: Table1Config,
-    workers: int = 1,
-    dask: Any = None,
-    progress: Callable[[dict[str, Any]], None] | None = None,
-) -> dict[str, Any]:
-    """Run every job (on Dask when a scheduler is given) and summarise (:func:`~skincal.bench.harness.run_harness`).
-
-    Returns ``{"config", "summary", "records", "wall_time_s"}`` (the ``--json`` document; records by set, run).
-    """
-    from skincal.bench.harness import run_harness
-
-    return run_harness(HARNESS, config, workers=workers, dask=dask, progress=progress)[0]
-
-
 def _cell(stat: list[float] | None, scale: float = 1.0, digits: int = 2) -> str:
     if stat is None:
         return "-"

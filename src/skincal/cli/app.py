@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import math
+import time
 from pathlib import Path
+from typing import Any
 
 import typer
 from rich.console import Console
@@ -80,3 +83,59 @@ def seed_option(value: int) -> int:
         raise ConfigError(f"--seed {value}: a seed is an integer >= 0")
     return value
 
+
+
+class Throttle:
+    """A redraw at most every ``period_s`` seconds of wall time (monotonic clock): :meth:`due` says whether
+    to draw now (and counts it as drawn); ``force`` draws regardless (the final view)."""
+
+    def __init__(self, period_s: float) -> None:
+        self.period_s = period_s
+        self._wall = -math.inf
+
+    def due(self, force: bool = False) -> bool:
+        now = time.monotonic()
+        if not force and now - self._wall < self.period_s:
+            return False
+        self._wall = now
+        return True
+
+
+class LiveMeter:
+    """The live meter of a command that follows a calibration (``calibrate --follow``, ``ros2``): on a
+    terminal a rich table redrawn in place, elsewhere one plain line printed when it changes; drawn at
+    most every 0.25 s on a terminal, 1 s elsewhere. ``target`` is a ``workflows.live.Target``; a context
+    manager (the table is started and stopped with it); :meth:`show` is the ``on_meter`` callback."""
+
+    def __init__(self, target: Any, title: str) -> None:
+        from rich.live import Live
+
+        self.target, self.title = target, title
+        self.throttle = Throttle(0.25 if console.is_terminal else 1.0)
+        self._line: str | None = None
+        self.live = Live(console=console, refresh_per_second=4, transient=False) if console.is_terminal else None
+
+    def __enter__(self) -> LiveMeter:
+        if self.live is not None:
+            self.live.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.live is not None:
+            self.live.stop()
+
+    def show(self, statuses: Any, t_data: float, t_end: float | None, force_draw: bool = False) -> None:
+        """Draw the units' ``statuses`` at ``t_data`` (s) of ``t_end`` (None: open-ended); ``force_draw``
+        past the throttle (the final view). Without units nothing is printed."""
+        from skincal.viz.meter import meter_line, meter_table
+
+        if not self.throttle.due(force_draw):
+            return
+        goal = self.target
+        if self.live is not None:
+            self.live.update(meter_table(statuses, goal.position_m, goal.rotation_deg, t_data, t_end, self.title))
+        elif statuses:
+            line = meter_line(statuses, goal.position_m, goal.rotation_deg, t_data, t_end)
+            if line != self._line:
+                self._line = line
+                console.print(line, markup=False, highlight=False, soft_wrap=True)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console, console_warning, require_file, seed_option, shown
+from skincal.cli.app import LiveMeter, app, console, console_warning, require_file, seed_option, shown
 from skincal.errors import ConfigError
 from skincal.io.files import DATASET_FILE, RESULT_FILE
 
@@ -189,13 +189,9 @@ def _calibrate_follow(
     with the live meter (a rich table on a terminal, a line per second otherwise), stop at the target
     or the data's end and write the result atomically (nothing is written when interrupted)."""
     import math
-    import time
-
-    from rich.live import Live
 
     from skincal.data.result import sha256_file, write_result
     from skincal.io.atomic import check_output
-    from skincal.viz.meter import meter_line, meter_table
     from skincal.workflows.live import Target, follow_dataset, is_bag, load_source, parse_target
 
     target = parse_target(target_text) if target_text is not None else Target()
@@ -207,39 +203,18 @@ def _calibrate_follow(
     check_output(out, force=force, inputs=(source, *robot_file))
     ds = load_source(source, robot)
     digest = "" if is_bag(source) and source.is_dir() else sha256_file(source)
-    title = f"follow {source.name}"
-    last: dict = {"wall": -math.inf}
-    period = 0.25 if console.is_terminal else 1.0
+    meter = LiveMeter(target, f"follow {source.name}")
 
-    def show(statuses, t_data: float, t_end: float | None, force_draw: bool = False) -> None:
-        now = time.monotonic()
-        if not force_draw and now - last["wall"] < period:
-            return
-        last["wall"] = now
-        if live is not None:
-            live.update(meter_table(statuses, target.position_m, target.rotation_deg, t_data, t_end, title))
-        else:
-            line = meter_line(statuses, target.position_m, target.rotation_deg, t_data, t_end)
-            if line != last.get("line"):
-                last["line"] = line
-                console.print(line, markup=False, highlight=False, soft_wrap=True)
+    def moved(event: dict) -> None:
+        console.print(f"[yellow]moved[/]: unit {shown(str(event.get('unit')))} changed at "
+                      f"{float(event.get('t_change_s', math.nan)):.1f} s (flagged at "
+                      f"{float(event.get('t_detected_s', math.nan)):.1f} s); re-calibrating it from the data "
+                      "after the change", highlight=False)  # fmt: skip
 
-    live = Live(console=console, refresh_per_second=4, transient=False) if console.is_terminal else None
-    if live is not None:
-        live.start()
-    try:
-        def moved(event: dict) -> None:
-            console.print(f"[yellow]moved[/]: unit {shown(str(event.get('unit')))} changed at "
-                          f"{float(event.get('t_change_s', math.nan)):.1f} s (flagged at "
-                          f"{float(event.get('t_detected_s', math.nan)):.1f} s); re-calibrating it from the data "
-                          "after the change", highlight=False)  # fmt: skip
-
+    with meter:
         outcome = follow_dataset(ds, target, speed=None if speed == 0 else speed, units=list(unit) if unit else None,
-                                 on_meter=show, dataset_sha256=digest, watch=watch, on_event=moved)  # fmt: skip
-        show(outcome.statuses, outcome.t_data, outcome.t_end, force_draw=True)
-    finally:
-        if live is not None:
-            live.stop()
+                                 on_meter=meter.show, dataset_sha256=digest, watch=watch, on_event=moved)  # fmt: skip
+        meter.show(outcome.statuses, outcome.t_data, outcome.t_end, force_draw=True)
     write_result(outcome.result, out)
     if watch:
         events = outcome.result.events

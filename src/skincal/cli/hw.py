@@ -12,7 +12,7 @@ import typer
 from rich.live import Live
 from rich.table import Table
 
-from skincal.cli.app import app, console, seed_option
+from skincal.cli.app import Throttle, app, console, seed_option
 from skincal.cli.signals import run_async
 from skincal.errors import ConfigError
 
@@ -155,7 +155,6 @@ def _record_live(out: Path, chain, target_text: str | None, result: Path | None,
     """``record --live``: the recording session with the online calibrator fed from the same packets, the
     meter (a rich table on a terminal, a line per second otherwise), a stop at the target unless
     ``keep_recording``, and the result written atomically to ``result`` at the end."""
-    import time
 
     from skincal.cli.app import shown
     from skincal.data.result import write_result
@@ -172,8 +171,7 @@ def _record_live(out: Path, chain, target_text: str | None, result: Path | None,
             raise ConfigError(f"--result {result} is the recording --out; give another file")
     if out.exists() and not force:  # before binding (hw.session.record checks it too)
         raise ConfigError(f"{out}: file exists (choose another --out or allow overwriting)")
-    last = {"wall": 0.0}
-    period = 0.25 if console.is_terminal else 1.0
+    throttle = Throttle(0.25 if console.is_terminal else 1.0)
     port = options.pop("port")
 
     async def main() -> tuple:
@@ -184,10 +182,8 @@ def _record_live(out: Path, chain, target_text: str | None, result: Path | None,
         live_view = Live(console=console, refresh_per_second=4, transient=False) if console.is_terminal else None
 
         def on_meter(feed, stats, recorder, receiver) -> None:  # noqa: ANN001
-            now = time.monotonic()
-            if now - last["wall"] < period:
+            if not throttle.due():
                 return
-            last["wall"] = now
             title = f"record --live -> {recorder.path} (flushed {recorder.flushed_samples} samples)"
             if live_view is not None:
                 live_view.update(meter_table(feed.statuses, target.position_m, target.rotation_deg, feed.t_data,

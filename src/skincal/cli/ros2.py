@@ -12,7 +12,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console, shown
+from skincal.cli.app import LiveMeter, app, console, shown
 from skincal.errors import ConfigError
 
 DOMAIN_HELP = "ROS 2 domain id (default: ROS_DOMAIN_ID, else 0)"
@@ -105,14 +105,10 @@ def ros2(
     """Calibrate the skin live on a ROS 2 graph: /joint_states and every sensor_msgs/Imu topic in, each
     unit's pose on /tf_static and its status on /diagnostics out, the live meter here."""
     import math
-    import time
-
-    from rich.live import Live
 
     from skincal.data.result import write_result
     from skincal.data.ros2.participant import join
     from skincal.io.atomic import check_output
-    from skincal.viz.meter import meter_line, meter_table
     from skincal.workflows.live import Target, parse_target
     from skincal.workflows.ros2_live import Ros2Calibration, Ros2Options
 
@@ -134,22 +130,7 @@ def ros2(
         chain = get_robot(robot, base_link=base_link, tip_link=tip_link)
     joined = join(domain, interface)
     console.print(f"joined {joined.joined}", highlight=False)
-    period = 0.25 if console.is_terminal else 1.0
-    last: dict = {"wall": -math.inf}
-    title = f"ros2 domain {joined.domain_id}"
-
-    def show(statuses, t_data: float, t_end: float | None, force_draw: bool = False) -> None:
-        now = time.monotonic()
-        if not force_draw and now - last["wall"] < period:
-            return
-        last["wall"] = now
-        if live is not None:
-            live.update(meter_table(statuses, goal.position_m, goal.rotation_deg, t_data, t_end, title))
-        elif statuses:
-            line = meter_line(statuses, goal.position_m, goal.rotation_deg, t_data, t_end)
-            if line != last.get("line"):
-                last["line"] = line
-                console.print(line, markup=False, highlight=False, soft_wrap=True)
+    meter = LiveMeter(goal, f"ros2 domain {joined.domain_id}")
 
     def moved(event: dict) -> None:
         console.print(f"[yellow]moved[/]: unit {shown(str(event.get('unit')))} changed at "
@@ -158,19 +139,15 @@ def ros2(
 
     session = Ros2Calibration(joined.participant, chain, goal, options, record=record, on_event=moved,
                               base_link=base_link, tip_link=tip_link)  # fmt: skip
-    live = Live(console=console, refresh_per_second=4, transient=False) if console.is_terminal else None
-    if live is not None:
-        live.start()
     try:
-        with _stop_on_signals() as stop:
-            why = session.run(stop, on_meter=show)
-            outcome = session.finish()
-        if outcome is not None:
-            show(outcome.statuses, outcome.t_data, None, force_draw=True)
+        with meter:
+            with _stop_on_signals() as stop:
+                why = session.run(stop, on_meter=meter.show)
+                outcome = session.finish()
+            if outcome is not None:
+                meter.show(outcome.statuses, outcome.t_data, None, force_draw=True)
     finally:
         session.close()  # on an error too: the receiving thread ends and the bag is closed
-        if live is not None:
-            live.stop()
     joined.close()
     if outcome is None:
         waiting = "robot description on /robot_description (or give --robot)" if session.chain is None else (

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from skincal.cli.app import app, console, console_warning, err_console, require_file, seed_option, shown
+from skincal.cli.app import Throttle, app, console, console_warning, err_console, require_file, seed_option, shown
 from skincal.errors import ConfigError
 from skincal.io.files import DATASET_FILE, RESULT_FILE
 
@@ -68,7 +68,6 @@ def view(
 
     import dataclasses
     import os
-    import time
 
     from skincal.data.hdf5 import read_dataset
     from skincal.data.provenance import check_result_dataset
@@ -136,13 +135,7 @@ def view(
     for note in viewer.notes:
         err_console.print(f"note: {printable(note)}", markup=False, highlight=False, soft_wrap=True)
     console.print(f"skincal viewer: [bold]{shown(viewer.url)}[/]  (Ctrl-C to stop)", highlight=False)
-    if duration is not None:
-        try:
-            time.sleep(duration)
-        finally:
-            viewer.close()
-        return
-    serve_forever(viewer)
+    serve_forever(viewer, duration=duration)
 
 
 def _view_follow(
@@ -173,18 +166,16 @@ def _view_follow(
         err_console.print(f"note: {shown(note)}", highlight=False, soft_wrap=True)
     console.print(f"skincal viewer: [bold]{shown(viewer.url)}[/]  (following {shown(source.name)}; Ctrl-C to stop)",
                   highlight=False)  # fmt: skip
-    last = {"wall": -math.inf}
+    throttle = Throttle(0.25)
 
     class _DurationOver(Exception):
         """``--duration`` ran out during the replay (it counts from the start, replay included)."""
 
     def on_meter(statuses, t_data: float, t_end: float | None) -> None:
-        now = time.monotonic()
-        if duration is not None and now - start >= duration:
+        if duration is not None and time.monotonic() - start >= duration:
             raise _DurationOver
-        if now - last["wall"] < 0.25:
+        if not throttle.due():
             return
-        last["wall"] = now
         q = interp_rows(np.asarray([t0 + t_data]), joints.t, joints.q)[0]
         update_live(viewer, statuses, q, meter_line(statuses, target.position_m, target.rotation_deg, t_data, t_end))
 
@@ -200,20 +191,13 @@ def _view_follow(
     except BaseException:
         viewer.close()
         raise
-    if duration is not None:
-        try:
-            time.sleep(max(0.0, duration - (time.monotonic() - start)))
-        finally:
-            viewer.close()
-        return
-    serve_forever(viewer)
+    serve_forever(viewer, duration=None if duration is None else duration - (time.monotonic() - start))
 
 
 def _view_scenario(
     name: str, result: Path | None, seed: int, placement: str, host: str, port: int, duration: float | None
 ) -> None:
     """Run avoidance scenario ``name`` with the result's poses (truth if none) and serve its playback."""
-    import time
 
     import numpy as np
 
@@ -233,13 +217,7 @@ def _view_scenario(
     believed = CalibrationResult(label, chain.name, "", 0.0, {u: UnitResult(p) for u, p in poses.items()})
     viewer = start_viewer(believed, chain, truth=true_poses, recording=recording_from_run(log), host=host, port=port)
     console.print(f"skincal viewer: [bold]{shown(viewer.url)}[/]  (Ctrl-C to stop)", highlight=False)
-    if duration is not None:
-        try:
-            time.sleep(duration)
-        finally:
-            viewer.close()
-        return
-    serve_forever(viewer)
+    serve_forever(viewer, duration=duration)
 
 
 @app.command()

@@ -28,7 +28,7 @@ A run of the MuJoCo experiment is summarised by :func:`skincal.workflows.experim
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -76,13 +76,11 @@ def obstacle_segments(solids: Sequence[object], M: int) -> tuple[FloatArray, Flo
     return stack(a), stack(b), np.array(r)
 
 
-def clearance(t: FloatArray, q: FloatArray, body: RobotBody, solids_at: SolidsAt | None) -> FloatArray:
-    """``(S,)`` smallest distance between the robot capsules of ``body`` at ``q`` ``(S, n)`` and the obstacle
-    solids at ``t`` ``(S,)``, m (inf: none; ``solids_at`` None: no obstacles)."""
+def _capsule_distances(t: FloatArray, q: FloatArray, body: RobotBody, solids_at: SolidsAt) -> Iterator[tuple]:
+    """Per chunk of instants with solids: ``(sl, d, ra, rb, oa, ob)``, the surface distance
+    ``d = |core_c - core_p| - r_c - r_p`` ``(M, C, P)`` of every robot capsule ``c`` and solid ``p`` (m) and
+    their core segments (robot ``(M, C, 3)``, solids ``(M, P, 3)``, base frame)."""
     S = t.size
-    out = np.full(S, np.inf)
-    if solids_at is None:
-        return out
     for k0 in range(0, S, _CHUNK):
         sl = slice(k0, min(S, k0 + _CHUNK))
         oa, ob, orad = obstacle_segments(solids_at(t[sl]), t[sl].size)
@@ -90,7 +88,16 @@ def clearance(t: FloatArray, q: FloatArray, body: RobotBody, solids_at: SolidsAt
             continue
         ra, rb = body.segments(body.chain.link_frames(q[sl]))  # (M, C, 3)
         d = segment_distance(ra[:, :, None], rb[:, :, None], oa[:, None], ob[:, None])  # (M, C, P)
-        d = d - body.radius[None, :, None] - orad[None, None, :]
+        yield sl, d - body.radius[None, :, None] - orad[None, None, :], ra, rb, oa, ob
+
+
+def clearance(t: FloatArray, q: FloatArray, body: RobotBody, solids_at: SolidsAt | None) -> FloatArray:
+    """``(S,)`` smallest distance between the robot capsules of ``body`` at ``q`` ``(S, n)`` and the obstacle
+    solids at ``t`` ``(S,)``, m (inf: none; ``solids_at`` None: no obstacles)."""
+    out = np.full(t.size, np.inf)
+    if solids_at is None:
+        return out
+    for sl, d, *_ in _capsule_distances(t, q, body, solids_at):
         out[sl] = d.reshape(d.shape[0], -1).min(axis=1)
     return out
 
@@ -291,14 +298,7 @@ def nearest_pairs(t: FloatArray, q: FloatArray, body: RobotBody, solids_at: Soli
                        np.tile([0.0, 0.0, 1.0], (S, 1)), np.zeros((S, 3)))  # fmt: skip
     if solids_at is None:
         return out
-    for k0 in range(0, S, _CHUNK):
-        sl = slice(k0, min(S, k0 + _CHUNK))
-        oa, ob, orad = obstacle_segments(solids_at(t[sl]), t[sl].size)
-        if orad.size == 0:
-            continue
-        ra, rb = body.segments(body.chain.link_frames(q[sl]))
-        d = segment_distance(ra[:, :, None], rb[:, :, None], oa[:, None], ob[:, None])
-        d = d - body.radius[None, :, None] - orad[None, None, :]
+    for sl, d, ra, rb, oa, ob in _capsule_distances(t, q, body, solids_at):
         M, C, P = d.shape
         flat = d.reshape(M, -1)
         best = np.argmin(flat, axis=1)

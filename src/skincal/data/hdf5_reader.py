@@ -13,7 +13,7 @@ import numpy as np
 
 from skincal.data.dataset import BodyPose, ImuStream, JointStates, Segments, TofStream
 from skincal.data.events import MoveEvent, check_events
-from skincal.data.validate import TRUTH_BODY_ATTRS, check_unit_name, shown
+from skincal.data.validate import TRUTH_BODY_ATTRS, check_unit_name, shape_mismatch, shown
 from skincal.data.writer import FORMAT, JOINT_TYPE_CODES, VERSION
 from skincal.errors import ConfigError, DatasetError
 from skincal.errors import first_line as _first_line
@@ -180,13 +180,9 @@ class DatasetReader:
         if declared_dtype.kind not in allowed:  # checked before reading: no strings or objects are read
             raise self.fail(path, f"has dtype {declared_dtype}, expected {what}")
         self.check_declared(path, obj)
-        if shape is not None:
-            declared = obj.shape or ()
-            fits = len(declared) == len(shape) and all(w in (None, d) for w, d in zip(shape, declared, strict=False))
-            if not fits:
-                sizes = ", ".join("N" if w is None else str(w) for w in shape)
-                expected = f"({sizes},)" if len(shape) == 1 else f"({sizes})"
-                raise self.fail(path, f"has shape {declared}, expected {expected}")
+        problem = "" if shape is None else shape_mismatch(obj.shape or (), shape)
+        if problem:
+            raise self.fail(path, problem)
         try:
             value = np.asarray(obj[()])
         except (OSError, KeyError, ValueError, TypeError) as exc:

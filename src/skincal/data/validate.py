@@ -56,11 +56,19 @@ def _real_array(value: object, source: str, field: str, *, integer: bool = False
     return arr
 
 
+def shape_mismatch(actual: tuple[int, ...], shape: tuple[int | None, ...]) -> str:
+    """``""`` when ``actual`` fits ``shape`` (same rank, ``None`` entries free), else the complaint
+    ``"has shape (4,), expected (N, 3)"``: the one wording of a wrong shape, for arrays and HDF5 datasets."""
+    if len(actual) == len(shape) and all(s is None or s == a for s, a in zip(shape, actual, strict=False)):
+        return ""
+    want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
+    return f"has shape {actual}, expected {want}"
+
+
 def _check_shape(arr: np.ndarray, shape: tuple[int | None, ...], source: str, field: str) -> None:
-    ok = arr.ndim == len(shape) and all(s is None or s == a for s, a in zip(shape, arr.shape, strict=False))
-    if not ok:
-        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
-        raise _fail(source, field, f"has shape {arr.shape}, expected {want}")
+    problem = shape_mismatch(arr.shape, shape)
+    if problem:
+        raise _fail(source, field, problem)
 
 
 def _check_finite(arr: np.ndarray, source: str, field: str, *, allow_nan: bool = False) -> None:

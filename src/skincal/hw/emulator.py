@@ -236,6 +236,12 @@ class SkinEmulator:
         send_t = arrays["t"][stops - 1] - self.t_first if n else np.empty(0)
         return np.column_stack([np.full(starts.size, len(self._sources) - 1), starts, stops, send_t])
 
+    def device_stamps_us(self, unit: str) -> np.ndarray:
+        """``(N,)`` the device clock stamps (us) the emulator sends with the IMU samples of ``unit`` (the
+        dataset's instants through that unit's :class:`DeviceClock`), to compare a receiver's clock fit with."""
+        key = ("skin", self.unit_ids[unit])
+        return next(us for k, kind, _, us in self._sources if k == key and kind == _IMU)
+
     def _apply_faults(self, src, start, stop, send_t, seq, keys, stream_of) -> None:
         f, rng, n = self.faults, self.rng, src.size
         dropped = rng.random(n) < f.loss

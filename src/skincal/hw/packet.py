@@ -94,12 +94,6 @@ class BadValueError(PacketError):
     reason = "bad_value"
 
 
-PACKET_ERRORS: tuple[type[PacketError], ...] = (
-    ShortPacketError, BadMagicError, BadChecksumError, UnknownVersionError, BadLengthError, BadFieldError,
-    BadValueError,
-)
-
-
 @dataclass(frozen=True)
 class SkinPacket:
     """Decoded skin packet.

@@ -214,6 +214,14 @@ class SkinReceiver:
         self._sweeper = asyncio.create_task(self._sweep())
         return self.port
 
+    @property
+    def bound_address(self) -> tuple[str, int] | None:
+        """``(host, port)`` the socket is bound to, as the operating system reports it; None when stopped."""
+        if self._transport is None:
+            return None
+        host, port = self._transport.get_extra_info("sockname")[:2]
+        return str(host), int(port)
+
     async def stop(self) -> None:
         """Stop receiving and deliver everything still buffered (missing ones count as lost)."""
         if self._sweeper is not None:

@@ -34,13 +34,13 @@ import numpy as np
 from skincal.errors import ConfigError, ProtocolError
 from skincal.kinematics.chain import GRAVITY_BASE, SerialChain
 from skincal.kinematics.geometry import DEFAULT_LINK_RADIUS, link_capsules
-from skincal.kinematics.transforms import FloatArray
+from skincal.kinematics.transforms import FloatArray, skew
 from skincal.protocol.config import ProtocolConfig
 from skincal.protocol.limits import VELOCITY_CAP_FRACTION
 from skincal.protocol.trajectory import Trajectory, build_trajectory
+from skincal.skin.imu import STANDARD_GRAVITY
 
 _DPS = math.pi / 180.0
-_G0 = 9.80665
 
 PEAK_RATE_HZ = 200.0
 """Rate the bounds are evaluated at on a built motion (exact ``Trajectory.evaluate``), Hz."""
@@ -79,7 +79,8 @@ class ImuRange:
                 f"preset ({', '.join(IMU_PRESETS)}), got {text!r}"
             )
         values = []
-        for part, units in zip(parts, ({"g": _G0, "": 1.0}, {"dps": _DPS, "deg/s": _DPS, "": 1.0}), strict=True):
+        scales = ({"g": STANDARD_GRAVITY, "": 1.0}, {"dps": _DPS, "deg/s": _DPS, "": 1.0})
+        for part, units in zip(parts, scales, strict=True):
             match = re.fullmatch(r"([0-9.eE+-]+|inf)\s*([a-z/]*)", part)
             if match is None or match.group(2) not in units:
                 raise ConfigError(f"--imu-range: cannot read {part!r} (a number, with g or dps if not SI)")
@@ -90,7 +91,7 @@ class ImuRange:
         return cls(*values)
 
     def describe(self) -> str:
-        return f"+-{self.accel_mps2 / _G0:.3g} g / +-{self.gyro_rps / _DPS:.4g} deg/s"
+        return f"+-{self.accel_mps2 / STANDARD_GRAVITY:.3g} g / +-{self.gyro_rps / _DPS:.4g} deg/s"
 
 
 def fit_to_imu_range(
@@ -171,8 +172,8 @@ def imu_bounds(
     w, dw, a = motion.omega, motion.omega_dot, motion.a_origin  # (N, n + 1, 3)
     rate = np.linalg.norm(w, axis=2)
     g = np.asarray(GRAVITY_BASE, dtype=float)
-    wx = _skew(w)
-    M = _skew(dw) + wx @ wx  # (N, n + 1, 3, 3): a(x) = a_o + M (x - o)
+    wx = skew(w)
+    M = skew(dw) + wx @ wx  # (N, n + 1, 3, 3): a(x) = a_o + M (x - o)
     accel = np.zeros_like(rate)
     R = motion.T_base_link[..., :3, :3]
     for cap in link_capsules(chain, radius):
@@ -182,14 +183,6 @@ def imu_bounds(
         bound = np.max(np.linalg.norm(f, axis=2), axis=1) + np.linalg.norm(M[:, cap.link], axis=(1, 2)) * cap.radius
         accel[:, cap.link] = np.maximum(accel[:, cap.link], bound)
     return ImuBounds(t, rate, accel, (np.abs(qd) > 1e-9) | (np.abs(qdd) > 1e-9))
-
-
-def _skew(v: FloatArray) -> FloatArray:
-    """``[v]x`` of ``v`` ``(..., 3)``: ``(..., 3, 3)``."""
-    out = np.zeros(v.shape + (3,))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return out
 
 
 def build_within_imu_range(

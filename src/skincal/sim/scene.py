@@ -302,21 +302,6 @@ HUMAN_REGIONS = ("chest", "skull", "upper_arm", "upper_arm", "forearm", "forearm
 forearms, two legs)."""
 
 
-def approaching_human(
-    t_start: float,
-    t_end: float,
-    start: ArrayLike = (1.6, 0.0, 0.0),
-    end: ArrayLike = (0.6, 0.0, 0.0),
-    name: str = "human",
-    height: float = 1.75,
-) -> Obstacle:
-    """A person walking straight from ``start`` (at ``t_start``, s) to ``end`` (at ``t_end``); feet positions, m."""
-    start, end = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
-    step = end[:2] - start[:2]
-    yaw = float(np.arctan2(step[1], step[0])) if np.linalg.norm(step) > 0 else np.pi
-    return human(name, start, yaw, height, TimeTable([t_start, t_end], [start, end]))
-
-
 def table(
     name: str = "table",
     centre: ArrayLike = (0.6, 0.0, 0.0),

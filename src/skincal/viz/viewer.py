@@ -225,6 +225,13 @@ def _viser():
     return viser
 
 
+def scene_nodes(server: Any) -> dict[str, Any]:
+    """The viser scene's handles by node name (``"/robot/link3/live_su1"``), live: viser keeps this lookup
+    private and offers no public one, so it is read here alone (for removing a node by name and for
+    tests that inspect the scene)."""
+    return server.scene._handle_from_node_name  # noqa: SLF001
+
+
 def _wxyz(R: FloatArray) -> tuple[float, float, float, float]:
     return tuple(float(x) for x in quat_wxyz_from_matrix(R))  # type: ignore[return-value]
 
@@ -515,7 +522,7 @@ def update_live(viewer: Viewer, statuses: Any, q: FloatArray | None = None, text
             before = viewer.live.get(name)
             if before is not None and before != link:
                 for node in (f"/robot/link{before}/live_{name}", f"/robot/link{before}/live_sigma_{name}"):
-                    handle = server.scene._handle_from_node_name.get(node)  # noqa: SLF001 - viser keeps no public lookup
+                    handle = scene_nodes(server).get(node)
                     if handle is not None:
                         handle.remove()
             viewer.live[name] = link
@@ -562,10 +569,12 @@ def _add_gui(viewer: Viewer, result: CalibrationResult, errors: dict[str, float]
     viewer.set_joints(q0)
 
 
-def serve_forever(viewer: Viewer, poll_s: float = 0.5) -> None:
-    """Block until interrupted (Ctrl-C), then stop the server."""
+def serve_forever(viewer: Viewer, poll_s: float = 0.5, duration: float | None = None) -> None:
+    """Block until interrupted (Ctrl-C) or, with ``duration``, for that many seconds; then stop the server."""
     try:
-        while True:
+        if duration is not None:
+            time.sleep(max(0.0, duration))
+        while duration is None:
             time.sleep(poll_s)
     finally:
         viewer.close()

@@ -27,7 +27,7 @@ from skincal.calib.online.monitor import Alarm, MonitorOptions, MovedUnitMonitor
 from skincal.data.dataset import Dataset, ImuStream, JointStates, Segments
 from skincal.data.result import CalibrationResult, UnitResult, with_events
 from skincal.errors import ConfigError
-from skincal.kinematics.transforms import FloatArray, rotation_angle
+from skincal.kinematics.transforms import FloatArray
 from skincal.skin.pose import SkinUnitPose
 
 MOVING_SPEED = 0.05
@@ -261,10 +261,3 @@ def monitor_online(
             event["T_link_su_after"] = unit.pose.T_link_su.tolist()
     run.result = with_events(result, run.events)
     return run
-
-
-def pose_errors(T_est: Any, truth: SkinUnitPose) -> tuple[float, float]:
-    """Position (m) and rotation (deg) error of a ``(4, 4)`` pose against ``truth``."""
-    T = np.asarray(T_est, dtype=float)
-    dp = float(np.linalg.norm(T[:3, 3] - truth.p_link_su))
-    return dp, float(np.degrees(rotation_angle(truth.R_link_su, T[:3, :3])))

@@ -253,7 +253,7 @@ class Ros2Calibration:
         return got
 
     def _receive(self) -> None:
-        """The receiving thread: discovery and takes every ``poll_s``, into :attr:`_inbox`, so that a long
+        """The receiving thread: discovery and takes every ``poll_s``, handed to :meth:`deliver`, so that a long
         calibrator step never lets a reader's queue overflow."""
         try:
             if self._record_path is not None:  # sqlite: the bag is written and closed by this thread only
@@ -261,14 +261,9 @@ class Ros2Calibration:
             while not self._closing.is_set():
                 c0 = time.monotonic()
                 self._discover()
-                got = self._take()
-                if got:
-                    with self._lock:
-                        self._inbox.extend(got)
+                self.deliver(self._take())
                 self._closing.wait(max(0.0, self.options.poll_s - (time.monotonic() - c0)))
-            got = self._take()  # the last samples, recorded too
-            with self._lock:
-                self._inbox.extend(got)
+            self.deliver(self._take())  # the last samples, recorded too
         except Exception as exc:  # noqa: BLE001 - the session must end cleanly, with what it has
             self._receive_error = exc
         finally:
@@ -283,6 +278,11 @@ class Ros2Calibration:
         if self._thread is None:
             self._thread = threading.Thread(target=self._receive, name="skincal-ros2-receive", daemon=True)
             self._thread.start()
+
+    def deliver(self, messages: list[tuple[str, Any, bytes]]) -> None:
+        """Queue received ``(ROS topic, message, bytes)`` for the next :meth:`poll` (thread-safe)."""
+        with self._lock:
+            self._inbox.extend(messages)
 
     def _drain(self) -> list[tuple[str, Any, bytes]]:
         with self._lock:

@@ -35,7 +35,6 @@ REAL_RECORDING_NOISE = ("real-consumer",)
 host-stamped ~14 Hz reports (joints ``report14``) and host-stamped IMU samples with gaps and clock
 steps (clock ``host-gaps``)."""
 
-PLACEMENTS = ("paper", "random", "ring")
 MUJOCO_MODES = ("kinematic", "dynamic")
 
 

@@ -80,7 +80,6 @@ __all__ = [
     "fault_lines",
     "names",
     "run",
-    "run_benchmark",
 ]
 
 
@@ -149,21 +148,6 @@ def fault_lines() -> list[str]:
         target = f"mean <= {f.target_mean_mm:g} mm" if f.target_mean_mm is not None else "no mean target"
         out.append(f"{f.name:14s} {f.description} ({target})")
     return out
-
-
-def run_benchmark(
-    config: RobustnessConfig,
-    workers: int = 1,
-    dask: Any = None,
-    progress: Callable[[dict[str, Any]], None] | None = None,
-) -> dict[str, Any]:
-    """Run every job and summarise (:func:`~skincal.bench.harness.run_harness`).
-
-    Returns ``{"config", "cells", "records", "wall_time_s", "workers", "dask"}`` (the ``--out`` document).
-    """
-    from skincal.bench.harness import run_harness
-
-    return run_harness(HARNESS, config, workers=workers, dask=dask, progress=progress)[0]
 
 
 class RobustnessHarness:

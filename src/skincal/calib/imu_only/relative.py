@@ -15,6 +15,7 @@ from skincal.calib.closed_form import wahba
 from skincal.calib.imu_only.rests import NOISE_FLOOR
 from skincal.calib.preprocess import white_noise_std
 from skincal.calib.robust import huber_weights, pinv, residual_correlation, robust_sigma
+from skincal.calib.timing import normalised_xcorr
 from skincal.data.dataset import ImuStream
 from skincal.kinematics.transforms import FloatArray, skew
 
@@ -57,18 +58,15 @@ def _uniform_grid(t: FloatArray) -> tuple[FloatArray, float]:
 
 def coarse_offset(t_ref: FloatArray, w_ref: FloatArray, t_j: FloatArray, w_j: FloatArray, max_s: float) -> float:
     """Offset ``delta`` s such that unit ``j``'s stamp ``t + delta`` saw the motion of the reference's
-    stamp ``t``: the peak of the cross-correlation of ``|w|`` on a uniform grid within ``max_s``."""
+    stamp ``t``: the peak of the cross-correlation of ``|w|`` on a uniform grid within ``max_s``
+    (:func:`~skincal.calib.timing.normalised_xcorr`, the one cross-correlation)."""
     grid, dt = _uniform_grid(t_ref)
     x = np.interp(grid, t_ref, np.linalg.norm(w_ref, axis=1))
     y = np.interp(grid, t_j, np.linalg.norm(w_j, axis=1))
-    x, y = x - x.mean(), y - y.mean()
-    n = len(grid)
-    lags = np.arange(-int(max_s / dt), int(max_s / dt) + 1)
-    spectrum = np.fft.rfft(x, 2 * n) * np.conj(np.fft.rfft(y, 2 * n))
-    cc = np.fft.irfft(spectrum, 2 * n)
-    values = cc[lags % (2 * n)]
-    # cc[k] = sum x[i + k] y[i]: y leads x by k samples when the peak is at k, i.e. delta = -k dt
-    return float(-lags[int(np.argmax(values))] * dt)
+    size, max_lag = 2 * len(grid), int(max_s / dt)
+    values = normalised_xcorr(x, np.conj(np.fft.rfft(y - y.mean(), size)), y, size, max_lag)
+    # values[k + max_lag] ~ sum x[i + k] y[i]: y leads x by k samples when the peak is at k, i.e. delta = -k dt
+    return float((max_lag - int(np.argmax(values))) * dt)
 
 
 def _gyro_fit(w_ref: FloatArray, w_j: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:

@@ -188,7 +188,11 @@ def _distinct_orientations(u_link: FloatArray, min_angle_deg: float = 5.0) -> in
     return len(chosen)
 
 
-def _blocks(problem: UnitProblem, p: Problem) -> Blocks:
+def fit_blocks(problem: UnitProblem, p: Problem) -> Blocks:
+    """The parameter blocks ``mle`` fits for this unit on its link: the scale/misalignment form (full with a
+    gyroscope, symmetric without, none when off), gravity's scale with >= 10 moving rows, the clock offset,
+    its drift over at least ``CLOCK_DRIFT_MIN_SPAN_S`` of motion, the gyroscope bias, and the bias drift over
+    enough rest runs and span; the same choice the solver and the report's residuals use."""
     opts: MleOptions = problem.options
     rows = p.data.rows
     gyro = rows.static_g is not None
@@ -320,7 +324,7 @@ def run_unit(problem: UnitProblem) -> UnitResult:
             f"only {n_orient} distinct static orientation(s) (3 or more recommended): rotation, bias and scale "
             "rest on the moving data"
         )
-    blocks = _blocks(problem, p)
+    blocks = fit_blocks(problem, p)
     if start is not None:
         start = replace(start, E=np.zeros((3, 3)), bg=gyro_bias_start(p.data.rows))
     # Converge on every 8th moving sample, then one Gauss-Newton step on all of them, whose
@@ -337,7 +341,7 @@ def run_unit(problem: UnitProblem) -> UnitResult:
         s = problem.samples
         before = np.count_nonzero(s.t <= move.t_before) >= np.count_nonzero(s.t >= move.t_after)
         p = arrange(problem, link, window=(-np.inf, move.t_before) if before else (move.t_after, np.inf))
-        blocks = _blocks(problem, p)
+        blocks = fit_blocks(problem, p)
         coarse = fit_problem(decimated(p, 8), blocks, state=coarse.state)
         extras["moved_between_s"] = [move.t_before, move.t_after]
         warnings.append(

@@ -442,6 +442,11 @@ class OnlineCalibrator:
         """Every unit's :class:`UnitStatus` now."""
         return {u: self._status(u) for u in self.units}
 
+    def unit_state(self, unit: str) -> UnitState:
+        """The streaming state of ``unit`` (its clock mapping, Gram matrices, kept samples): live, not a
+        copy, for diagnostics and tests that disturb it; :meth:`status` is the answer to read."""
+        return self._u[unit]
+
     # ---------------------------------------------------------------- design support
     def information(self, unit: str) -> tuple[int | None, FloatArray]:
         """``(link, (6, 6))``: the current information about the pose ``[rotation (rad, unit axes),

@@ -10,9 +10,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from skincal.calib.hermite import hermite
 from skincal.calib.online import stats
 from skincal.calib.online.options import UnitStatus
-from skincal.calib.signals import hermite
 from skincal.calib.timing import ClockSteps
 from skincal.kinematics.transforms import FloatArray
 
@@ -110,7 +110,7 @@ def take_pending(st: UnitState) -> tuple[FloatArray, FloatArray, FloatArray | No
 
 def signals_at(grid: Grid, s: FloatArray, links: Sequence[int]):
     """Link signals of ``links`` at instants ``s`` (M,) from the grid, as ``mle``'s signal table does
-    (:func:`~skincal.calib.signals.hermite`: cubic Hermite for the values with their derivatives,
+    (:func:`~skincal.calib.hermite.hermite`: cubic Hermite for the values with their derivatives,
     linear for the derivatives). Returns u, K, w, dw_dt, du_dt, dK_dt, u_g (each ``(L, M, ...)``)
     and ok ``(M,)``."""
     y, dy, i = hermite(grid.t, grid.y, grid.dy, s, np.asarray(links) - 1)  # (M, L, 18)

@@ -2,7 +2,7 @@
 from the encoder positions when they are less noisy, kinks, the noise levels (:func:`joint_noise`,
 :func:`white_noise_std`); a low-rate (< 60 Hz) or irregular stream as smoothing splines of its positions
 with the per-sample variance of its accelerations (:func:`spline_condition`).
-The cubic Hermite interpolation of positions with their velocities is :func:`cubic_hermite`."""
+The cubic Hermite interpolation of positions with their velocities is :func:`skincal.calib.hermite.hermite`."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from scipy.interpolate import make_smoothing_spline
 from scipy.ndimage import maximum_filter1d, uniform_filter1d
 from scipy.signal import savgol_coeffs, savgol_filter
 
+from skincal.calib.hermite import hermite
 from skincal.calib.preprocess.gcv import gcv_lambda
 from skincal.data.dataset import JointStates
 from skincal.errors import CalibrationError
@@ -373,7 +374,7 @@ def condition_joint_stream(
         whole = np.rint(np.diff(t) / dt)
         if 1 < whole.max() <= MAX_REFILL:
             full = t[0] + dt * np.arange(int(whole.sum()) + 1)
-            q = cubic_hermite(t, q, qd, full)
+            q = hermite(t, q, qd, full)[0]
             qd = np.column_stack([np.interp(full, t, c) for c in qd.T])
             t = full
     uniform = np.max(np.abs(np.diff(t) - dt)) <= 0.01 * dt
@@ -397,18 +398,3 @@ def condition_joint_stream(
     out = joints if not regularised else JointStates(t=t, q=q, qd=qd, qdd=None if refilled else joints.qdd)
     kinks = _kinks(qd, window, sigma_v, KINK_FLOOR["velocities"])
     return out, JointConditioning(source="velocities", qdd_noise=noise_v, unreliable=kinks, **info)
-
-
-def cubic_hermite(t_knots: FloatArray, y: FloatArray, dy: FloatArray, t: FloatArray) -> FloatArray:
-    """Cubic Hermite interpolation of ``y`` (N, n) with slopes ``dy`` at instants ``t`` (M,).
-
-    Same result as ``scipy.interpolate.CubicHermiteSpline(t_knots, y, dy)(t)`` inside the knots,
-    but without building the piecewise-polynomial coefficients of all N knots (0.5 s for a 1 kHz
-    recording of ten minutes) when only M << N instants are needed.
-    """
-    i = np.clip(np.searchsorted(t_knots, t) - 1, 0, t_knots.size - 2)
-    h = (t_knots[i + 1] - t_knots[i])[:, None]
-    s = (t - t_knots[i])[:, None] / h
-    s2, s3 = s * s, s * s * s
-    h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
-    return h00 * y[i] + h10 * h * dy[i] + h01 * y[i + 1] + h11 * h * dy[i + 1]

@@ -8,11 +8,11 @@ import threading
 import numpy as np
 from scipy.signal import savgol_coeffs
 
+from skincal.calib.hermite import hermite
 from skincal.calib.preprocess.conditioning import (
     DEFAULT_QDD_WINDOW_S,
     JointConditioning,
     condition_joint_stream,
-    cubic_hermite,
     estimate_qdd,
 )
 from skincal.data.dataset import JointStates
@@ -97,12 +97,8 @@ class JointInterpolator:
                 f"instants {t.min():.3f}..{t.max():.3f} s fall outside the joint stream "
                 f"{self.t_start:.3f}..{self.t_end:.3f} s"
             )
-        q = cubic_hermite(self._tj, self._q, self._qd_j, t)
-        qd = cubic_hermite(self._t_acc, self._qd, self._qdd, t)
-        i = np.clip(np.searchsorted(self._t_acc, t) - 1, 0, self._t_acc.size - 2)
-        t0, t1 = self._t_acc[i], self._t_acc[i + 1]
-        w = ((t - t0) / (t1 - t0))[:, None]
-        qdd = (1.0 - w) * self._qdd[i] + w * self._qdd[i + 1]
+        q = hermite(self._tj, self._q, self._qd_j, t)[0]
+        qd, qdd, _ = hermite(self._t_acc, self._qd, self._qdd, t)  # qdd: linear in the accelerations
         return q, qd, qdd
 
 
