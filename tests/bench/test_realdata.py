@@ -116,31 +116,35 @@ def test_real_recordings_each_get_an_answer():
 
 def test_paired_differences_cancel_what_a_session_shares():
     """Two IMUs recorded at once share the robot's stream and the host's lag: a per-session shift common
-    to both (here 0-90 mm, 80-110 ms) leaves their difference, which keeps only each sensor's own error."""
+    to both (here 0-90 mm, +-3 deg, 80-110 ms) leaves their difference, which keeps only each sensor's own error."""
     rng = np.random.default_rng(3)
     shift_p, shift_t = rng.uniform(0, 90, (6, 3)), rng.uniform(80, 110, 6)
-    err = {g: (rng.normal(0, 1.0, (6, 3)), rng.normal(0, 0.5, 6)) for g in ("IMU_A", "IMU_B")}
+    shift_r = rng.uniform(-3, 3, (6, 3))
+    err = {g: (rng.normal(0, 1.0, (6, 3)), rng.normal(0, 0.5, 6), rng.normal(0, 0.1, (6, 3))) for g in ("A", "B")}
 
     def block(group: str) -> dict:
-        e_p, e_t = err[group]
+        e_p, e_t, e_r = err[group]
         rows = [
             {
                 "recording": f"V{100 * (k + 1)}_S{k % 4 + 1}_{group}", "position_mm": list(shift_p[k] + e_p[k]),
                 "position_std_mm": [1.0, 1.0, 1.0], "time_offset_ms": float(shift_t[k] + e_t[k]),
-                "time_offset_std_ms": 0.5,
+                "time_offset_std_ms": 0.5, "rotation_from_mean_deg": list(shift_r[k] + e_r[k]),
+                "rotation_std_deg": [0.1, 0.1, 0.1],
             }  # fmt: skip
             for k in range(6)
         ]
         return {"link": 6, "per_recording": rows}
 
     assert session_name("V500_S3_MPU9150", "MPU9150") == "V500_S3" and session_name("rec", "su1") == "rec"
-    pair = paired("IMU_A", block("IMU_A"), "IMU_B", block("IMU_B"))
+    pair = paired("A", block("A"), "B", block("B"))
     assert pair is not None and len(pair["sessions"]) == 6
-    d_p = err["IMU_A"][0] - err["IMU_B"][0]
+    d_p = err["A"][0] - err["B"][0]
     np.testing.assert_allclose(pair["position_difference_mm"]["mean"], d_p.mean(axis=0), atol=1e-9)
     np.testing.assert_allclose(pair["position_difference_mm"]["std"], d_p.std(axis=0, ddof=1), atol=1e-9)
     assert max(pair["position_difference_mm"]["std"]) < 3.0  # the 0-90 mm shared shift is gone
-    d_t = err["IMU_A"][1] - err["IMU_B"][1]
+    d_r = err["A"][2] - err["B"][2]
+    np.testing.assert_allclose(pair["rotation_difference_deg"]["std"], d_r.std(axis=0, ddof=1), atol=1e-9)
+    d_t = err["A"][1] - err["B"][1]
     z = (d_t - d_t.mean()) / np.hypot(0.5, 0.5)
     np.testing.assert_allclose(pair["time_offset_difference_ms"]["deviation_rms_std"], np.sqrt(np.mean(z**2)))
-    assert paired("IMU_A", {**block("IMU_A"), "link": 5}, "IMU_B", block("IMU_B")) is None  # other links
+    assert paired("A", {**block("A"), "link": 5}, "B", block("B")) is None  # other links

@@ -331,7 +331,9 @@ def _difference(x: np.ndarray, s: np.ndarray) -> dict[str, Any]:
 def paired(a_name: str, a: dict[str, Any], b_name: str, b: dict[str, Any]) -> dict[str, Any] | None:
     """Per session recorded by both groups ``a`` and ``b`` (their :func:`repeatability` blocks, same
     method, same link), ``a``'s estimate minus ``b``'s: position (link axes, mm; std the two combined,
-    ``sqrt(s_a^2 + s_b^2)``) and time offset (ms). What the robot's stream and the host did is common to
+    ``sqrt(s_a^2 + s_b^2)``), rotation (each one's rotation vector from its group's mean about the link
+    axes, deg: the two mounts differ by a fixed rotation, which the means take out; small angles) and
+    time offset (ms). What the robot's stream and the host did is common to
     both and cancels; a deviation over own std near 1 says each sensor's part of the std is honest.
     ``None`` when fewer than two sessions are shared."""
     if a.get("link") is None or a.get("link") != b.get("link"):
@@ -346,14 +348,18 @@ def paired(a_name: str, a: dict[str, Any], b_name: str, b: dict[str, Any]) -> di
 
     def diff(keys: list[str], key: str, std_key: str) -> tuple[np.ndarray, np.ndarray]:
         x = np.array([np.subtract(ea[k][key], eb[k][key]) for k in keys], dtype=float).reshape(len(keys), -1)
-        sa = np.array([np.nan if ea[k][std_key] is None else ea[k][std_key] for k in keys], dtype=float)
-        sb = np.array([np.nan if eb[k][std_key] is None else eb[k][std_key] for k in keys], dtype=float)
+        sa = np.array([np.nan if ea[k].get(std_key) is None else ea[k][std_key] for k in keys], dtype=float)
+        sb = np.array([np.nan if eb[k].get(std_key) is None else eb[k][std_key] for k in keys], dtype=float)
         return x, np.hypot(sa, sb).reshape(x.shape)
 
     out: dict[str, Any] = {"groups": [a_name, b_name], "sessions": both}
     if len(pos) > 1:
         x, s = diff(pos, "position_mm", "position_std_mm")
         out["position_difference_mm"] = _difference(x, s)
+    rot = [k for k in both if None not in (ea[k].get("rotation_from_mean_deg"), eb[k].get("rotation_from_mean_deg"))]
+    if len(rot) > 1:  # each IMU's rotation from its own mean (the mounts differ by a fixed rotation)
+        x, s = diff(rot, "rotation_from_mean_deg", "rotation_std_deg")
+        out["rotation_difference_deg"] = _difference(x, s)
     if len(tim) > 1:
         x, s = diff(tim, "time_offset_ms", "time_offset_std_ms")
         scalar = _difference(x, s)
@@ -461,6 +467,9 @@ def realdata_report(doc: dict[str, Any]) -> list[Any]:
                 f" position mean {_fmt(d['mean'])} mm, std {_fmt(d['std'])} mm, dev/own std "
                 f"{_fmt(d['deviation_rms_std'])};"
             )
+        if "rotation_difference_deg" in pair:
+            d = pair["rotation_difference_deg"]
+            text += f" rotation std {_fmt(d['std'], 2)} deg, dev/own std {_fmt(d['deviation_rms_std'])};"
         if "time_offset_difference_ms" in pair:
             d = pair["time_offset_difference_ms"]
             text += (
