@@ -464,3 +464,42 @@ def test_a_rest_counts_only_where_every_unit_on_the_body_is_still():
     rests = common_rests(knocked, "su1")
     assert not np.any((rests[:, 0] < t0) & (rests[:, 1] > t0))
     assert len(rests) >= len(clean) - 1 and len(clean) == 11
+
+
+def _knocked(ds, unit: str, angle_deg: float):
+    """``ds`` with ``unit`` turned by ``angle_deg`` about its z axis from the recording's middle on (a unit
+    that slipped: the rigid-body model does not carry it)."""
+    from dataclasses import replace
+
+    s = ds.imu[unit]
+    late = s.t >= 0.5 * (s.t[0] + s.t[-1])
+    R = Rotation.from_rotvec([0.0, 0.0, np.radians(angle_deg)]).as_matrix()
+    accel, gyro = s.accel.copy(), s.gyro.copy()
+    accel[late], gyro[late] = accel[late] @ R.T, gyro[late] @ R.T
+    return replace(ds, imu={**ds.imu, unit: replace(s, accel=accel, gyro=gyro)})
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_split_check_leaves_honest_std_alone_and_catches_a_slipped_unit(seed):
+    """The IMU-only fit's split check (issue 24: "the same for --reference"): on a clean simulated
+    "turn it over" session with ``real`` IMUs the halves, alternate windows and calm/lively parts agree
+    within their std (the parts share the whole recording's accelerometer gauge: without it the lively
+    half, holding no rest, disagreed by 8 std in position); with the unit turned by 2 deg halfway, which
+    the model does not carry, the time split disagrees by tens of std and the rotation std is inflated
+    with a warning."""
+    from skincal.workflows.handheld import handheld_dataset
+
+    ds = handheld_dataset(units=2, duration_s=30.0, imu="real", clock="driver", seed=seed)
+    clean = calibrate_relative(ds, "su1").units["su2"]
+    c = clean.extras["consistency"]
+    assert c["failed"] == [] and c["dof_position"] == c["dof_rotation"] == 9
+    assert c["inflation_position"] == 1.0 and c["chi2_position"] < 2.5 * 9
+    assert c["inflation_rotation"] < 1.7  # seed 1: 1.60 ('real' gyroscopes' scale errors are not in the model)
+    off = calibrate_relative(_knocked(ds, "su2", 2.0), "su1").units["su2"]
+    k = off.extras["consistency"]
+    assert k["inflation_rotation"] > 10.0 and any(d.startswith("time: rotation") for d in k["disagrees"])
+    assert any("independent parts of the recording disagree" in w for w in off.warnings)
+    unchecked = calibrate_relative(_knocked(ds, "su2", 2.0), "su1", consistency=False).units["su2"]
+    assert "consistency" not in unchecked.extras
+    grown = off.rotation_std_deg / unchecked.rotation_std_deg
+    assert np.all(grown >= 1.0 - 1e-12) and grown.max() > 10.0

@@ -11,7 +11,8 @@ their std allow. Each unit's samples are split two ways:
   see the same kinds of motion: catches model errors and residuals correlated beyond the model);
 * ``excitation``: the calmer and the livelier half of the recording, windows of
   :data:`EXCITATION_WINDOW_S` ranked by how fast the unit's link turns (or, on a link that only
-  translates, moves): catches errors that grow or shrink with the motion (a low-rate joint stream
+  translates, moves; for units on one rigid body without joint states, the IMU-only calibration, by
+  how fast the gyroscopes turn): catches errors that grow or shrink with the motion (a low-rate joint stream
   that resolves slow motion but not fast, a delay that is not one constant offset).
 
 Each part is calibrated with the same method on the unit's link (the full result's), and for each
@@ -40,7 +41,7 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2 as chi2_dist
 
 from skincal.data.dataset import Dataset, ImuStream, TofStream
-from skincal.data.result import CalibrationResult, UnitResult
+from skincal.data.result import REFERENCE_LINK, CalibrationResult, UnitResult
 from skincal.kinematics.transforms import FloatArray
 
 WINDOW_S = 4.0
@@ -137,6 +138,39 @@ def lively_windows_of(dataset: Dataset, links: Iterable[int]) -> dict[int, np.nd
     return out
 
 
+def lively_windows_from_gyro(dataset: Dataset) -> np.ndarray:
+    """``(W,)`` True on the :data:`EXCITATION_WINDOW_S` windows (from :func:`recording_span`'s start) in
+    which the units' mean gyroscope speed ``|w|`` exceeds the median window's: the ``excitation`` split
+    of units on one rigid body without joint states (the IMU-only calibration, all on ``link 0``)."""
+    t0, _ = recording_span(dataset)
+    total: FloatArray = np.zeros(0)
+    count: FloatArray = np.zeros(0)
+    for stream in dataset.imu.values():
+        if stream.gyro is None or len(stream.t) == 0:
+            continue
+        index = np.floor((np.asarray(stream.t, dtype=float) - t0) / EXCITATION_WINDOW_S).astype(int)
+        index = np.maximum(index, 0)
+        n = max(int(index.max()) + 1, total.size)
+        total = np.pad(total, (0, n - total.size)) + np.bincount(
+            index, weights=np.linalg.norm(stream.gyro, axis=1), minlength=n
+        )
+        count = np.pad(count, (0, n - count.size)) + np.bincount(index, minlength=n)
+    if total.size == 0:
+        return np.zeros(0, dtype=bool)
+    score = np.where(count > 0, total / np.maximum(count, 1), 0.0)
+    return score > np.median(score)
+
+
+def recording_span(dataset: Dataset) -> tuple[float, float]:
+    """``(t0, t1)`` of the recording, s: the joint stream's, else the IMU streams' first and last stamps."""
+    if dataset.joints is not None and len(dataset.joints.t):
+        return float(dataset.joints.t[0]), float(dataset.joints.t[-1])
+    stamps = [np.asarray(s.t, dtype=float) for s in dataset.imu.values() if len(s.t)]
+    if not stamps:
+        return 0.0, 0.0
+    return float(min(t[0] for t in stamps)), float(max(t[-1] for t in stamps))
+
+
 def part_masks(
     t: FloatArray, t0: float, t1: float, lively: np.ndarray | None = None
 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -157,13 +191,15 @@ def _part(
     """``dataset`` with every unit's IMU (and ToF) samples restricted to one part of ``split``
     (``links``: each unit's link, which the ``excitation`` split ranks the windows by; ``lively``: their
     :func:`lively_windows_of`, when already computed)."""
-    j = dataset.joints
-    assert j is not None
-    t0, t1 = float(j.t[0]), float(j.t[-1])
+    t0, t1 = recording_span(dataset)
     if split != "excitation":
         lively = {}
     elif lively is None:
-        lively = lively_windows_of(dataset, links.values())
+        lively = (
+            lively_windows_of(dataset, links.values())
+            if dataset.joints is not None
+            else {REFERENCE_LINK: lively_windows_from_gyro(dataset)}
+        )
 
     def mask(name: str, t: FloatArray) -> np.ndarray:
         masks = part_masks(np.asarray(t, dtype=float), t0, t1, lively.get(links.get(name, -1)))
@@ -249,15 +285,19 @@ def axis_inflation(z: FloatArray, block: float) -> tuple[float, float, float]:
 def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> CalibrationResult:
     """``result`` with each unit's :class:`Consistency` (``extras["consistency"]``) and its std inflated
     where the parts disagree (module docstring); ``refit`` runs the method on each part."""
-    if dataset.joints is None or not result.units:
+    if not result.units:
         return result
     links = {name: int(u.pose.link) for name, u in result.units.items() if u.observable}
-    if not links:
-        return result
+    if not links or (dataset.joints is None and set(links.values()) != {REFERENCE_LINK}):
+        return result  # without joint states only units on one rigid body (the IMU-only fit) can be split
     outcomes: dict[str, dict[str, list[UnitResult | None]]] = {u: {} for u in links}
     errors: dict[str, list[str]] = {u: [] for u in links}
     try:  # the excitation split's windows, once for both sides (a failure: each part's own, below)
-        lively: dict[int, np.ndarray] | None = lively_windows_of(dataset, links.values())
+        lively: dict[int, np.ndarray] | None = (
+            lively_windows_of(dataset, links.values())
+            if dataset.joints is not None
+            else {REFERENCE_LINK: lively_windows_from_gyro(dataset)}
+        )
     except Exception:  # noqa: BLE001
         lively = None
     for split in SPLITS:

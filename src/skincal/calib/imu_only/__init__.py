@@ -99,12 +99,16 @@ class RelativeOptions:
         other_body_ratio: angular-velocity misfit (relative) above which a unit is on another body.
         reference_scale_std, reference_misalignment_std: the reference accelerometer's uncalibrated
             per-axis scale and cross-axis error (used when the rests do not calibrate it).
+        consistency: the split check (:mod:`skincal.calib.consistency`: halves in time, alternate
+            windows, the calmer and the livelier half by the gyroscopes' speed; std inflated where they
+            disagree beyond it).
     """
 
     max_offset_s: float = field(default=1.0, metadata={"min": 0.0})
     other_body_ratio: float = field(default=OTHER_BODY_RATIO, metadata={"min": 0.0})
     reference_scale_std: float = field(default=0.0, metadata={"min": 0.0, "max": 0.999})
     reference_misalignment_std: float = field(default=0.0, metadata={"min": 0.0, "max": 0.999})
+    consistency: bool = True
 
 
 def calibrate_relative(
@@ -117,6 +121,8 @@ def calibrate_relative(
     reference_scale_std: float = 0.0,
     reference_misalignment_std: float = 0.0,
     dataset_sha256: str = "",
+    consistency: bool = True,
+    accel_fits: dict[str, AccelFit] | None = None,
 ) -> CalibrationResult:
     """Poses of ``units`` (default: every unit) in the frame of unit ``reference`` from the IMUs alone.
 
@@ -126,7 +132,12 @@ def calibrate_relative(
     ``r_est = (1 + s) r``): ``reference_scale_std`` and ``reference_misalignment_std`` (the size of its
     uncalibrated per-axis scale error and symmetric cross-axis error, e.g. 0.03 and 0.01 for the
     ``real`` IMU preset) add that to the position std; 0 (default) takes the reference as exact. With
-    the diagonal fit (6-8 orientations) only ``reference_misalignment_std`` is added.
+    the diagonal fit (6-8 orientations) only ``reference_misalignment_std`` is added. With
+    ``consistency`` (default) independent parts of the recording are calibrated the same way and each
+    unit's std is inflated where they disagree beyond it (:func:`skincal.calib.consistency.check`; the
+    unit's ``consistency`` block). ``accel_fits``: the units' accelerometer fits to the rests to use
+    instead of fitting them here (the parts of the split check take the whole recording's, so that
+    their positions share its gauge; a part holds too few rests to fit its own).
 
     Returns a :class:`~skincal.data.result.CalibrationResult` with ``method = "imu-only"``,
     ``reference``, ``extras["accel_scale_fit"]`` (the rests' fit of the reference's
@@ -153,11 +164,12 @@ def calibrate_relative(
     gravity = float(np.linalg.norm(dataset.gravity))
     streams = {name: dataset.imu[name] for name in dict.fromkeys([reference, *names])}
     rests = common_rests(streams, reference) if len(ref.t) >= 50 else np.zeros((0, 2))
-    accel_fits: dict[str, AccelFit] = {}
-    for name, stream in streams.items():
-        fit_a, _ = fit_unit_accelerometer(stream, rests, gravity)
-        if fit_a is not None:
-            accel_fits[name] = fit_a
+    if accel_fits is None:
+        accel_fits = {}
+        for name, stream in streams.items():
+            fit_a, _ = fit_unit_accelerometer(stream, rests, gravity)
+            if fit_a is not None:
+                accel_fits[name] = fit_a
     ref_fit = accel_fits.get(reference)
     ref_distinct = distinct_orientations(rest_means(ref, rests)[0]) if len(rests) else 0
     gauge = _gauge_notes(reference, ref_fit, len(rests), ref_distinct, gravity)
@@ -202,10 +214,24 @@ def calibrate_relative(
         "orientations": int(ref_distinct),
         "note": gauge[-1],
     }
-    return CalibrationResult(
+    result = CalibrationResult(
         METHOD, robot, dataset_sha256, time.perf_counter() - start, out, {"accel_scale_fit": accel_scale_fit},
         failed_units=failed, reference=reference,
     )  # fmt: skip
+    if not consistency:
+        return result
+    from skincal.calib.consistency import check
+
+    def refit(part: Dataset, links: dict[str, int]) -> CalibrationResult:
+        """The same calibration on a part of the recording (the parts' own rests and offsets)."""
+        return calibrate_relative(
+            part, reference, units=[reference, *(u for u in links if u != reference)], max_offset_s=max_offset_s,
+            other_body_ratio=other_body_ratio, reference_scale_std=reference_scale_std,
+            reference_misalignment_std=reference_misalignment_std, consistency=False, accel_fits=accel_fits,
+        )  # fmt: skip
+
+    checked = check(dataset, result, refit)
+    return replace(checked, runtime_s=time.perf_counter() - start)
 
 
 def _gauge_notes(reference: str, fit: AccelFit | None, rests: int, distinct: int, gravity: float) -> list[str]:
