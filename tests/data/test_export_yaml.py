@@ -1,0 +1,58 @@
+"""``export -f yaml`` through libyaml (issue 27, "no size bounds": a 10,000-unit result took 17.6 s, over
+60 s before; the speed target is in ``benchmarks/bench_export.py``): the same text as
+:func:`yaml.safe_dump` byte for byte, crafted names included, without PyYAML's pure-Python emitter."""
+
+from __future__ import annotations
+
+import gc
+
+import pytest
+import yaml
+from test_export_names import METHODS, ROBOT, UNIT_NAMES, _panda_map, _result
+
+from skincal.data.export import documents, export_text
+
+pytestmark = pytest.mark.adversarial
+
+
+@pytest.mark.parametrize("method", METHODS, ids=range(len(METHODS)))
+def test_yaml_is_safe_dumps_text_byte_for_byte(tmp_path, method):
+    result = _result(UNIT_NAMES + [f"su{k}" for k in range(40)], method=method, robot=ROBOT)
+    text, frames = export_text(result, "yaml", link_map=_panda_map(tmp_path), prefix="=-")
+    doc = documents.export_document(result, frames)
+    assert text == yaml.safe_dump(doc, sort_keys=False, default_flow_style=None)
+    assert yaml.safe_load(text) == doc  # and it reads back as the document (names unchanged)
+
+
+@pytest.mark.skipif(not hasattr(yaml, "CSafeDumper"), reason="PyYAML built without libyaml")
+def test_yaml_does_not_use_the_pure_python_emitter(tmp_path, monkeypatch):
+    """The pure-Python emitter was 2/3 of the time of a 10,000-unit export."""
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("PyYAML's pure-Python emitter used")
+
+    link_map = _panda_map(tmp_path)  # written with yaml.safe_dump
+    monkeypatch.setattr(yaml.emitter.Emitter, "emit", refuse)
+    text, _ = export_text(_result(["su1", "su2"]), "yaml", link_map=link_map)
+    assert text.startswith("format: skincal-skin-frames\n")
+
+
+def test_the_garbage_collector_is_restored_after_a_dump(tmp_path, monkeypatch):
+    assert gc.isenabled()
+    export_text(_result(["su1"]), "yaml", link_map=_panda_map(tmp_path))
+    assert gc.isenabled()
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("emitter failed")
+
+    monkeypatch.setattr(documents.yaml, "dump", broken)
+    with pytest.raises(RuntimeError):
+        export_text(_result(["su1"]), "yaml", link_map=_panda_map(tmp_path))
+    assert gc.isenabled()
+    gc.disable()
+    try:  # a caller's paused collector stays paused
+        monkeypatch.undo()
+        export_text(_result(["su1"]), "yaml", link_map=_panda_map(tmp_path))
+        assert not gc.isenabled()
+    finally:
+        gc.enable()
