@@ -6,13 +6,36 @@ from __future__ import annotations
 
 import gc
 
+import numpy as np
 import pytest
 import yaml
-from test_export_names import METHODS, ROBOT, UNIT_NAMES, _panda_map, _result
+from test_export_names import METHODS, ROBOT, UNIT_NAMES
 
 from skincal.data.export import documents, export_text
+from skincal.data.result import CalibrationResult, UnitResult
+from skincal.skin.pose import SkinUnitPose
 
 pytestmark = pytest.mark.adversarial
+
+
+def _result(names, method: str = "mle", robot: str = "panda") -> CalibrationResult:
+    """Units on the Panda's links with random poses; every third without std, every fifth with a NaN."""
+    rng = np.random.default_rng(7)
+    units = {}
+    for k, name in enumerate(names):
+        q = rng.normal(size=4)
+        pose = SkinUnitPose.from_quaternion(k % 7 + 1, rng.uniform(-0.1, 0.1, 3), q / np.linalg.norm(q))
+        std = None if k % 3 == 0 else rng.uniform(1e-6, 1e-2, 3)
+        if std is not None and k % 5 == 0:
+            std[1] = np.nan
+        units[name] = UnitResult(pose=pose, observable=k % 2 == 1, position_std_m=std, rotation_std_deg=std)
+    return CalibrationResult(method=method, robot=robot, dataset_sha256="", runtime_s=0.1, units=units)
+
+
+def _panda_map(tmp_path):
+    path = tmp_path / "map.yaml"
+    path.write_text("links: {" + ", ".join(f"{i}: panda_link{i}" for i in range(1, 8)) + "}\n")
+    return path
 
 
 @pytest.mark.parametrize("method", METHODS, ids=range(len(METHODS)))
@@ -31,7 +54,7 @@ def test_yaml_does_not_use_the_pure_python_emitter(tmp_path, monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("PyYAML's pure-Python emitter used")
 
-    link_map = _panda_map(tmp_path)  # written with yaml.safe_dump
+    link_map = _panda_map(tmp_path)
     monkeypatch.setattr(yaml.emitter.Emitter, "emit", refuse)
     text, _ = export_text(_result(["su1", "su2"]), "yaml", link_map=link_map)
     assert text.startswith("format: skincal-skin-frames\n")
