@@ -116,7 +116,7 @@ def calibrate(
     ),
     robot: str | None = typer.Option(
         None, "--robot", help="--follow of a ROS bag: robot preset, .urdf or chain file (default: the bag's "
-        "/robot_description, else panda)"
+        "/robot_description; without one, required)"
     ),
     watch: bool = typer.Option(
         False, "--watch", help="--follow: keep following to the data's end and watch every calibrated unit: one "
