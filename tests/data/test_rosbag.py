@@ -116,7 +116,7 @@ def test_written_bag_holds_standard_messages(small, tmp_path):
 def test_bag_then_mle_matches_hdf5_accuracy(sim, tmp_path):
     """The benchmark target in small: bag -> import -> auto segments -> mle vs HDF5 + protocol segments."""
     write_bag(sim, tmp_path / "b", ros_version=2, storage="mcap", accel_unit="g", gyro_unit="deg")
-    imported, _ = read_bag(tmp_path / "b")
+    imported, _ = read_bag(tmp_path / "b", "panda")
     imported, _ = segment_dataset(imported)
     write_dataset(sim, tmp_path / "ref.h5")
     ev_ref = evaluate(calibrate(read_dataset(tmp_path / "ref.h5"), "mle"), sim)
@@ -198,14 +198,14 @@ def test_nan_samples_dropped_with_count_or_error_when_all_nan(tmp_path):
     accel = UP_G.copy()
     accel[[5, 50, 51], 1] = np.nan
     bag = _write(tmp_path / "b", 2, {"/joint_states": _joint_msgs(ts, T), "/su1/imu": _imu_msgs(ts, T, accel)})
-    ds, report = read_bag(bag)
+    ds, report = read_bag(bag, "panda")
     assert "/su1/imu: dropped 3 sample(s) containing NaN" in report.notes
     assert len(ds.imu["su1"].t) == len(T) - 3
     np.testing.assert_allclose(ds.imu["su1"].accel, np.delete(UP_G, [5, 50, 51], axis=0) * STANDARD_GRAVITY)
     bag2 = _write(tmp_path / "c", 2, {"/joint_states": _joint_msgs(ts, T),
                                       "/su1/imu": _imu_msgs(ts, T, np.full_like(UP_G, np.nan))})
     with pytest.raises(DatasetError, match=f"topic /su1/imu: all {len(T)} samples contain NaN"):
-        read_bag(bag2)
+        read_bag(bag2, "panda")
 
 
 def test_unknown_topic_wrong_type_and_empty_bag(tmp_path):
@@ -272,7 +272,7 @@ def test_range_and_laserscan_to_tof(tmp_path):
         "/joint_states": _joint_msgs(ts, T), "/skin/a/imu": _imu_msgs(ts, T, UP_G, frame="a"),
         "/skin/b/imu": _imu_msgs(ts, T, UP_G, frame="b"), "/skin/a/range": ("sensor_msgs/msg/Range", rng_msgs),
         "/scanner": ("sensor_msgs/msg/LaserScan", scan_msgs)})
-    ds, report = read_bag(bag, tmap=topic_map(range_=["/skin/a/range", "/scanner=b"]))
+    ds, report = read_bag(bag, "panda", tmap=topic_map(range_=["/skin/a/range", "/scanner=b"]))
     assert report.range_topics == {"/skin/a/range": "a", "/scanner": "b"}  # namespace match, explicit name
     np.testing.assert_allclose(ds.tof["a"].range, [0.5, np.nan, np.nan, 0.7], equal_nan=True)  # NaN reading dropped
     np.testing.assert_allclose(ds.tof["a"].t, [0.0, 0.01, 0.02, 0.04], atol=1e-9)
@@ -283,7 +283,7 @@ def test_range_and_laserscan_to_tof(tmp_path):
 def test_cli_import(small, tmp_path, capsys):
     sim = small
     write_bag(sim, tmp_path / "b.bag", ros_version=1)
-    assert main(["import", str(tmp_path / "b.bag"), "--out", str(tmp_path / "d.h5")]) == 0
+    assert main(["import", str(tmp_path / "b.bag"), "--robot", "panda", "--out", str(tmp_path / "d.h5")]) == 0
     captured = capsys.readouterr()
     out = captured.out
     assert captured.err == ""  # the progress bar is transient and on stderr: nothing left in a log
@@ -369,13 +369,23 @@ def test_robot_description_that_is_not_urdf_is_one_line_error(small, tmp_path):
     assert "\n" not in str(info.value)
 
 
-def test_no_robot_and_no_description_is_panda_noted(small, tmp_path):
-    write_bag(small, tmp_path / "b")
-    ds, report = read_bag(tmp_path / "b")
-    assert ds.robot.name == "panda" and report.robot_source == "default"
-    assert "no --robot given and no /robot_description in the bag: robot 'panda' (the default)" in report.notes
+def test_no_robot_and_no_description_asks_for_robot(small, tmp_path, capsys):
+    """Issue 27: a bag without /robot_description became a Panda, said only in a note."""
+    write_bag(small, tmp_path / "b")  # a real ROS 2 bag (rosbags), the Panda's joint names, no description
+    with pytest.raises(ConfigError, match=r"b has no /robot_description: give the robot with --robot .*; its joint "
+                       r"names are those of 'panda': e.g. --robot panda$") as info:  # fmt: skip
+        read_bag(tmp_path / "b")
+    assert "\n" not in str(info.value)
     with pytest.raises(ConfigError, match="--base-link/--tip-link need a URDF"):
         read_bag(tmp_path / "b", tip_link="panda_link5")
+    ds, report = read_bag(tmp_path / "b", "panda")  # named: read as before
+    assert ds.robot.name == "panda" and report.robot_source == "panda"
+    capsys.readouterr()
+    out = tmp_path / "d.h5"
+    assert main(["import", str(tmp_path / "b"), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and "--robot" in err, err
+    assert not out.exists()
 
 
 PRESET_JOINTS = {

@@ -236,7 +236,8 @@ def test_cli_import_takes_segments_from_the_protocol_file(tmp_path, capsys):
                        for u, s in rec.imu.items()})  # fmt: skip
     write_bag(rec, tmp_path / "rec")
     capsys.readouterr()
-    code = main(["import", str(tmp_path / "rec"), "--protocol", str(motion), "-o", str(tmp_path / "ds.h5")])
+    code = main(["import", str(tmp_path / "rec"), "--robot", "panda", "--protocol", str(motion), "-o",
+                 str(tmp_path / "ds.h5")])  # fmt: skip
     assert code == 0, capsys.readouterr()
     assert "protocol t=0 at -2.00" in capsys.readouterr().out
     seg = read_dataset(tmp_path / "ds.h5").segments

@@ -47,8 +47,8 @@ ROBUSTNESS = (
 
 
 MLE = (
-    Opt("runs", int | None, None, "random placements per robot (default 20; 2 with --quick)"),
-    Opt("quick", bool, False, "short protocol and 2 placements per robot, for a smoke test"),
+    Opt("runs", int | None, None, "random placements per robot (default 20; 1 with --quick)"),
+    Opt("quick", bool, False, "fast protocol and 1 placement per robot, for a smoke test"),
     Opt("om", bool, True, "also time the paper's OM on the same data"),
     Opt("json_out", Path | None, None, "also write the figures as JSON", flag="--json"),
 )

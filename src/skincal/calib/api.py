@@ -156,6 +156,7 @@ def calibrate(
     dataset_sha256: str = "",
     progress: Callable[[str], None] | None = None,
     workers: int = 1,
+    work: Callable[[int, int, str], None] | None = None,
     **options: Any,
 ) -> CalibrationResult:
     """Calibrate the units of ``dataset`` with ``method``; units that fail are reported in
@@ -181,6 +182,9 @@ def calibrate(
         units: calibrate only these units (default: all).
         dataset_sha256: recorded in the result.
         progress: called with each unit's name when it is done.
+        work: called with ``(steps done, steps planned, stage)`` as the run advances (:class:`WorkSteps`:
+            the dataset's preparation, each unit, each unit of every part of the split check and of every
+            fit of the report-spacing check), for a progress bar that moves with the work.
         workers: units calibrated at once. Where the platform can ``fork`` (Linux) these are
             forked processes that inherit the prepared joint interpolation and shared tables (no
             copy, no pickling of the dataset; only the unit results come back); elsewhere threads.
@@ -200,6 +204,7 @@ def calibrate(
             raise ConfigError(f"unknown unit '{u}' (dataset has: {', '.join(dataset.units)})")
     check_joint_range(dataset)
     start = time.perf_counter()
+    steps = WorkSteps.plan(work, len(names), parsed, dataset)
     tagged, notes = dataset, []
     if dataset.segments is None or len(dataset.segments) == 0:
         tagged, notes = segment_automatically(dataset, spec)
@@ -210,6 +215,7 @@ def calibrate(
     if spec.prepare is not None:
         with method_errors(f"method '{method}', preparing the dataset: "):
             shared = spec.prepare(dataset, interpolator)
+    steps.advance("calibrating the units")
     results: dict[str, UnitResult] = {}
     failed: dict[str, str] = {}
     errors: list[CalibrationError] = []
@@ -262,6 +268,7 @@ def calibrate(
                 unusable += int(isinstance(error, UnitDataError))
             if progress is not None:
                 progress(name)
+            steps.advance("calibrating the units")
     finally:
         if pool is not None:
             pool.shutdown()
@@ -307,9 +314,11 @@ def calibrate(
                     )  # fmt: skip
                 except CalibrationError as exc:
                     part_failed[name] = str(exc)
+                steps.advance("checking independent parts of the recording")
             return CalibrationResult(method, dataset.chain.name, "", 0.0, units, failed_units=part_failed)
 
         result = check(tagged, result, refit)
+        steps.reach(steps.consistency_end, "checking independent parts of the recording")
     if getattr(parsed, "joint_rate", False):  # the report-spacing check (skincal.calib.joint_rate)
         from skincal.calib.joint_rate import check as joint_rate_check
 
@@ -320,12 +329,60 @@ def calibrate(
             tables are its own), the units on their links, without the checks."""
             return calibrate(
                 thinned, method, seed=seed, links=thinned_links, use_dataset_qdd=use_dataset_qdd,
-                qdd_window_s=qdd_window_s, units=list(thinned_links), **thinned_options,
+                qdd_window_s=qdd_window_s, units=list(thinned_links),
+                progress=lambda _name: steps.advance("checking the joint stream's report spacing"), **thinned_options,
             )  # fmt: skip
 
         result = joint_rate_check(tagged, result, refit_thinned)
+    steps.reach(steps.total, "done")
     # on the final std (after every inflation above)
     return replace(result, units={name: weak_position(u) for name, u in result.units.items()})
+
+
+@dataclass
+class WorkSteps:
+    """The steps of one :func:`calibrate` run for a progress bar, planned at its start: 1 for the dataset's
+    preparation (segments, joint conditioning, the method's shared tables), 1 per unit, ``len(SPLITS) * 2``
+    parts x the units of the split check (when on), and :data:`JOINT_RATE_FITS` fits x the units of the
+    report-spacing check (when on and the joint stream is low-rate). A check that runs fewer (units that
+    failed, a short stream) jumps to its end; ``callback(done, total, stage)`` is called at every step."""
+
+    callback: Callable[[int, int, str], None] | None
+    total: int
+    consistency_end: int
+    done: int = 0
+
+    @classmethod
+    def plan(cls, callback: Callable[[int, int, str], None] | None, n_units: int, parsed: Any,
+             dataset: Dataset) -> WorkSteps:  # fmt: skip
+        units_end = 1 + n_units
+        consistency_end = units_end
+        if getattr(parsed, "consistency", False):
+            from skincal.calib.consistency import SPLITS
+
+            consistency_end += 2 * len(SPLITS) * n_units
+        total = consistency_end
+        if getattr(parsed, "joint_rate", False) and dataset.joints is not None:
+            from skincal.calib.preprocess import is_low_rate
+
+            if is_low_rate(dataset.joints.t):
+                total += JOINT_RATE_FITS * n_units
+        steps = cls(callback, total, consistency_end)
+        steps.reach(0, "preparing the dataset")
+        return steps
+
+    def advance(self, stage: str) -> None:
+        self.reach(min(self.done + 1, self.total), stage)
+
+    def reach(self, done: int, stage: str) -> None:
+        self.done = max(self.done, done)
+        if self.callback is not None:
+            self.callback(self.done, self.total, stage)
+
+
+JOINT_RATE_FITS = 5
+"""Fits of the report-spacing check (``skincal.calib.joint_rate``: every second report, 2 phases; every
+third, 3), for :class:`WorkSteps`."""
 
 
 @contextmanager

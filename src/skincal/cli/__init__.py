@@ -49,9 +49,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with unwinds():
             return _run(argv)
-    except Terminated as exc:  # between the command's end and the handler's removal
+    except Terminated as exc:  # between the command's end and the handler's removal, or pending then
         console_error("terminated")
         return int(exc.code)
+    except KeyboardInterrupt:
+        console_error("interrupted")
+        return 130
 
 
 def _run(argv: list[str] | None) -> int:

@@ -116,7 +116,7 @@ def calibrate(
     ),
     robot: str | None = typer.Option(
         None, "--robot", help="--follow of a ROS bag: robot preset, .urdf or chain file (default: the bag's "
-        "/robot_description, else panda)"
+        "/robot_description; without one, required)"
     ),
     watch: bool = typer.Option(
         False, "--watch", help="--follow: keep following to the data's end and watch every calibrated unit: one "
@@ -163,11 +163,15 @@ def calibrate(
     link_map = read_links_file(links) if links is not None else None
     names = unit or ds.units
     with Progress(console=console, transient=True, disable=not console.is_terminal) as progress:
-        task = progress.add_task(f"calibrating ({method})", total=len(names))
+        task = progress.add_task(f"{method}: preparing the dataset", total=None)
+
+        def step(done: int, total: int, stage: str) -> None:  # the bar moves with the work (WorkSteps)
+            progress.update(task, completed=done, total=total, description=f"{method}: {stage}")
+
         result = run(
             ds, method, seed=seed, links=link_map, use_truth_links=use_truth_links,
             use_dataset_qdd=use_dataset_qdd, units=list(names), dataset_sha256=sha256_file(dataset),
-            progress=lambda _name: progress.advance(task), workers=workers, **options,
+            workers=workers, work=step, **options,
         )
     write_result(result, out)
     console.print(unit_table(result, f"{method}: {len(result.units)} units in {result.runtime_s:.2f} s"))

@@ -88,8 +88,9 @@ def _segments_from_protocol(ds, protocol: Path):
 def import_bag(
     bag: Path = typer.Argument(..., help="ROS 1 .bag file, ROS 2 bag directory, or .db3/.mcap file"),
     out: Path = typer.Option(..., "--out", "-o", help="dataset file to write (.h5)"),
-    robot: str | None = typer.Option(None, help="robot: a preset, the robot's .urdf or a DH chain file (default: the "
-                                     "URDF on the bag's /robot_description, else panda)", show_default=False),
+    robot: str | None = typer.Option(None, help="robot: a preset, the robot's .urdf or a DH chain file (default: "
+                                     "the URDF on the bag's /robot_description; without one, required)",
+                                     show_default=False),
     base_link: str | None = typer.Option(None, help="URDF link the chain starts from (--robot arm.urdf or the bag's "
                                          "/robot_description)"),
     tip_link: str | None = typer.Option(None, help="URDF link the chain ends at (--robot arm.urdf or the bag's "

@@ -9,7 +9,10 @@ in four ways, each handled here:
   clean-up, leaving its temporary or a traceback: the first signal wins, a further SIGTERM/SIGINT within
   :data:`GRACE_S` of it is ignored;
 - **an exception Python can only ignore** (raised in a weakref callback or a ``__del__``, which h5py
-  runs all the time): :func:`_redeliver` sends the signal again a moment later;
+  runs all the time): :func:`_redeliver` keeps the signal pending and sends it again a moment later; a
+  signal arriving while that hook runs is kept pending too (raised there, it was "Exception ignored in
+  sys.unraisablehook" and lost), and one still pending when the command ends (it ended within the
+  moment) is raised as the command returns, so the exit code is still 143 / 130;
 - **a blocking call entered just after the signal** (the signal lands between the interpreter's last
   check and ``sleep``/``read``/``select``, or the kernel hands it to another thread): the C-level
   handler has run, the Python one waits for the call to return, up to forever. A watcher thread learns
@@ -49,49 +52,68 @@ class Terminated(SystemExit):
 
 
 class _State:
-    """What the handlers share: the signal being handled (None: none yet), since when, and whether
-    handling is on (a command is running)."""
+    """What the handlers share: the signal being handled (None: none yet), since when, whether handling
+    is on (a command is running), the signal received but not raised yet (``pending``: lost in an
+    unraisable context, or received while ``deferring``) and whether raising is put off (``deferring``:
+    inside the unraisable hook and while :func:`unwinds` restores the handlers)."""
 
     def __init__(self) -> None:
         self.signum: int | None = None
         self.at = 0.0
         self.active = False
+        self.pending: int | None = None
+        self.deferring = False
 
 
 _state = _State()
+
+
+def _exception(signum: int) -> BaseException:
+    return Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
 def _on_signal(signum: int, _frame: object) -> None:
     now = time.monotonic()
     if _state.signum is not None and now - _state.at < GRACE_S:
         return  # the first signal's exception is unwinding the command: let its clean-up finish
-    _state.signum, _state.at = signum, now
-    if signum == signal.SIGTERM:
-        raise Terminated()
-    raise KeyboardInterrupt()
+    if _state.deferring:  # raised here it would be lost: raised later (the hook's re-send, or unwinds' end)
+        if _state.pending is None:
+            _state.pending = signum
+        return
+    _state.signum, _state.at, _state.pending = signum, now, None
+    raise _exception(signum)
 
 
 def _redeliver(unraisable: object, *, fallback: object) -> None:
     """``sys.unraisablehook`` while a command runs: a signal's exception raised where Python can only
     ignore it (a weakref callback, a ``__del__``: it would print "Exception ignored" and carry on, the
     signal lost) is sent again a moment later, so it surfaces in the command's own code instead."""
-    exc = getattr(unraisable, "exc_value", None)
-    if isinstance(exc, Terminated):
-        sig = signal.SIGTERM
-    elif isinstance(exc, KeyboardInterrupt):
-        sig = signal.SIGINT
-    else:
-        fallback(unraisable)  # type: ignore[operator]
-        return
-    _state.signum = None  # lost: the next delivery raises again
-    # from another thread, a moment later: delivered now, it would be raised inside this hook again
-    timer = threading.Timer(_REDELIVER_S, _send_if_active, (sig,))
-    timer.daemon = True
-    timer.start()
+    was_deferring, _state.deferring = _state.deferring, True  # a signal now (a watcher's kick) stays pending
+    try:
+        exc = getattr(unraisable, "exc_value", None)
+        if isinstance(exc, Terminated):
+            sig = signal.SIGTERM
+        elif isinstance(exc, KeyboardInterrupt):
+            sig = signal.SIGINT
+        else:
+            fallback(unraisable)  # type: ignore[operator]
+            return
+        _state.signum = None  # lost: the next delivery raises again
+        if _state.pending is None:
+            _state.pending = sig
+        # from another thread, a moment later: delivered now, it would be raised inside this hook again
+        timer = threading.Timer(_REDELIVER_S, _send_pending)
+        timer.daemon = True
+        timer.start()
+    finally:
+        _state.deferring = was_deferring
 
 
-def _send_if_active(sig: int) -> None:
-    if _state.active:
+def _send_pending() -> None:
+    """The timer of :func:`_redeliver`: the pending signal sent again while the command runs (one that is
+    not, because the command ended, :func:`unwinds` raises)."""
+    sig = _state.pending
+    if _state.active and sig is not None:
         os.kill(os.getpid(), sig)
 
 
@@ -163,7 +185,8 @@ def _install() -> dict[int, Any]:
 def unwinds() -> Iterator[None]:
     """While the command runs: SIGTERM raises :class:`Terminated` and SIGINT ``KeyboardInterrupt`` (main
     thread only), the first signal wins, a swallowed one is delivered again, and one that lands before a
-    blocking call still breaks it. The previous handlers, hook and wakeup fd are restored afterwards.
+    blocking call still breaks it. The previous handlers, hook and wakeup fd are restored afterwards; a
+    signal received but not raised by then (pending) is raised as the block ends.
     Commands that handle SIGTERM themselves (``record``) install their own handler inside."""
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -174,12 +197,13 @@ def unwinds() -> Iterator[None]:
         previous_fd = signal.set_wakeup_fd(_Watcher.write_fd(), warn_on_full_buffer=False)
     except (OSError, ValueError):  # no pipe: the other three guards still hold
         previous_fd = None
-    _state.signum, _state.active = None, True
+    _state.signum, _state.pending, _state.deferring, _state.active = None, None, False, True
     previous = _install()
     sys.unraisablehook = functools.partial(_redeliver, fallback=previous_hook)
     try:
         yield
     finally:
+        _state.deferring = True  # a signal during the restore is kept, not raised half-way through it
         _state.active = False
         sys.unraisablehook = previous_hook
         for sig, handler in previous.items():
@@ -187,6 +211,10 @@ def unwinds() -> Iterator[None]:
         if previous_fd is not None:
             with contextlib.suppress(OSError, ValueError):
                 signal.set_wakeup_fd(previous_fd)
+        _state.deferring = False
+        pending, _state.pending = _state.pending, None
+    if pending is not None:  # received, never raised (lost near the end, or during the restore): raised now
+        raise _exception(pending)
 
 
 def run_async(main: Any) -> Any:

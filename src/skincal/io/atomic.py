@@ -104,19 +104,21 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     _refuse_special(target)
     remove_debris(target)
     tmp = directory / f".{target.name}.{os.getpid()}.{secrets.token_hex(6)}.tmp"
+    # the name is this process's alone (its pid, 48 random bits): whatever ends the block from here on,
+    # even a signal's exception right after the file was made, removes it
     try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    except FileNotFoundError:
-        raise ConfigError(f"{target}: the folder {directory} does not exist") from None
-    except OSError as exc:
-        raise ConfigError(f"{target}: cannot write in {directory} ({exc.strerror or exc})") from None
-    os.close(fd)
-    try:
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileNotFoundError:
+            raise ConfigError(f"{target}: the folder {directory} does not exist") from None
+        except OSError as exc:
+            raise ConfigError(f"{target}: cannot write in {directory} ({exc.strerror or exc})") from None
+        os.close(fd)
         yield tmp
         _fsync_path(tmp)
         os.replace(tmp, target)
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
+        with contextlib.suppress(OSError):  # absent (never made), or not removable: the error says why
             os.unlink(tmp)
         raise
     _fsync_path(directory, directory=True)

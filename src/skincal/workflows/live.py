@@ -157,7 +157,7 @@ def is_bag(path: str | Path) -> bool:
 
 def load_source(path: str | Path, robot: str | None = None) -> Dataset:
     """The dataset of ``path``: a ROS bag through :func:`skincal.data.ros.read_bag` (``robot``: a preset,
-    ``.urdf`` or chain file; default the bag's ``/robot_description``, else panda) or an HDF5 dataset
+    ``.urdf`` or chain file; default the bag's ``/robot_description``, required without one) or an HDF5 dataset
     (``robot`` must then be ``None``: the dataset has its own). Needs joint states."""
     if is_bag(path):
         from skincal.data.ros import read_bag

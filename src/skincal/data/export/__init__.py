@@ -44,7 +44,8 @@ Escaping by construction (no user text is ever pasted into a template):
   a comment or a code position);
 * CSV: through :mod:`csv`; a text cell starting with ``=``, ``+``, ``-``, ``@``, tab or CR gets a
   leading ``'`` (spreadsheet formula neutralisation); numbers are written as numbers;
-* YAML and JSON: through :func:`yaml.safe_dump` and :func:`json.dumps`.
+* YAML and JSON: through :func:`yaml.safe_dump`'s representer and emitter (libyaml's when PyYAML has it, same text) and
+  :func:`json.dumps`.
 
 One job per module: :mod:`~skincal.data.export.frames` (frame names, link maps, the unit frames and their
 covariance, the name checks), :mod:`~skincal.data.export.offsets` (a result moved onto another description

@@ -5,7 +5,8 @@ Reads ROS 1 (``.bag``) and ROS 2 bags (a directory with ``metadata.yaml``, or a 
 
 * The robot: ``--robot`` (a preset, a ``.urdf`` with ``base_link``/``tip_link``, a DH chain file),
   else the URDF on the bag's ``/robot_description`` topic (``std_msgs/String``, latched, as
-  ``robot_state_publisher`` publishes it; the last message), else the ``panda`` preset (noted).
+  ``robot_state_publisher`` publishes it; the last message); a bag with joint states and neither is a
+  one-line error asking for ``--robot`` (naming the presets whose joint names it carries).
 * ``sensor_msgs/Imu``: ``linear_acceleration`` -> ``/imu/<unit>/accel`` and ``angular_velocity``
   -> ``gyro``. One unit per topic and ``header.frame_id``: a topic whose messages carry several
   frame_ids (IMUs sharing a topic) gives one unit per frame_id, named by it. Unit name: the map,
@@ -104,9 +105,36 @@ def _robot(robot: SerialChain | str | None, base_link: str | None, tip_link: str
     return get_robot(robot, base_link=base_link, tip_link=tip_link)
 
 
+def _presets_named_by(scan: BagPass) -> list[str]:
+    """The presets all of whose joints some JointState message of the bag names: by their exact names,
+    else as :func:`match_joints` finds them (a prefix such as ``lbr_A1``)."""
+    from skincal.kinematics import PRESETS, get_robot
+
+    topic = scan.used.joints
+    seen = {row[2][0] for row in scan.rows.get(topic, [])} if topic is not None else set()
+    exact, suffixed = [], []
+    for name in PRESETS:
+        wanted = get_robot(name).joint_names
+        if wanted is None:
+            continue
+        if any(set(wanted) <= set(names) for names in seen):
+            exact.append(name)
+            continue
+        for names in seen:
+            try:
+                cols, _ = match_joints(names, wanted, "", topic or "")
+            except DatasetError:  # a name matched twice: not this robot's naming
+                cols = None
+            if cols is not None:
+                suffixed.append(name)
+                break
+    return exact or suffixed
+
+
 def _robot_from_bag(scan: BagPass, source: str, base_link: str | None, tip_link: str | None) -> tuple[SerialChain, str]:
-    """The chain of the bag's ``/robot_description`` (the last message), else the panda preset."""
-    from skincal.kinematics import get_robot
+    """The chain of the bag's ``/robot_description`` (the last message); without one, a one-line error
+    asking for ``--robot`` (naming the presets whose joint names the joint states carry): the robot is
+    never assumed (it was the Panda, said only in a note)."""
     from skincal.kinematics.urdf import chain_from_urdf
 
     texts = scan.rows.get(ROBOT_DESCRIPTION) or []
@@ -115,8 +143,15 @@ def _robot_from_bag(scan: BagPass, source: str, base_link: str | None, tip_link:
             raise ConfigError(
                 f"--base-link/--tip-link need a URDF: give --robot arm.urdf ({source} has no {ROBOT_DESCRIPTION} topic)"
             )
-        scan.notes.append(f"no --robot given and no {ROBOT_DESCRIPTION} in the bag: robot 'panda' (the default)")
-        return get_robot("panda"), "default"
+        fits = _presets_named_by(scan)
+        hint = (f"; its joint names are those of {' and '.join(repr(f) for f in fits)}: e.g. --robot {fits[0]}"
+                if fits else "")  # fmt: skip
+        raise ConfigError(
+            printable(
+                f"{source} has no {ROBOT_DESCRIPTION}: give the robot with --robot (a preset, arm.urdf or a DH "
+                f"chain file){hint}"
+            )
+        )
     text = texts[-1][2]
     if len({t[2] for t in texts}) > 1:
         scan.notes.append(f"{ROBOT_DESCRIPTION}: {len(texts)} different descriptions; using the last")
@@ -180,7 +215,7 @@ def read_bag(
     Args:
         path: ``.bag`` file, ROS 2 bag directory, or ``.db3``/``.mcap`` file.
         robot: preset name, ``.urdf`` or DH chain file, or chain; None: the bag's
-            ``/robot_description``, else the ``panda`` preset (noted).
+            ``/robot_description`` (without one, joint states are a :class:`ConfigError` asking for it).
         tmap: topics to read (default: every Imu, JointState, Range and LaserScan topic).
         base_link, tip_link: the serial chain of a URDF (``robot`` a ``.urdf``, or the bag's).
         accel_unit: ``auto``, ``g`` or ``mps2``; gyro_unit: ``auto``, ``rad`` or ``deg`` (per second).
