@@ -22,7 +22,7 @@ from skincal.bench.realdata import (
     run_realdata_benchmark,
     session_name,
 )
-from skincal.calib.api import POSITION_WEAK_STD_M
+from skincal.calib.position import POSITION_WEAK_STD_M
 from skincal.cli import main
 from skincal.data.hdf5 import write_dataset
 from skincal.sim import simulate

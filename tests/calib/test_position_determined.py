@@ -1,4 +1,4 @@
-"""What the data say of a unit's position, for every method (``calib.api.judge_position``,
+"""What the data say of a unit's position, for every method (``calib.position.judge_position``,
 ``weak_position``): rests
 alone never determine it (written as null even when a fit's priors left a number), and a std beyond
 ``POSITION_WEAK_STD_M`` on some axis is named in a warning with the estimate kept."""
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from skincal.calib.api import POSITION_WEAK_STD_M, judge_position, weak_position
+from skincal.calib.position import POSITION_WEAK_STD_M, judge_position, weak_position
 from skincal.data.result import UnitResult, has_position
 from skincal.skin.pose import SkinUnitPose
 

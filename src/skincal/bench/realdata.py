@@ -23,7 +23,7 @@ Per group and method, over the recordings calibrated on the group's most common 
 * time offsets (ms), their spread and the RMS of each one's deviation from the weighted mean in its own
   std (``time_offset_deviation_rms_std``); links chosen; failures (recording and reason);
 * ``position_weak``: the recordings whose position the calibration calls weakly determined (a std
-  above :data:`~skincal.calib.api.POSITION_WEAK_STD_M` on some axis; kept in every figure above;
+  above :data:`~skincal.calib.position.POSITION_WEAK_STD_M` on some axis; kept in every figure above;
   ``position_std_firm_mm`` and ``position_spread_over_std_firm`` are the spread without them).
 
 Recordings made at once by several IMUs (one folder per IMU with the same ``V.._S.._`` stem, or one

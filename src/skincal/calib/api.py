@@ -22,6 +22,7 @@ import numpy as np
 
 from skincal.calib.links import LinkAssignment, discover_link
 from skincal.calib.options import NoOptions, parse_options
+from skincal.calib.position import judge_position, weak_position
 from skincal.calib.preprocess import (
     DEFAULT_QDD_WINDOW_S,
     JointInterpolator,
@@ -31,7 +32,7 @@ from skincal.calib.preprocess import (
     unit_samples,
 )
 from skincal.data.dataset import NO_JOINTS_MESSAGE, STATIC, Dataset
-from skincal.data.result import POSITION_DETERMINED, CalibrationResult, UnitResult
+from skincal.data.result import CalibrationResult, UnitResult
 from skincal.errors import CalibrationError, ConfigError, DatasetError, SkincalError
 from skincal.kinematics.chain import SerialChain
 from skincal.parallel import can_fork, imap
@@ -562,57 +563,6 @@ def calibrate_unit(
         # the link by name as well as index (a URDF robot's own link name; link<i> for a DH robot)
         link_name = dataset.chain.link_name(result.pose.link)
         return replace(result, extras={**result.extras, "link_name": link_name})
-
-
-POSITION_WEAK_STD_M = 0.1
-"""A position whose std exceeds this on some link axis (m) is *weakly determined*: the unit's result
-says so in a warning (the estimate and its std are kept). Beyond 0.1 m a proximity reading placed by
-that pose lands anywhere on a link of a typical arm; the motion, not the estimator, is what is short
-(a translation moves no lever arm: ``f = R^T (a_o + [dw]x p + [w]x^2 p - g)`` loses ``p`` when
-``w = dw = 0``)."""
-
-
-def judge_position(result: UnitResult, rests_only: bool, static_only: bool) -> UnitResult:
-    """``result`` with what rests say of a position: nothing. From rests only (``rests_only``: no moving
-    sample used) the accelerometer reads ``f = R^T (-g)``, which holds no ``p``: the position is **not
-    determined**, whatever a fit's priors left, so it is written as ``null`` (``observable: false``, NaN
-    std and covariance rows, ``position_determined: false``) with a warning; the rotation and link (from
-    the rests) are kept. Otherwise ``result`` unchanged."""
-    if not rests_only:
-        return result
-    said = "static poses only" if static_only else "no moving sample used: rests only"
-    warning = f"position not determined ({said}): written as null; the rotation and link come from the rests"
-    cov = result.pose_covariance
-    if cov is not None:  # (x, y, z, rx, ry, rz): the position rows and columns undetermined
-        cov = np.array(cov, dtype=float)
-        cov[:3, :] = cov[:, :3] = np.nan
-    return replace(
-        result,
-        observable=False,
-        position_std_m=np.full(3, np.nan),
-        pose_covariance=cov,
-        warnings=(*result.warnings, warning),
-        extras={**result.extras, POSITION_DETERMINED: False},
-    )
-
-
-def weak_position(result: UnitResult) -> UnitResult:
-    """``result`` with a warning when its position std exceeds :data:`POSITION_WEAK_STD_M` on some link
-    axis (*weakly determined*, naming the axis and the std: a linear move that barely turns the link, a
-    rotation about the lever arm only); the estimate and its std are kept. Judged on the final std."""
-    std = result.position_std_m
-    if std is None:
-        return result
-    s = np.asarray(std, dtype=float)
-    if not np.any(np.isfinite(s)) or np.nanmax(s) <= POSITION_WEAK_STD_M:
-        return result
-    axis = int(np.nanargmax(s))
-    warning = (
-        f"position weakly determined: std {1e3 * s[axis]:.0f} mm along the link's {'xyz'[axis]} axis (above "
-        f"{1e3 * POSITION_WEAK_STD_M:.0f} mm): the motion barely turns this unit's link about the axes that show "
-        "this lever arm (a translation shows none); a motion that rotates the link determines it"
-    )
-    return replace(result, warnings=(*result.warnings, warning))
 
 
 def sees_motion(dataset: Dataset, unit: str) -> bool:
