@@ -148,3 +148,21 @@ def test_paired_differences_cancel_what_a_session_shares():
     z = (d_t - d_t.mean()) / np.hypot(0.5, 0.5)
     np.testing.assert_allclose(pair["time_offset_difference_ms"]["deviation_rms_std"], np.sqrt(np.mean(z**2)))
     assert paired("A", {**block("A"), "link": 5}, "B", block("B")) is None  # other links
+
+
+def test_bad_folders_are_one_line_errors(tmp_path, capsys):
+    """Nothing to compare is an error, not an empty table with exit 0: one recording (or a recording's own
+    folder), and a folder whose recordings are all unreadable (exit 2, one line on stderr)."""
+    junk = tmp_path / "junk"
+    junk.mkdir()
+    (junk / "a.h5").write_text("not hdf5")
+    (junk / "b.h5").write_text("neither")
+    one = tmp_path / "one" / "V100_S1_board"
+    one.mkdir(parents=True)
+    (one / "recording.h5").write_text("x")
+    for folder, said in ((junk, "no readable recording"), (one.parent, "at least two recordings"),
+                         (one, "at least two recordings")):  # fmt: skip
+        capsys.readouterr()
+        assert main(["benchmark", "realdata", str(folder)]) == 2
+        err = capsys.readouterr().err
+        assert said in err and len(err.strip().splitlines()) == 1

@@ -138,3 +138,41 @@ def test_one_decisive_rest_pose_decides_the_link():
     blind = replace(ds, imu={"su1": ImuStream(s.t[keep], s.accel[keep], None)})
     other = calibrate(blind, "mle").units["su1"]
     assert other.pose.link in (6, 7) and any("ambiguous" in w for w in other.warnings)
+
+
+def test_a_null_position_is_neither_scored_nor_exported_at_the_link_origin(static_session, tmp_path, capsys):
+    """A rests-only unit's p_link_su is a placeholder (0, 0, 0): evaluate gives it no position error
+    (``null``, "-" in the table) and leaves it out of the mean; every export leaves it out with a
+    warning naming it (a frame at the link origin would be a silent wrong answer); a result with no
+    position at all is refused in one line, exit 2."""
+    from skincal.calib import evaluate
+    from skincal.cli import main
+    from skincal.data.hdf5 import write_dataset
+
+    ds, st = static_session
+    result = calibrate(st, "mle")
+    ev = evaluate(result, ds)
+    assert all(np.isnan(u.position_error_mm) for u in ev.units.values()) and ev.mean_position_error_mm is None
+    assert all(u["position_error_mm"] is None for u in ev.to_dict()["units"].values())
+    # one unit from the moving session beside them: it is exported, the rests-only ones are not
+    moving = calibrate(ds, "mle", units=["su1"]).units["su1"]
+    mixed = replace(result, units={**result.units, "su1": moving})
+    data, res, mixed_path = tmp_path / "d.h5", tmp_path / "r.json", tmp_path / "m.json"
+    write_dataset(st, data)
+    write_result(result, res)
+    write_result(mixed, mixed_path)
+    capsys.readouterr()
+    assert main(["evaluate", str(res), "--truth", str(data), "--allow-other-dataset"]) == 0
+    assert "not determined" in capsys.readouterr().out
+    for fmt in ("urdf", "tf", "csv", "yaml"):
+        out = tmp_path / f"skin.{fmt}"
+        assert main(["export", str(mixed_path), "-f", fmt, "-o", str(out), "--robot", "panda"]) == 0
+        said = capsys.readouterr().out
+        for name in ("su2", "su3"):
+            assert f"unit {name} not exported (position not determined" in said
+            assert name not in out.read_text()
+        assert "su1" in out.read_text()
+    assert main(["export", str(res), "-f", "urdf", "-o", str(tmp_path / "none.urdf"), "--robot", "panda"]) == 2
+    err = capsys.readouterr().err
+    assert "no unit has a position to export" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "none.urdf").exists()

@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from skincal.errors import ConfigError, SkincalError
+from skincal.errors import ConfigError, DatasetError, SkincalError
 
 RECORDING_FILE = "recording.h5"
 """Name of the dataset file inside a recording folder."""
@@ -65,7 +65,7 @@ class Recording:
 
 def find_recordings(folder: Path) -> list[Recording]:
     """The recordings of ``folder``, sorted by name: sub-folders holding :data:`RECORDING_FILE`, and
-    ``.h5`` files directly in it; none is a :class:`ConfigError`."""
+    ``.h5`` files directly in it; fewer than two is a :class:`ConfigError` (nothing to compare)."""
     folder = Path(folder)
     if not folder.is_dir():
         raise ConfigError(f"{folder}: not a folder of recordings")
@@ -73,6 +73,11 @@ def find_recordings(folder: Path) -> list[Recording]:
     found += [Recording(p.stem, p) for p in folder.glob("*.h5") if p.is_file()]
     if not found:
         raise ConfigError(f"{folder}: no recordings (folders with {RECORDING_FILE}, or .h5 files)")
+    if len(found) < 2:
+        raise ConfigError(
+            f"{folder}: repeatability needs at least two recordings of one mount, found one (give the folder "
+            "that holds the recordings)"
+        )
     return sorted(found, key=lambda r: r.name)
 
 
@@ -381,6 +386,9 @@ def run_realdata_benchmark(
         if progress is not None:
             progress(rec.name)
         records.append(calibrate_recording(rec, methods, workers=workers))
+    if all(r["error"] is not None for r in records):
+        reasons = "; ".join(f"{r['recording']}: {r['error']}" for r in records[:3])
+        raise DatasetError(f"{folder}: no readable recording ({reasons}{'; ...' if len(records) > 3 else ''})")
     groups: dict[str, dict[str, list[dict[str, Any]]]] = {}
     for r in records:
         if r["error"] is not None:

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from skincal.data.dataset import Dataset
-from skincal.data.result import CalibrationResult, check_links
+from skincal.data.result import CalibrationResult, check_links, has_position
 from skincal.errors import DatasetError
 from skincal.kinematics.transforms import quat_wxyz_from_matrix, quaternion_distance, rotation_angle
 from skincal.skin.pose import SkinUnitPose
@@ -48,7 +48,8 @@ class UnitEvaluation:
         link_true, link_estimated: the unit's true and estimated 1-based link.
         observable: whether the result could determine the unit's full pose.
         position_error_mm: ``|p_est - p_true|``, mm (in the link frame; the base frame at the first
-            sample when the links differ).
+            sample when the links differ); NaN (``null`` in JSON) for a unit whose result determines no
+            position (:func:`~skincal.data.result.has_position`: its ``p_link_su`` is a placeholder).
         rotation_error_deg: the angle of ``R_true^T R_est``, deg.
         quaternion_distance: ``min(|q1 - q2|, |q1 + q2|)``.
     """
@@ -83,10 +84,19 @@ class Evaluation:
     units_failed: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        """The evaluation document of ``docs/interfaces.md`` (plain JSON values)."""
+        """The evaluation document of ``docs/interfaces.md`` (plain JSON values; NaN as ``null``)."""
         doc = asdict(self)
         doc["units_failed"] = list(self.units_failed)
+        for unit in doc["units"].values():
+            if not np.isfinite(unit["position_error_mm"]):
+                unit["position_error_mm"] = None
         return doc
+
+
+def error_text(value: float, digits: int = 3) -> str:
+    """An error for a table: ``value`` with ``digits`` decimals, ``-`` where it is not defined (NaN: a
+    position the result does not determine)."""
+    return f"{value:.{digits}f}" if np.isfinite(value) else "- (not determined)"
 
 
 def evaluate(result: CalibrationResult, truth: Dataset) -> Evaluation:
@@ -102,8 +112,10 @@ def evaluate(result: CalibrationResult, truth: Dataset) -> Evaluation:
     for name, unit in result.units.items():
         true = truth.truth[name]
         pos_mm, rot_deg, qdist = pose_errors(truth.robot, q0, unit.pose, true)
+        if not has_position(unit):  # its p_link_su is a placeholder, not an estimate
+            pos_mm = float("nan")
         units[name] = UnitEvaluation(true.link, unit.pose.link, bool(unit.observable), pos_mm, rot_deg, qdist)
-    observable = [u for u in units.values() if u.observable]
+    observable = [u for u in units.values() if u.observable and np.isfinite(u.position_error_mm)]
 
     def mean(key: str) -> float | None:
         return float(np.mean([getattr(u, key) for u in observable])) if observable else None

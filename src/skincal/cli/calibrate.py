@@ -348,6 +348,7 @@ def evaluate(
 
     from rich.table import Table
 
+    from skincal.calib.metrics import error_text
     from skincal.calib.metrics import evaluate as run
     from skincal.data.hdf5 import read_dataset
     from skincal.data.provenance import check_result_dataset
@@ -372,7 +373,7 @@ def evaluate(
         table.add_row(
             shown(name) + mark,
             f"{u.link_true}/{u.link_estimated}",
-            f"{u.position_error_mm:.3f}",
+            error_text(u.position_error_mm),
             f"{u.rotation_error_deg:.4f}",
             f"{u.quaternion_distance:.5f}",
         )

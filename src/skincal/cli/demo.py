@@ -21,6 +21,7 @@ def demo(
     from rich.table import Table
 
     from skincal.calib import calibrate, evaluate
+    from skincal.calib.metrics import error_text
     from skincal.cli.calibrate import std_cell
     from skincal.workflows.session import simulate_dataset
 
@@ -45,7 +46,7 @@ def demo(
         table.add_row(
             name,
             f"{u.link_true}/{u.link_estimated}",
-            f"{u.position_error_mm:.3f}",
+            error_text(u.position_error_mm),
             f"{u.rotation_error_deg:.4f}",
             std,
             escape("; ".join(unit.warnings)),

@@ -237,7 +237,7 @@ def export_cmd(
     --robot (both chains' forward kinematics; refused when they do not move alike)."""
     from rich.markup import escape
 
-    from skincal.data.export import export_result
+    from skincal.data.export import export_result, without_position
     from skincal.data.result import read_result
     from skincal.io.atomic import check_output
     from skincal.kinematics import PRESETS
@@ -262,6 +262,9 @@ def export_cmd(
     # names come from the result and the link map: no markup, control characters shown escaped
     console.print(printable(f"wrote {out}: {len(frames)} unit(s) as {fmt} onto " + ", ".join(
         sorted({f.parent for f in frames}))), highlight=False, markup=False)
+    for name in without_position(res):
+        console.print("[yellow]warning[/]: " + escape(printable(f"unit {name} not exported (position not determined: "
+                                                                 "calibrated from rests only)")), highlight=False)
     for name, reason in res.failed_units.items():
         if name not in res.units:
             console.print("[yellow]warning[/]: " + escape(printable(f"unit {name} not exported (not calibrated: "

@@ -12,7 +12,7 @@ from skincal.calib.metrics import Evaluation, evaluate
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.residuals import PLOT_POINTS, UnitResiduals, unit_activity, unit_residuals
 from skincal.data.dataset import Dataset, ImuStream
-from skincal.data.result import CalibrationResult
+from skincal.data.result import CalibrationResult, has_position
 from skincal.errors import DatasetError
 from skincal.kinematics.transforms import FloatArray
 from skincal.parallel import can_fork, imap
@@ -29,7 +29,7 @@ class UnitRow:
 
     name: str
     link: int
-    position_m: FloatArray
+    position_m: FloatArray | None
     quaternion_wxyz: FloatArray
     observable: bool
     position_std_m: FloatArray | None
@@ -159,7 +159,7 @@ def collect(
             UnitRow(
                 name=name,
                 link=unit.pose.link,
-                position_m=unit.pose.p_link_su,
+                position_m=unit.pose.p_link_su if has_position(unit) else None,  # None: not determined
                 quaternion_wxyz=unit.pose.quaternion_wxyz,
                 observable=unit.observable,
                 position_std_m=unit.position_std_m,

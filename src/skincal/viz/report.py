@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from skincal.calib.metrics import error_text
 from skincal.data.dataset import Dataset
 from skincal.data.result import CalibrationResult
 from skincal.io.atomic import write_bytes_atomic
@@ -146,7 +147,7 @@ def _errors_section(content: ReportContent) -> str:
         link = f"{u.link_true}" + ("" if u.link_true == u.link_estimated else
                                       f' <b class="warn">(est. {u.link_estimated})</b>')
         mark = "" if u.observable else ' <span class="muted">(unobservable)</span>'
-        rows.append([_e(name) + mark, link, f"{u.position_error_mm:.3f}", f"{u.rotation_error_deg:.4f}",
+        rows.append([_e(name) + mark, link, error_text(u.position_error_mm), f"{u.rotation_error_deg:.4f}",
                      f"{u.quaternion_distance:.5f}"])
     if ev.mean_position_error_mm is not None:
         rows.append(["<b>mean (observable)</b>", f"{ev.links_correct}/{ev.units_total} links ok",

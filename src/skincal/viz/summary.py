@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from skincal.calib.metrics import error_text
 from skincal.names import printable
 from skincal.viz.content import WORST_SHOWN, ReportContent
 
@@ -70,7 +71,7 @@ def render_markdown(content: ReportContent, worst: int = WORST_SHOWN) -> str:
     ev = content.evaluation
     if ev is not None:
         out += ["", "## Errors against truth", ""]
-        erows = [[name, f"{u.link_true}/{u.link_estimated}", f"{u.position_error_mm:.3f}",
+        erows = [[name, f"{u.link_true}/{u.link_estimated}", error_text(u.position_error_mm),
                   f"{u.rotation_error_deg:.4f}", f"{u.quaternion_distance:.5f}"]
                  for name, u in ev.units.items()]
         if ev.mean_position_error_mm is not None:

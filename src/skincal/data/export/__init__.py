@@ -98,6 +98,8 @@ __all__ = [
     "FORMATS",
     "export_result",
     "export_text",
+    "exportable",
+    "without_position",
 ]
 
 
@@ -112,6 +114,31 @@ _WRITERS = {
     "tf-ros1": to_tf_ros1,
     "csv": to_csv,
 }
+
+
+def exportable(result: CalibrationResult) -> CalibrationResult:
+    """``result`` with only the units that have a position (:func:`~skincal.data.result.has_position`): a
+    unit calibrated from rests only has a link and a rotation but no position, and a frame placed at
+    its placeholder ``(0, 0, 0)`` would put it on the link's origin; the caller names the ones left out
+    (:func:`without_position`). :class:`ConfigError` when no unit is left."""
+    from dataclasses import replace
+
+    from skincal.data.result import has_position
+
+    kept = {name: unit for name, unit in result.units.items() if has_position(unit)}
+    if result.units and not kept:
+        raise ConfigError(
+            "no unit has a position to export (calibrated from rests only: positions not determined); "
+            "record motion that turns the units' links and calibrate again"
+        )
+    return result if len(kept) == len(result.units) else replace(result, units=kept)
+
+
+def without_position(result: CalibrationResult) -> list[str]:
+    """The units of ``result`` that :func:`exportable` leaves out (no position determined)."""
+    from skincal.data.result import has_position
+
+    return [name for name, unit in result.units.items() if not has_position(unit)]
 
 
 def export_text(
@@ -137,6 +164,7 @@ def export_text(
             "to add the units to your own robot description)"
         )
     check_robot_name(result)  # before the robot is looked at: a crafted name is refused as such
+    result = exportable(result)
     if robot is None and source is not None:
         if base_link is not None or tip_link is not None:
             raise ConfigError("--base-link and --tip-link apply to a URDF robot given with --robot")
