@@ -147,8 +147,11 @@ def run_experiment(
     if c.margin in CRITERION:
         sep = separation_for(c.chain, c.scenario, stopping=stopping)
         controller = replace(controller, separation=sep, stop_never_approaches=True)
-        if c.mode == "torque":  # speed scaling before S_p for a drive that lags its command
-            controller = replace(controller, v_max=TORQUE_V_MAX, sp_buffer=TORQUE_SP_BUFFER_M)
+        if c.mode == "torque":  # speed scaling before S_p, and commands the drive reaches within a step
+            from skincal.sim.dynamics import acceleration_limits
+
+            accel = tuple(acceleration_limits(c.chain).tolist())
+            controller = replace(controller, v_max=TORQUE_V_MAX, sp_buffer=TORQUE_SP_BUFFER_M, acceleration_limit=accel)
     if c.margin == "iso-pfl":
         controller = replace(controller, pfl=assumed_region(regions))
     mass = robot_mass_matrix(c.chain) if c.margin in CRITERION else None
