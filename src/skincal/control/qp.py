@@ -156,6 +156,11 @@ class ControllerConfig:
             one (``qd_prev`` of :meth:`AvoidanceController.step`), so the drive reaches it within the step and
             the obstacle rows hold on the velocity the robot actually has (module docstring). None: an ideal
             velocity interface (kinematic).
+        all_directions: with ``separation``, a robot point near a perceived point (its bound below
+            ``TANGENT_SHARE v_max``) moves across the normal no faster than the row lets it move toward the
+            point, ``|t_k^T J_i qd| <= u_i`` for two tangents ``t_k`` while ``u_i >= 0`` (:func:`_sideways_rows`):
+            the speed ``v_r`` of ``S_p`` toward a part of the person the skin has not seen yet, in any direction,
+            scaled down before ``S_p`` is reached.
     """
 
     dt: float = 0.001
@@ -176,6 +181,7 @@ class ControllerConfig:
     sp_buffer: float = 0.0
     stop_never_approaches: bool = False
     acceleration_limit: tuple[float, ...] | None = None
+    all_directions: bool = False
 
     def __post_init__(self) -> None:
         if self.pfl is not None and (self.separation is None or not isinstance(self.pfl, BodyRegion)):
@@ -273,6 +279,33 @@ class SeparationInputs:
     v_now: FloatArray
     v_h: FloatArray
     z_d: FloatArray
+
+
+TANGENT_SHARE = 0.9
+"""With ``ControllerConfig.all_directions``, the rows across the normal are added where the normal row's bound is
+below this share of ``v_max`` (inside the ramp: a person near)."""
+
+
+def _sideways_rows(
+    chain: SerialChain, T: FloatArray, prox, h_all: FloatArray, below: float
+) -> tuple[FloatArray, FloatArray]:
+    """Rows ``+-t_k^T J_i`` ``(4 m, n)`` and bounds ``h_i`` ``(4 m,)`` for the ``m`` points whose bound is
+    ``0 <= h_i < below`` (near, not inside the margin: inside it the normal row asks for a retreat and the way
+    out may be sideways, ``pinch``): ``t_1, t_2`` unit vectors across the normal ``n_i`` (base frame). With the
+    normal row they bound the robot point's speed toward any direction ``e`` by ``sqrt(3) h_i``
+    (``e^T v <= |e.n| n^T v + |e.t_1| |t_1^T v| + |e.t_2| |t_2^T v|``)."""
+    near = np.flatnonzero((h_all >= 0) & (h_all < below))
+    if near.size == 0:
+        return np.zeros((0, chain.n_joints)), np.zeros(0)
+    normal = prox.normal[near]
+    helper = np.where(np.abs(normal[:, :1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+    t1 = np.cross(normal, helper)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(normal, t1)
+    J = chain.point_jacobians(T, prox.link[near], prox.p_base_robot[near])  # (m, 3, n)
+    rows = np.concatenate([np.einsum("ki,kij->kj", t, J) for t in (t1, t2)])
+    bound = np.tile(h_all[near], 2)
+    return np.vstack([rows, -rows]), np.concatenate([bound, bound])
 
 
 def drive_bounds(
@@ -408,6 +441,9 @@ class AvoidanceController:
             # A row with no lever on the robot (point at the base) and a non-negative bound is void.
             keep = (np.abs(G_all).max(axis=1) > 1e-9) | (h_all < 0)
             G, h = G_all[keep], h_all[keep]
+            if cfg.all_directions and cfg.separation is not None:
+                G_t, h_t = _sideways_rows(self.chain, T, prox, h_all, TANGENT_SHARE * cfg.v_max)
+                G, h = np.vstack([G, G_t]), np.concatenate([h, h_t])
         else:
             G, h, dist, crit, terms = np.zeros((0, n)), np.zeros(0), np.zeros(0), np.zeros(0), None
             sep_in = None
@@ -446,8 +482,8 @@ class AvoidanceController:
             ub[n:] = np.inf
             z = qpsolvers.solve_qp(P, np.zeros(n + K), G, prob.h, lb=lb, ub=ub, solver=self.config.solver)
         elapsed = time.perf_counter() - t0
-        if z is None:  # cannot happen for consistent bounds; stand still rather than guess
-            qd = np.zeros(n)
+        if z is None:  # cannot happen for consistent bounds; as near standing still as the box allows
+            qd = np.clip(np.zeros(n), prob.lb, prob.ub)
         else:
             qd = z[:n]
         violation = float(np.max(prob.G @ qd - prob.h, initial=0.0))

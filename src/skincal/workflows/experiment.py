@@ -151,7 +151,13 @@ def run_experiment(
             from skincal.sim.dynamics import acceleration_limits
 
             accel = tuple(acceleration_limits(c.chain).tolist())
-            controller = replace(controller, v_max=TORQUE_V_MAX, sp_buffer=TORQUE_SP_BUFFER_M, acceleration_limit=accel)
+            controller = replace(
+                controller,
+                v_max=TORQUE_V_MAX,
+                sp_buffer=TORQUE_SP_BUFFER_M,
+                acceleration_limit=accel,
+                all_directions=True,
+            )
     if c.margin == "iso-pfl":
         controller = replace(controller, pfl=assumed_region(regions))
     mass = robot_mass_matrix(c.chain) if c.margin in CRITERION else None
@@ -165,7 +171,9 @@ def run_experiment(
         )  # fmt: skip
     body = RobotBody.of(c.chain)
     judged = (CRITERION[c.margin], regions, mass) if c.margin in CRITERION else None
-    return Experiment(c, controller, log, reference, summarize(log, body, c.label, reference, judged), body)
+    stop = controller.separation.stopping if controller.separation is not None else None
+    metrics = summarize(log, body, c.label, reference, judged, stopping=stop)
+    return Experiment(c, controller, log, reference, metrics, body)
 
 
 def scenario_regions(scenario: Scenario) -> list[BodyRegion | None]:
@@ -220,10 +228,12 @@ def summarize(
     poses: str = "",
     reference: RunLog | None = None,
     judged: tuple[str, list, MassMatrix | None] | None = None,
+    stopping: StoppingModel | None = None,
 ) -> AvoidMetrics:
     """All metrics of a run; ``body`` is the TRUE robot geometry (as simulated); ``reference`` the same
     run without a person (for the task time lost; NaN without it); ``judged``: ``(criterion, regions,
-    mass_matrix)`` to judge the run by ISO/TS 15066's criteria (:func:`skincal.control.iso_metrics.iso_criteria`)."""
+    mass_matrix)`` to judge the run by ISO/TS 15066's criteria (:func:`skincal.control.iso_metrics.iso_criteria`);
+    ``stopping`` the robot's stopping model there (the share of a violation that is a stop in progress)."""
     iso = None
     scene = log.scenario.scene
     if judged is not None:
@@ -233,7 +243,7 @@ def summarize(
             measured = (log.sp_inside, log.sp_approach, log.sp_excess)
         criterion, regions, mass = judged
         iso = iso_metrics.iso_criteria(
-            log.t, log.q, body, solids, margin_of(log), regions, mass, criterion, measured=measured
+            log.t, log.q, body, solids, margin_of(log), regions, mass, criterion, measured=measured, stopping=stopping
         )
     return iso_metrics.summarize_run(
         scenario=log.scenario.name,
