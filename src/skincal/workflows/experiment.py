@@ -49,6 +49,12 @@ TORQUE_SP_BUFFER_M = 0.02
 """``ControllerConfig.sp_buffer`` in torque mode with an ISO margin, m: the lagging drive comes to rest before
 ``S_p`` (with :data:`TORQUE_V_MAX`: no step approaching inside ``S_p`` in ``hand``, Panda, torque; simulated,
 chosen on that run)."""
+TORQUE_ALL_DIRECTIONS = False
+"""``ControllerConfig.all_directions`` in torque mode with an ISO margin. Off: measured on the Panda (torque,
+``--margin iso``, true poses; simulated) it cut the time approaching inside ``S_p`` summed over the eight shipped
+scenarios from 0.61 to 0.54 s and the largest speed there in ``lower`` from 0.84 to 0.05 m/s, but passed two of
+them instead of four (``elbow`` and ``walk-at`` failed with it, ``pinch`` went from 0.19 to 0.44 s):
+``docs/results-iso.md``."""
 CRITERION = {"iso": "ssm", "iso-pfl": "pfl"}
 """The ISO criterion a margin's run is judged by (:func:`skincal.control.iso_metrics.iso_criteria`)."""
 
@@ -156,7 +162,7 @@ def run_experiment(
                 v_max=TORQUE_V_MAX,
                 sp_buffer=TORQUE_SP_BUFFER_M,
                 acceleration_limit=accel,
-                all_directions=True,
+                all_directions=TORQUE_ALL_DIRECTIONS,
             )
     if c.margin == "iso-pfl":
         controller = replace(controller, pfl=assumed_region(regions))
