@@ -68,3 +68,25 @@ def test_braking_steps_are_a_stop_from_the_entry_within_the_stopping_time():
     np.testing.assert_array_equal(np.flatnonzero(out), [1, 2, 3, 4, 5, 6, 7, 8, 11])
     # the second entry (step 11, 0.1 m/s) counts; it speeds up at step 12: not a stop from there on
     assert not out[12] and not out[13] and out[11]
+
+
+def test_all_directions_bounds_the_speed_across_the_normal_near_a_point_only():
+    """A still point 0.3 m beyond the flange (inside the ramp, outside S_p): with all_directions the QP has the
+    normal row and four tangent rows with the same bound, each tangent row orthogonal to the normal one in
+    Cartesian space; a point 3 m away (the ramp saturated) adds none."""
+    chain = panda()
+    x = chain.flange_pose(Q_START)[0, :3, 3]
+    base = ControllerConfig(separation=SEP, n_rim=0)
+    ctl = AvoidanceController(chain, replace(base, all_directions=True))
+    near = ctl.problem(Q_START, x, np.zeros(3), (x + [0.3, 0.0, 0.0])[None])
+    plain = AvoidanceController(chain, base).problem(Q_START, x, np.zeros(3), (x + [0.3, 0.0, 0.0])[None])
+    assert plain.G.shape[0] == 1 and near.G.shape[0] == 5
+    assert 0 < plain.h[0] < 0.9 * base.v_max
+    np.testing.assert_allclose(near.h, plain.h[0])
+    np.testing.assert_allclose(near.G[1:3], -near.G[3:5])
+    J = chain.point_jacobians(chain.link_frames(Q_START)[0], [chain.n_joints], x)[0]
+    normal = np.linalg.lstsq(J.T, plain.G[0], rcond=None)[0]  # n with n^T J = G (the flange is the nearest point)
+    tangents = np.linalg.lstsq(J.T, near.G[1:3].T, rcond=None)[0].T
+    np.testing.assert_allclose(tangents @ normal, 0.0, atol=1e-6)
+    far = ctl.problem(Q_START, x, np.zeros(3), (x + [3.0, 0.0, 0.0])[None])
+    assert far.G.shape[0] == 1
