@@ -90,3 +90,14 @@ def test_all_directions_bounds_the_speed_across_the_normal_near_a_point_only():
     np.testing.assert_allclose(tangents @ normal, 0.0, atol=1e-6)
     far = ctl.problem(Q_START, x, np.zeros(3), (x + [3.0, 0.0, 0.0])[None])
     assert far.G.shape[0] == 1
+
+
+def test_feedback_speed_caps_the_way_back_to_the_reference():
+    chain = panda()
+    x = chain.flange_pose(Q_START)[0, :3, 3]
+    far = x + np.array([0.0, 0.2, 0.0])  # K = 10/s: 2 m/s uncapped
+    capped = AvoidanceController(chain, ControllerConfig(feedback_speed=0.5)).problem(Q_START, far, np.zeros(3), [])
+    free = AvoidanceController(chain, ControllerConfig()).problem(Q_START, far, np.zeros(3), [])
+    np.testing.assert_allclose(capped.c, 0.25 * free.c)  # c = -J^T xd_cmd: the feedback scaled to 0.5 m/s
+    with pytest.raises(ConfigError, match="feedback_speed"):
+        ControllerConfig(feedback_speed=0.0)

@@ -161,6 +161,12 @@ class ControllerConfig:
             point, ``|t_k^T J_i qd| <= u_i`` for two tangents ``t_k`` while ``u_i >= 0`` (:func:`_sideways_rows`):
             the speed ``v_r`` of ``S_p`` toward a part of the person the skin has not seen yet, in any direction,
             scaled down before ``S_p`` is reached.
+        feedback_speed: the feedback term ``K (x_des - x)`` is scaled down to at most this norm, m/s (None: not
+            capped). After a retreat the flange is far off its reference and ``K = 10/s`` would bring it back at
+            up to 1.8 m/s (``hand`` on the Panda, torque, with ``--resume``; simulated), a speed an acceleration
+            limited drive cannot take back within a step when a part of the person is then first seen. Not used
+            by ``skincal avoid`` yet: capped at 0.5 m/s it cut that run's steps approaching inside ``S_p`` from
+            220 to 5 (``pinch``: 334 to 204) but gave ``arm`` (torque, 7 s, no ``--resume``) one (simulated).
     """
 
     dt: float = 0.001
@@ -182,6 +188,7 @@ class ControllerConfig:
     stop_never_approaches: bool = False
     acceleration_limit: tuple[float, ...] | None = None
     all_directions: bool = False
+    feedback_speed: float | None = None
 
     def __post_init__(self) -> None:
         if self.pfl is not None and (self.separation is None or not isinstance(self.pfl, BodyRegion)):
@@ -197,6 +204,8 @@ class ControllerConfig:
             raise ConfigError(f"controller: separation must be SeparationParams or None, got {self.separation!r}")
         if not (0 < self.critical < self.notice):
             raise ConfigError(f"controller: need 0 < critical < notice (m), got {self.critical}, {self.notice}")
+        if self.feedback_speed is not None and not self.feedback_speed > 0:
+            raise ConfigError(f"controller: feedback_speed must be positive, got {self.feedback_speed}")
         for name in ("dt", "damping", "v_max", "velocity_scale"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"controller: {name} must be positive, got {getattr(self, name)}")
@@ -393,7 +402,12 @@ class AvoidanceController:
         T = self._frames.frames(q)
         x = T[n, :3, :3] @ self._flange + T[n, :3, 3]
         J = self.chain.point_jacobians(T, [n], x)[0]
-        xd_cmd = np.asarray(xd_des, dtype=float) + cfg.gain * (np.asarray(x_des, dtype=float) - x)
+        feedback = cfg.gain * (np.asarray(x_des, dtype=float) - x)
+        if cfg.feedback_speed is not None:  # the way back to the reference at most at this speed
+            norm = float(np.linalg.norm(feedback))
+            if norm > cfg.feedback_speed:
+                feedback *= cfg.feedback_speed / norm
+        xd_cmd = np.asarray(xd_des, dtype=float) + feedback
         P = J.T @ J + cfg.damping * np.eye(n)
         c = -J.T @ xd_cmd
         if cfg.posture_gain > 0 and self.q_posture is not None:
