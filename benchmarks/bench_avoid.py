@@ -62,13 +62,27 @@ def main() -> None:
             json.dump({"step": step, "runs": rows}, fh, indent=2)
 
 
+ISO_HEADER = f"{'viol[s]':>7} {'brake[s]':>8} {'vmax':>6} {'rob/pers':>8} {'in-lim':>6} {'ISO':>4}"
+"""Issue 28's pass/fail columns (:func:`iso_columns`)."""
+
+
 def iso_columns(iso: dict | None) -> str:
-    """Issue 28's columns: time approaching a point inside its S_p faster than allowed (s), contacts
-    robot-/person-initiated, and the verdict (ISO/TS 15066: none of the first, every contact within limits)."""
+    """Issue 28's columns: time approaching a point inside its S_p faster than allowed (s; must be 0), of it the
+    time that was a stop in progress from the entry into S_p (s), the largest approach speed inside S_p (m/s),
+    contacts robot-/person-initiated (robot-initiated must be 0), contacts within the body region's limits of
+    all, and the verdict (ISO/TS 15066: no violation, every contact within its limits)."""
     if not iso:
-        return f"{'-':>7} {'-':>8} {'-':>4}"
+        return f"{'-':>7} {'-':>8} {'-':>6} {'-':>8} {'-':>6} {'-':>4}"
     pair = f"{iso['contacts_robot_initiated']}/{iso['contacts_person_initiated']}"
-    return f"{iso['sp_violation_s']:7.3f} {pair:>8} {'pass' if iso['iso_pass'] else 'FAIL':>4}"
+    n = iso["contacts_robot_initiated"] + iso["contacts_person_initiated"]
+    within = f"{iso['contacts_within_limits']}/{n}"
+    brake = iso.get("sp_violation_braking_s")
+    brake_text = f"{brake:8.3f}" if brake is not None else f"{'-':>8}"
+    verdict = "pass" if iso["iso_pass"] else "FAIL"
+    return (
+        f"{iso['sp_violation_s']:7.3f} {brake_text} {iso['max_approach_inside_sp_mps']:+6.3f} {pair:>8} "
+        f"{within:>6} {verdict:>4}"
+    )
 
 
 def iso(args) -> None:
@@ -90,7 +104,7 @@ def iso(args) -> None:
     print(
         f"{'robot':7} {'scenario':8} {'v_h':>4} {'poses':18} {'mode':9} {'contacts':>8} {'clear[m]':>8} "
         f"{'min(d-Sp)':>9} {'<Sp':>5} {'Sp@min':>6} {'Sp max':>6} {'Z_d':>6} {'stop[s]':>7} {'near[s]':>7} "
-        f"{'lost[s]':>7} {'loop med/p95[ms]':>17} {'viol[s]':>7} {'rob/pers':>8} {'ISO':>4}",
+        f"{'lost[s]':>7} {'loop med/p95[ms]':>17} {ISO_HEADER}",
         flush=True,
     )
 

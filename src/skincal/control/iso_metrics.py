@@ -36,6 +36,7 @@ import numpy as np
 from skincal.control.body_regions import BodyRegion, contact_force, pfl_speed_limit, transfer_energy
 from skincal.control.effective_mass import MassMatrix, effective_mass
 from skincal.errors import ConfigError
+from skincal.kinematics.stopping import StoppingModel
 from skincal.kinematics.transforms import FloatArray
 from skincal.perception.body import RobotBody, segment_closest_points, segment_distance
 from skincal.skin import tof
@@ -400,6 +401,9 @@ class IsoCriteria:
         true_inside_sp_s, true_violation_s, true_max_approach_mps: the same against the true geometry.
         contacts: the contacts (:class:`ContactEvent`, true geometry).
         passed: no violation (measured separation) and every contact within its limits.
+        braking_s: of ``violation_s``, the time that is a stop in progress from the step the robot came inside
+            ``S_p`` (:func:`braking_steps`; NaN without a stopping model). Reported, not excused: ``passed``
+            does not use it.
     """
 
     criterion: str
@@ -413,6 +417,7 @@ class IsoCriteria:
     true_max_approach_mps: float
     contacts: tuple[ContactEvent, ...]
     passed: bool
+    braking_s: float = float("nan")
 
     def summary(self) -> dict:
         """The metrics' flat fields (JSON-ready): counts, peaks and the verdict."""
@@ -423,6 +428,7 @@ class IsoCriteria:
             "inside_sp_s": self.inside_sp_s,
             "sp_violation_s": self.violation_s,
             "sp_violation_steps": self.violation_steps,
+            "sp_violation_braking_s": self.braking_s,
             "max_approach_inside_sp_mps": self.max_approach_inside_sp_mps,
             "max_approach_excess_mps": self.max_excess_mps,
             "true_inside_sp_s": self.true_inside_sp_s,
@@ -451,6 +457,7 @@ def iso_criteria(
     criterion: str = "ssm",
     tolerance: float = APPROACH_TOLERANCE_MPS,
     measured: tuple[np.ndarray, FloatArray, FloatArray] | None = None,
+    stopping: StoppingModel | None = None,
 ) -> IsoCriteria:
     """A run (instants ``t`` ``(S,)``, configurations ``q`` ``(S, n)``, the step's ``S_p`` ``margin`` ``(S,)``)
     against ISO/TS 15066: at each step the TRUE nearest pair of robot and solid (:func:`nearest_pairs`), the
@@ -463,7 +470,8 @@ def iso_criteria(
     infinite: the most cautious limit). ``measured``: per step ``(inside, approach, excess)`` ``(S,)`` each:
     the number of perceived points inside their ``S_p``, the robot's largest actual speed toward them and
     its largest excess over their allowed speed, m/s (:class:`skincal.workflows.avoidance.RunLog`'s
-    ``sp_*``); the standard's criterion. None: the true-geometry test is the criterion."""
+    ``sp_*``); the standard's criterion. None: the true-geometry test is the criterion. ``stopping``: the
+    robot's stopping model, for the share of the violation that is a stop in progress (:func:`braking_steps`)."""
     if criterion not in CRITERIA:
         raise ConfigError(f"unknown ISO criterion '{criterion}' (use {' or '.join(CRITERIA)})")
     S = t.size
@@ -521,7 +529,12 @@ def iso_criteria(
         m_bad = m_inside & (np.asarray(measured[2]) > tolerance)
         m_approach = float(np.max(measured[1][m_inside])) if np.any(m_inside) else 0.0
         m_excess = float(np.max(measured[2][m_inside])) if np.any(m_inside) else float("-inf")
+    braking = float("nan")
+    if stopping is not None:
+        speed = measured[1] if measured is not None else np.where(inside, v_r, -np.inf)
+        braking = float(np.sum(braking_steps(m_inside, m_bad, np.asarray(speed, dtype=float), dt, stopping)) * dt)
     return IsoCriteria(
+        braking_s=braking,
         criterion=criterion,
         inside_sp_s=float(np.sum(m_inside) * dt),
         violation_s=float(np.sum(m_bad) * dt),
@@ -534,3 +547,30 @@ def iso_criteria(
         contacts=tuple(events),
         passed=bool(not np.any(m_bad) and all(e.within_limits and not e.robot_initiated for e in events)),
     )
+
+
+def braking_steps(
+    inside: np.ndarray, bad: np.ndarray, approach: FloatArray, dt: float, stopping: StoppingModel
+) -> np.ndarray:
+    """``(S,)`` the violating steps (``bad``) that are a stop in progress: in a run of consecutive steps
+    ``inside`` ``S_p`` entered at step ``k0`` with the robot approaching at ``v0 = approach[k0]`` (m/s), the
+    steps ``k`` up to the first one that is not braking, where braking means the approach speed never above
+    ``v0`` and ``t_k - t_k0 <= T_r + T_s(v0)`` of the stopping model. (What ``S_r + S_s`` of ``S_p`` budget
+    for: ISO/TS 15066 asks the robot to initiate its stop when the separation falls below ``S_p``, and a
+    drive cannot reverse at once; a point first perceived inside ``S_p``, a part the skin had not seen, is
+    such an entry.)"""
+    S = inside.size
+    out = np.zeros(S, dtype=bool)
+    k = 0
+    while k < S:
+        if not inside[k]:
+            k += 1
+            continue
+        k0, v0 = k, float(approach[k])
+        limit = stopping.reaction_time_s + float(stopping.stopping_time(max(v0, 0.0)))
+        braking = True
+        while k < S and inside[k]:
+            braking = braking and approach[k] <= v0 + 1e-12 and (k - k0) * dt <= limit + 1e-12
+            out[k] = braking and bad[k]
+            k += 1
+    return out

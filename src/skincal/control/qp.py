@@ -150,6 +150,23 @@ class ControllerConfig:
             a row that allows an approach not at all: the protective stop of speed and separation
             monitoring (module docstring). False: the legacy retreat, which may approach one point to back
             away from others.
+        acceleration_limit: ``(n,)`` joint acceleration limits of the drive the command goes to, rad/s^2 (a
+            torque-level robot whose reference velocity moves toward the command at most at these,
+            :class:`skincal.sim.dynamics.TorqueRobot`): each command stays within ``a_j dt`` of the previous
+            one (``qd_prev`` of :meth:`AvoidanceController.step`), so the drive reaches it within the step and
+            the obstacle rows hold on the velocity the robot actually has (module docstring). None: an ideal
+            velocity interface (kinematic).
+        all_directions: with ``separation``, a robot point near a perceived point (its bound below
+            ``TANGENT_SHARE v_max``) moves across the normal no faster than the row lets it move toward the
+            point, ``|t_k^T J_i qd| <= u_i`` for two tangents ``t_k`` while ``u_i >= 0`` (:func:`_sideways_rows`):
+            the speed ``v_r`` of ``S_p`` toward a part of the person the skin has not seen yet, in any direction,
+            scaled down before ``S_p`` is reached.
+        feedback_speed: the feedback term ``K (x_des - x)`` is scaled down to at most this norm, m/s (None: not
+            capped). After a retreat the flange is far off its reference and ``K = 10/s`` would bring it back at
+            up to 1.8 m/s (``hand`` on the Panda, torque, with ``--resume``; simulated), a speed an acceleration
+            limited drive cannot take back within a step when a part of the person is then first seen. Not used
+            by ``skincal avoid`` yet: capped at 0.5 m/s it cut that run's steps approaching inside ``S_p`` from
+            220 to 5 (``pinch``: 334 to 204) but gave ``arm`` (torque, 7 s, no ``--resume``) one (simulated).
     """
 
     dt: float = 0.001
@@ -169,16 +186,26 @@ class ControllerConfig:
     pfl_share: float = 0.5
     sp_buffer: float = 0.0
     stop_never_approaches: bool = False
+    acceleration_limit: tuple[float, ...] | None = None
+    all_directions: bool = False
+    feedback_speed: float | None = None
 
     def __post_init__(self) -> None:
         if self.pfl is not None and (self.separation is None or not isinstance(self.pfl, BodyRegion)):
             raise ConfigError("controller: pfl needs a BodyRegion and a separation model")
         if not (0 < self.pfl_share <= 1):
             raise ConfigError(f"controller: pfl_share must be in (0, 1], got {self.pfl_share}")
+        if self.acceleration_limit is not None:
+            acc = np.asarray(self.acceleration_limit, dtype=float)
+            if acc.ndim != 1 or not np.all(np.isfinite(acc) & (acc > 0)):
+                raise ConfigError("controller: acceleration_limit must be finite positive numbers (rad/s^2)")
+            object.__setattr__(self, "acceleration_limit", tuple(float(a) for a in acc))
         if self.separation is not None and not isinstance(self.separation, SeparationParams):
             raise ConfigError(f"controller: separation must be SeparationParams or None, got {self.separation!r}")
         if not (0 < self.critical < self.notice):
             raise ConfigError(f"controller: need 0 < critical < notice (m), got {self.critical}, {self.notice}")
+        if self.feedback_speed is not None and not self.feedback_speed > 0:
+            raise ConfigError(f"controller: feedback_speed must be positive, got {self.feedback_speed}")
         for name in ("dt", "damping", "v_max", "velocity_scale"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"controller: {name} must be positive, got {getattr(self, name)}")
@@ -263,6 +290,54 @@ class SeparationInputs:
     z_d: FloatArray
 
 
+TANGENT_SHARE = 0.9
+"""With ``ControllerConfig.all_directions``, the rows across the normal are added where the normal row's bound is
+below this share of ``v_max`` (inside the ramp: a person near)."""
+
+
+def _sideways_rows(
+    chain: SerialChain, T: FloatArray, prox, h_all: FloatArray, below: float
+) -> tuple[FloatArray, FloatArray]:
+    """Rows ``+-t_k^T J_i`` ``(4 m, n)`` and bounds ``h_i`` ``(4 m,)`` for the ``m`` points whose bound is
+    ``0 <= h_i < below`` (near, not inside the margin: inside it the normal row asks for a retreat and the way
+    out may be sideways, ``pinch``): ``t_1, t_2`` unit vectors across the normal ``n_i`` (base frame). With the
+    normal row they bound the robot point's speed toward any direction ``e`` by ``sqrt(3) h_i``
+    (``e^T v <= |e.n| n^T v + |e.t_1| |t_1^T v| + |e.t_2| |t_2^T v|``)."""
+    near = np.flatnonzero((h_all >= 0) & (h_all < below))
+    if near.size == 0:
+        return np.zeros((0, chain.n_joints)), np.zeros(0)
+    normal = prox.normal[near]
+    helper = np.where(np.abs(normal[:, :1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+    t1 = np.cross(normal, helper)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(normal, t1)
+    J = chain.point_jacobians(T, prox.link[near], prox.p_base_robot[near])  # (m, 3, n)
+    rows = np.concatenate([np.einsum("ki,kij->kj", t, J) for t in (t1, t2)])
+    bound = np.tile(h_all[near], 2)
+    return np.vstack([rows, -rows]), np.concatenate([bound, bound])
+
+
+def drive_bounds(
+    lb: FloatArray, ub: FloatArray, qd_prev: ArrayLike, acceleration: ArrayLike, dt: float
+) -> tuple[FloatArray, FloatArray]:
+    """The box ``lb <= qd <= ub`` ``(n,)`` rad/s narrowed to what an acceleration-limited drive reaches from the
+    previous command ``qd_prev`` within one control period ``dt``,
+
+        lb' = clip(lb, qd_prev - a dt, qd_prev + a dt),   ub' = clip(ub, qd_prev - a dt, qd_prev + a dt)
+
+    (``a`` ``(n,)`` rad/s^2; a position bound that asks for more braking than ``a`` allows gives the strongest
+    braking the drive has). Without it, the drive's reference moves toward a command far away at the limit of
+    its slowest joint along the whole joint-space change (stop category 2 keeps the path), so a retreat command
+    that also swings joints the retreat does not need (the tracking objective's choice) reverses the approach
+    at a fraction of the drive's deceleration: measured in ``fast`` on the Panda, torque mode, a 2.6 rad/s
+    change led by joint 5 (15 rad/s^2, 0.17 s) while the speed toward a hand inside ``S_p`` fell by 1 mm/s
+    per ms (simulated)."""
+    prev = np.asarray(qd_prev, dtype=float).reshape(-1)
+    step = np.asarray(acceleration, dtype=float).reshape(-1) * float(dt)
+    lo, hi = prev - step, prev + step
+    return np.clip(lb, lo, hi), np.clip(ub, lo, hi)
+
+
 @functools.lru_cache(maxsize=8)
 def _speed_table(params: SeparationParams, v_max: float, width: float) -> ApproachSpeedTable:
     """The allowed-speed table of a separation model and ramp (built once, 0.1-0.2 s, shared by controllers)."""
@@ -309,6 +384,7 @@ class AvoidanceController:
         xd_des: ArrayLike,
         points: ArrayLike | ObstaclePoints,
         qd_now: ArrayLike | None = None,
+        qd_prev: ArrayLike | None = None,
         *,
         _terms: bool = True,
     ) -> QpProblem:
@@ -316,7 +392,9 @@ class AvoidanceController:
         and obstacle points: :class:`ObstaclePoints` (velocities, cone spread and covariances used) or
         still points ``(K, 3)`` exactly where given (base frame, m). ``qd_now`` ``(n,)``: the robot's
         measured joint velocity, rad/s, a floor for the speed in ``S_p`` (with ``separation``; default None:
-        the robot moves as commanded, an ideal velocity interface). (``_terms=False``: with ``separation``,
+        the robot moves as commanded, an ideal velocity interface). ``qd_prev`` ``(n,)``: the previous command,
+        rad/s; with ``acceleration_limit`` the box bounds are narrowed to ``qd_prev +- a dt`` (:func:`drive_bounds`).
+        (``_terms=False``: with ``separation``,
         ``critical`` and ``terms`` are left None; :meth:`step` computes them at the command's speed.)"""
         cfg = self.config
         q = np.asarray(q, dtype=float).reshape(-1)
@@ -324,12 +402,19 @@ class AvoidanceController:
         T = self._frames.frames(q)
         x = T[n, :3, :3] @ self._flange + T[n, :3, 3]
         J = self.chain.point_jacobians(T, [n], x)[0]
-        xd_cmd = np.asarray(xd_des, dtype=float) + cfg.gain * (np.asarray(x_des, dtype=float) - x)
+        feedback = cfg.gain * (np.asarray(x_des, dtype=float) - x)
+        if cfg.feedback_speed is not None:  # the way back to the reference at most at this speed
+            norm = float(np.linalg.norm(feedback))
+            if norm > cfg.feedback_speed:
+                feedback *= cfg.feedback_speed / norm
+        xd_cmd = np.asarray(xd_des, dtype=float) + feedback
         P = J.T @ J + cfg.damping * np.eye(n)
         c = -J.T @ xd_cmd
         if cfg.posture_gain > 0 and self.q_posture is not None:
             c -= cfg.damping * cfg.posture_gain * (self.q_posture - q)
         lb, ub = joint_velocity_bounds(self.chain, q, cfg.dt, cfg.velocity_scale, cfg.limit_margin)
+        if cfg.acceleration_limit is not None and qd_prev is not None:
+            lb, ub = drive_bounds(lb, ub, qd_prev, cfg.acceleration_limit, cfg.dt)
         obs = points if isinstance(points, ObstaclePoints) else ObstaclePoints.still(points)
         pts = obs.positions
         if pts.shape[0]:
@@ -370,6 +455,9 @@ class AvoidanceController:
             # A row with no lever on the robot (point at the base) and a non-negative bound is void.
             keep = (np.abs(G_all).max(axis=1) > 1e-9) | (h_all < 0)
             G, h = G_all[keep], h_all[keep]
+            if cfg.all_directions and cfg.separation is not None:
+                G_t, h_t = _sideways_rows(self.chain, T, prox, h_all, TANGENT_SHARE * cfg.v_max)
+                G, h = np.vstack([G, G_t]), np.concatenate([h, h_t])
         else:
             G, h, dist, crit, terms = np.zeros((0, n)), np.zeros(0), np.zeros(0), np.zeros(0), None
             sep_in = None
@@ -397,14 +485,19 @@ class AvoidanceController:
         G = np.hstack([prob.G, -np.eye(K)])
         lb = np.concatenate([prob.lb, np.zeros(K)])
         slack_ub = np.full(K, np.inf)
-        if self.config.stop_never_approaches:  # a retreat row violated at most down to a stop, no other row
-            slack_ub = np.maximum(-prob.h, 0.0)
+        capped = self.config.stop_never_approaches
+        if capped:  # a retreat row violated at most down to a stop (or the slowest approach the box allows)
+            slowest = np.minimum(prob.G * prob.lb, prob.G * prob.ub).sum(axis=1)  # min of G_i qd over the box
+            slack_ub = np.maximum(np.maximum(-prob.h, 0.0), slowest - prob.h)
         ub = np.concatenate([prob.ub, slack_ub])
         t0 = time.perf_counter()
         z = qpsolvers.solve_qp(P, np.zeros(n + K), G, prob.h, lb=lb, ub=ub, solver=self.config.solver)
+        if z is None and capped:  # rows that cannot all brake at once in the box: the plain least violation
+            ub[n:] = np.inf
+            z = qpsolvers.solve_qp(P, np.zeros(n + K), G, prob.h, lb=lb, ub=ub, solver=self.config.solver)
         elapsed = time.perf_counter() - t0
-        if z is None:  # cannot happen for consistent bounds; stand still rather than guess
-            qd = np.zeros(n)
+        if z is None:  # cannot happen for consistent bounds; as near standing still as the box allows
+            qd = np.clip(np.zeros(n), prob.lb, prob.ub)
         else:
             qd = z[:n]
         violation = float(np.max(prob.G @ qd - prob.h, initial=0.0))
@@ -417,9 +510,10 @@ class AvoidanceController:
         xd_des: ArrayLike,
         points: ArrayLike | ObstaclePoints,
         qd_now: ArrayLike | None = None,
+        qd_prev: ArrayLike | None = None,
     ) -> StepResult:
         """Joint velocities for this step (see :meth:`problem`)."""
-        prob = self.problem(q, x_des, xd_des, points, qd_now, _terms=False)
+        prob = self.problem(q, x_des, xd_des, points, qd_now, qd_prev, _terms=False)
         qd, feasible, violation, elapsed = self.solve(prob)
         d_min = float(prob.distance.min()) if prob.distance.size else float("inf")
         margin, clearance = float("nan"), float("inf")

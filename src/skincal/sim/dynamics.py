@@ -166,6 +166,26 @@ def feasible_acceleration(
     return best
 
 
+def acceleration_limits(
+    chain: SerialChain,
+    model: mujoco.MjModel | None = None,
+    effort: ArrayLike | None = None,
+    override: ArrayLike | None = None,
+) -> FloatArray:
+    """The joint acceleration limits ``(n,)`` rad/s^2 :class:`TorqueRobot` brakes and accelerates its reference
+    at: ``override``, else the chain's ``acceleration_limit``, else the published ones, else
+    :func:`feasible_acceleration` on ``model`` (default :func:`torque_model`) with ``effort`` (default
+    :func:`effort_limits`)."""
+    acc = override if override is not None else chain.acceleration_limit
+    if acc is None:
+        pub = published_limits(chain)
+        acc = pub.acceleration if pub is not None else None
+    if acc is None:
+        model = torque_model(chain) if model is None else model
+        acc = feasible_acceleration(chain, model, effort_limits(chain) if effort is None else effort)
+    return _vector(acc, chain.n_joints, "acceleration limit")
+
+
 @dataclass(frozen=True)
 class TorqueConfig:
     """How :class:`TorqueRobot` tracks the velocity command (module docstring).
@@ -264,13 +284,7 @@ class TorqueRobot:
         )
         vel = config.velocity_limit if config.velocity_limit is not None else chain.velocity_limit
         self.velocity_limit = np.full(n, np.inf) if vel is None else _vector(vel, n, "velocity limit")
-        acc = config.acceleration_limit if config.acceleration_limit is not None else chain.acceleration_limit
-        if acc is None:
-            pub = published_limits(chain)
-            acc = pub.acceleration if pub is not None else None
-        if acc is None:
-            acc = feasible_acceleration(chain, self.model, self.effort_limit)
-        self.acceleration_limit = _vector(acc, n, "acceleration limit")
+        self.acceleration_limit = acceleration_limits(chain, self.model, self.effort_limit, config.acceleration_limit)
         self.h = float(self.model.opt.timestep)
         self.saturated = np.zeros(n, dtype=bool)
         self.saturation_steps = 0

@@ -254,7 +254,7 @@ def run_scenario(
         if robot is None:
             res = ctl.step(q, x_des[k], xd_des[k], pts)
         else:  # S_p from the measured speed, as far as the command tracked accounts for it
-            res = ctl.step(q, x_des[k], xd_des[k], pts, separation_speed(qd, qd_cmd))
+            res = ctl.step(q, x_des[k], xd_des[k], pts, separation_speed(qd, qd_cmd), qd_prev=qd_cmd)
             qd_cmd = res.qd
         step_t[k] = time.perf_counter() - t1
         log_q[k], log_qd[k], log_x[k] = q, res.qd, res.x

@@ -49,6 +49,12 @@ TORQUE_SP_BUFFER_M = 0.02
 """``ControllerConfig.sp_buffer`` in torque mode with an ISO margin, m: the lagging drive comes to rest before
 ``S_p`` (with :data:`TORQUE_V_MAX`: no step approaching inside ``S_p`` in ``hand``, Panda, torque; simulated,
 chosen on that run)."""
+TORQUE_ALL_DIRECTIONS = False
+"""``ControllerConfig.all_directions`` in torque mode with an ISO margin. Off: measured on the Panda (torque,
+``--margin iso``, true poses; simulated) it cut the time approaching inside ``S_p`` summed over the eight shipped
+scenarios from 0.61 to 0.54 s and the largest speed there in ``lower`` from 0.84 to 0.05 m/s, but passed two of
+them instead of four (``elbow`` and ``walk-at`` failed with it, ``pinch`` went from 0.19 to 0.44 s):
+``docs/results-iso.md``."""
 CRITERION = {"iso": "ssm", "iso-pfl": "pfl"}
 """The ISO criterion a margin's run is judged by (:func:`skincal.control.iso_metrics.iso_criteria`)."""
 
@@ -147,8 +153,17 @@ def run_experiment(
     if c.margin in CRITERION:
         sep = separation_for(c.chain, c.scenario, stopping=stopping)
         controller = replace(controller, separation=sep, stop_never_approaches=True)
-        if c.mode == "torque":  # speed scaling before S_p for a drive that lags its command
-            controller = replace(controller, v_max=TORQUE_V_MAX, sp_buffer=TORQUE_SP_BUFFER_M)
+        if c.mode == "torque":  # speed scaling before S_p, and commands the drive reaches within a step
+            from skincal.sim.dynamics import acceleration_limits
+
+            accel = tuple(acceleration_limits(c.chain).tolist())
+            controller = replace(
+                controller,
+                v_max=TORQUE_V_MAX,
+                sp_buffer=TORQUE_SP_BUFFER_M,
+                acceleration_limit=accel,
+                all_directions=TORQUE_ALL_DIRECTIONS,
+            )
     if c.margin == "iso-pfl":
         controller = replace(controller, pfl=assumed_region(regions))
     mass = robot_mass_matrix(c.chain) if c.margin in CRITERION else None
@@ -162,7 +177,9 @@ def run_experiment(
         )  # fmt: skip
     body = RobotBody.of(c.chain)
     judged = (CRITERION[c.margin], regions, mass) if c.margin in CRITERION else None
-    return Experiment(c, controller, log, reference, summarize(log, body, c.label, reference, judged), body)
+    stop = controller.separation.stopping if controller.separation is not None else None
+    metrics = summarize(log, body, c.label, reference, judged, stopping=stop)
+    return Experiment(c, controller, log, reference, metrics, body)
 
 
 def scenario_regions(scenario: Scenario) -> list[BodyRegion | None]:
@@ -217,10 +234,12 @@ def summarize(
     poses: str = "",
     reference: RunLog | None = None,
     judged: tuple[str, list, MassMatrix | None] | None = None,
+    stopping: StoppingModel | None = None,
 ) -> AvoidMetrics:
     """All metrics of a run; ``body`` is the TRUE robot geometry (as simulated); ``reference`` the same
     run without a person (for the task time lost; NaN without it); ``judged``: ``(criterion, regions,
-    mass_matrix)`` to judge the run by ISO/TS 15066's criteria (:func:`skincal.control.iso_metrics.iso_criteria`)."""
+    mass_matrix)`` to judge the run by ISO/TS 15066's criteria (:func:`skincal.control.iso_metrics.iso_criteria`);
+    ``stopping`` the robot's stopping model there (the share of a violation that is a stop in progress)."""
     iso = None
     scene = log.scenario.scene
     if judged is not None:
@@ -230,7 +249,7 @@ def summarize(
             measured = (log.sp_inside, log.sp_approach, log.sp_excess)
         criterion, regions, mass = judged
         iso = iso_metrics.iso_criteria(
-            log.t, log.q, body, solids, margin_of(log), regions, mass, criterion, measured=measured
+            log.t, log.q, body, solids, margin_of(log), regions, mass, criterion, measured=measured, stopping=stopping
         )
     return iso_metrics.summarize_run(
         scenario=log.scenario.name,
