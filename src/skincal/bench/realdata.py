@@ -427,8 +427,8 @@ def _fmt(values: Any, digits: int = 1) -> str:
 
 
 def realdata_report(doc: dict[str, Any]) -> list[Any]:
-    """Rich output of :func:`run_realdata_benchmark`'s document: a table with one row per group and
-    method, a line per distinct failure reason (with its count) and per recording that could not be
+    """Rich output of :func:`run_realdata_benchmark`'s document: a table per group (a row per figure, a
+    column per method), a line per distinct failure reason (with its count) and per recording that could not be
     read (names, reasons and paths shown escaped)."""
     from rich.markup import escape
     from rich.table import Table
@@ -438,34 +438,41 @@ def realdata_report(doc: dict[str, Any]) -> list[Any]:
     def shown(text: object) -> str:
         return escape(printable(str(text)))
 
-    table = Table(title=f"repeatability across recordings ({doc['data']}): {shown(doc['folder'])}")
-    for col in (
-        "IMU", "method", "ok/all", "link", "pos std x y z (mm)", "pos pairwise x y z (mm)", "rot std (deg)",
-        "rot pairwise (deg)", "spread/std pos", "spread/std rot", "dev/own std pos", "dev/own std rot",
-        "motion kept", "offsets (ms) (dev/own std)", "weak pos", "failures",
-    ):  # fmt: skip
-        table.add_column(col)
+    rows: list[tuple[str, Callable[[dict[str, Any]], str]]] = [
+        ("recordings calibrated", lambda g: f"{g['calibrated']}/{g['recordings']}"),
+        ("link (recordings on it)", lambda g: f"{g.get('link', '-')} ({g.get('on_link', 0)})"),
+        ("position std x y z (mm)", lambda g: _fmt(g.get("position_std_mm"))),
+        ("position pairwise x y z (mm)", lambda g: _fmt(g.get("position_pairwise_mm"))),
+        ("position spread / median std", lambda g: _fmt(g.get("position_spread_over_std"))),
+        ("position deviation / own std", lambda g: _fmt(g.get("position_deviation_rms_std"))),
+        ("weakly determined positions", lambda g: str(g.get("position_weak", "-"))),
+        ("without them: spread / median std", lambda g: _fmt(g.get("position_spread_over_std_firm"))),
+        ("rotation std x y z (deg)", lambda g: _fmt(g.get("rotation_std_deg"), 2)),
+        ("rotation pairwise max (deg)", lambda g: _fmt(g.get("rotation_pairwise_max_deg"), 2)),
+        ("rotation spread / median std", lambda g: _fmt(g.get("rotation_spread_over_std"))),
+        ("rotation deviation / own std", lambda g: _fmt(g.get("rotation_deviation_rms_std"))),
+        ("motion kept (median)", lambda g: _fmt(g.get("median_motion_kept"), 2)),
+        ("time offsets (ms)", lambda g: "-" if not g.get("time_offsets_ms") else
+            f"{min(g['time_offsets_ms']):.0f}..{max(g['time_offsets_ms']):.0f}"),
+        ("time offset deviation / own std", lambda g: _fmt(g.get("time_offset_deviation_rms_std"))),
+        ("failures", lambda g: str(len(g["failures"]))),
+    ]  # fmt: skip
+    tables: list[Any] = []
     failures: list[str] = []
     for name, by_method in doc["groups"].items():
+        # one table per IMU, a column per method: readable at any terminal width
+        table = Table(title=f"{shown(name)}: repeatability across recordings ({doc['data']}): {shown(doc['folder'])}")
+        table.add_column("figure")
+        for method in by_method:
+            table.add_column(method)
+        for label, cell in rows:
+            table.add_row(label, *(cell(g) for g in by_method.values()))
+        tables.append(table)
         for method, g in by_method.items():
-            reasons = sorted({str(f["reason"]) for f in g["failures"]})
-            offsets = g.get("time_offsets_ms")
-            offset_text = "-" if not offsets else f"{min(offsets):.0f}..{max(offsets):.0f}"
-            if g.get("time_offset_deviation_rms_std") is not None:
-                offset_text += f" ({g['time_offset_deviation_rms_std']:.1f})"
-            table.add_row(
-                shown(name), method, f"{g['calibrated']}/{g['recordings']}", str(g.get("link", "-")),
-                _fmt(g.get("position_std_mm")), _fmt(g.get("position_pairwise_mm")),
-                _fmt(g.get("rotation_std_deg"), 2), _fmt(g.get("rotation_pairwise_max_deg"), 2),
-                _fmt(g.get("position_spread_over_std")), _fmt(g.get("rotation_spread_over_std")),
-                _fmt(g.get("position_deviation_rms_std")), _fmt(g.get("rotation_deviation_rms_std")),
-                _fmt(g.get("median_motion_kept"), 2), offset_text, str(g.get("position_weak", "-")),
-                str(len(g["failures"])),
-            )  # fmt: skip
-            for reason in reasons:
+            for reason in sorted({str(f["reason"]) for f in g["failures"]}):
                 count = sum(1 for f in g["failures"] if f["reason"] == reason)
                 failures.append(f"{shown(name)} {method}: {count} x {shown(reason)}")
-    parts: list[Any] = [table, *failures]
+    parts: list[Any] = [*tables, *failures]
     for pair in doc.get("paired", []):
         a, b = (shown(n) for n in pair["groups"])
         text = f"paired {a} - {b} ({pair['method']}, {len(pair['sessions'])} sessions recorded by both):"
