@@ -5,6 +5,8 @@ alone never determine it (written as null even when a fit's priors left a number
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -24,13 +26,20 @@ def _unit(pos_std_m, cov: bool = False) -> UnitResult:
 
 def test_rests_only_null_the_position_even_when_a_fit_left_a_finite_std():
     # a prior-held position of a rests-only fit looks observable; rests hold no lever arm
-    out = judge_position(_unit([0.002, 0.002, 0.002], cov=True), rests_only=True, static_only=True)
+    unit = replace(_unit([0.002, 0.002, 0.002], cov=True), warnings=(
+        "unobservable: offset along the direction [1.0, 0.0, 0.0] and offset along the joint-3 axis (left at the "
+        "closed-form start)", "unobservable: rotation (yaw) about the joint-1 axis and offset along the direction "
+        "[0.0, 1.0, 0.0] (left at the closed-form start)", "rest poses disagree with the model",
+    ))  # fmt: skip
+    out = judge_position(unit, rests_only=True, static_only=True)
+    # the positions-only null-space warning gives way to "not determined"; one naming a rotation stays
+    assert out.warnings[:2] == unit.warnings[1:] and out.warnings[2].startswith("position not determined")
     assert not out.observable and not has_position(out)
     assert np.all(np.isnan(out.position_std_m))
     assert np.all(np.isnan(out.pose_covariance[:3, :])) and np.all(np.isnan(out.pose_covariance[:, :3]))
     np.testing.assert_allclose(out.pose_covariance[3:, 3:], 1e-6 * np.eye(3))  # the rotation is kept
     assert np.allclose(out.rotation_std_deg, 0.1)
-    assert any(w.startswith("position not determined (static poses only)") for w in out.warnings)
+    assert out.warnings[-1].startswith("position not determined (static poses only)")
 
 
 def test_a_weak_position_is_named_with_its_axis_and_kept():

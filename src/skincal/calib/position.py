@@ -40,14 +40,23 @@ def judge_position(result: UnitResult, rests_only: bool, static_only: bool) -> U
     if cov is not None:  # (x, y, z, rx, ry, rz): the position rows and columns undetermined
         cov = np.array(cov, dtype=float)
         cov[:3, :] = cov[:, :3] = np.nan
+    # the fit's "unobservable: offset along ..." (positions only) says less than this and contradicts it
+    kept = [w for w in result.warnings if not (w.startswith("unobservable: ") and _offsets_only(w))]
     return replace(
         result,
         observable=False,
         position_std_m=np.full(3, np.nan),
         pose_covariance=cov,
-        warnings=(*result.warnings, warning),
+        warnings=(*kept, warning),
         extras={**result.extras, POSITION_DETERMINED: False},
     )
+
+
+def _offsets_only(warning: str) -> bool:
+    """Whether an ``unobservable: ...`` warning (:func:`skincal.calib.mle.account.describe_null`) names
+    position offsets only (no rotation, no sensor parameter)."""
+    parts = warning.removeprefix("unobservable: ").split(" (left at")[0].split(" and ")
+    return all(part.startswith("offset along") for part in parts)
 
 
 def weak_position(result: UnitResult) -> UnitResult:
