@@ -42,6 +42,20 @@ def test_simulate_calibrate_evaluate(dataset, tmp_path, capsys):
     assert digest(dataset) == before  # input files are never modified
 
 
+def test_evaluate_lists_a_unit_the_result_could_not_calibrate(dataset, tmp_path, capsys):
+    """A failed unit stays in evaluate's table ("not calibrated"), not only in --json's units_failed."""
+    result = tmp_path / "result.json"
+    assert main(["calibrate", str(dataset), "--out", str(result), "--unit", "su1", "--unit", "su2"]) == 0
+    doc = json.loads(result.read_text())
+    doc["units"]["su2"] = {"link": None, "position_m": None, "quaternion_wxyz": None, "observable": False,
+                           "position_std_m": None, "rotation_std_deg": None, "warnings": ["no motion excites it"]}
+    result.write_text(json.dumps(doc))
+    capsys.readouterr()
+    assert main(["evaluate", str(result), "--truth", str(dataset)]) == 0
+    out = capsys.readouterr().out
+    assert "su2 (not calibrated)" in out and "su1" in out
+
+
 def test_calibrate_with_a_links_file(dataset, tmp_path):
     links = tmp_path / "links.yaml"
     links.write_text("su1: 2\nsu2: 3\n")

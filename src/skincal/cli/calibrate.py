@@ -377,6 +377,8 @@ def evaluate(
             f"{u.rotation_error_deg:.4f}",
             f"{u.quaternion_distance:.5f}",
         )
+    for name in ev.units_failed:  # a unit the result could not calibrate is listed, never dropped silently
+        table.add_row(shown(name) + " (not calibrated)", "-", "-", "-", "-")
     if ev.mean_position_error_mm is not None:
         table.add_row(
             "mean",
