@@ -114,6 +114,7 @@ def _moving_counts(dataset: Any) -> dict[str, int]:
 
 def _unit_record(unit: Any) -> dict[str, Any]:
     """The figures of one calibrated unit (positions in mm, rotations as matrices, offsets in ms)."""
+    from skincal.calib.position import is_weak
     from skincal.data.result import has_position
 
     imu = unit.imu
@@ -132,7 +133,7 @@ def _unit_record(unit: Any) -> dict[str, Any]:
         "rotation_std_deg": r_std,
         "time_offset_ms": offset,
         "time_offset_std_ms": offset_std,
-        "position_weak": any(w.startswith("position weakly determined") for w in unit.warnings),
+        "position_weak": positioned and is_weak(unit.position_std_m),
         "n_moving_samples": unit.extras.get("n_moving_samples"),
         "joint_rate": unit.extras.get("joint_rate"),
         "warnings": list(unit.warnings),
@@ -193,6 +194,14 @@ def _finite_or_none(x: Any) -> Any:
     return [_finite_or_none(v) for v in arr]
 
 
+def weighted_mean(x: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Inverse-variance weighted mean over rows of ``x`` ``(K, m)`` with std ``s`` (same shape; a NaN or
+    zero std gives its row no weight)."""
+    with np.errstate(all="ignore"):
+        w = np.where(np.isfinite(s) & (s > 0), 1.0 / s**2, 0.0)
+        return np.sum(w * x, axis=0) / np.sum(w, axis=0)
+
+
 def normalised_spread(x: np.ndarray, std: list[Any]) -> np.ndarray:
     """RMS over recordings of ``(x_i - x_w) / s_i`` per axis: each estimate's deviation from the
     inverse-variance weighted mean ``x_w`` in its own reported std ``s_i`` (``x`` ``(K, m)``, ``std``
@@ -205,10 +214,9 @@ def normalised_spread(x: np.ndarray, std: list[Any]) -> np.ndarray:
         return np.full(m, np.nan)
     x = x.reshape(len(x), m)
     s = np.asarray(std, dtype=float).reshape(x.shape)
+    mean = weighted_mean(x, s)
     with np.errstate(all="ignore"):
-        w = np.where(np.isfinite(s) & (s > 0), 1.0 / s**2, 0.0)
-        mean = np.sum(w * x, axis=0) / np.sum(w, axis=0)
-        z = np.where(w > 0, (x - mean) / s, np.nan)
+        z = np.where(np.isfinite(s) & (s > 0), (x - mean) / s, np.nan)
         return np.sqrt(np.nanmean(z * z, axis=0))
 
 
@@ -323,11 +331,8 @@ def session_name(recording: str, group: str) -> str:
 def _difference(x: np.ndarray, s: np.ndarray) -> dict[str, Any]:
     """Weighted mean, std across sessions and the RMS deviation over its own std of paired
     differences ``x`` ``(K, m)`` with std ``s`` (:func:`normalised_spread`)."""
-    with np.errstate(all="ignore"):
-        w = np.where(np.isfinite(s) & (s > 0), 1.0 / s**2, 0.0)
-        mean = np.sum(w * x, axis=0) / np.sum(w, axis=0)
     return {
-        "mean": _finite_or_none(mean),
+        "mean": _finite_or_none(weighted_mean(x, s)),
         "std": _finite_or_none(x.std(axis=0, ddof=1) if len(x) > 1 else np.full(x.shape[1], np.nan)),
         "deviation_rms_std": _finite_or_none(normalised_spread(x, list(s))),
     }
@@ -345,7 +350,7 @@ def paired(a_name: str, a: dict[str, Any], b_name: str, b: dict[str, Any]) -> di
         return None
     ea = {session_name(e["recording"], a_name): e for e in a.get("per_recording", [])}
     eb = {session_name(e["recording"], b_name): e for e in b.get("per_recording", [])}
-    both = [k for k in sorted(set(ea) & set(eb))]
+    both = sorted(set(ea) & set(eb))
     pos = [k for k in both if ea[k]["position_mm"] is not None and eb[k]["position_mm"] is not None]
     tim = [k for k in both if ea[k]["time_offset_ms"] is not None and eb[k]["time_offset_ms"] is not None]
     if len(both) < 2:

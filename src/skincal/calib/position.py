@@ -59,16 +59,22 @@ def _offsets_only(warning: str) -> bool:
     return all(part.startswith("offset along") for part in parts)
 
 
+def is_weak(position_std_m: object) -> bool:
+    """Whether a position std ``(3,)`` (m; NaN: undetermined) exceeds :data:`POSITION_WEAK_STD_M` on
+    some axis: the rule :func:`weak_position` warns by."""
+    if position_std_m is None:
+        return False
+    s = np.asarray(position_std_m, dtype=float)
+    return bool(np.any(np.isfinite(s)) and np.nanmax(s) > POSITION_WEAK_STD_M)
+
+
 def weak_position(result: UnitResult) -> UnitResult:
     """``result`` with a warning when its position std exceeds :data:`POSITION_WEAK_STD_M` on some link
     axis (*weakly determined*, naming the axis and the std: a linear move that barely turns the link, a
     rotation about the lever arm only); the estimate and its std are kept. Judged on the final std."""
-    std = result.position_std_m
-    if std is None:
+    if not is_weak(result.position_std_m):
         return result
-    s = np.asarray(std, dtype=float)
-    if not np.any(np.isfinite(s)) or np.nanmax(s) <= POSITION_WEAK_STD_M:
-        return result
+    s = np.asarray(result.position_std_m, dtype=float)
     axis = int(np.nanargmax(s))
     warning = (
         f"position weakly determined: std {1e3 * s[axis]:.0f} mm along the link's {'xyz'[axis]} axis (above "
