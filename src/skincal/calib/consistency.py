@@ -143,22 +143,23 @@ def lively_windows_from_gyro(dataset: Dataset) -> np.ndarray:
     which the units' mean gyroscope speed ``|w|`` exceeds the median window's: the ``excitation`` split
     of units on one rigid body without joint states (the IMU-only calibration, all on ``link 0``)."""
     t0, _ = recording_span(dataset)
-    total: FloatArray = np.zeros(0)
-    count: FloatArray = np.zeros(0)
-    for stream in dataset.imu.values():
-        if stream.gyro is None or len(stream.t) == 0:
-            continue
-        index = np.floor((np.asarray(stream.t, dtype=float) - t0) / EXCITATION_WINDOW_S).astype(int)
-        index = np.maximum(index, 0)
-        n = max(int(index.max()) + 1, total.size)
-        total = np.pad(total, (0, n - total.size)) + np.bincount(
-            index, weights=np.linalg.norm(stream.gyro, axis=1), minlength=n
-        )
-        count = np.pad(count, (0, n - count.size)) + np.bincount(index, minlength=n)
-    if total.size == 0:
+    streams = [st for st in dataset.imu.values() if st.gyro is not None and len(st.t)]
+    if not streams:
         return np.zeros(0, dtype=bool)
+    t = np.concatenate([np.asarray(st.t, dtype=float) for st in streams])
+    speed = np.concatenate([np.linalg.norm(st.gyro, axis=1) for st in streams])
+    index = np.maximum(np.floor((t - t0) / EXCITATION_WINDOW_S).astype(int), 0)
+    total, count = np.bincount(index, weights=speed), np.bincount(index)
     score = np.where(count > 0, total / np.maximum(count, 1), 0.0)
     return score > np.median(score)
+
+
+def lively_of(dataset: Dataset, links: Iterable[int]) -> dict[int, np.ndarray]:
+    """The ``excitation`` split's windows per link: :func:`lively_windows_of` from the joint stream, or
+    without joint states (units on one rigid body, all on ``link 0``) :func:`lively_windows_from_gyro`."""
+    if dataset.joints is not None:
+        return lively_windows_of(dataset, links)
+    return {REFERENCE_LINK: lively_windows_from_gyro(dataset)}
 
 
 def recording_span(dataset: Dataset) -> tuple[float, float]:
@@ -195,11 +196,7 @@ def _part(
     if split != "excitation":
         lively = {}
     elif lively is None:
-        lively = (
-            lively_windows_of(dataset, links.values())
-            if dataset.joints is not None
-            else {REFERENCE_LINK: lively_windows_from_gyro(dataset)}
-        )
+        lively = lively_of(dataset, links.values())
 
     def mask(name: str, t: FloatArray) -> np.ndarray:
         masks = part_masks(np.asarray(t, dtype=float), t0, t1, lively.get(links.get(name, -1)))
@@ -293,11 +290,7 @@ def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> Calibrat
     outcomes: dict[str, dict[str, list[UnitResult | None]]] = {u: {} for u in links}
     errors: dict[str, list[str]] = {u: [] for u in links}
     try:  # the excitation split's windows, once for both sides (a failure: each part's own, below)
-        lively: dict[int, np.ndarray] | None = (
-            lively_windows_of(dataset, links.values())
-            if dataset.joints is not None
-            else {REFERENCE_LINK: lively_windows_from_gyro(dataset)}
-        )
+        lively: dict[int, np.ndarray] | None = lively_of(dataset, links.values())
     except Exception:  # noqa: BLE001
         lively = None
     for split in SPLITS:
