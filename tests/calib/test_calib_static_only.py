@@ -176,3 +176,25 @@ def test_a_null_position_is_neither_scored_nor_exported_at_the_link_origin(stati
     err = capsys.readouterr().err
     assert "no unit has a position to export" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "none.urdf").exists()
+
+
+def test_streaming_calibrator_answers_a_static_only_session_like_mle(static_session):
+    """``calibrate --follow`` of a stream recorded in the rests only: it used to absorb no sample (its
+    clock waited for motion, the rests aged out of the grid) and wrote no unit; now the stamps are
+    taken as they are (said in a note), every unit gets its link and its rotation from the rests, and
+    the position is null as with ``mle``."""
+    from skincal.workflows.live import follow_dataset
+
+    ds, st = static_session
+    result = follow_dataset(st, speed=None, stop_at_target=False).result
+    assert set(result.units) == set(ds.units), result.failed_units
+    for name, unit in result.units.items():
+        assert unit.pose.link == ds.truth[name].link
+        err = float(np.degrees(rotation_angle(unit.pose.R_link_su, ds.truth[name].R_link_su)))
+        std = float(np.linalg.norm(unit.rotation_std_deg))
+        # the rests' own precision (a few thousandths of a degree), not the 0.8 deg a prior on the
+        # accelerometer's misalignment left when it could pose as the rotation
+        assert std < 0.05 and err < 4 * std, (name, err, unit.rotation_std_deg)
+        assert not unit.observable and not has_position(unit)
+        assert any("position not determined (static poses only)" in w for w in unit.warnings)
+        assert any("coarse clock search skipped" in n for n in unit.notes)

@@ -29,6 +29,11 @@ ALIGN_RETRY_S = 2.0
 """A unit not yet aligned tries again after this much more of its stream, s."""
 MAX_REALIGN = 6
 """Re-alignments allowed per unit."""
+AGEING_S = 5.0
+"""Samples this close (s) to the start of the grid's history are about to be lost unaligned: judged then."""
+REST_ONLY_DENSITY = 0.3
+"""A unit's stream whose samples fall in the robot's moves at under this fraction of the moves' share of
+time was recorded in the rests only (:func:`holds_motion`)."""
 
 
 def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray | None, o: OnlineOptions) -> None:
@@ -37,9 +42,24 @@ def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray
     nearly full); else leave ``st.offset`` None."""
     tg, w, speed = grid.t, grid.y[..., 12:15], grid.speed
     inside = (t >= tg[0]) & (t <= tg[-1])
-    if inside.sum() < 20 or t[inside][-1] - t[inside][0] < o.align_s:
+    if inside.sum() < 20:
         return
-    lo, hi = np.searchsorted(tg, [t[inside][0], t[inside][-1]])
+    ti = t[inside]
+    short = ti[-1] - ti[0] < o.align_s
+    # about to leave the grid unaligned: was it recorded in the rests only, judged up to the grid's end?
+    ageing = bool(ti[0] < tg[0] + AGEING_S)
+    if short and not ageing:
+        return
+    if holds_motion(grid, ti, end=tg[-1] if short else ti[-1]) is False:
+        # the robot moved while the unit recorded nothing (static poses only): nothing determines its
+        # clock, and a search would shift the rest samples into the moves
+        if st.offset is None:  # the stamps as they are, aligned again once it records in motion
+            st.offset, st.offset_sharpness, st.clock_provisional = 0.0, 0.0, True
+            st.t_ref, st.steps, st.t_seen = float(ti[0]), find_clock_steps(t), float(t[-1])
+        return
+    if short:
+        return
+    lo, hi = np.searchsorted(tg, [ti[0], ti[-1]])
     ang = np.linalg.norm(w[lo:hi], axis=2)
     if ang.shape[0] < 20 or float(ang.max()) < 5 * rest.MOVING_RPS:
         return  # no motion to align on yet
@@ -48,10 +68,31 @@ def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray
     span = t[inside][-1] - t[inside][0]
     if search.sharpness < ALIGN_SHARPNESS and span < ALIGN_WAIT_FRACTION * o.history_s:
         return  # the peak is not distinct yet: wait for more motion (the samples stay pending)
-    st.offset, st.offset_sharpness = float(search.offset_s), float(search.sharpness)
+    st.offset, st.offset_sharpness, st.clock_provisional = float(search.offset_s), float(search.sharpness), False
     st.t_ref = float(t[inside][0])
     st.steps = find_clock_steps(t)
     st.t_seen = float(t[-1])
+
+
+def holds_motion(grid: Grid, t: FloatArray, end: float | None = None) -> bool | None:
+    """Whether the unit recorded while the robot moved: the share of its stamps ``t`` (taken as
+    joint-clock instants) that fall where a link turns (faster than ``5 rest.MOVING_RPS`` on the grid)
+    is at least :data:`REST_ONLY_DENSITY` of the share of the grid's time from ``t[0]`` to ``end``
+    (default ``t[-1]``) that moves. A stream recorded in the rests only (static poses) has samples in
+    the moves only where its unknown clock offset pushes a rest's edge over (a few % of each move); a
+    continuous stream has about the grid's own share. ``None`` when nothing tells (no stamp inside the
+    grid, or the robot did not move over the span)."""
+    t = t[(t >= grid.t[0]) & (t <= grid.t[-1])]
+    if t.size == 0:
+        return None
+    lo, hi = np.searchsorted(grid.t, [t[0], t[-1] if end is None else end], side="right")
+    lo = max(lo - 1, 0)
+    ang = np.linalg.norm(grid.y[lo:hi, :, 12:15], axis=2).max(axis=1)
+    moving = ang >= 5 * rest.MOVING_RPS
+    if not moving.any():
+        return None
+    k = np.clip(np.searchsorted(grid.t[lo:hi], t), 0, hi - lo - 1)
+    return bool(moving[k].mean() >= REST_ONLY_DENSITY * moving.mean())
 
 
 def track_steps(st: UnitState, t: FloatArray) -> None:
@@ -82,6 +123,32 @@ def realign(st: UnitState, tau: float, drift: float) -> None:
     if st.steps is None and raw:  # re-sync steps seen since the alignment
         st.steps = find_clock_steps(np.concatenate([r[0] for r in raw]))
         st.t_seen = float(raw[-1][0][-1])
+    restart(st)
+
+
+def align_on_motion(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray | None,
+                    o: OnlineOptions) -> bool:  # fmt: skip
+    """A unit whose clock is provisional (:func:`align` saw it record in the rests only) aligned on its
+    kept and new samples ``t, a, g`` once they hold motion; on success (``True``) its statistics are
+    restarted and every kept sample (then the new ones) is absorbed again under the found clock."""
+    raw = list(st.raw)
+    T = np.concatenate([r[0] for r in raw] + [t])
+    if not holds_motion(grid, t):  # the new samples: still in the rests, or nothing tells
+        return False
+    A = np.concatenate([r[1] for r in raw] + [a])
+    G = None if g is None or any(r[2] is None for r in raw) else np.concatenate([r[2] for r in raw] + [g])
+    st.offset = None
+    align(st, grid, T, A, G, o)
+    if st.offset is None or st.clock_provisional:  # no distinct peak yet: the stamps as they are, for now
+        st.offset, st.clock_provisional = 0.0, True
+        return False
+    restart(st)
+    return True
+
+
+def restart(st: UnitState) -> None:
+    """Forget the unit's statistics and put its kept raw samples back in front of its pending ones."""
+    raw = list(st.raw)
     st.raw = deque()
     L = len(st.links)
     st.Za, st.Zg, st.moving = np.zeros_like(st.Za), np.zeros_like(st.Zg), np.zeros(L)

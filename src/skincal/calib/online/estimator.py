@@ -34,21 +34,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from skincal.calib.online import design, stats
-from skincal.calib.online.clock import (
-    ALIGN_RETRY_S,
-    ALIGN_SHARPNESS,
-    MAX_REALIGN,
-    align,
-    clock_off,
-    instants,
-    realign,
-    track_steps,
-)
+from skincal.calib.online import clock, design, stats
 from skincal.calib.online.design import excitation
 from skincal.calib.online.fit import JOINT_ACTIVE_RPS, decide, inflation, residuals, solve_unit, window_means
 from skincal.calib.online.options import OnlineOptions, UnitStatus, is_settled
-from skincal.calib.online.unit import Grid, UnitState, keep_pending, signals_at, take_pending, unsaturated
+from skincal.calib.online.unit import Grid, UnitState, keep_pending, rests_only, signals_at, take_pending, unsaturated
+from skincal.calib.position import judge_position
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.rest import link_moving
 from skincal.calib.signals import frame_signals
@@ -298,18 +289,23 @@ class OnlineCalibrator:
         t, a, g = take_pending(st)
         st.pending_t, st.pending_a, st.pending_g = [], [], []
         if st.offset is None:
-            if final or t[-1] - st.align_tried >= ALIGN_RETRY_S:
-                st.align_tried = float(t[-1])
-                align(st, grid, t, a, g, self.options)
+            if final or max(t[-1], grid.t[-1]) - st.align_tried >= clock.ALIGN_RETRY_S:  # the grid moves on too
+                st.align_tried = float(max(t[-1], grid.t[-1]))
+                clock.align(st, grid, t, a, g, self.options)
             if st.offset is None:
                 if final:
                     st.offset, st.offset_sharpness = 0.0, 0.0  # no motion to align on: the stamps as they are
                 else:
                     keep_pending(st, t, a, g)
                     return 0
+        elif st.clock_provisional and t[-1] - st.align_tried >= clock.ALIGN_RETRY_S:
+            st.align_tried = float(t[-1])
+            if clock.align_on_motion(st, grid, t, a, g, self.options):  # its kept samples are pending again
+                keep_pending(st, t, a, g)
+                return self._absorb_unit(name, final)
         assert st.offset is not None
-        track_steps(st, t)
-        s = instants(st, t)
+        clock.track_steps(st, t)
+        s = clock.instants(st, t)
         tg = grid.t
         late = s < tg[0]
         self.late += int(late.sum())
@@ -319,7 +315,7 @@ class OnlineCalibrator:
         if not ready.any():
             return 0
         st.raw.append((t[ready], a[ready], None if g is None else g[ready]))
-        while st.raw and instants(st, st.raw[0][0][-1:])[0] < tg[0]:
+        while st.raw and clock.instants(st, st.raw[0][0][-1:])[0] < tg[0]:
             st.raw.popleft()  # its part of the grid is gone: it could not be absorbed again
         return self._absorb(name, st, grid, s[ready], a[ready], None if g is None else g[ready])
 
@@ -398,8 +394,10 @@ class OnlineCalibrator:
         pos_std, rot_std = std[:3], np.degrees(std[3:])
         determined = bool(np.all(pos_std < UNDETERMINED_M) and np.all(rot_std < UNDETERMINED_DEG))
         undecided = len(ambiguous) > 1
-        if determined and not undecided and st.realigned < MAX_REALIGN and clock_off(st, sol):
-            realign(st, sol.tau, sol.drift)
+        # recorded in the rests only: the rotation and link are the answer (the position is null in a result)
+        rests_answer = rests_only(st, k) and bool(np.all(rot_std < UNDETERMINED_DEG))
+        if determined and not undecided and st.realigned < clock.MAX_REALIGN and clock.clock_off(st, sol):
+            clock.realign(st, sol.tau, sol.drift)
             self._absorb_unit(name)  # the kept samples again, at once: the status (and a result) never shows the gap
             return self._status(name, advise)
         if not undecided and not st.decided and len(st.links) > 1 and st.moving[k] > MIN_MOVING and determined:
@@ -411,9 +409,9 @@ class OnlineCalibrator:
         missing = ""
         if undecided:
             missing = f"link undecided between {', '.join(map(str, ambiguous))}: move joint {max(ambiguous)}"
-        elif not determined:
+        elif not determined and not rests_answer:
             missing = "pose not determined yet: " + (
-                f"no motion of its link (joints 1-{link})" if st.moving[k] < 10 else "needs rests in more orientations"
+                f"no motion of its link (joints 1-{link})" if rests_only(st, k) else "needs rests in more orientations"
             )  # fmt: skip
         if not determined:
             pos_std = np.where(pos_std < UNDETERMINED_M, pos_std, np.inf)
@@ -539,7 +537,7 @@ class OnlineCalibrator:
                 gravity_std_mps2=float(np.linalg.norm(self.gravity) * np.sqrt(max(sol.cov[22, 22] * kappa, 0.0))),
             )
             warnings: list[str] = []
-            if np.isfinite(st.offset_sharpness) and st.offset_sharpness < ALIGN_SHARPNESS:
+            if np.isfinite(st.offset_sharpness) and st.offset_sharpness < clock.ALIGN_SHARPNESS:
                 warnings.append("time offset uncertain (no motion to align the unit's clock on)")
             notes: list[str] = []
             if drift_std_ppm > DRIFT_UNDETERMINED_PPM:
@@ -564,10 +562,17 @@ class OnlineCalibrator:
                 "realigned": st.realigned,
                 "scale_estimated": st.scale_estimated,
             }
-            units[name] = UnitResult(
+            if st.clock_provisional:
+                notes.append(
+                    "coarse clock search skipped: the unit's samples hold no motion (static poses only), so nothing "
+                    "determines the clock offset; the stamps taken as they are"
+                )
+            unit = UnitResult(
                 pose=s.pose, observable=True, position_std_m=s.position_std_m, rotation_std_deg=s.rotation_std_deg,
                 warnings=tuple(warnings), extras=extras, imu=imu, pose_covariance=cov, notes=tuple(notes),
             )  # fmt: skip
+            rests = rests_only(st, st.links.index(s.link) if s.link in st.links else 0)
+            units[name] = judge_position(unit, rests, static_only=st.clock_provisional)
         top: dict[str, Any] = {"late_samples": self.late, "cpu_s": self.cpu_s}
         result = CalibrationResult("online", self.chain.name, dataset_sha256, time.perf_counter() - self._t_start,
                                    units, top, failed_units=failed)  # fmt: skip

@@ -101,7 +101,6 @@ SETTLED_ROTATION_DEG = 0.2
 for a move (looser than a calibration target: a unit that never reaches 0.3 mm is still watched)."""
 
 
-
 def is_settled(status: UnitStatus) -> bool:
     """The unit's link is decided and its pose known to :data:`SETTLED_POSITION_M` / :data:`SETTLED_ROTATION_DEG`."""
     return bool(

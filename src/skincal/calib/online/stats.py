@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from skincal.kinematics.transforms import FloatArray, nearest_rotation, skew
+from skincal.kinematics.transforms import FloatArray, nearest_rotation, rotation_angle, skew
 
 NA = 28
 """Columns of the accelerometer Gram: ``[vec(G) 9, h 3, p 3, tau 1, tau p 3, k 1, k p 3, d 1, d p 3]`` and the
@@ -57,6 +57,23 @@ SCALE_PRIOR = 0.02
 """Prior std of each element of ``E`` (the accelerometer's scale/misalignment relative to 1)."""
 SCALE_FIXED = 1e-6
 """``scale_prior`` that holds ``E`` at zero (scale/misalignment not estimated)."""
+
+
+def _antisymmetric_projector() -> FloatArray:
+    """``(9, 9)`` projector onto the antisymmetric part of a row-major ``vec(E)``: ``E``'s rotation part,
+    which no accelerometer reading tells from the unit's rotation ``R`` (``R (I + [e]x) ~ R Exp(e)``)."""
+    V = np.zeros((9, 3))
+    for k, (i, j) in enumerate(((0, 1), (0, 2), (1, 2))):
+        V[3 * i + j, k], V[3 * j + i, k] = 2**-0.5, -(2**-0.5)
+    return V @ V.T
+
+
+_ANTISYMMETRIC = _antisymmetric_projector()
+RESTART_ANGLE_RAD = np.radians(30.0)
+"""A start rotation this far from the linear solution's (rad) is replaced by it."""
+MAX_TURN_RAD = 0.5
+"""Largest rotation step of one Gauss-Newton iteration (rad): a direction the data leave open (rests in
+one orientation only) must not throw the estimate around the sphere."""
 TAU_PRIOR_S = 0.01
 """Prior std of the residual time offset after the coarse alignment, s."""
 _TH, _E, _H, _P, _C, _T, _K, _D = slice(0, 3), slice(3, 12), slice(12, 15), slice(15, 18), slice(18, 21), 21, 22, 23
@@ -189,6 +206,22 @@ def _vec_jacobians(R: FloatArray, F: FloatArray) -> tuple[FloatArray, FloatArray
     return JG, JE, JR
 
 
+def _rotation_start(Za: FloatArray, Zg: FloatArray | None, held: bool) -> FloatArray | None:
+    """The rotation of the linear solution: from the gyroscope's Gram when it holds all of ``vec(R)``,
+    else from the accelerometer's (``vec(G)``, ``G = R (I + E)``); with ``held`` only from a Gram that
+    holds all of it (None otherwise)."""
+    for Z, n in ((Zg, NG - 1), (Za, NA - 1)):
+        if Z is None:
+            continue
+        full = np.linalg.matrix_rank(Z[:9, :9], tol=1e-9 * max(Z[:9, :9].trace(), 1e-300)) >= 9
+        if not full and (held or Z is Zg):
+            continue
+        start = _linear_start(Z, n)
+        if start is not None:
+            return nearest_rotation(start[:9].reshape(3, 3))
+    return None
+
+
 def _linear_start(Z: FloatArray, n: int) -> FloatArray | None:
     """Unconstrained least-squares solution of the first ``n`` unknowns of a Gram ``Z`` (None: singular)."""
     Q, b = Z[:n, :n], Z[:n, n]
@@ -248,13 +281,11 @@ def solve(
     (tiny: the accelerometer's scale/misalignment held at the identity), ``drift_prior`` that of the
     residual clock drift. None when the data determine nothing yet."""
     have_g = Zg is not None and Zg[0, 0] > 0
+    linear = _rotation_start(Za, Zg if have_g else None, held=R0 is not None)
     if R0 is None:
-        start = _linear_start(Zg, NG - 1) if have_g else None
-        if start is not None and np.linalg.matrix_rank(Zg[:9, :9], tol=1e-9 * Zg[:9, :9].trace()) >= 9:
-            R0 = nearest_rotation(start[:9].reshape(3, 3))
-        else:
-            start_a = _linear_start(Za, NA - 1)
-            R0 = np.eye(3) if start_a is None else nearest_rotation(start_a[:9].reshape(3, 3))
+        R0 = np.eye(3) if linear is None else linear
+    elif linear is not None and float(rotation_angle(R0, linear)) > RESTART_ANGLE_RAD:
+        R0 = linear  # the last solution is another basin (it was fitted before the data held the rotation)
     R, x = np.array(R0, dtype=float), np.zeros(NP)  # x holds E, h, p, c, tau, k, d (dtheta always 0 at the current R)
     wa, wg = 1.0 / sigma_a**2, (1.0 / sigma_g**2 if have_g else 0.0)
     prior = np.zeros(NP)
@@ -262,12 +293,15 @@ def solve(
     prior[_T] = 1.0 / TAU_PRIOR_S**2
     prior[_K] = 1.0 / GRAVITY_PRIOR**2
     prior[_D] = 1.0 / drift_prior**2
+    P = np.diag(prior)
+    if not have_g:  # E symmetric (as mle's): its rotation part, which only a gyroscope tells from R, is R's
+        P[_E, _E] += _ANTISYMMETRIC / SCALE_FIXED**2
     H = np.eye(NP)
     for it in range(iterations):
         xa, Ja, xg, Jg = linearise(R, x)
         ga = Za[: NA - 1, : NA - 1] @ xa - Za[: NA - 1, NA - 1]
-        H = wa * Ja.T @ Za[: NA - 1, : NA - 1] @ Ja + np.diag(prior)
-        grad = wa * Ja.T @ ga + prior * np.r_[np.zeros(3), x[3:]]
+        H = wa * Ja.T @ Za[: NA - 1, : NA - 1] @ Ja + P
+        grad = wa * Ja.T @ ga + P @ np.r_[np.zeros(3), x[3:]]
         if have_g:
             assert Zg is not None
             gg = Zg[: NG - 1, : NG - 1] @ xg - Zg[: NG - 1, NG - 1]
@@ -281,6 +315,9 @@ def solve(
             return None
         if not np.all(np.isfinite(step)):
             return None
+        turn = float(np.linalg.norm(step[_TH]))
+        if turn > MAX_TURN_RAD:  # a rotation the data do not hold yet (one gravity direction): no wild jump
+            step *= MAX_TURN_RAD / turn
         R = R @ Rotation.from_rotvec(step[_TH]).as_matrix()
         x[3:] += step[3:]
         if np.linalg.norm(step[_TH]) < 1e-10 and it > 1:

@@ -20,6 +20,8 @@ REST, MOVING = 0, 1
 """Rest and moving samples are two classes with their own noise level (a resting unit's residual is its sensor
 noise; a moving one's adds the errors of the joint-derived accelerations), so the Grams are kept per class
 (:func:`~skincal.calib.rest.link_moving`)."""
+MIN_POSITION_MOVING = 10
+"""A unit whose link has fewer moving samples than this holds no position (rests only)."""
 SATURATION_FLOOR = (1.5 * 9.80665, 2.0)
 """A recurring largest reading is taken as the sensor's range only from 1.5 g (m/s^2) and 2 rad/s up:
 no accelerometer used on skin saturates below 2 g, nor a gyroscope below 250 deg/s."""
@@ -59,6 +61,7 @@ class UnitState:
     pending_g: list[FloatArray | None] = field(default_factory=list)
     offset: float | None = None
     offset_sharpness: float = float("nan")
+    clock_provisional: bool = False  # stamps taken as they are (no motion seen yet): aligned again on motion
     has_gyro: bool | None = None
     chunks: deque = field(default_factory=deque)  # (t_min, t_max, Za, Zg, moving) per absorb call
     t_last: float = float("-inf")
@@ -142,3 +145,9 @@ def unsaturated(st: UnitState, a: FloatArray, g: FloatArray | None) -> np.ndarra
             keep &= np.all(m < st.peak[i], axis=1)
     st.saturated += int((~keep).sum())
     return keep
+
+
+def rests_only(st: UnitState, k: int) -> bool:
+    """Whether the unit recorded in the robot's rests only (static poses: its clock not aligned on motion)
+    or its candidate link ``k`` (index into ``st.links``) has too few moving samples: no position."""
+    return bool(st.clock_provisional or (st.moving.size and st.moving[k] < MIN_POSITION_MOVING))
