@@ -40,10 +40,12 @@ from skincal.calib.mle.problem import (
     Problem,
     Shared,
     arrange,
+    check_startable,
     decimated,
     fit_problem,
     gyro_bias_start,
     use_gyro,
+    warm_state,
 )
 from skincal.calib.mle.solver import (
     SCALE_FULL,
@@ -296,7 +298,8 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     account = problem.samples.account
     if account is not None:  # the gyroscope's screening (the accelerometer's reaches the result elsewhere)
         warnings += [w for w in account.warnings if not w.startswith("accelerometer ")]
-    rates = gyro_rates(problem)  # once: link discovery and the unit check below share them
+    # once: link discovery and the unit check below share them (a part's warnings are not kept: no check)
+    rates = gyro_rates(problem) if problem.link == 0 or problem.diagnostics else None
     if problem.link == 0:
         link, confidence, link_warnings, levels, start, by_gyro = choose_link(problem, rates)
         warnings += link_warnings
@@ -327,6 +330,17 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     blocks = fit_blocks(problem, p)
     if start is not None:
         start = replace(start, E=np.zeros((3, 3)), bg=gyro_bias_start(p.data.rows))
+    full = problem.start
+    if full is not None and full.pose.link == link and "moved_between_s" not in full.extras:
+        # A part of the recording (the consistency check): one Gauss-Newton step on all its samples from the
+        # whole recording's estimate, which lies within about the part's std of the part's optimum (closer
+        # than the coarse fit below gets); the whole recording's decision that the unit did not move is kept.
+        check_startable(p)
+        resync = None if problem.alignment is None else problem.alignment.steps
+        warm = warm_state(full, p, blocks, problem.time_offset_s, problem.shared.interpolator.t_start,
+                          0.0 if resync is None else resync.drift_ppm, float(np.linalg.norm(problem.gravity)))
+        return _report(problem, p, link, fit_problem(p, blocks, state=warm, max_outer=1, max_inner=1),
+                       warnings, extras, confidence, early_notes)  # fmt: skip
     # Converge on every 8th moving sample, then one Gauss-Newton step on all of them, whose
     # normal matrix also gives the covariance.
     coarse = fit_problem(decimated(p, 8), blocks, state=start)
@@ -350,6 +364,13 @@ def run_unit(problem: UnitProblem) -> UnitResult:
             f"{'before' if before else 'after'} it only"
         )
     fit = fit_problem(p, blocks, state=coarse.state, max_outer=1, max_inner=1)
+    return _report(problem, p, link, fit, warnings, extras, confidence, early_notes)
+
+
+def _report(problem: UnitProblem, p: Problem, link: int, fit: Fit, warnings: list[str], extras: dict,
+            confidence: float | None, early_notes: list[str]) -> UnitResult:  # fmt: skip
+    """The unit's result from its final fit on link ``link``: the residual tests, the std and what the
+    IMU's errors were found to be (``warnings``, ``extras``, ``early_notes``: found before the fit)."""
     e = fit.blocks.slices().get("e")
     if e is not None:
         std_e = np.sqrt(np.maximum(np.diag(fit.covariance)[e], 0.0))
