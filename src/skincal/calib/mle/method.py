@@ -331,21 +331,19 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     if start is not None:
         start = replace(start, E=np.zeros((3, 3)), bg=gyro_bias_start(p.data.rows))
     full = problem.start
-    if full is not None and full.pose.link == link and "moved_between_s" not in full.extras:
-        # A part of the recording (the consistency check): one Gauss-Newton step on all its samples from the
-        # whole recording's estimate, which lies within about the part's std of the part's optimum (closer
-        # than the coarse fit below gets); the whole recording's decision that the unit did not move is kept.
+    part = full is not None and full.pose.link == link and "moved_between_s" not in full.extras
+    if part:  # a part of the recording (the consistency check): started from the whole recording's estimate
+        assert full is not None
         check_startable(p)
         resync = None if problem.alignment is None else problem.alignment.steps
-        warm = warm_state(full, p, blocks, problem.time_offset_s, problem.shared.interpolator.t_start,
-                          0.0 if resync is None else resync.drift_ppm, float(np.linalg.norm(problem.gravity)))
-        return _report(problem, p, link, fit_problem(p, blocks, state=warm, max_outer=1, max_inner=1),
-                       warnings, extras, confidence, early_notes)  # fmt: skip
+        start = warm_state(full, p, blocks, problem.time_offset_s, problem.shared.interpolator.t_start,
+                           0.0 if resync is None else resync.drift_ppm, float(np.linalg.norm(problem.gravity)))
     # Converge on every 8th moving sample, then one Gauss-Newton step on all of them, whose
-    # normal matrix also gives the covariance.
+    # normal matrix also gives the covariance (a part converges too: on real recordings one step from the
+    # whole recording's estimate stops short of a part's optimum by up to 2 std).
     coarse = fit_problem(decimated(p, 8), blocks, state=start)
-    move = None
-    if problem.options.detect_move and coarse.residuals is not None:
+    move = None  # a part keeps the whole recording's finding that the unit did not move
+    if problem.options.detect_move and coarse.residuals is not None and not part:
         # a fitted bias drift can soak up part of a move: look with and without it
         S = len(p.data.rows.static_u)
         undrifted = coarse.residuals.copy()

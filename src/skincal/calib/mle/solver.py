@@ -413,6 +413,8 @@ def solve(
             break
         if abs(state.tau - lin.tau_k) < 1e-7 and abs(state.d - lin.d_k) * (np.ptp(rows.moving_t) + 1e-9) < 1e-7:
             break
+        if _outer == max_outer - 1:  # no outer loop left to use a new linearisation (the final one-step fit)
+            break
         lin = linearise(state.tau, state.d)
     # Covariance from the last iteration's normal matrix (the final step changes it negligibly),
     # each sensor's information divided by its residuals' autocorrelation factor.
