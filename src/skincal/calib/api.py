@@ -58,8 +58,6 @@ class UnitProblem:
         alignment: that step's outcome (method-specific), or ``None``.
         diagnostics: ``False`` when the caller keeps only the pose, its std and the link (the
             consistency check's parts): a method may then skip what only adds warnings and extras.
-        start: the unit's result on the whole recording when these samples are a part of it (the
-            consistency check's parts), or ``None``: a method may start from it (and keep its decisions).
     """
 
     chain: SerialChain
@@ -74,7 +72,6 @@ class UnitProblem:
     time_offset_s: float = 0.0
     alignment: Any = None
     diagnostics: bool = True
-    start: UnitResult | None = None
 
 
 class UnitMethod(Protocol):
@@ -300,13 +297,11 @@ def calibrate(
 
         part_options = dataclasses.replace(parsed, consistency=False)
 
-        full = result
-
         def refit(part: Dataset, part_links: dict[str, int]) -> CalibrationResult:
             """The method on a part of the recording: the same joint conditioning and shared tables (they do
             not depend on the IMU samples) and each unit's clock alignment on its whole stream (found in the
-            full run when it ran in this process, else here), the units on their links, each started from its
-            full result; only their poses, std and links are kept (no diagnostics)."""
+            full run when it ran in this process, else here), the units on their links; only their poses,
+            std and links are kept (no diagnostics)."""
             units: dict[str, UnitResult] = {}
             part_failed: dict[str, str] = {}
             for k, name in enumerate(part_links):
@@ -316,7 +311,7 @@ def calibrate(
                     units[name] = calibrate_unit(
                         part, name, spec, link=part_links[name], rng=np.random.default_rng([seed, k]),
                         interpolator=interpolator, shared=shared, options=part_options,
-                        alignment=alignments.get(name), diagnostics=False, start=full.units.get(name),
+                        alignment=alignments.get(name), diagnostics=False,
                     )  # fmt: skip
                 except CalibrationError as exc:
                     part_failed[name] = str(exc)
@@ -495,13 +490,12 @@ def calibrate_unit(
     alignment: Any = None,
     record: dict[str, Any] | None = None,
     diagnostics: bool = True,
-    start: UnitResult | None = None,
 ) -> UnitResult:
     """Calibrate one unit (see :func:`calibrate`); ``options``: the method's parsed options
     (default: the method's defaults); ``alignment``: the unit's clock alignment found on its whole
     stream (``spec.align``), applied to this dataset's stream (a part of it) with its ``for_stream``
     instead of searching again; ``record``: where the alignment this call found (``spec.align``) is
-    kept under the unit's name; ``diagnostics``, ``start``: :attr:`UnitProblem.diagnostics` and ``start``."""
+    kept under the unit's name; ``diagnostics``: :attr:`UnitProblem.diagnostics`."""
     with method_errors():  # a foreign exception: this unit's CalibrationError, raised from it
         if interpolator is None:
             interpolator = JointInterpolator(dataset.joints)
@@ -554,7 +548,6 @@ def calibrate_unit(
             time_offset_s=offset,
             alignment=alignment,
             diagnostics=diagnostics,
-            start=start,
         )
         result = spec.run_unit(problem)
         _, screening = screen_readings(unit, dataset.imu[unit].accel, dataset.imu[unit].t)

@@ -40,12 +40,10 @@ from skincal.calib.mle.problem import (
     Problem,
     Shared,
     arrange,
-    check_startable,
     decimated,
     fit_problem,
     gyro_bias_start,
     use_gyro,
-    warm_state,
 )
 from skincal.calib.mle.solver import (
     SCALE_FULL,
@@ -298,7 +296,8 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     account = problem.samples.account
     if account is not None:  # the gyroscope's screening (the accelerometer's reaches the result elsewhere)
         warnings += [w for w in account.warnings if not w.startswith("accelerometer ")]
-    # once: link discovery and the unit check below share them (a part's warnings are not kept: no check)
+    # once: link discovery and the unit check below share them; a part of the consistency check (no
+    # diagnostics, its link given) skips the unit check: the whole stream's run made it
     rates = gyro_rates(problem) if problem.link == 0 or problem.diagnostics else None
     if problem.link == 0:
         link, confidence, link_warnings, levels, start, by_gyro = choose_link(problem, rates)
@@ -330,20 +329,11 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     blocks = fit_blocks(problem, p)
     if start is not None:
         start = replace(start, E=np.zeros((3, 3)), bg=gyro_bias_start(p.data.rows))
-    full = problem.start
-    part = full is not None and full.pose.link == link and "moved_between_s" not in full.extras
-    if part:  # a part of the recording (the consistency check): started from the whole recording's estimate
-        assert full is not None
-        check_startable(p)
-        resync = None if problem.alignment is None else problem.alignment.steps
-        start = warm_state(full, p, blocks, problem.time_offset_s, problem.shared.interpolator.t_start,
-                           0.0 if resync is None else resync.drift_ppm, float(np.linalg.norm(problem.gravity)))
     # Converge on every 8th moving sample, then one Gauss-Newton step on all of them, whose
-    # normal matrix also gives the covariance (a part converges too: on real recordings one step from the
-    # whole recording's estimate stops short of a part's optimum by up to 2 std).
+    # normal matrix also gives the covariance.
     coarse = fit_problem(decimated(p, 8), blocks, state=start)
-    move = None  # a part keeps the whole recording's finding that the unit did not move
-    if problem.options.detect_move and coarse.residuals is not None and not part:
+    move = None
+    if problem.options.detect_move and coarse.residuals is not None:
         # a fitted bias drift can soak up part of a move: look with and without it
         S = len(p.data.rows.static_u)
         undrifted = coarse.residuals.copy()
@@ -362,13 +352,6 @@ def run_unit(problem: UnitProblem) -> UnitResult:
             f"{'before' if before else 'after'} it only"
         )
     fit = fit_problem(p, blocks, state=coarse.state, max_outer=1, max_inner=1)
-    return _report(problem, p, link, fit, warnings, extras, confidence, early_notes)
-
-
-def _report(problem: UnitProblem, p: Problem, link: int, fit: Fit, warnings: list[str], extras: dict,
-            confidence: float | None, early_notes: list[str]) -> UnitResult:  # fmt: skip
-    """The unit's result from its final fit on link ``link``: the residual tests, the std and what the
-    IMU's errors were found to be (``warnings``, ``extras``, ``early_notes``: found before the fit)."""
     e = fit.blocks.slices().get("e")
     if e is not None:
         std_e = np.sqrt(np.maximum(np.diag(fit.covariance)[e], 0.0))

@@ -12,7 +12,6 @@ from skincal.calib.api import UnitProblem
 from skincal.calib.closed_form import position_and_bias, static_rotation_and_bias, wahba
 from skincal.calib.mle.arrange import UnitData, arrange_unit_data
 from skincal.calib.mle.solver import (
-    SCALE_NONE,
     Blocks,
     Fit,
     Linearisation,
@@ -34,8 +33,6 @@ from skincal.calib.timing import (
     motion_profile,
 )
 from skincal.data.dataset import Dataset, ImuStream
-from skincal.data.imu_calibration import ImuCalibration
-from skincal.data.result import UnitResult
 from skincal.errors import CalibrationError
 from skincal.kinematics.transforms import FloatArray
 
@@ -176,70 +173,25 @@ def gyro_bias_start(rows: Rows) -> FloatArray:
     return np.median(rows.static_g, axis=0) if rows.static_g is not None and len(rows.static_g) else np.zeros(3)
 
 
-def check_startable(p: Problem) -> None:
-    """Raise the :class:`CalibrationError` of a problem without a start: fewer than 2 rest runs and no
-    gyroscope over at least 10 moving samples to give the rotation."""
-    rows = p.data.rows
-    S = len(rows.static_u)
-    if S < 2 and (rows.moving_g is None or len(rows.moving_t) < 10):
-        raise CalibrationError(
-            f"only {S} rest period(s) for link {p.data.link} and no gyroscope; at least 2 distinct static "
-            "poses are needed"
-        )
-
-
 def start_state(p: Problem) -> State:
     """Closed-form start: rotation from the rest runs (or the angular velocities), then position."""
-    check_startable(p)
     rows = p.data.rows
     S, M = len(rows.static_u), len(rows.moving_t)
     bg = gyro_bias_start(rows)
     lin = p.linearise(0.0, 0.0) if M >= 10 else None
     if S >= 2:
         R, b = static_rotation_and_bias(rows.static_u, rows.static_f, rows.static_weight)
-    else:
-        assert rows.moving_g is not None and lin is not None
+    elif rows.moving_g is not None and lin is not None:
         R, b = wahba(lin.w, rows.moving_g - bg), np.zeros(3)
+    else:
+        raise CalibrationError(
+            f"only {S} rest period(s) for link {p.data.link} and no gyroscope; at least 2 distinct static "
+            "poses are needed"
+        )
     if lin is not None:
         pos, b_dyn = position_and_bias(R, lin.u, lin.K, rows.moving_f)
         return State(R=R, p=pos, b=b_dyn if np.linalg.norm(b) == 0 else b, bg=bg)
     return State(R=R, p=np.zeros(3), b=b, bg=bg)
-
-
-def warm_state(full: UnitResult, p: Problem, blocks: Blocks, time_offset_s: float, t_ref: float,
-               resync_drift_ppm: float, g0: float) -> State:  # fmt: skip
-    """The start of a part of a recording (the consistency check) from the unit's result ``full`` on the
-    whole recording: its pose and IMU errors carried to the part's reference instant ``t_c``, the blocks the
-    part does not fit (``blocks``) at their cold start's zero.
-
-    The reported offset refers to ``t_ref`` (``time_reference_s``); the fit's ``tau`` to ``t_c``, after the
-    coarse offset ``time_offset_s`` (the same alignment as the whole stream's)::
-
-        tau = time_offset_s_reported - time_offset_s - d (t_ref - t_c),   b = b_reported + c (t_c - t_b)
-
-    with ``d`` the fitted drift (the reported one less the re-sync steps' ``resync_drift_ppm``) and ``t_b``
-    the bias's reference; ``k = |g_reported| / g0 - 1``. A start only: the part's fit moves from it to the
-    part's own optimum (which differs from the whole recording's by about its std).
-    """
-    imu = full.imu if full.imu is not None else ImuCalibration()  # nothing estimated: zero errors
-    t_c = p.data.t_c
-    vec = lambda x: np.zeros(3) if x is None else np.asarray(x, dtype=float)  # noqa: E731
-    d = 0.0
-    if imu.clock_drift_std_ppm is not None and imu.clock_drift_ppm is not None:
-        d = (float(imu.clock_drift_ppm) - resync_drift_ppm) * 1e-6
-    offset = 0.0 if imu.time_offset_s is None else float(imu.time_offset_s)
-    tau = offset - time_offset_s - d * (t_ref - t_c) if blocks.time_offset else 0.0
-    c = vec(imu.accel_bias_drift_mps3)
-    t_b = t_ref if imu.accel_bias_reference_s is None else float(imu.accel_bias_reference_s)
-    b = vec(imu.accel_bias_mps2) + c * (t_c - t_b)
-    A = np.eye(3) if imu.accel_scale_misalignment is None else np.asarray(imu.accel_scale_misalignment, dtype=float)
-    E = A - np.eye(3) if blocks.scale != SCALE_NONE else np.zeros((3, 3))
-    k = float(imu.gravity_mps2) / g0 - 1.0 if blocks.gravity and imu.gravity_mps2 is not None else 0.0
-    bg = vec(imu.gyro_bias_rps) if imu.gyro_bias_rps is not None else gyro_bias_start(p.data.rows)
-    return State(
-        R=np.asarray(full.pose.R_link_su, dtype=float), p=np.asarray(full.pose.p_link_su, dtype=float), b=b, E=E,
-        tau=tau, d=d if blocks.clock_drift else 0.0, bg=bg, c=c if blocks.bias_drift else np.zeros(3), k=k,
-    )
 
 
 def fit_problem(p: Problem, blocks: Blocks, state: State | None = None, **kw) -> Fit:
