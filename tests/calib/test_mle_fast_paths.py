@@ -178,14 +178,6 @@ def test_the_one_step_fit_linearises_once(short, monkeypatch):
     assert np.array_equal(again.state.p, fit.state.p) and np.array_equal(again.covariance, fit.covariance)
 
 
-def test_stacked_matrix_products_are_one_product(rng):
-    from skincal.calib.mle.solver import _times_matrices
-
-    M, X = rng.normal(size=(3, 3)), rng.normal(size=(200, 3, 3))
-    np.testing.assert_allclose(_times_matrices(M, X), M @ X, rtol=0, atol=1e-14)
-    np.testing.assert_allclose(_times_matrices(M, X)[17], M @ X[17], rtol=0, atol=1e-14)
-
-
 def test_a_part_skips_the_gyroscope_unit_check_and_keeps_its_fit(short, monkeypatch):
     """A consistency part (no diagnostics, link given) does not evaluate the gyroscope's rates for the unit check
     (the whole stream's run made it); its pose and std are the same as with the check."""
