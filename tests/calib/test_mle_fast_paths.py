@@ -137,3 +137,60 @@ def test_the_gcv_smoothing_parameter_is_scipys(n, noise):
     lam = gcv_lambda(t, y)
     assert 0.0 <= lam <= n
     assert np.array_equal(make_smoothing_spline(t, y, lam=lam).c, make_smoothing_spline(t, y).c)
+
+
+def _captured_fits(monkeypatch):
+    """Record every ``fit_problem(p, blocks, ...)`` call of ``mle``'s ``run_unit`` with its outcome."""
+    import skincal.calib.mle.method as method
+
+    calls: list = []
+    real = method.fit_problem
+
+    def spy(p, blocks, **kw):
+        fit = real(p, blocks, **kw)
+        calls.append((p, blocks, kw, fit))
+        return fit
+
+    monkeypatch.setattr(method, "fit_problem", spy)
+    return calls
+
+
+def test_the_one_step_fit_linearises_once(short, monkeypatch):
+    """The final one-step fit (``max_outer=1``) evaluates the link signals at its start only: a linearisation
+    after its last step would have no outer loop left to use it."""
+    calls = _captured_fits(monkeypatch)
+    spec = METHODS["mle"]
+    unit = short.units[0]
+    calibrate_unit(short, unit, spec, link=short.truth[unit].link, rng=np.random.default_rng(0))
+    p, blocks, kw, fit = calls[-1]
+    assert kw.get("max_outer") == 1 and blocks.time_offset
+    asked: list = []
+    real = p.linearise
+
+    def counted(tau, d):
+        asked.append((tau, d))
+        return real(tau, d)
+
+    from skincal.calib.mle.solver import solve
+
+    again = solve(kw["state"], blocks, p.data.rows, counted, max_outer=1, max_inner=1, sandwich=p.sandwich)
+    assert asked == [(kw["state"].tau, kw["state"].d)]
+    assert np.array_equal(again.state.p, fit.state.p) and np.array_equal(again.covariance, fit.covariance)
+
+
+def test_a_part_skips_the_gyroscope_unit_check_and_keeps_its_fit(short, monkeypatch):
+    """A consistency part (no diagnostics, link given) does not evaluate the gyroscope's rates for the unit check
+    (the whole stream's run made it); its pose and std are the same as with the check."""
+    import skincal.calib.mle.method as method
+
+    spec = METHODS["mle"]
+    unit = short.units[0]
+    link = short.truth[unit].link
+    asked: list = []
+    real = method.gyro_rates
+    monkeypatch.setattr(method, "gyro_rates", lambda problem: asked.append(problem.diagnostics) or real(problem))
+    got = [calibrate_unit(short, unit, spec, link=link, rng=np.random.default_rng(0), diagnostics=flag)
+           for flag in (True, False)]  # fmt: skip
+    assert asked == [True]
+    assert np.array_equal(got[0].pose.p_link_su, got[1].pose.p_link_su)
+    assert np.array_equal(got[0].position_std_m, got[1].position_std_m)

@@ -296,7 +296,9 @@ def run_unit(problem: UnitProblem) -> UnitResult:
     account = problem.samples.account
     if account is not None:  # the gyroscope's screening (the accelerometer's reaches the result elsewhere)
         warnings += [w for w in account.warnings if not w.startswith("accelerometer ")]
-    rates = gyro_rates(problem)  # once: link discovery and the unit check below share them
+    # once: link discovery and the unit check below share them; a part of the consistency check (no
+    # diagnostics, its link given) skips the unit check: the whole stream's run made it
+    rates = gyro_rates(problem) if problem.link == 0 or problem.diagnostics else None
     if problem.link == 0:
         link, confidence, link_warnings, levels, start, by_gyro = choose_link(problem, rates)
         warnings += link_warnings

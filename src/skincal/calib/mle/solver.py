@@ -236,9 +236,9 @@ def _accel_rows_with_residual(
     r = pred - meas
     J = np.zeros((len(v), 3, blocks.size + 1))
     J[:, :, -1] = r
-    J[:, :, sl["theta"]] = A @ skew(f)  # d/d dtheta of A R^T v with R <- R Exp(dtheta): A [f]x
+    J[:, :, sl["theta"]] = _times_matrices(A, skew(f))  # d/d dtheta of A R^T v with R <- R Exp(dtheta): A [f]x
     if lin is not None:
-        J[S:, :, sl["p"]] = (A @ R.T) @ Kd
+        J[S:, :, sl["p"]] = _times_matrices(A @ R.T, Kd)
     J[:, :, sl["b"]] = np.eye(3)
     if "e" in sl:
         _scale_columns(J, f, blocks.scale, sl["e"])
@@ -413,6 +413,8 @@ def solve(
             break
         if abs(state.tau - lin.tau_k) < 1e-7 and abs(state.d - lin.d_k) * (np.ptp(rows.moving_t) + 1e-9) < 1e-7:
             break
+        if _outer == max_outer - 1:  # no outer loop left to use a new linearisation (the final one-step fit)
+            break
         lin = linearise(state.tau, state.d)
     # Covariance from the last iteration's normal matrix (the final step changes it negligibly),
     # each sensor's information divided by its residuals' autocorrelation factor.
@@ -470,6 +472,12 @@ def sandwich_inflation(
         cov_sw = cov_sw * (moving_blocks / (moving_blocks - 1.0))
     ratio = np.sqrt(np.maximum(np.diag(cov_sw), 0.0) / np.maximum(np.diag(cov), 1e-300))
     return np.where(ratio > 1.0 + 2.33 * np.sqrt(0.5 / nb), ratio, 1.0)
+
+
+def _times_matrices(M: FloatArray, X: FloatArray) -> FloatArray:
+    """``(N, 3, 3)`` ``M X_n`` of ``M`` ``(3, 3)`` and every ``X_n`` of ``X`` ``(N, 3, 3)``, as one matrix product
+    ``(X_n^T M^T)^T`` over the stacked rows (half the time of NumPy's stacked ``M @ X`` on 50 000 rows)."""
+    return (X.transpose(0, 2, 1).reshape(-1, 3) @ M.T).reshape(-1, 3, 3).transpose(0, 2, 1)
 
 
 def _times_vector(K: FloatArray, p: FloatArray) -> FloatArray:
