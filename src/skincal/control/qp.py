@@ -412,7 +412,8 @@ class AvoidanceController:
         c = -J.T @ xd_cmd
         if cfg.posture_gain > 0 and self.q_posture is not None:
             c -= cfg.damping * cfg.posture_gain * (self.q_posture - q)
-        lb, ub = joint_velocity_bounds(self.chain, q, cfg.dt, cfg.velocity_scale, cfg.limit_margin)
+        acc = cfg.acceleration_limit
+        lb, ub = joint_velocity_bounds(self.chain, q, cfg.dt, cfg.velocity_scale, cfg.limit_margin, acc)
         if cfg.acceleration_limit is not None and qd_prev is not None:
             lb, ub = drive_bounds(lb, ub, qd_prev, cfg.acceleration_limit, cfg.dt)
         obs = points if isinstance(points, ObstaclePoints) else ObstaclePoints.still(points)
