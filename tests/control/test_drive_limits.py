@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from skincal.control import AvoidanceController, ControllerConfig
+from skincal.control.constraints import joint_velocity_bounds
 from skincal.control.iso_metrics import braking_steps
 from skincal.control.qp import drive_bounds
 from skincal.control.separation import SeparationParams, StoppingModel
@@ -101,3 +102,53 @@ def test_feedback_speed_caps_the_way_back_to_the_reference():
     np.testing.assert_allclose(capped.c, 0.25 * free.c)  # c = -J^T xd_cmd: the feedback scaled to 0.5 m/s
     with pytest.raises(ConfigError, match="feedback_speed"):
         ControllerConfig(feedback_speed=0.0)
+
+
+def test_a_drive_limited_joint_stops_before_its_position_limit():
+    """Joint 2 of the Panda at 2 rad/s toward its upper limit, 0.3 rad short of the margin: each step the command
+    stays within the box and within a_j dt of the previous one (as the torque robot's drive does); it must come to
+    rest before ``upper - margin``. With the one-step bound alone the drive cannot brake in time and runs past it
+    (``lower``, Panda, torque: into the stop at 2 rad/s; simulated)."""
+    chain = panda()
+    acc, dt, margin = np.asarray(ACC), 0.001, 0.05
+    q = Q_START.copy()
+    q[1] = chain.joint_upper[1] - margin - 0.3
+    qd = np.zeros(chain.n_joints)
+    qd[1] = 2.0
+    assert qd[1] ** 2 / (2 * acc[1]) < 0.3  # braking at a_2 from 2 rad/s fits in 0.3 rad when begun at once
+    top = q[1]
+    for _ in range(400):
+        lb, ub = joint_velocity_bounds(chain, q, dt, margin=margin, acceleration=acc)
+        lo, hi = drive_bounds(lb, ub, qd, acc, dt)
+        qd = np.clip(np.full(chain.n_joints, 10.0), lo, hi)  # as fast up as allowed
+        q = q + qd * dt
+        top = max(top, q[1])
+    assert top <= chain.joint_upper[1] - margin + acc[1] * dt**2  # (within one step's a dt^2: the discretisation)
+    assert top > chain.joint_upper[1] - margin - 0.01  # and it does get there (not a bound that stops far short)
+    lb, ub = joint_velocity_bounds(chain, Q_START, dt, margin=margin)
+    lb_a, ub_a = joint_velocity_bounds(chain, Q_START, dt, margin=margin, acceleration=acc)
+    np.testing.assert_array_equal((lb, ub), (lb_a, ub_a))  # far from the limits: the velocity limits, as before
+
+
+def test_drive_limited_commands_do_not_build_up_null_space_speed():
+    """The Panda's flange sent to a point 10 cm away (feedback 1 m/s) from rest, each command within a_j dt of the
+    previous one: the commands approach the ideal interface's, whose null-space speed is ~0, joint by joint, so the
+    arm's null-space speed ``|(I - J^+ J) qd|`` stays small. Minimising the tracking objective in the drive's box
+    directly picked its corners and drove it to 1.99 rad/s here (0.60 now; in ``hand``, Panda, torque: joints 1, 3
+    and 6 at 1.3-2.2 rad/s with the flange nearly still; simulated)."""
+    chain = panda()
+    cfg = ControllerConfig(acceleration_limit=ACC)
+    ctl = AvoidanceController(chain, cfg)
+    q = Q_START.copy()
+    target = chain.flange_pose(q)[0, :3, 3] + np.array([0.07, -0.07, 0.0])
+    qd, null_speed = np.zeros(chain.n_joints), 0.0
+    for _ in range(300):
+        res = ctl.step(q, target, np.zeros(3), np.zeros((0, 3)), qd_prev=qd)
+        assert np.all(np.abs(res.qd - qd) <= np.asarray(ACC) * cfg.dt + 1e-9)
+        qd = res.qd
+        x = chain.flange_pose(q)[0, :3, 3]
+        J = chain.point_jacobians(chain.link_frames(q)[0], [chain.n_joints], x)[0]
+        null_speed = max(null_speed, float(np.linalg.norm(qd - np.linalg.pinv(J) @ (J @ qd))))
+        q = q + qd * cfg.dt
+    assert null_speed < 0.75
+    assert np.linalg.norm(chain.flange_pose(q)[0, :3, 3] - target) < 0.01  # and the flange gets there

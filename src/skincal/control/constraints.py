@@ -191,18 +191,40 @@ def obstacle_rows(
     return ObstacleRows(G, h, prox.distance, prox.link, prox.normal, prox.p_base_robot)
 
 
-def joint_velocity_bounds(chain: SerialChain, q: ArrayLike, dt: float, scale: float = 1.0, margin: float = 0.0):
+def joint_velocity_bounds(
+    chain: SerialChain,
+    q: ArrayLike,
+    dt: float,
+    scale: float = 1.0,
+    margin: float = 0.0,
+    acceleration: ArrayLike | None = None,
+):
     """Box bounds ``lb <= qd <= ub`` ``(n,)`` [rad/s] from velocity limits and position limits over one step.
 
     ``ub = min(scale v_max, (q_upper - margin - q) / dt)``, ``lb = max(-scale v_max, (q_lower + margin - q) / dt)``,
     then widened to contain 0 (a joint already past a limit may stop or move back, never further).
     Joints without limits get ``+-inf`` (velocity) or no position term.
+
+    ``acceleration`` ``(n,)`` rad/s^2: a drive that changes its velocity by at most ``a dt`` per step (torque mode)
+    must also be able to stop before the limit, so with ``s = q_upper - margin - q >= 0`` left (and likewise below)
+
+        ub <= sqrt((a dt / 2)^2 + 2 a s) - a dt / 2
+
+    the speed from which braking at ``a`` (``v, v - a dt, ...`` each held for ``dt``: ``v^2 / (2 a) + v dt / 2``
+    travelled) ends within ``s``. Without it the one-step bound lets the drive reach a limit at speed: ``lower`` on
+    the Panda (torque, simulated) drove joint 2 into its stop at 2 rad/s (7.5 rad/s^2 needs 0.3 rad to brake).
     """
     q = np.asarray(q, dtype=float).reshape(-1)
     n = chain.n_joints
     v = np.full(n, np.inf) if chain.velocity_limit is None else scale * chain.velocity_limit
     lb, ub = -v.copy(), v.copy()
     if chain.joint_lower is not None and chain.joint_upper is not None:
-        ub = np.minimum(ub, (chain.joint_upper - margin - q) / dt)
-        lb = np.maximum(lb, (chain.joint_lower + margin - q) / dt)
+        up, down = chain.joint_upper - margin - q, q - chain.joint_lower - margin
+        ub = np.minimum(ub, up / dt)
+        lb = np.maximum(lb, -down / dt)
+        if acceleration is not None:
+            a = np.asarray(acceleration, dtype=float).reshape(n)
+            half = 0.5 * a * dt
+            ub = np.minimum(ub, np.sqrt(half**2 + 2.0 * a * np.maximum(up, 0.0)) - half)
+            lb = np.maximum(lb, half - np.sqrt(half**2 + 2.0 * a * np.maximum(down, 0.0)))
     return np.minimum(lb, 0.0), np.maximum(ub, 0.0)

@@ -74,7 +74,7 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -271,6 +271,7 @@ class QpProblem:
     critical: FloatArray | None = None
     terms: SeparationTerms | None = None
     separation_inputs: SeparationInputs | None = None
+    free_box: tuple[FloatArray, FloatArray] | None = None
 
 
 @dataclass(frozen=True)
@@ -412,9 +413,12 @@ class AvoidanceController:
         c = -J.T @ xd_cmd
         if cfg.posture_gain > 0 and self.q_posture is not None:
             c -= cfg.damping * cfg.posture_gain * (self.q_posture - q)
-        lb, ub = joint_velocity_bounds(self.chain, q, cfg.dt, cfg.velocity_scale, cfg.limit_margin)
-        if cfg.acceleration_limit is not None and qd_prev is not None:
-            lb, ub = drive_bounds(lb, ub, qd_prev, cfg.acceleration_limit, cfg.dt)
+        acc = cfg.acceleration_limit
+        lb, ub = joint_velocity_bounds(self.chain, q, cfg.dt, cfg.velocity_scale, cfg.limit_margin, acc)
+        free_box = None
+        if acc is not None and qd_prev is not None:
+            free_box = (lb, ub)
+            lb, ub = drive_bounds(lb, ub, qd_prev, acc, cfg.dt)
         obs = points if isinstance(points, ObstaclePoints) else ObstaclePoints.still(points)
         pts = obs.positions
         if pts.shape[0]:
@@ -461,10 +465,34 @@ class AvoidanceController:
         else:
             G, h, dist, crit, terms = np.zeros((0, n)), np.zeros(0), np.zeros(0), np.zeros(0), None
             sep_in = None
-        return QpProblem(P, c, G, h, lb, ub, x, dist, crit, terms, sep_in)
+        return QpProblem(P, c, G, h, lb, ub, x, dist, crit, terms, sep_in, free_box)
 
     def solve(self, prob: QpProblem) -> tuple[FloatArray, bool, float, float]:
-        """``(qd, feasible, violation, solve_time_s)`` of a problem; the least-violating retreat when infeasible."""
+        """``(qd, feasible, violation, solve_time_s)`` of a problem; the least-violating retreat when infeasible.
+
+        With the drive's box (``prob.free_box`` set: :func:`drive_bounds`) in two stages: the command of an ideal
+        velocity interface ``qd*`` (the same QP in the box without the drive's step limit), then the command the drive
+        reaches within the step nearest to it joint by joint, ``min 1/2 |qd - qd*|^2`` s.t. the obstacle rows and the
+        drive's box: every joint moves toward ``qd*`` at up to its acceleration limit. Solving the tracking objective in
+        the drive's box directly instead picks its corners, and the redundant arm's null-space speed, which that
+        objective leaves almost free (``damping``), grew at the limits step after step: in ``hand`` on the Panda
+        (torque) joints 1, 3 and 6 reached 1.3-2.2 rad/s with the flange nearly still, sweeping a link toward the
+        hand at 0.25 m/s when it was first seen inside ``S_p`` (simulated). An infeasible first stage goes straight
+        to the least-violating retreat in the drive's box."""
+        if prob.free_box is None:
+            return self._solve_qp(prob)
+        free = replace(prob, lb=prob.free_box[0], ub=prob.free_box[1], free_box=None)
+        ideal, feasible, _, t_ideal = self._solve_qp(free, retreat=False)
+        if not feasible:
+            qd, violation, t_stop = self._safe_stop(prob)
+            return qd, False, violation, t_ideal + t_stop
+        n = prob.P.shape[0]
+        near = replace(prob, P=np.eye(n), c=-ideal, free_box=None)
+        qd, feasible, violation, elapsed = self._solve_qp(near)
+        return qd, feasible, violation, t_ideal + elapsed
+
+    def _solve_qp(self, prob: QpProblem, retreat: bool = True) -> tuple[FloatArray, bool, float, float]:
+        """One QP solve; infeasible: the least-violating retreat (``retreat``) or ``(nan, False, nan, t)``."""
         import qpsolvers
 
         G = prob.G if prob.G.shape[0] else None
@@ -474,6 +502,8 @@ class AvoidanceController:
         elapsed = time.perf_counter() - t0
         if qd is not None and (G is None or np.max(G @ qd - h) <= _FEAS_TOL * max(1.0, np.abs(h).max())):
             return qd, True, 0.0, elapsed
+        if not retreat:
+            return np.full(prob.P.shape[0], np.nan), False, float("nan"), elapsed
         qd, violation, t_stop = self._safe_stop(prob)
         return qd, False, violation, elapsed + t_stop
 

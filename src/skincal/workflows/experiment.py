@@ -163,6 +163,7 @@ def run_experiment(
                 sp_buffer=TORQUE_SP_BUFFER_M,
                 acceleration_limit=accel,
                 all_directions=TORQUE_ALL_DIRECTIONS,
+                feedback_speed=TORQUE_V_MAX,
             )
     if c.margin == "iso-pfl":
         controller = replace(controller, pfl=assumed_region(regions))
