@@ -74,7 +74,10 @@ def instants(st: UnitState, t: FloatArray) -> FloatArray:
 
 def realign(st: UnitState, tau: float, drift: float) -> None:
     """Compose the unit's clock mapping with the residual offset ``tau`` (s) and drift and absorb its kept
-    raw samples again from scratch."""
+    raw samples again under the new mapping; the statistics of the samples no longer kept (older than the
+    history) are carried over to the new mapping's unknowns (:func:`~skincal.calib.online.stats.shift_clock`)
+    instead of being dropped: a re-alignment late in a long session no longer discards all but its last
+    ``history_s`` of data."""
     assert st.offset is not None
     st.offset, st.drift = compose_clock(st.offset, st.drift, tau, drift)
     st.realigned += 1
@@ -83,13 +86,24 @@ def realign(st: UnitState, tau: float, drift: float) -> None:
         st.steps = find_clock_steps(np.concatenate([r[0] for r in raw]))
         st.t_seen = float(raw[-1][0][-1])
     st.raw = deque()
-    L = len(st.links)
-    st.Za, st.Zg, st.moving = np.zeros_like(st.Za), np.zeros_like(st.Zg), np.zeros(L)
+    Za, Zg, moving = st.Za.copy(), st.Zg.copy(), st.moving.copy()
+    for *_, chunk in raw:  # what is absorbed again below
+        if chunk is not None:
+            Za -= chunk[2]
+            Zg -= chunk[3]
+            moving -= chunk[4]
+    frozen = float(Za[..., 9, 9].max()) >= 0.5  # Z[9, 9] counts a class's samples (round-off left otherwise)
+    if frozen:
+        st.Za, st.Zg = stats.shift_clock(Za, Zg, tau, drift)
+        st.moving = np.maximum(moving, 0.0)
+    else:
+        st.Za, st.Zg, st.moving = np.zeros_like(st.Za), np.zeros_like(st.Zg), np.zeros(len(st.links))
     st.chunks = deque()
     st.solutions, st.status, st.dirty = {}, None, True
     st.win_sum, st.win_n, st.win_stat, st.win_count = np.zeros(3), 0, 0.0, 0
-    st.t_last, st.t_first = float("-inf"), float("inf")
-    for t, a, g in raw[::-1]:
+    if not frozen:
+        st.t_last, st.t_first = float("-inf"), float("inf")
+    for t, a, g, _ in raw[::-1]:
         st.pending_t.insert(0, t)
         st.pending_a.insert(0, a)
         st.pending_g.insert(0, g)

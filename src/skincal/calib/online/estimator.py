@@ -318,13 +318,17 @@ class OnlineCalibrator:
             keep_pending(st, t[~ready & ~late], a[~ready & ~late], None if g is None else g[~ready & ~late])
         if not ready.any():
             return 0
-        st.raw.append((t[ready], a[ready], None if g is None else g[ready]))
+        g_ready = None if g is None else g[ready]
+        n, chunk = self._absorb(name, st, grid, s[ready], a[ready], g_ready)
+        st.raw.append((t[ready], a[ready], g_ready, chunk))
         while st.raw and instants(st, st.raw[0][0][-1:])[0] < tg[0]:
-            st.raw.popleft()  # its part of the grid is gone: it could not be absorbed again
-        return self._absorb(name, st, grid, s[ready], a[ready], None if g is None else g[ready])
+            st.raw.popleft()  # its part of the grid is gone: it could not be absorbed again (its statistics stay)
+        return n
 
     def _absorb(self, name: str, st: UnitState, grid: Grid, s: FloatArray, a: FloatArray,
-                g: FloatArray | None) -> int:  # fmt: skip
+                g: FloatArray | None) -> tuple[int, tuple | None]:  # fmt: skip
+        """Absorb samples at instants ``s``: their count and their chunk ``(s0, s1, Za, Zg, moving)`` (None:
+        none absorbed)."""
         unsat = unsaturated(st, a, g)
         if not unsat.all():
             s, a, g = s[unsat], a[unsat], None if g is None else g[unsat]
@@ -334,7 +338,7 @@ class OnlineCalibrator:
             ug = ug[:, ok]
             g = None if g is None else g[ok]
         if s.size == 0:
-            return 0
+            return 0, None
         moving = link_moving(w, dw)  # (L, M)
         sol = st.solutions.get(st.links[0]) if st.decided else None
         if sol is not None:
@@ -353,7 +357,7 @@ class OnlineCalibrator:
                 rn = rn[keep]
             window_means(st, rn)
         if s.size == 0:
-            return 0
+            return 0, None
         L, M = u.shape[0], s.size
         cls = np.stack([~moving, moving], axis=1)[..., None, None]  # (L, 2, M, 1, 1)
         elapsed = s - st.t_ref
@@ -367,14 +371,15 @@ class OnlineCalibrator:
         st.Za += Za
         st.Zg += Zg
         st.moving += n_moving
-        st.chunks.append((float(s[0]), float(s[-1]), Za, Zg, n_moving))
+        chunk = (float(s[0]), float(s[-1]), Za, Zg, n_moving)
+        st.chunks.append(chunk)
         horizon = s[-1] - self.options.history_s
         while st.chunks and st.chunks[0][1] < horizon:
             st.chunks.popleft()
         st.t_last = max(st.t_last, float(s[-1]))
         st.t_first = min(st.t_first, float(s[0]))
         st.dirty = True
-        return int(M)
+        return int(M), chunk
 
     # ---------------------------------------------------------------- estimates
     def _status(self, name: str, advise: bool = True) -> UnitStatus:
@@ -434,7 +439,12 @@ class OnlineCalibrator:
         k = st.links.index(link)
         st.links = [link]
         st.Za, st.Zg, st.moving = st.Za[k : k + 1].copy(), st.Zg[k : k + 1].copy(), st.moving[k : k + 1].copy()
-        st.chunks = deque((t0, t1, Za[k : k + 1], Zg[k : k + 1], mv[k : k + 1]) for t0, t1, Za, Zg, mv in st.chunks)
+        kept = {id(c): (c[0], c[1], c[2][k : k + 1], c[3][k : k + 1], c[4][k : k + 1]) for c in st.chunks}
+        for r in st.raw:
+            if r[3] is not None and id(r[3]) not in kept:
+                kept[id(r[3])] = (r[3][0], r[3][1], r[3][2][k : k + 1], r[3][3][k : k + 1], r[3][4][k : k + 1])
+        st.chunks = deque(kept[id(c)] for c in st.chunks)
+        st.raw = deque((t, a, g, None if c is None else kept[id(c)]) for t, a, g, c in st.raw)
         st.solutions = {link: st.solutions[link]}
         st.decided = True
 
@@ -485,6 +495,8 @@ class OnlineCalibrator:
         st = self._u[unit]
         chunks = deque(c for c in st.chunks if c[0] >= t_from)
         st.chunks = chunks
+        ids = {id(c) for c in chunks}  # the kept samples a re-alignment absorbs again: those still counted
+        st.raw = deque(r for r in st.raw if r[3] is not None and id(r[3]) in ids)
         shape_a, shape_g = st.Za.shape, st.Zg.shape
         st.Za, st.Zg, st.moving = np.zeros(shape_a), np.zeros(shape_g), np.zeros(len(st.links))
         st.sigmas = {}
