@@ -73,6 +73,34 @@ def test_residual_sum_is_the_sum_of_squared_residuals():
     assert stats.residual_sum(Zg, np.concatenate([R.reshape(9), c, [tau], [d]])) == pytest.approx(direct_g, rel=1e-10)
 
 
+def test_shift_clock_re_expresses_the_grams_in_the_composed_mappings_unknowns():
+    """``stats.shift_clock``: the residual sum of Grams absorbed under a mapping, at the unknowns of the mapping
+    composed with ``(tau_r, d_r)`` (``compose_clock``), equals the old Grams' at the old unknowns of the same
+    instants (``tau = tau_r + tau' + tau_r d'``, ``d = d_r + (1 + d_r) d'``), to round-off."""
+    rng = np.random.default_rng(5)
+    a, u, du, ug = (rng.normal(size=(50, 3)) for _ in range(4))
+    K, dK = rng.normal(size=(50, 3, 3)), rng.normal(size=(50, 3, 3))
+    g, w, dw = (rng.normal(size=(50, 3)) for _ in range(3))
+    elapsed = rng.uniform(0.0, 300.0, size=50)
+    Za, Zg = stats.gram(stats.accel_rows(a, u, K, du, dK, ug, elapsed)), stats.gram(stats.gyro_rows(g, w, dw, elapsed))
+    tau_r, d_r = 0.004, -2e-4
+    Za_new, Zg_new = stats.shift_clock(Za, Zg, tau_r, d_r)
+    G, R = rng.normal(size=9), rng.normal(size=9)
+    h, p, c, k = rng.normal(size=3), rng.normal(size=3), rng.normal(size=3), 0.01
+    tau, d = 0.001, 3e-5  # the new mapping's residual
+    tau_old, d_old = tau_r + tau + tau_r * d, d_r + (1.0 + d_r) * d
+
+    def xa(t: float, dd: float) -> np.ndarray:
+        return np.concatenate([G, h, p, [t], t * p, [k], k * p, [dd], dd * p])
+
+    old = stats.residual_sum(Za, xa(tau_old, d_old))
+    assert stats.residual_sum(Za_new, xa(tau, d)) == pytest.approx(old, rel=1e-12)
+    xg_new, xg_old = np.r_[R, c, tau, d], np.r_[R, c, tau_old, d_old]
+    assert stats.residual_sum(Zg_new, xg_new) == pytest.approx(stats.residual_sum(Zg, xg_old), rel=1e-12)
+    # and the old rule (the Grams unchanged) is off: the test sees a wrong transform
+    assert stats.residual_sum(Za, xa(tau, d)) != pytest.approx(stats.residual_sum(Za, xa(tau_old, d_old)), rel=1e-3)
+
+
 def test_covariance_matches_monte_carlo():
     """The position and rotation std of the solve against the scatter of 150 noisy repetitions."""
     rng = np.random.default_rng(3)
