@@ -169,3 +169,17 @@ REALDATA = (
     Opt("json_out", Path | None, None, "also write the figures as JSON", flag="--json"),
 )
 """The options of ``skincal benchmark realdata`` and ``benchmarks/bench_realdata.py``."""
+
+
+STREAMING_CLOCK = (
+    Opt("robots", str, "panda,ur5e", "comma-separated robot presets"),
+    Opt("protocols", str, "fast,paper-sim", "comma-separated protocols (fast, paper-sim); fast runs first"),
+    Opt("clocks", str, "wifi,wifi-resync", "comma-separated clock presets"),
+    Opt("seeds", int, [0, 1, 2], "session seeds", many=True),
+    Opt("noise", str, "realistic", "IMU preset"),
+    Opt("quick", bool, False, "the fast protocol and the first seed only", switch=False),
+    WORKERS,
+    Opt("json", Path | None, None, "also write the cells and the summary here (JSON)"),
+    Opt("force", bool, False, "overwrite an existing --json file", switch=False),
+)
+"""The options of ``benchmarks/bench_streaming_clock.py``."""

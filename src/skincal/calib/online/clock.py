@@ -115,7 +115,10 @@ def instants(st: UnitState, t: FloatArray) -> FloatArray:
 
 def realign(st: UnitState, tau: float, drift: float) -> None:
     """Compose the unit's clock mapping with the residual offset ``tau`` (s) and drift and absorb its kept
-    raw samples again from scratch."""
+    raw samples again under the new mapping; the statistics of the samples no longer kept (older than the
+    history) are carried over to the new mapping's unknowns (:func:`~skincal.calib.online.stats.shift_clock`)
+    instead of being dropped: a re-alignment late in a long session no longer discards all but its last
+    ``history_s`` of data."""
     assert st.offset is not None
     st.offset, st.drift = compose_clock(st.offset, st.drift, tau, drift)
     st.realigned += 1
@@ -123,7 +126,7 @@ def realign(st: UnitState, tau: float, drift: float) -> None:
     if st.steps is None and raw:  # re-sync steps seen since the alignment
         st.steps = find_clock_steps(np.concatenate([r[0] for r in raw]))
         st.t_seen = float(raw[-1][0][-1])
-    restart(st)
+    restart(st, (tau, drift))
 
 
 def align_on_motion(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray | None,
@@ -146,17 +149,32 @@ def align_on_motion(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: 
     return True
 
 
-def restart(st: UnitState) -> None:
-    """Forget the unit's statistics and put its kept raw samples back in front of its pending ones."""
+def restart(st: UnitState, shift: tuple[float, float] | None = None) -> None:
+    """Put the unit's kept raw samples back in front of its pending ones and take their part out of its
+    statistics; the rest (samples older than the history) carried over to the clock mapping composed with
+    ``shift = (tau, drift)`` (:func:`~skincal.calib.online.stats.shift_clock`), or forgotten (``None``)."""
     raw = list(st.raw)
     st.raw = deque()
-    L = len(st.links)
-    st.Za, st.Zg, st.moving = np.zeros_like(st.Za), np.zeros_like(st.Zg), np.zeros(L)
+    Za, Zg, moving = st.Za.copy(), st.Zg.copy(), st.moving.copy()
+    for *_, chunk in raw:  # what is absorbed again below
+        if chunk is not None:
+            Za -= chunk[2]
+            Zg -= chunk[3]
+            moving -= chunk[4]
+    # Z[9, 9] counts a class's samples (round-off left otherwise)
+    frozen = shift is not None and float(Za[..., 9, 9].max()) >= 0.5
+    if frozen:
+        assert shift is not None
+        st.Za, st.Zg = stats.shift_clock(Za, Zg, *shift)
+        st.moving = np.maximum(moving, 0.0)
+    else:
+        st.Za, st.Zg, st.moving = np.zeros_like(st.Za), np.zeros_like(st.Zg), np.zeros(len(st.links))
     st.chunks = deque()
     st.solutions, st.status, st.dirty = {}, None, True
     st.win_sum, st.win_n, st.win_stat, st.win_count = np.zeros(3), 0, 0.0, 0
-    st.t_last, st.t_first = float("-inf"), float("inf")
-    for t, a, g in raw[::-1]:
+    if not frozen:
+        st.t_last, st.t_first = float("-inf"), float("inf")
+    for t, a, g, _ in raw[::-1]:
         st.pending_t.insert(0, t)
         st.pending_a.insert(0, a)
         st.pending_g.insert(0, g)

@@ -314,13 +314,16 @@ class OnlineCalibrator:
             keep_pending(st, t[~ready & ~late], a[~ready & ~late], None if g is None else g[~ready & ~late])
         if not ready.any():
             return 0
-        st.raw.append((t[ready], a[ready], None if g is None else g[ready]))
+        g_ready = None if g is None else g[ready]
+        n, chunk = self._absorb(name, st, grid, s[ready], a[ready], g_ready)
+        st.raw.append((t[ready], a[ready], g_ready, chunk))
         while st.raw and clock.instants(st, st.raw[0][0][-1:])[0] < tg[0]:
-            st.raw.popleft()  # its part of the grid is gone: it could not be absorbed again
-        return self._absorb(name, st, grid, s[ready], a[ready], None if g is None else g[ready])
+            st.raw.popleft()  # its part of the grid is gone: it could not be absorbed again (its statistics stay)
+        return n
 
     def _absorb(self, name: str, st: UnitState, grid: Grid, s: FloatArray, a: FloatArray,
-                g: FloatArray | None) -> int:  # fmt: skip
+                g: FloatArray | None) -> tuple[int, tuple | None]:  # fmt: skip
+        """Absorb samples at instants ``s``: their count and chunk ``(s0, s1, Za, Zg, moving)`` (None: none)."""
         unsat = unsaturated(st, a, g)
         if not unsat.all():
             s, a, g = s[unsat], a[unsat], None if g is None else g[unsat]
@@ -330,7 +333,7 @@ class OnlineCalibrator:
             ug = ug[:, ok]
             g = None if g is None else g[ok]
         if s.size == 0:
-            return 0
+            return 0, None
         moving = link_moving(w, dw)  # (L, M)
         sol = st.solutions.get(st.links[0]) if st.decided else None
         if sol is not None:
@@ -349,7 +352,7 @@ class OnlineCalibrator:
                 rn = rn[keep]
             window_means(st, rn)
         if s.size == 0:
-            return 0
+            return 0, None
         L, M = u.shape[0], s.size
         cls = np.stack([~moving, moving], axis=1)[..., None, None]  # (L, 2, M, 1, 1)
         elapsed = s - st.t_ref
@@ -363,14 +366,15 @@ class OnlineCalibrator:
         st.Za += Za
         st.Zg += Zg
         st.moving += n_moving
-        st.chunks.append((float(s[0]), float(s[-1]), Za, Zg, n_moving))
+        chunk = (float(s[0]), float(s[-1]), Za, Zg, n_moving)
+        st.chunks.append(chunk)
         horizon = s[-1] - self.options.history_s
         while st.chunks and st.chunks[0][1] < horizon:
             st.chunks.popleft()
         st.t_last = max(st.t_last, float(s[-1]))
         st.t_first = min(st.t_first, float(s[0]))
         st.dirty = True
-        return int(M)
+        return int(M), chunk
 
     # ---------------------------------------------------------------- estimates
     def _status(self, name: str, advise: bool = True) -> UnitStatus:
@@ -394,8 +398,7 @@ class OnlineCalibrator:
         pos_std, rot_std = std[:3], np.degrees(std[3:])
         determined = bool(np.all(pos_std < UNDETERMINED_M) and np.all(rot_std < UNDETERMINED_DEG))
         undecided = len(ambiguous) > 1
-        # recorded in the rests only: the rotation and link are the answer (the position is null in a result)
-        rests_answer = rests_only(st, k) and bool(np.all(rot_std < UNDETERMINED_DEG))
+        rests_answer = rests_only(st, k) and bool(np.all(rot_std < UNDETERMINED_DEG))  # a result nulls the position
         if determined and not undecided and st.realigned < clock.MAX_REALIGN and clock.clock_off(st, sol):
             clock.realign(st, sol.tau, sol.drift)
             self._absorb_unit(name)  # the kept samples again, at once: the status (and a result) never shows the gap
@@ -432,7 +435,10 @@ class OnlineCalibrator:
         k = st.links.index(link)
         st.links = [link]
         st.Za, st.Zg, st.moving = st.Za[k : k + 1].copy(), st.Zg[k : k + 1].copy(), st.moving[k : k + 1].copy()
-        st.chunks = deque((t0, t1, Za[k : k + 1], Zg[k : k + 1], mv[k : k + 1]) for t0, t1, Za, Zg, mv in st.chunks)
+        both = [*st.chunks, *(r[3] for r in st.raw if r[3] is not None)]  # a chunk's statistics: link k's only
+        kept = {id(c): (c[0], c[1], c[2][k : k + 1], c[3][k : k + 1], c[4][k : k + 1]) for c in both}
+        st.chunks = deque(kept[id(c)] for c in st.chunks)
+        st.raw = deque((t, a, g, None if c is None else kept[id(c)]) for t, a, g, c in st.raw)
         st.solutions = {link: st.solutions[link]}
         st.decided = True
 
@@ -483,6 +489,8 @@ class OnlineCalibrator:
         st = self._u[unit]
         chunks = deque(c for c in st.chunks if c[0] >= t_from)
         st.chunks = chunks
+        ids = {id(c) for c in chunks}  # the kept samples a re-alignment absorbs again: those still counted
+        st.raw = deque(r for r in st.raw if r[3] is not None and id(r[3]) in ids)
         shape_a, shape_g = st.Za.shape, st.Zg.shape
         st.Za, st.Zg, st.moving = np.zeros(shape_a), np.zeros(shape_g), np.zeros(len(st.links))
         st.sigmas = {}

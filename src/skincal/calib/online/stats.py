@@ -142,6 +142,36 @@ def gram(rows: FloatArray) -> FloatArray:
     return np.swapaxes(flat, -1, -2) @ flat
 
 
+def shift_clock(Za: FloatArray, Zg: FloatArray, tau_r: float, d_r: float) -> tuple[FloatArray, FloatArray]:
+    """Grams ``(..., NA, NA)``, ``(..., NG, NG)`` of samples absorbed under a clock mapping, re-expressed in the
+    unknowns of the mapping composed with the residual ``(tau_r, d_r)``
+    (:func:`~skincal.calib.timing.compose_clock`), exactly.
+
+    A sample absorbed at ``s`` (old mapping) is at ``s' = s + tau_r + d_r (s - t_ref)`` under the new one, so
+    its residual clock error ``T = tau + d (s - t_ref)`` in the old unknowns is, in the new ones ``(tau', d')``
+    (``T' = tau' + d' (s' - t_ref)``, the same instant measured)::
+
+        tau = tau_r + tau' + tau_r d',    d = d_r + (1 + d_r) d'
+        tau p = tau_r p + (tau p)' + tau_r (d p)',    d p = d_r p + (1 + d_r) (d p)'
+
+    i.e. ``x = M x' + m``, affine; with ``T = [[M, -m], [0, 1]]`` the Gram of ``[x'; -1]`` is ``T^T Z T``.
+    The rows stay linearised at the old instants (first order in the old residual, which the re-alignment
+    kept within a few ms): what the kept statistics of samples no longer in the history become when the
+    unit's clock mapping is re-aligned, instead of being lost."""
+    Ta = np.eye(NA)
+    Ta[15, 23], Ta[15, NA - 1] = tau_r, -tau_r
+    i3 = np.arange(3)
+    Ta[16 + i3, 24 + i3] = tau_r
+    Ta[16 + i3, 12 + i3] = tau_r
+    Ta[23, 23], Ta[23, NA - 1] = 1.0 + d_r, -d_r
+    Ta[24 + i3, 24 + i3] = 1.0 + d_r
+    Ta[24 + i3, 12 + i3] = d_r
+    Tg = np.eye(NG)
+    Tg[12, 13], Tg[12, NG - 1] = tau_r, -tau_r
+    Tg[13, 13], Tg[13, NG - 1] = 1.0 + d_r, -d_r
+    return Ta.T @ Za @ Ta, Tg.T @ Zg @ Tg
+
+
 def residual_sum(Z: FloatArray, x: FloatArray) -> float:
     """``J(x) = [x; -1]^T Z [x; -1]``, the residual sum of squares of the equations whose Gram is ``Z``."""
     xe = np.append(x, -1.0)
