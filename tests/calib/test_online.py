@@ -320,8 +320,8 @@ def test_a_clock_realignment_is_absorbed_before_the_status_is_given(realistic):
     replay(ds, cal)
     st = cal.unit_state("su3")
     good = st.offset
-    st.offset -= 0.006
-    realign(st, 0.0, 0.0)  # the last minute absorbed again with the wrong offset
+    realign(st, 0.006, 0.0)  # wrong by 6 ms: the last minute absorbed again, the older statistics moved with it
+    assert abs(st.offset - (good - 0.006)) < 1e-12
     wrong = st.realigned
     cal.update()  # absorbs the re-queued samples (no new joint block)
     status = cal.status()["su3"]
