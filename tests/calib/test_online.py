@@ -399,3 +399,20 @@ def test_a_late_realignment_keeps_the_statistics_older_than_the_history():
         assert np.all(dp <= 0.5 * np.asarray(w.position_std_m)), (u, dp, w.position_std_m)
         err = np.linalg.norm(s.pose.p_link_su - ds.truth[u].p_link_su)
         assert err <= 3 * np.linalg.norm(s.position_std_m), (u, err)
+
+
+def test_correlated_residuals_inflate_the_std_before_five_windows_but_white_ones_do_not():
+    """``fit.inflation``: below MIN_WINDOWS windows, applied only when white residuals could not reach it
+    (a real 14 Hz joint stream's windows give hundreds of times white noise's value from the first); white
+    residuals' windows (simulated, unit variance) leave it at 1 until MIN_WINDOWS."""
+    from types import SimpleNamespace
+
+    from skincal.calib.online.fit import CORRELATION_MAX, MIN_WINDOWS, inflation
+
+    rng = np.random.default_rng(8)
+    for count in range(1, MIN_WINDOWS):
+        white = sum(float(np.sum(rng.normal(size=3) ** 2)) for _ in range(count))  # n |mean|^2 of white windows
+        assert inflation(SimpleNamespace(win_count=count, win_stat=white)) == 1.0
+        assert inflation(SimpleNamespace(win_count=count, win_stat=60.0 * 3 * count)) == pytest.approx(60.0)
+    assert inflation(SimpleNamespace(win_count=2, win_stat=1507.3)) == CORRELATION_MAX  # the real recording's
+    assert inflation(SimpleNamespace(win_count=MIN_WINDOWS, win_stat=2.0 * 3 * MIN_WINDOWS)) == pytest.approx(2.0)

@@ -5,6 +5,7 @@ per-class noise levels (:func:`solve_unit`) and the link decision (:func:`decide
 from __future__ import annotations
 
 import numpy as np
+from scipy.stats import chi2
 
 from skincal.calib.online import stats
 from skincal.calib.online.options import OnlineOptions
@@ -30,7 +31,10 @@ CORRELATION_MAX = 100.0
 WINDOW_SAMPLES = 100
 """Samples per window of the correlation inflation (1 s at 100 Hz)."""
 MIN_WINDOWS = 5
-"""Windows before the inflation is applied."""
+"""Windows before the inflation is applied whatever its value."""
+EARLY_FALSE_ALARM = 1e-3
+"""With fewer windows, the inflation is applied once white residuals would exceed it with at most this
+probability (a chi-square with 3 degrees of freedom per window): clear evidence is not held back."""
 
 
 def residuals(
@@ -70,10 +74,17 @@ def inflation(st: UnitState) -> float:
     """Variance inflation for correlated residuals: the variance of the residuals' means over windows
     of :data:`WINDOW_SAMPLES` consecutive samples against white noise's (``n |mean|^2`` averages 3
     for white residuals of unit variance). It covers every correlation shorter than a window, incl.
-    the slow errors of joint-derived accelerations, which a lag-1 autocorrelation misses."""
-    if st.win_count < MIN_WINDOWS:
+    the slow errors of joint-derived accelerations, which a lag-1 autocorrelation misses. From
+    :data:`MIN_WINDOWS` windows on it is applied as it is; before, only when it is beyond what white
+    residuals reach (:data:`EARLY_FALSE_ALARM`): a real recording whose residuals are strongly correlated
+    shows an honest std from its first window, not an uninflated one that jumps at the data's end."""
+    if st.win_count == 0:
         return 1.0
-    return float(np.clip(st.win_stat / (3.0 * st.win_count), 1.0, CORRELATION_MAX))
+    dof = 3 * st.win_count
+    ratio = st.win_stat / dof
+    if st.win_count < MIN_WINDOWS and ratio < chi2.isf(EARLY_FALSE_ALARM, dof) / dof:
+        return 1.0
+    return float(np.clip(ratio, 1.0, CORRELATION_MAX))
 
 
 def weighted(st: UnitState, k: int, sig: FloatArray) -> tuple[FloatArray, FloatArray | None]:
