@@ -270,3 +270,28 @@ def test_reliable_is_all_true_for_reported_accelerations():
     reported = JointStates(t=joints.t, q=joints.q, qd=joints.qd, qdd=qdd)
     interp = JointInterpolator(reported, use_dataset_qdd=True)
     assert np.all(interp.reliable(np.array([1.99, 2.0, 2.01, 5.0])))
+
+
+def test_a_quantised_joint_that_never_moves_one_count_keeps_its_step_as_the_noise_floor():
+    """An encoder of step r = 2 pi / 2^18 read at 500 Hz on a joint turning 3-4 counts per sample (no
+    change of one count in the window): the quantisation floor is r / sqrt(12), not the smallest change's
+    (3 r) / sqrt(12) (the white part of the rounding, from third differences, sits just above the
+    floor); the same as the slow joint beside it, which does move one count at a time. A smooth
+    (unquantised) signal keeps its own smallest change as the floor."""
+    from skincal.calib.preprocess.conditioning import joint_noise
+
+    r = 2.0 * np.pi / 2**18
+    t = np.arange(2000) / 500.0
+    fast = 0.3 + 3.5 * r * 500.0 * t + 1e-3 * np.sin(2.0 * t)  # 3-4 counts per sample, always moving
+    slow = 0.1 + 0.2 * r * 500.0 * t  # at most one count per sample
+    q_true = np.column_stack([fast, slow])
+    q = np.round(q_true / r) * r
+    changes = np.abs(np.diff(q[:, 0]))
+    assert np.min(changes[changes > 0]) > 2.5 * r  # the fast joint never changes by a single count
+    sigma_q, _ = joint_noise(q, np.gradient(q_true, t, axis=0))
+    floor = r / np.sqrt(12.0)
+    assert np.all(sigma_q >= floor * (1 - 1e-9)) and sigma_q[0] < 1.5 * floor, sigma_q / floor  # 3 r would be 3x
+    assert sigma_q[0] == pytest.approx(sigma_q[1], rel=0.05)
+    smooth, _ = joint_noise(q_true, np.gradient(q_true, t, axis=0))
+    d_min = np.min(np.abs(np.diff(q_true[:, 0])))
+    assert smooth[0] == pytest.approx(d_min / np.sqrt(12.0), rel=1e-9)  # no finer step invented for it

@@ -283,11 +283,30 @@ def joint_noise(q: FloatArray, qd: FloatArray) -> tuple[FloatArray, FloatArray]:
     return sigma_q, sigma_v
 
 
+QUANTUM_DIVISORS = 8
+"""A quantised signal's step is sought down to its smallest change over this many (a joint that turns fast
+enough never changes by one count between samples: its smallest change is several counts)."""
+
+
 def _smallest_step(x: FloatArray) -> FloatArray:
-    """Smallest non-zero change between neighbouring samples per column of ``x`` ``(N, k)`` (the
-    quantisation step of a quantised signal; tiny for a smooth one)."""
+    """The quantisation step per column of ``x`` ``(N, k)``: the smallest non-zero change ``d_min`` between
+    neighbouring samples, divided by the smallest ``m <= QUANTUM_DIVISORS`` for which every change is an
+    integer multiple of ``d_min / m`` (a window in which the joint moves 3 or 4 counts per sample has
+    ``d_min`` = 3 counts and the step ``d_min / 3``); ``d_min`` when no ``m`` fits (a signal that is not
+    quantised; tiny for a smooth one)."""
     d = np.abs(np.diff(np.asarray(x, dtype=float), axis=0))
-    return np.array([np.min(c[c > 1e-12]) if np.any(c > 1e-12) else 0.0 for c in d.T])
+    out = np.zeros(d.shape[1])
+    for j, c in enumerate(d.T):
+        c = c[c > 1e-12]
+        if not c.size:
+            continue
+        out[j] = step = float(np.min(c))
+        for m in range(1, QUANTUM_DIVISORS + 1):
+            units = c * (m / step)
+            if np.all(np.abs(units - np.rint(units)) < 1e-3):
+                out[j] = step / m
+                break
+    return out
 
 
 def _line(x: FloatArray, y: FloatArray) -> tuple[float, float]:
