@@ -165,6 +165,7 @@ REALDATA = (
     Opt("folder", Path, None, "folder of recordings sharing a mount (folders with recording.h5, or .h5 files)",
         positional=True),
     Opt("om", bool, True, "also run the paper's OM (a recording it cannot take is a failure)"),
+    Opt("online", bool, True, "also run the streaming calibrator (calibrate --follow) to each recording's end"),
     Opt("workers", int, 1, "units calibrated at once per recording"),
     Opt("json_out", Path | None, None, "also write the figures as JSON", flag="--json"),
 )

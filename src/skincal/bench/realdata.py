@@ -4,7 +4,9 @@ Real recordings have no ground truth; what they do have is repetition: every rec
 on one mount must give the same pose within the reported uncertainty. ``DIR`` holds the recordings
 (each a folder with ``recording.h5``, or ``.h5`` files directly); they are grouped by IMU (the part
 of the folder name after the last ``_S<n>_``, as in ``V500_S3_MPU9150``, else the unit name in the
-dataset) and each is calibrated with ``mle`` and, where the data allow it, the paper's ``om``.
+dataset) and each is calibrated with ``mle``, with the streaming calibrator (``online``: the recording
+replayed as ``skincal calibrate --follow --speed 0`` replays it, to the data's end) and, where the data
+allow it, the paper's ``om``.
 
 Per group and method, over the recordings calibrated on the group's most common link:
 
@@ -50,8 +52,19 @@ from skincal.errors import ConfigError, DatasetError, SkincalError
 
 RECORDING_FILE = "recording.h5"
 """Name of the dataset file inside a recording folder."""
-METHODS = ("mle", "om")
-"""Methods the benchmark runs on every recording (``om``: the paper's, where the data allow it)."""
+METHODS = ("mle", "online", "om")
+"""Methods the benchmark runs on every recording (``online``: the streaming calibrator to the data's end;
+``om``: the paper's, where the data allow it)."""
+STREAMING = "online"
+"""The method name under which the streaming calibrator's results are reported."""
+
+
+def chosen_methods(om: bool = True, online: bool = True) -> tuple[str, ...]:
+    """:data:`METHODS` less those switched off (the ``--no-om`` and ``--no-online`` options)."""
+    on = {"om": om, STREAMING: online}
+    return tuple(m for m in METHODS if on.get(m, True))
+
+
 _GROUP = re.compile(r"_S\d+_(.+)$")
 
 
@@ -166,7 +179,7 @@ def calibrate_recording(
     for method in methods:
         units: dict[str, Any] = {}
         try:
-            result = calibrate(ds, method, workers=workers)
+            result = _streamed(ds) if method == STREAMING else calibrate(ds, method, workers=workers)
         except SkincalError as exc:
             units = {u: {"calibrated": False, "reason": str(exc)} for u in ds.units}
         else:
@@ -183,6 +196,14 @@ def calibrate_recording(
                     units[u] = {"calibrated": False, "reason": failed.get(u, "no result")}
         record["methods"][method] = units
     return record
+
+
+def _streamed(ds: Any) -> Any:
+    """The streaming calibrator's result on ``ds`` replayed as fast as possible to the data's end
+    (:func:`skincal.workflows.live.follow_dataset`, no stop at a target)."""
+    from skincal.workflows.live import follow_dataset
+
+    return follow_dataset(ds, speed=None, stop_at_target=False).result
 
 
 def _finite_or_none(x: Any) -> Any:

@@ -129,10 +129,10 @@ typer_command(benchmark_app, "speed", options.SPEED + (FORCE,), speed)
 def realdata(v: dict[str, Any]) -> None:
     """Repeatability across recordings of one mount, per IMU: spread of positions and rotations, spread
     over the reported std, motion kept, time offsets, failures."""
-    from skincal.bench.realdata import METHODS, realdata_report, run_realdata_benchmark
+    from skincal.bench.realdata import chosen_methods, realdata_report, run_realdata_benchmark
 
     _check_json(v["json_out"], v["force"])
-    methods = METHODS if v["om"] else tuple(m for m in METHODS if m != "om")
+    methods = chosen_methods(v["om"], v["online"])
     with console.status("benchmarking recordings...") as status:
         doc = run_realdata_benchmark(
             v["folder"], methods, workers=v["workers"], progress=lambda n: status.update(shown(n))
