@@ -359,6 +359,7 @@ def test_a_drifting_clock_is_followed_as_mle_follows_it():
         err_s.append(np.linalg.norm(e))
         err_b.append(np.linalg.norm(batch.units[name].pose.p_link_su - true.p_link_su))
         assert np.all(np.abs(e) <= 4 * np.asarray(unit.position_std_m)), (name, e, unit.position_std_m)
+        assert unit.extras["clock_rechecked"] == 0  # the right coarse offset is not searched away again
         drift_true = float(ds.truth_sensor[name]["clock_drift_ppm"])
         assert unit.imu is not None and unit.imu.clock_drift_ppm is not None
         assert abs(unit.imu.clock_drift_ppm - drift_true) <= 4 * unit.imu.clock_drift_std_ppm + 1.0, (name, drift_true)

@@ -56,6 +56,7 @@ from skincal.calib.mle.solver import (
 from skincal.calib.model import sym_from_e
 from skincal.calib.preprocess import check_gyro_units
 from skincal.calib.timing import (
+    CLOCK_DRIFT_MIN_SPAN_S,
     OffsetSearch,
 )
 from skincal.data.imu_calibration import ImuCalibration
@@ -66,10 +67,6 @@ from skincal.skin.pose import SkinUnitPose
 
 SCALE_STD_LIMIT = 0.01
 """Scale/misalignment is kept only when each of its components is determined to this std."""
-
-
-CLOCK_DRIFT_MIN_SPAN_S = 60.0
-"""The clock drift is estimated when the unit's moving samples span at least this long, s."""
 
 
 BIAS_DRIFT_MIN_RUNS = 6

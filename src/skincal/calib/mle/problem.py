@@ -31,6 +31,7 @@ from skincal.calib.timing import (
     find_clock_steps,
     find_gap_steps,
     motion_profile,
+    resolved_speed,
 )
 from skincal.data.dataset import Dataset, ImuStream
 from skincal.errors import CalibrationError
@@ -61,7 +62,8 @@ def prepare(dataset: Dataset, interpolator: JointInterpolator) -> Shared:
     noise = None if c.velocity_noise is None else (c.position_noise, c.velocity_noise)
     rest = joint_rest(dataset.joints, dataset.segments, noise=noise)
     table = SignalTable(dataset.robot, interpolator, np.asarray(dataset.gravity, dtype=float))
-    return Shared(table, rest, motion_profile(table.grid_t, table.angular_speed, table.joint_speed), interpolator)
+    profile = motion_profile(table.grid_t, table.angular_speed, table.joint_speed, resolved_speed(dataset.joints.t))
+    return Shared(table, rest, profile, interpolator)
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,12 @@ REALIGN_S = 0.004
 """A decided unit whose residual clock error (offset and drift, at either end of its data) exceeds this (s)
 is re-aligned (its clock mapping composed with the residual, :func:`~skincal.calib.timing.compose_clock`)
 and its statistics restarted: the first-order clock model holds for a few ms only."""
+RECHECK_GROWTH = 2.0
+"""An aligned unit's coarse offset is searched again once its kept stream spans this many times the stream
+it was last searched on, and at the data's end (:func:`recheck`)..."""
+RECHECK_S = 0.02
+"""...and taken when its distinct peak lies further than this from the current mapping, s (beyond what the
+fine fit's re-alignments, :data:`REALIGN_S` at a time, reach reliably)."""
 ALIGN_RETRY_S = 2.0
 """A unit not yet aligned tries again after this much more of its stream, s."""
 MAX_REALIGN = 6
@@ -63,13 +69,13 @@ def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray
     ang = np.linalg.norm(w[lo:hi], axis=2)
     if ang.shape[0] < 20 or float(ang.max()) < 5 * rest.MOVING_RPS:
         return  # no motion to align on yet
-    profile = motion_profile(tg[lo:hi], ang, speed[lo:hi])
+    profile = motion_profile(tg[lo:hi], ang, speed[lo:hi], grid.resolved_rps)
     search = coarse_time_offset(profile, t[inside], a[inside], None if g is None else g[inside])
     span = t[inside][-1] - t[inside][0]
     if search.sharpness < ALIGN_SHARPNESS and span < ALIGN_WAIT_FRACTION * o.history_s:
         return  # the peak is not distinct yet: wait for more motion (the samples stay pending)
     st.offset, st.offset_sharpness, st.clock_provisional = float(search.offset_s), float(search.sharpness), False
-    st.t_ref = float(t[inside][0])
+    st.t_ref, st.searched_span = float(t[inside][0]), float(span)
     st.steps = find_clock_steps(t)
     st.t_seen = float(t[-1])
 
@@ -147,6 +153,56 @@ def align_on_motion(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: 
         return False
     restart(st)
     return True
+
+
+def recheck(st: UnitState, grid: Grid, t: FloatArray | None, a: FloatArray | None, g: FloatArray | None,
+            o: OnlineOptions, final: bool = False) -> bool:  # fmt: skip
+    """Search an aligned unit's coarse offset again on its kept and new samples ``t, a, g`` (``t`` None: none)
+    once they span :data:`RECHECK_GROWTH` times what it was last searched on, or more at the data's end
+    (``final``): the first ``align_s`` of a stream can hold a distinct but wrong peak (a real 14 Hz recording:
+    365 ms on its first 11 s, 108 ms on all 39 s, where ``mle`` finds 112 ms). A distinct peak further than
+    :data:`RECHECK_S` from the current mapping's offset replaces the mapping (as :func:`align` sets it, no
+    drift) and the statistics restart from the kept samples (``True``: they are pending again; those older
+    than the history, taken under the wrong clock, are forgotten)."""
+    if st.offset is None or st.clock_provisional or not st.raw:
+        return False
+    parts = [r[:3] for r in st.raw] + ([] if t is None or not len(t) else [(t, a, g)])
+    T = np.concatenate([p[0] for p in parts])
+    span = float(T[-1] - T[0])
+    if span < RECHECK_GROWTH * st.searched_span and not (final and span > 1.05 * st.searched_span):
+        return False
+    st.searched_span = span
+    A = np.concatenate([p[1] for p in parts])
+    G = None if any(p[2] is None for p in parts) else np.concatenate([p[2] for p in parts])
+    inside = (T >= grid.t[0]) & (T <= grid.t[-1])  # searched on the stamps as align searches them
+    if inside.sum() < 20:
+        return False
+    Ti = T[inside]
+    lo, hi = np.searchsorted(grid.t, [Ti[0], Ti[-1]])
+    profile = motion_profile(grid.t[lo:hi], np.linalg.norm(grid.y[lo:hi, :, 12:15], axis=2), grid.speed[lo:hi],
+                             grid.resolved_rps)  # fmt: skip
+    search = coarse_time_offset(profile, Ti, A[inside], None if G is None else G[inside])
+    now = float(np.median(Ti - instants(st, Ti)))  # the current mapping's offset over these samples
+    if search.sharpness < ALIGN_SHARPNESS or abs(search.offset_s - now) <= RECHECK_S:
+        return False
+    st.recheck_shift_s = float(search.offset_s) - now
+    st.offset, st.drift, st.t_ref = float(search.offset_s), 0.0, float(Ti[0])
+    st.offset_sharpness = float(search.sharpness)
+    st.rechecked, st.realigned = st.rechecked + 1, 0  # a new coarse mapping: the fine re-alignments start over
+    restart(st)
+    return True
+
+
+def notes(st: UnitState) -> list[str]:
+    """What the result should say about the unit's clock: a search skipped (rests only) or run again."""
+    out = []
+    if st.clock_provisional:
+        out.append("coarse clock search skipped: the unit's samples hold no motion (static poses only), so nothing "
+                   "determines the clock offset; the stamps taken as they are")  # fmt: skip
+    if st.rechecked:
+        out.append(f"coarse clock offset searched again on a longer stream ({st.rechecked} time(s)): the first "
+                   f"seconds' peak was elsewhere, the offset moved by {1e3 * st.recheck_shift_s:+.0f} ms")  # fmt: skip
+    return out
 
 
 def restart(st: UnitState, shift: tuple[float, float] | None = None) -> None:

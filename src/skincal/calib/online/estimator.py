@@ -43,7 +43,7 @@ from skincal.calib.position import judge_position
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.rest import link_moving
 from skincal.calib.signals import frame_signals
-from skincal.calib.timing import compose_clock
+from skincal.calib.timing import compose_clock, resolved_speed
 from skincal.data.dataset import JointStates
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.result import CalibrationResult, UnitResult, with_events
@@ -199,6 +199,8 @@ class OnlineCalibrator:
         c0 = time.process_time()
         self._blocks(final=True)
         for u in self.units:
+            if (grid := self._grid_arrays()) is not None:  # the whole stream's peak (its kept samples pending again)
+                clock.recheck(self._u[u], grid, None, None, None, self.options, final=True)
             self._absorb_unit(u, final=True)
         self.cpu_s += time.process_time() - c0
 
@@ -263,7 +265,7 @@ class OnlineCalibrator:
         u, K, w, dw, ug = frame_signals(self.chain.link_motion(qg, qdg, qddg), self.gravity)  # (G, n, ...) links 1..n
         y = np.concatenate([u, K.reshape(*K.shape[:2], 9), w, ug], axis=2)
         self.joint_active_s += (np.abs(qdg) > JOINT_ACTIVE_RPS).sum(axis=0) * dt
-        self._grid.append(Grid(tg, y, dw, interp.reliable(tg), np.cumsum(np.abs(qdg), axis=1)))
+        self._grid.append(Grid(tg, y, dw, interp.reliable(tg), np.cumsum(np.abs(qdg), axis=1), resolved_speed(t[sel])))
         self._grid_cat = None
 
     def _grid_arrays(self) -> Grid | None:
@@ -276,9 +278,8 @@ class OnlineCalibrator:
             y = np.concatenate([b.y for b in self._grid])
             dy = np.gradient(y, tg, axis=0) if tg.size > 1 else np.zeros_like(y)
             dy[..., 12:15] = np.concatenate([b.dy for b in self._grid])  # dw/ds from the kinematics
-            self._grid_cat = Grid(
-                tg, y, dy, np.concatenate([b.ok for b in self._grid]), np.concatenate([b.speed for b in self._grid])
-            )
+            ok, speed = np.concatenate([b.ok for b in self._grid]), np.concatenate([b.speed for b in self._grid])
+            self._grid_cat = Grid(tg, y, dy, ok, speed, min(b.resolved_rps for b in self._grid))
         return self._grid_cat
 
     def _absorb_unit(self, name: str, final: bool = False) -> int:
@@ -298,9 +299,11 @@ class OnlineCalibrator:
                 else:
                     keep_pending(st, t, a, g)
                     return 0
-        elif st.clock_provisional and t[-1] - st.align_tried >= clock.ALIGN_RETRY_S:
-            st.align_tried = float(t[-1])
-            if clock.align_on_motion(st, grid, t, a, g, self.options):  # its kept samples are pending again
+        else:  # a provisional clock aligned on motion, or a longer stream's peak elsewhere: all pending again
+            retry = st.clock_provisional and t[-1] - st.align_tried >= clock.ALIGN_RETRY_S
+            st.align_tried = float(t[-1]) if retry else st.align_tried
+            if clock.align_on_motion(st, grid, t, a, g, self.options) if retry else clock.recheck(
+                    st, grid, t, a, g, self.options, final):  # fmt: skip
                 keep_pending(st, t, a, g)
                 return self._absorb_unit(name, final)
         assert st.offset is not None
@@ -568,13 +571,10 @@ class OnlineCalibrator:
                 "outliers": st.outliers,
                 "saturated_samples": st.saturated,
                 "realigned": st.realigned,
+                "clock_rechecked": st.rechecked,
                 "scale_estimated": st.scale_estimated,
             }
-            if st.clock_provisional:
-                notes.append(
-                    "coarse clock search skipped: the unit's samples hold no motion (static poses only), so nothing "
-                    "determines the clock offset; the stamps taken as they are"
-                )
+            notes += clock.notes(st)
             unit = UnitResult(
                 pose=s.pose, observable=True, position_std_m=s.position_std_m, rotation_std_deg=s.rotation_std_deg,
                 warnings=tuple(warnings), extras=extras, imu=imu, pose_covariance=cov, notes=tuple(notes),

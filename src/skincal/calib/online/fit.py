@@ -10,6 +10,7 @@ from scipy.stats import chi2
 from skincal.calib.online import stats
 from skincal.calib.online.options import OnlineOptions
 from skincal.calib.online.unit import MOVING, REST, UnitState
+from skincal.calib.timing import CLOCK_DRIFT_MIN_SPAN_S
 from skincal.kinematics.transforms import FloatArray
 
 SCALE_STD_LIMIT = 0.01
@@ -152,6 +153,9 @@ def solve_unit(st: UnitState, o: OnlineOptions) -> None:
         return
     default = np.array([o.accel_sigma, o.accel_sigma, o.gyro_sigma, o.gyro_sigma])
     common = st.sigmas.get(0, default)
+    # like mle: a drift only from a stream long enough to tell it from the offset and the model's errors
+    drift = stats.DRIFT_PRIOR if st.t_last - st.t_first >= CLOCK_DRIFT_MIN_SPAN_S else stats.DRIFT_SHORT_PRIOR
+    clock = {"drift_prior": drift, "drift_total": st.drift}
     sols: dict[int, stats.Solution] = {}
     for k, link in enumerate(st.links):
         if st.Za[k, :, 9, 9].sum() < 10:
@@ -159,18 +163,18 @@ def solve_unit(st: UnitState, o: OnlineOptions) -> None:
         prev = st.solutions.get(link)
         sig = st.sigmas.get(link, common) if st.decided else common
         Za, Zg = weighted(st, k, sig)
-        sol = stats.solve(Za, Zg, 1.0, 1.0, R0=None if prev is None else prev.R)
+        sol = stats.solve(Za, Zg, 1.0, 1.0, R0=None if prev is None else prev.R, **clock)
         if sol is None:
             continue
         if st.decided:
             for _ in range(1 if prev is not None else 2):  # re-weight with the fit's own noise levels
                 sig = class_sigmas(st, k, sol, sig)
                 Za, Zg = weighted(st, k, sig)
-                sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R) or sol
+                sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R, **clock) or sol
             # like mle: the scale/misalignment is kept only where the data determine every element of it
             st.scale_estimated = bool(np.sqrt(np.clip(np.diag(sol.cov)[3:12], 0.0, None)).max() <= SCALE_STD_LIMIT)
             if not st.scale_estimated:
-                sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R, scale_prior=stats.SCALE_FIXED) or sol
+                sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R, scale_prior=stats.SCALE_FIXED, **clock) or sol
         st.sigmas[link] = sig if st.decided else class_sigmas(st, k, sol, common)
         sols[link] = sol
     st.solutions = sols

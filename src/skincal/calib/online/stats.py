@@ -81,6 +81,12 @@ TAU, DRIFT = _T, _D
 """Indices of the residual time offset and clock drift among the Gauss-Newton unknowns (``Solution.cov``)."""
 DRIFT_PRIOR = 1e-3
 """Prior std of the residual clock drift ``d`` (1000 ppm: ``mle``'s, far wider than any real clock's)."""
+DRIFT_SHORT_PRIOR = 1e-4
+"""Prior std of the mapping's drift while the stream is shorter than
+:data:`~skincal.calib.timing.CLOCK_DRIFT_MIN_SPAN_S` (100 ppm: a crystal's tolerance), where ``mle`` fits
+none: a free drift took up a 14 Hz stream's model errors as -2000 to -9000 ppm on real recordings of one
+host's clock; held at 0, a WiFi clock drifting at 300 ppm left the stream 1.4x ``mle``'s error
+(simulated)."""
 GRAVITY_PRIOR = 0.001
 """Prior std of ``k``, the motion's accelerations' relative error against gravity (``mle``: 0.2 %, the
 spread of the local gravity). 0.1 % here, measured (`benchmarks/bench_online.py --accuracy`): 0.2 %
@@ -304,12 +310,16 @@ def solve(
     iterations: int = 12,
     scale_prior: float = SCALE_PRIOR,
     drift_prior: float = DRIFT_PRIOR,
+    drift_total: float = 0.0,
 ) -> Solution | None:
     """Gauss-Newton minimiser of ``C`` (module docstring) from the Grams ``Za`` ``(NA, NA)`` and ``Zg``
     ``(NG, NG)`` (None: no gyroscope) with noise levels ``sigma_a`` (m/s^2), ``sigma_g`` (rad/s); ``R0``
     a start rotation (default: the linear solution); ``scale_prior`` the prior std of each element of ``E``
     (tiny: the accelerometer's scale/misalignment held at the identity), ``drift_prior`` that of the
-    residual clock drift. None when the data determine nothing yet."""
+    residual clock drift about ``drift_total``, the drift of the mapping it adds to: the prior holds the
+    mapping's whole drift (``drift_total - d`` to first order), not each re-alignment's residual, which
+    would otherwise walk away by a prior's width at every re-alignment. None when the data determine
+    nothing yet."""
     have_g = Zg is not None and Zg[0, 0] > 0
     linear = _rotation_start(Za, Zg if have_g else None, held=R0 is not None)
     if R0 is None:
@@ -331,7 +341,9 @@ def solve(
         xa, Ja, xg, Jg = linearise(R, x)
         ga = Za[: NA - 1, : NA - 1] @ xa - Za[: NA - 1, NA - 1]
         H = wa * Ja.T @ Za[: NA - 1, : NA - 1] @ Ja + P
-        grad = wa * Ja.T @ ga + P @ np.r_[np.zeros(3), x[3:]]
+        centred = np.r_[np.zeros(3), x[3:]]
+        centred[_D] -= drift_total
+        grad = wa * Ja.T @ ga + P @ centred
         if have_g:
             assert Zg is not None
             gg = Zg[: NG - 1, : NG - 1] @ xg - Zg[: NG - 1, NG - 1]

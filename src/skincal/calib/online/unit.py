@@ -38,6 +38,8 @@ class Grid:
         dy: ``(G, n, 18)`` their time derivatives (per block: only ``dw`` ``(G, n, 3)``, exact).
         ok: ``(G,)`` the joint accelerations are reliable there.
         speed: ``(G, n)`` ``sum_{j <= k} |qd_j|``, rad/s (the clock search without a gyroscope).
+        resolved_rps: the angular speed the joint stream resolves
+            (:func:`~skincal.calib.timing.resolved_speed` of the stamps the grid was made from), rad/s.
     """
 
     t: FloatArray
@@ -45,6 +47,7 @@ class Grid:
     dy: FloatArray
     ok: np.ndarray
     speed: FloatArray
+    resolved_rps: float = float("inf")
 
 
 @dataclass
@@ -61,6 +64,7 @@ class UnitState:
     pending_g: list[FloatArray | None] = field(default_factory=list)
     offset: float | None = None
     offset_sharpness: float = float("nan")
+    searched_span: float = 0.0  # span of the stream the coarse offset was last searched on, s (clock.recheck)
     clock_provisional: bool = False  # stamps taken as they are (no motion seen yet): aligned again on motion
     has_gyro: bool | None = None
     chunks: deque = field(default_factory=deque)  # (t_min, t_max, Za, Zg, moving) per absorb call
@@ -86,6 +90,8 @@ class UnitState:
     align_tried: float = float("-inf")
     raw: deque = field(default_factory=deque)  # absorbed (stamps, accel, gyro) within the history, to realign
     realigned: int = 0
+    rechecked: int = 0  # coarse mappings replaced by a search on a longer stream (clock.recheck)...
+    recheck_shift_s: float = 0.0  # ...and the last replacement's change of the offset, s
     scale_estimated: bool = False
     # the clock mapping s = t' - offset - drift (t' - t_ref), t' the stamps less their re-sync steps
     drift: float = 0.0
