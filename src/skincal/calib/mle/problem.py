@@ -62,7 +62,8 @@ def prepare(dataset: Dataset, interpolator: JointInterpolator) -> Shared:
     noise = None if c.velocity_noise is None else (c.position_noise, c.velocity_noise)
     rest = joint_rest(dataset.joints, dataset.segments, noise=noise)
     table = SignalTable(dataset.robot, interpolator, np.asarray(dataset.gravity, dtype=float))
-    profile = motion_profile(table.grid_t, table.angular_speed, table.joint_speed, resolved_speed(dataset.joints.t))
+    resolved = resolved_speed(dataset.joint_states.t)
+    profile = motion_profile(table.grid_t, table.angular_speed, table.joint_speed, resolved)
     return Shared(table, rest, profile, interpolator)
 
 
