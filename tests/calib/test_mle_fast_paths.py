@@ -54,7 +54,7 @@ def test_table_rows_interpolate_as_hermite_and_the_textbook_form(rng):
 
 def test_normal_equations_from_the_residual_column(rng):
     J, r, w = rng.normal(size=(50, 3, 7)), rng.normal(size=(50, 3)), rng.uniform(0.1, 2.0, 50)
-    H, g = normal_equations(np.concatenate([J, r[:, :, None]], axis=2), w)
+    H, g = normal_equations(np.concatenate([J, r[:, :, None]], axis=2).transpose(2, 0, 1).copy(), w)  # by columns
     W = np.repeat(w, 3)
     J2 = J.reshape(-1, 7)
     np.testing.assert_allclose(H, J2.T @ (W[:, None] * J2), rtol=1e-12)
