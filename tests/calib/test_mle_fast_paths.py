@@ -54,7 +54,7 @@ def test_table_rows_interpolate_as_hermite_and_the_textbook_form(rng):
 
 def test_normal_equations_from_the_residual_column(rng):
     J, r, w = rng.normal(size=(50, 3, 7)), rng.normal(size=(50, 3)), rng.uniform(0.1, 2.0, 50)
-    H, g = normal_equations(np.concatenate([J, r[:, :, None]], axis=2), w)
+    H, g = normal_equations(np.concatenate([J, r[:, :, None]], axis=2).transpose(2, 0, 1).copy(), w)  # by columns
     W = np.repeat(w, 3)
     J2 = J.reshape(-1, 7)
     np.testing.assert_allclose(H, J2.T @ (W[:, None] * J2), rtol=1e-12)
@@ -137,6 +137,41 @@ def test_the_gcv_smoothing_parameter_is_scipys(n, noise):
     lam = gcv_lambda(t, y)
     assert 0.0 <= lam <= n
     assert np.array_equal(make_smoothing_spline(t, y, lam=lam).c, make_smoothing_spline(t, y).c)
+
+
+@pytest.mark.parametrize("n", [5, 6, 40, 400])
+def test_the_smoothing_spline_from_shared_bands_is_scipys(n):
+    """smoothing_spline (bands built once, their central columns on whole windows) against SciPy's
+    make_smoothing_spline at the same lam, bit for bit, knots and coefficients."""
+    from scipy.interpolate import make_smoothing_spline
+
+    from skincal.calib.preprocess.gcv import smoothing_spline, spline_bands
+
+    rng = np.random.default_rng(n)
+    t = np.cumsum(rng.uniform(0.5, 1.5, n)) / 14.0
+    y = np.sin(2.1 * t) + 1e-3 * rng.normal(size=n)
+    bands = spline_bands(t)
+    for lam in (0.0, 1e-5, 0.02, 3.0):
+        ours, scipys = smoothing_spline(t, y, lam, bands), make_smoothing_spline(t, y, lam=lam)
+        assert np.array_equal(ours.t, scipys.t) and np.array_equal(ours.c, scipys.c)
+
+
+def test_a_stream_fitted_again_gets_the_same_spline_without_cross_validation(monkeypatch):
+    """The conditioning's smoothing spline of a stream it has fitted before (the report-spacing check's
+    thinned streams) skips the GCV search and is the same spline, bit for bit."""
+    import skincal.calib.preprocess.conditioning as conditioning
+
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.5, 1.5, 300)) / 14.0
+    y = np.sin(2.1 * t) + 1e-4 * rng.normal(size=300)
+    first = conditioning._smoothing_spline(t, y)
+    searched: list[int] = []
+    real = conditioning.gcv_lambda
+    monkeypatch.setattr(conditioning, "gcv_lambda", lambda *a, **k: searched.append(1) or real(*a, **k))
+    again = conditioning._smoothing_spline(t.copy(), y.copy())
+    assert not searched and np.array_equal(again.c, first.c)
+    conditioning._smoothing_spline(t, y + 1e-6)  # other data: searched
+    assert searched == [1]
 
 
 def _captured_fits(monkeypatch):

@@ -187,19 +187,34 @@ class Fit:
 
 
 def _scale_columns(J: FloatArray, f: FloatArray, scale: str, sl: slice) -> None:
-    """d(E f)/de into ``J[:, :, sl]`` for ``f`` ``(N, 3)``."""
-    if scale == SCALE_FULL:
+    """d(E f)/de into the columns ``J[sl]`` of a column-major Jacobian ``(P, N, 3)`` for ``f`` ``(N, 3)``."""
+    c = sl.start
+    if scale == SCALE_FULL:  # d(E f)_a / dE_am = f_m
         for a in range(3):
-            J[:, a, sl.start + 3 * a : sl.start + 3 * a + 3] = f
+            J[c + 3 * a : c + 3 * a + 3, :, a] = f.T
         return
     fx, fy, fz = f[:, 0], f[:, 1], f[:, 2]
-    c = sl.start
-    J[:, 0, c + 0] = fx
-    J[:, 1, c + 1] = fy
-    J[:, 2, c + 2] = fz
-    J[:, 0, c + 3], J[:, 1, c + 3] = fy, fx
-    J[:, 0, c + 4], J[:, 2, c + 4] = fz, fx
-    J[:, 1, c + 5], J[:, 2, c + 5] = fz, fy
+    J[c + 0, :, 0] = fx
+    J[c + 1, :, 1] = fy
+    J[c + 2, :, 2] = fz
+    J[c + 3, :, 0], J[c + 3, :, 1] = fy, fx
+    J[c + 4, :, 0], J[c + 4, :, 2] = fz, fx
+    J[c + 5, :, 1], J[c + 5, :, 2] = fz, fy
+
+
+def _times_columns(J: FloatArray, cols: slice, M: FloatArray, X: FloatArray, rows: slice = slice(None)) -> None:
+    """``J[cols.start + j, rows] = (M X_n)[:, j]`` for every ``X_n`` of ``X`` ``(N, 3, 3)``: column ``j`` of the
+    products ``M X_n`` as one matrix product ``X[:, :, j] M^T`` ``(N, 3)``, written into a column-major
+    Jacobian ``(P, N, 3)`` (contiguous rows)."""
+    for j in range(3):
+        np.matmul(X[:, :, j], M.T, out=J[cols.start + j, rows])
+
+
+def _diagonal_columns(J: FloatArray, cols: slice, values: FloatArray | float) -> None:
+    """``J[cols]`` ``(3, N, 3)`` = ``I * values`` (one 3 x 3 identity per row times ``values`` ``(N,)`` or a scalar);
+    the entries off the diagonal are left as they are (zero)."""
+    for a in range(3):
+        J[cols.start + a, :, a] = values
 
 
 def accel_rows(
@@ -207,14 +222,16 @@ def accel_rows(
 ) -> tuple[FloatArray, FloatArray]:
     """Accelerometer residuals ``(S + M, 3)`` and Jacobian ``(S + M, 3, P)`` (static rows first)."""
     r, Jr = _accel_rows_with_residual(state, blocks, lin, rows)
-    return r, Jr[:, :, :-1]
+    return r, Jr[:-1].transpose(1, 2, 0)
 
 
 def _accel_rows_with_residual(
     state: State, blocks: Blocks, lin: Linearisation | None, rows: Rows
 ) -> tuple[FloatArray, FloatArray]:
-    """:func:`accel_rows` with the residuals as a last column of the Jacobian, ``(S + M, 3, P + 1)``
-    (one product :func:`normal_equations` then gives ``J^T W J`` and ``J^T W r``)."""
+    """:func:`accel_rows` with the residuals as a last column of the Jacobian, stored by columns:
+    ``Jr`` ``(P + 1, S + M, 3)``, ``Jr[c]`` the column ``c`` of every row (one product
+    :func:`normal_equations` then gives ``J^T W J`` and ``J^T W r``; each column contiguous, so it is
+    written in one pass)."""
     sl = blocks.slices()
     R, A = state.R, state.A
     S = len(rows.static_u)
@@ -234,25 +251,25 @@ def _accel_rows_with_residual(
     f = v @ R  # rows: (R^T v)^T
     pred = accelerometer(f, A, state.b, state.c, t_rel)
     r = pred - meas
-    J = np.zeros((len(v), 3, blocks.size + 1))
-    J[:, :, -1] = r
-    J[:, :, sl["theta"]] = _times_matrices(A, skew(f))  # d/d dtheta of A R^T v with R <- R Exp(dtheta): A [f]x
+    J = np.zeros((blocks.size + 1, len(v), 3))
+    J[-1] = r
+    _times_columns(J, sl["theta"], A, skew(f))  # d/d dtheta of A R^T v with R <- R Exp(dtheta): A [f]x
     if lin is not None:
-        J[S:, :, sl["p"]] = _times_matrices(A @ R.T, Kd)
-    J[:, :, sl["b"]] = np.eye(3)
+        _times_columns(J, sl["p"], A @ R.T, Kd, slice(S, None))
+    _diagonal_columns(J, sl["b"], 1.0)
     if "e" in sl:
         _scale_columns(J, f, blocks.scale, sl["e"])
     if lin is not None and ("tau" in sl or "d" in sl):
         dv = lin.du + _times_vector(lin.dK, state.p)
         col = -(dv @ R) @ A.T
         if "tau" in sl:
-            J[S:, :, sl["tau"].start] = col
+            J[sl["tau"].start, S:] = col
         if "d" in sl:
-            J[S:, :, sl["d"].start] = col * rows.moving_t[:, None]
+            J[sl["d"].start, S:] = col * rows.moving_t[:, None]
     if "c" in sl:
-        J[:, :, sl["c"]] = np.eye(3) * t_rel[:, None, None]
+        _diagonal_columns(J, sl["c"], t_rel)
     if "k" in sl and ug is not None:
-        J[:, :, sl["k"].start] = (ug @ R) @ A.T
+        J[sl["k"].start] = (ug @ R) @ A.T
     return r, J
 
 
@@ -262,7 +279,7 @@ def gyro_rows(
     """Gyroscope residuals ``(S + M, 3)`` and Jacobian ``(S + M, 3, P)`` (static rows: ``w = 0``)."""
     r, J_c, cols = _gyro_rows_compact(state, blocks, lin, rows)
     J = np.zeros((len(r), 3, blocks.size))
-    J[:, :, cols] = J_c[:, :, :-1]
+    J[:, :, cols] = J_c[:-1].transpose(1, 2, 0)
     return r, J
 
 
@@ -270,8 +287,8 @@ def _gyro_rows_compact(
     state: State, blocks: Blocks, lin: Linearisation | None, rows: Rows
 ) -> tuple[FloatArray, FloatArray, np.ndarray]:
     """:func:`gyro_rows` with only the columns the gyroscope depends on (rotation, time offset,
-    clock drift, gyroscope bias): residuals, Jacobian ``(S + M, 3, C + 1)`` (the residuals its last
-    column, as in :func:`_accel_rows_with_residual`) and the ``C`` column indices."""
+    clock drift, gyroscope bias): residuals, Jacobian by columns ``(C + 1, S + M, 3)`` (the residuals its
+    last column, as in :func:`_accel_rows_with_residual`) and the ``C`` column indices."""
     sl = blocks.slices()
     names = [n for n in ("theta", "tau", "d", "bg") if n in sl and (lin is not None or n in ("theta", "bg"))]
     cols = np.concatenate([np.arange(sl[n].start, sl[n].stop) for n in names])
@@ -287,17 +304,20 @@ def _gyro_rows_compact(
     w = np.concatenate(parts_w)
     g = w @ R
     r = g + state.bg - np.concatenate(meas)
-    J = np.zeros((len(w), 3, cols.size + 1))
-    J[:, :, -1] = r
-    J[:, :, local["theta"]] = skew(g)
-    J[:, :, local["bg"]] = np.eye(3)
+    J = np.zeros((cols.size + 1, len(w), 3))
+    J[-1] = r
+    gx = skew(g)
+    for j, c in enumerate(local["theta"]):
+        J[c] = gx[:, :, j]
+    for a, c in enumerate(local["bg"]):
+        J[c, :, a] = 1.0
     if lin is not None and ("tau" in sl or "d" in sl):
         S = len(rows.static_u)
         col = -(lin.dw @ R)
         if "tau" in local:
-            J[S:, :, local["tau"][0]] = col
+            J[local["tau"][0], S:] = col
         if "d" in local:
-            J[S:, :, local["d"][0]] = col * rows.moving_t[:, None]
+            J[local["d"][0], S:] = col * rows.moving_t[:, None]
     return r, J, cols
 
 
@@ -429,9 +449,9 @@ def solve(
     factors = np.ones(blocks.size)
     if sandwich and len(r) > S + 20:
         # a row's score J^T W r from the weighted rows W^1/2 [J | r] of the last iteration
-        scores = np.einsum("nkp,nk->np", J[:, :, :-1], J[:, :, -1])
+        scores = _row_scores(J)
         if use_gyro:
-            scores[:, cols_g] += np.einsum("nkp,nk->np", J_g[:, :, :-1], J_g[:, :, -1])
+            scores[:, cols_g] += _row_scores(J_g)
         factors = sandwich_inflation(cov, pinv(H), scores, rows.moving_t, S)
         cov = cov * np.outer(factors, factors)
     return Fit(
@@ -474,10 +494,11 @@ def sandwich_inflation(
     return np.where(ratio > 1.0 + 2.33 * np.sqrt(0.5 / nb), ratio, 1.0)
 
 
-def _times_matrices(M: FloatArray, X: FloatArray) -> FloatArray:
-    """``(N, 3, 3)`` ``M X_n`` of ``M`` ``(3, 3)`` and every ``X_n`` of ``X`` ``(N, 3, 3)``, as one matrix product
-    ``(X_n^T M^T)^T`` over the stacked rows (half the time of NumPy's stacked ``M @ X`` on 50 000 rows)."""
-    return (X.transpose(0, 2, 1).reshape(-1, 3) @ M.T).reshape(-1, 3, 3).transpose(0, 2, 1)
+def _row_scores(Jr: FloatArray) -> FloatArray:
+    """``(N, P)`` each row's score ``sum_k J_nk r_nk`` from weighted rows ``W^1/2 [J | r]`` stored by columns
+    ``(P + 1, N, 3)``, the three components summed in order."""
+    J, r = Jr[:-1], Jr[-1]
+    return (J[:, :, 0] * r[:, 0] + J[:, :, 1] * r[:, 1] + J[:, :, 2] * r[:, 2]).T
 
 
 def _times_vector(K: FloatArray, p: FloatArray) -> FloatArray:
@@ -487,13 +508,15 @@ def _times_vector(K: FloatArray, p: FloatArray) -> FloatArray:
 
 def normal_equations(Jr: FloatArray, w: FloatArray, overwrite: bool = False) -> tuple[FloatArray, FloatArray]:
     """``H = J^T W J`` and ``g = J^T W r`` for row weights ``w`` (per sample, all 3 components), from
-    ``Jr = [J | r]`` ``(N, 3, P + 1)``: one product ``(W^1/2 Jr)^T (W^1/2 Jr)``, whose last column is ``g``.
-    ``overwrite``: scale ``Jr`` itself to ``W^1/2 Jr`` (no copy)."""
-    sw = np.sqrt(w)[:, None, None]
+    ``Jr = [J | r]`` stored by columns, ``(P + 1, N, 3)`` (:func:`_accel_rows_with_residual`): one product
+    ``(W^1/2 Jr)^T (W^1/2 Jr)``, whose last column is ``g``. ``overwrite``: scale ``Jr`` itself to
+    ``W^1/2 Jr`` (no copy)."""
+    sw = np.repeat(np.sqrt(w), 3)
+    Jw = Jr.reshape(Jr.shape[0], -1)
     if overwrite:
-        Jr *= sw
-        Jw = Jr.reshape(-1, Jr.shape[2])
+        Jw *= sw
     else:
-        Jw = (Jr * sw).reshape(-1, Jr.shape[2])
-    G = Jw.T @ Jw
+        Jw = Jw * sw
+    rows = Jw.T  # (3 N, P + 1), column-major: the product below is BLAS's J^T J of the stacked rows
+    G = rows.T @ rows
     return G[:-1, :-1].copy(), G[:-1, -1].copy()

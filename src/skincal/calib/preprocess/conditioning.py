@@ -6,16 +6,17 @@ The cubic Hermite interpolation of positions with their velocities is :func:`ski
 
 from __future__ import annotations
 
+import hashlib
 import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import make_smoothing_spline
 from scipy.ndimage import maximum_filter1d, uniform_filter1d
 from scipy.signal import savgol_coeffs, savgol_filter
 
 from skincal.calib.hermite import hermite
-from skincal.calib.preprocess.gcv import gcv_lambda
+from skincal.calib.preprocess.gcv import gcv_lambda, smoothing_spline, spline_bands
 from skincal.data.dataset import JointStates
 from skincal.errors import CalibrationError
 from skincal.kinematics.transforms import FloatArray
@@ -179,18 +180,43 @@ itself, and a tighter cap (0.4) moved the slow paths' lever arm along the tool a
 0.1 m (the data do not pin it)."""
 
 
+SPLINE_MEMO_SIZE = 4096
+"""How many smoothing parameters :func:`_smoothing_spline` remembers (FIFO; a few floats per joint and
+thinned stream of a recording)."""
+_spline_lam: dict[bytes, float] = {}
+_spline_lock = threading.Lock()
+
+
 def _smoothing_spline(t: FloatArray, y: FloatArray):  # noqa: ANN202 - a scipy BSpline
     """The cubic smoothing spline of ``y(t)`` with ``lam`` by generalised cross-validation, but never
     smoother than an equivalent kernel of :data:`SMOOTHING_SPAN` report spacings ``h``: its
     bandwidth is ``(lam h)^(1/4)``, so ``lam <= (SMOOTHING_SPAN h)^4 / h``. Cross-validation on
     nearly noise-free positions can pick an enormous ``lam`` (a straight line through a sine);
     the capped fit is taken whenever it leaves the smaller residual (the smoothing is monotonic in
-    ``lam``: GCV chose more than the cap)."""
+    ``lam``: GCV chose more than the cap).
+
+    The ``lam`` chosen is remembered by the bytes of ``(t, y)``: the same stream fitted again (a report
+    stream's every second report, fitted for the error estimate of the full stream and again as the thinned
+    stream of the report-spacing check, :mod:`skincal.calib.joint_rate`) gets the same spline without its
+    cross-validation (bit-identical: the same arithmetic on the same numbers)."""
+    t = np.ascontiguousarray(t, dtype=float)
+    y = np.ascontiguousarray(y, dtype=float)
+    key = hashlib.blake2b(t.tobytes() + b"|" + y.tobytes(), digest_size=20).digest()
+    bands = spline_bands(t)
+    lam = _spline_lam.get(key)
+    if lam is not None:
+        return smoothing_spline(t, y, lam, bands)
     h = float(np.median(np.diff(t)))
-    gcv = make_smoothing_spline(t, y, lam=gcv_lambda(t, y))  # SciPy's own GCV choice, found faster
-    capped = make_smoothing_spline(t, y, lam=(SMOOTHING_SPAN * h) ** 4 / h)
+    lam_gcv = gcv_lambda(t, y, bands)  # SciPy's own GCV choice, found faster
+    lam_cap = (SMOOTHING_SPAN * h) ** 4 / h
+    gcv = smoothing_spline(t, y, lam_gcv, bands)
+    capped = smoothing_spline(t, y, lam_cap, bands)
     r_gcv = float(np.sum((gcv(t) - y) ** 2))
     r_cap = float(np.sum((capped(t) - y) ** 2))
+    with _spline_lock:  # units calibrated in threads share it
+        if len(_spline_lam) >= SPLINE_MEMO_SIZE:
+            del _spline_lam[next(iter(_spline_lam))]
+        _spline_lam[key] = lam_cap if r_cap < r_gcv else lam_gcv
     return capped if r_cap < r_gcv else gcv
 
 

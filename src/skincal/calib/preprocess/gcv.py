@@ -39,7 +39,8 @@ def _coeff_of_divided_diff(x: FloatArray) -> FloatArray:
 
 def _bands(x: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
     """The natural-spline design matrix ``X`` and penalty ``W^-1 E`` (5 bands each, LAPACK storage), as
-    :func:`scipy.interpolate.make_smoothing_spline` builds them."""
+    :func:`scipy.interpolate.make_smoothing_spline` builds them (its loop over the central columns done
+    on whole windows: each entry the same products in the same order, bit-identical)."""
     t = np.r_[[x[0]] * 3, x, [x[-1]] * 3]
     n = x.shape[0]
     X_bspl = BSpline.design_matrix(x, t, 3)
@@ -55,8 +56,16 @@ def _bands(x: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
     wE = np.zeros((5, n))
     wE[2:, 0] = _coeff_of_divided_diff(x[:3]) / w[:3]
     wE[1:, 1] = _coeff_of_divided_diff(x[:4]) / w[:4]
-    for j in range(2, n - 2):
-        wE[:, j] = (x[j + 2] - x[j - 2]) * _coeff_of_divided_diff(x[j - 2 : j + 3]) / w[j - 2 : j + 3]
+    if n > 4:  # the central columns j = 2 .. n - 3, all at once (the same products in the same order)
+        win = np.lib.stride_tricks.sliding_window_view(x, 5)  # (n - 4, 5): x[j - 2 : j + 3]
+        wins = np.lib.stride_tricks.sliding_window_view(w, 5)
+        span = win[:, 4] - win[:, 0]
+        for i in range(5):
+            pp = np.ones(n - 4)
+            for k in range(5):
+                if k != i:
+                    pp *= win[:, i] - win[:, k]
+            wE[i, 2 : n - 2] = span * (1.0 / pp) / wins[:, i]
     wE[:-1, -2] = -_coeff_of_divided_diff(x[-4:]) / w[-4:]
     wE[:-2, -1] = _coeff_of_divided_diff(x[-3:]) / w[-3:]
     wE *= 6
@@ -140,17 +149,53 @@ def _gcv(lam: float, X: FloatArray, XtWX: FloatArray, wE: FloatArray, XtE: Float
     return float(numer / denom)
 
 
-def gcv_lambda(x: FloatArray, y: FloatArray) -> float:
+def spline_bands(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The bands ``(X, W^-1 E)`` of the smoothing spline over stamps ``x`` (increasing, unit weights):
+    computed once, shared by :func:`gcv_lambda` and every :func:`smoothing_spline` over the same ``x``."""
+    x = np.ascontiguousarray(x, dtype=float)
+    if np.any(x[1:] - x[:-1] <= 0):
+        raise ValueError("``x`` should be an ascending array")
+    if x.shape[0] <= 4:
+        raise ValueError("``x`` and ``y`` length must be at least 5")
+    return _bands(x, np.ones(len(x)))
+
+
+def gcv_lambda(x: FloatArray, y: FloatArray, bands: tuple[FloatArray, FloatArray] | None = None) -> float:
     """``lam`` of the cubic smoothing spline of ``y(x)`` (``x`` increasing, unit weights) that minimises
     the GCV criterion: the value :func:`scipy.interpolate.make_smoothing_spline` finds with ``lam=None``
-    (pass it as ``lam`` for the same spline)."""
+    (pass it as ``lam`` for the same spline); ``bands``: :func:`spline_bands` of ``x`` when already built."""
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
     w = np.ones(len(x))
-    X, wE = _bands(x, w)
+    X, wE = spline_bands(x) if bands is None else bands
     XtWX = _xt_w_y(X, w, X)
     XtE = _xt_w_y(X, w, wE)
     est = minimize_scalar(_gcv, bounds=(0, X.shape[1]), method="Bounded", args=(X, XtWX, wE, XtE, y))
     if not est.success:
         raise ValueError(f"Unable to find minimum of the GCV function: {est.message}")
     return float(est.x)
+
+
+def smoothing_spline(
+    x: FloatArray, y: FloatArray, lam: float, bands: tuple[FloatArray, FloatArray] | None = None
+) -> BSpline:
+    """:func:`scipy.interpolate.make_smoothing_spline` ``(x, y, lam=lam)`` (1-D ``y``, unit weights) from the
+    :func:`spline_bands` of ``x`` (built once for every ``lam`` tried on the same stamps): the natural-spline
+    coefficients ``c = (X + lam W^-1 E)^-1 y`` moved to the B-spline basis, SciPy's arithmetic (bit-identical)."""
+    x = np.ascontiguousarray(x, dtype=float)
+    y = np.ascontiguousarray(y, dtype=float)
+    if lam < 0.0:
+        raise ValueError("Regularization parameter should be non-negative")
+    X, wE = spline_bands(x) if bands is None else bands
+    t = np.r_[[x[0]] * 3, x, [x[-1]] * 3]
+    c = solve_banded((2, 2), X + lam * wE, y)
+    c0, c1 = c[0:1], c[1:2]
+    cm0, cm1 = c[-1:-2:-1], c[-2:-3:-1]
+    c_ = np.r_[
+        c0 * (t[5] + t[4] - 2 * t[3]) + c1,
+        c0 * (t[5] - t[3]) + c1,
+        c[1:-1],
+        cm0 * (t[-4] - t[-6]) + cm1,
+        cm0 * (2 * t[-4] - t[-5] - t[-6]) + cm1,
+    ]
+    return BSpline.construct_fast(t, c_, 3, axis=0)
