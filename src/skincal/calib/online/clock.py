@@ -13,7 +13,14 @@ from skincal.calib import rest
 from skincal.calib.online import stats
 from skincal.calib.online.options import OnlineOptions
 from skincal.calib.online.unit import Grid, UnitState
-from skincal.calib.timing import coarse_time_offset, compose_clock, find_clock_steps, motion_instants, motion_profile
+from skincal.calib.timing import (
+    OffsetSearch,
+    coarse_time_offset,
+    compose_clock,
+    find_clock_steps,
+    motion_instants,
+    motion_profile,
+)
 from skincal.kinematics.transforms import FloatArray
 
 ALIGN_SHARPNESS = 0.1
@@ -46,7 +53,7 @@ def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray
     """Find the unit's coarse time offset on the grid's motion (:func:`~skincal.calib.timing.coarse_time_offset`)
     once its samples ``t, a, g`` span ``o.align_s`` with motion and the peak is distinct (or the history is
     nearly full); else leave ``st.offset`` None."""
-    tg, w, speed = grid.t, grid.y[..., 12:15], grid.speed
+    tg = grid.t
     inside = (t >= tg[0]) & (t <= tg[-1])
     if inside.sum() < 20:
         return
@@ -65,19 +72,38 @@ def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray
         return
     if short:
         return
-    lo, hi = np.searchsorted(tg, [ti[0], ti[-1]])
-    ang = np.linalg.norm(w[lo:hi], axis=2)
-    if ang.shape[0] < 20 or float(ang.max()) < 5 * rest.MOVING_RPS:
+    search = search_span(grid, ti, a[inside], None if g is None else g[inside])
+    if search is None:
         return  # no motion to align on yet
-    profile = motion_profile(tg[lo:hi], ang, speed[lo:hi], grid.resolved_rps)
-    search = coarse_time_offset(profile, t[inside], a[inside], None if g is None else g[inside])
-    span = t[inside][-1] - t[inside][0]
+    span = ti[-1] - ti[0]
     if search.sharpness < ALIGN_SHARPNESS and span < ALIGN_WAIT_FRACTION * o.history_s:
         return  # the peak is not distinct yet: wait for more motion (the samples stay pending)
     st.offset, st.offset_sharpness, st.clock_provisional = float(search.offset_s), float(search.sharpness), False
-    st.t_ref, st.searched_span = float(t[inside][0]), float(span)
+    st.t_ref, st.searched_span = float(ti[0]), float(span)
     st.steps = find_clock_steps(t)
     st.t_seen = float(t[-1])
+
+
+def search_span(grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray | None) -> OffsetSearch | None:
+    """The coarse offset search (:func:`~skincal.calib.timing.coarse_time_offset`) of samples stamped ``t``
+    (inside the grid) on the grid's predicted motion over their span, clipped at what the joint stream
+    resolves; None when a link turns too little there to align on."""
+    lo, hi = np.searchsorted(grid.t, [t[0], t[-1]])
+    ang = np.linalg.norm(grid.y[lo:hi, :, 12:15], axis=2)
+    if ang.shape[0] < 20 or float(ang.max()) < 5 * rest.MOVING_RPS:
+        return None
+    profile = motion_profile(grid.t[lo:hi], ang, grid.speed[lo:hi], grid.resolved_rps)
+    return coarse_time_offset(profile, t, a, g)
+
+
+def kept_with(st: UnitState, t: FloatArray | None, a: FloatArray | None,
+              g: FloatArray | None) -> tuple[FloatArray, FloatArray, FloatArray | None]:  # fmt: skip
+    """The unit's kept raw samples followed by the new ones ``t, a, g`` (``t`` None: none): stamps, accel and
+    gyro (None when some part has none)."""
+    parts = [r[:3] for r in st.raw] + ([] if t is None or not len(t) else [(t, a, g)])
+    T = np.concatenate([p[0] for p in parts])
+    A = np.concatenate([p[1] for p in parts])
+    return T, A, None if any(p[2] is None for p in parts) else np.concatenate([p[2] for p in parts])
 
 
 def holds_motion(grid: Grid, t: FloatArray, end: float | None = None) -> bool | None:
@@ -140,12 +166,9 @@ def align_on_motion(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: 
     """A unit whose clock is provisional (:func:`align` saw it record in the rests only) aligned on its
     kept and new samples ``t, a, g`` once they hold motion; on success (``True``) its statistics are
     restarted and every kept sample (then the new ones) is absorbed again under the found clock."""
-    raw = list(st.raw)
-    T = np.concatenate([r[0] for r in raw] + [t])
     if not holds_motion(grid, t):  # the new samples: still in the rests, or nothing tells
         return False
-    A = np.concatenate([r[1] for r in raw] + [a])
-    G = None if g is None or any(r[2] is None for r in raw) else np.concatenate([r[2] for r in raw] + [g])
+    T, A, G = kept_with(st, t, a, g)
     st.offset = None
     align(st, grid, T, A, G, o)
     if st.offset is None or st.clock_provisional:  # no distinct peak yet: the stamps as they are, for now
@@ -166,24 +189,18 @@ def recheck(st: UnitState, grid: Grid, t: FloatArray | None, a: FloatArray | Non
     than the history, taken under the wrong clock, are forgotten)."""
     if st.offset is None or st.clock_provisional or not st.raw:
         return False
-    parts = [r[:3] for r in st.raw] + ([] if t is None or not len(t) else [(t, a, g)])
-    T = np.concatenate([p[0] for p in parts])
+    T, A, G = kept_with(st, t, a, g)
     span = float(T[-1] - T[0])
     if span < RECHECK_GROWTH * st.searched_span and not (final and span > 1.05 * st.searched_span):
         return False
     st.searched_span = span
-    A = np.concatenate([p[1] for p in parts])
-    G = None if any(p[2] is None for p in parts) else np.concatenate([p[2] for p in parts])
     inside = (T >= grid.t[0]) & (T <= grid.t[-1])  # searched on the stamps as align searches them
     if inside.sum() < 20:
         return False
     Ti = T[inside]
-    lo, hi = np.searchsorted(grid.t, [Ti[0], Ti[-1]])
-    profile = motion_profile(grid.t[lo:hi], np.linalg.norm(grid.y[lo:hi, :, 12:15], axis=2), grid.speed[lo:hi],
-                             grid.resolved_rps)  # fmt: skip
-    search = coarse_time_offset(profile, Ti, A[inside], None if G is None else G[inside])
+    search = search_span(grid, Ti, A[inside], None if G is None else G[inside])
     now = float(np.median(Ti - instants(st, Ti)))  # the current mapping's offset over these samples
-    if search.sharpness < ALIGN_SHARPNESS or abs(search.offset_s - now) <= RECHECK_S:
+    if search is None or search.sharpness < ALIGN_SHARPNESS or abs(search.offset_s - now) <= RECHECK_S:
         return False
     st.recheck_shift_s = float(search.offset_s) - now
     st.offset, st.drift, st.t_ref = float(search.offset_s), 0.0, float(Ti[0])
