@@ -243,16 +243,28 @@ def compare(
         pa, Ra, sa = pose_vector(a)
         pb, Rb, sb = pose_vector(b)
         d = np.r_[pb - pa, Rotation.from_matrix(Rb @ Ra.T).as_rotvec()]
-        z[k] = d / np.sqrt(sa**2 + sb**2)
-        if limit is not None:
-            with np.errstate(invalid="ignore"):
-                z[k, ~((sa <= limit) & (sb <= limit))] = np.nan
-        for i in np.flatnonzero(np.abs(np.nan_to_num(z[k])) > Z_NAMED):
-            if i < 3:
-                what, size = "position", f"{d[i] * 1e3:+.1f} mm"
-            else:
-                what, size = "rotation", f"{np.degrees(d[i]):+.2f} deg"
-            named.append(f"{split}: {what} {AXES[i % 3]} {size} ({abs(z[k, i]):.1f} std)")
+        z[k], names = normalised_difference(split, d, sa, sb, limit)
+        named += names
+    return z, named
+
+
+def normalised_difference(
+    split: str, d: FloatArray, sa: FloatArray, sb: FloatArray, limit: FloatArray | None = None
+) -> tuple[FloatArray, list[str]]:
+    """``(6,)`` normalised difference ``z = d / sqrt(sa^2 + sb^2)`` of two parts' poses (``d`` position m
+    then rotation vector rad, link frame; ``sa``, ``sb`` their std) and the components of ``split`` beyond
+    :data:`Z_NAMED` std, named; NaN where a part's std exceeds ``limit`` (``(6,)``, None: no limit)."""
+    z = d / np.sqrt(sa**2 + sb**2)
+    if limit is not None:
+        with np.errstate(invalid="ignore"):
+            z[~((sa <= limit) & (sb <= limit))] = np.nan
+    named = []
+    for i in np.flatnonzero(np.abs(np.nan_to_num(z)) > Z_NAMED):
+        if i < 3:
+            what, size = "position", f"{d[i] * 1e3:+.1f} mm"
+        else:
+            what, size = "rotation", f"{np.degrees(d[i]):+.2f} deg"
+        named.append(f"{split}: {what} {AXES[i % 3]} {size} ({abs(z[i]):.1f} std)")
     return z, named
 
 
@@ -277,6 +289,40 @@ def axis_inflation(z: FloatArray, block: float) -> tuple[float, float, float]:
         v = z[:, i][np.isfinite(z[:, i])]
         out.append(max(1.0, float(np.sqrt(np.mean(v * v)))) if v.size else 1.0)
     return (out[0], out[1], out[2])
+
+
+def judge(z: FloatArray, named: list[str], failed: list[str]) -> Consistency:
+    """The :class:`Consistency` of normalised differences ``z`` ``(len(SPLITS), 6)`` (NaN: not compared),
+    with the components ``named`` beyond :data:`Z_NAMED` std and the parts that ``failed``."""
+    cp, dp, fp = block_inflation(z[:, :3])
+    cr, dr, fr = block_inflation(z[:, 3:])
+    ap, ar = axis_inflation(z[:, :3], fp), axis_inflation(z[:, 3:], fr)
+    return Consistency(cp, cr, dp, dr, fp, fr, tuple(named), tuple(failed), ap, ar)
+
+
+def apply(unit: UnitResult, c: Consistency) -> UnitResult:
+    """``unit`` with its split check ``c`` (``extras["consistency"]``), its std and pose covariance inflated
+    per axis where the parts disagree, and a warning saying so."""
+    fp, fr, ap, ar = c.inflation_position, c.inflation_rotation, c.axes_position, c.axes_rotation
+    warnings = list(unit.warnings)
+    if fp > 1.0 or fr > 1.0:
+        def said(what: str, f: tuple[float, float, float]) -> str:
+            return f"{what} " + " ".join(f"{a} x{v:.1f}" for a, v in zip(AXES, f, strict=True))
+
+        parts = [said("position", ap)] * (fp > 1.0) + [said("rotation", ar)] * (fr > 1.0)
+        warnings.append(
+            "independent parts of the recording disagree beyond their std ("
+            + "; ".join(c.disagrees[:3]) + "): std inflated by the observed excess, " + ", ".join(parts)
+        )
+    pos = None if unit.position_std_m is None else np.asarray(unit.position_std_m, dtype=float) * np.asarray(ap)
+    rot = None if unit.rotation_std_deg is None else np.asarray(unit.rotation_std_deg, dtype=float) * np.asarray(ar)
+    extras = {**unit.extras, "consistency": c.to_json()}
+    cov = unit.pose_covariance
+    if cov is not None and (fp > 1.0 or fr > 1.0):
+        T = np.diag([*ap, *ar])
+        cov = T @ cov @ T
+    return replace(unit, position_std_m=pos, rotation_std_deg=rot, warnings=tuple(warnings), extras=extras,
+                   pose_covariance=cov)  # fmt: skip
 
 
 def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> CalibrationResult:
@@ -311,28 +357,5 @@ def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> Calibrat
     for name in links:
         pairs = {s: (v[0], v[1]) for s, v in outcomes[name].items() if v[0] is not None and v[1] is not None}
         z, named = compare(pairs, result.units[name])  # type: ignore[arg-type]
-        cp, dp, fp = block_inflation(z[:, :3])
-        cr, dr, fr = block_inflation(z[:, 3:])
-        ap, ar = axis_inflation(z[:, :3], fp), axis_inflation(z[:, 3:], fr)
-        c = Consistency(cp, cr, dp, dr, fp, fr, tuple(named), tuple(errors[name]), ap, ar)
-        unit = units[name]
-        warnings = list(unit.warnings)
-        if fp > 1.0 or fr > 1.0:
-            def said(what: str, f: tuple[float, float, float]) -> str:
-                return f"{what} " + " ".join(f"{a} x{v:.1f}" for a, v in zip(AXES, f, strict=True))
-
-            parts = [said("position", ap)] * (fp > 1.0) + [said("rotation", ar)] * (fr > 1.0)
-            warnings.append(
-                "independent parts of the recording disagree beyond their std ("
-                + "; ".join(named[:3]) + "): std inflated by the observed excess, " + ", ".join(parts)
-            )
-        pos = None if unit.position_std_m is None else np.asarray(unit.position_std_m, dtype=float) * np.asarray(ap)
-        rot = None if unit.rotation_std_deg is None else np.asarray(unit.rotation_std_deg, dtype=float) * np.asarray(ar)
-        extras = {**unit.extras, "consistency": c.to_json()}
-        cov = unit.pose_covariance
-        if cov is not None and (fp > 1.0 or fr > 1.0):
-            T = np.diag([*ap, *ar])
-            cov = T @ cov @ T
-        units[name] = replace(unit, position_std_m=pos, rotation_std_deg=rot, warnings=tuple(warnings), extras=extras,
-                              pose_covariance=cov)  # fmt: skip
+        units[name] = apply(units[name], judge(z, named, errors[name]))
     return replace(result, units=units)

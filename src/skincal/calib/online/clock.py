@@ -234,14 +234,17 @@ def restart(st: UnitState, shift: tuple[float, float] | None = None) -> None:
             Za -= chunk[2]
             Zg -= chunk[3]
             moving -= chunk[4]
+            st.ledger.add(chunk[5], -1.0)
     # Z[9, 9] counts a class's samples (round-off left otherwise)
     frozen = shift is not None and float(Za[..., 9, 9].max()) >= 0.5
     if frozen:
         assert shift is not None
         st.Za, st.Zg = stats.shift_clock(Za, Zg, *shift)
         st.moving = np.maximum(moving, 0.0)
+        st.ledger.shift(*shift)
     else:
         st.Za, st.Zg, st.moving = np.zeros_like(st.Za), np.zeros_like(st.Zg), np.zeros(len(st.links))
+        st.ledger.clear()
     st.chunks = deque()
     st.solutions, st.status, st.dirty = {}, None, True
     st.win_sum, st.win_n, st.win_stat, st.win_count = np.zeros(3), 0, 0.0, 0

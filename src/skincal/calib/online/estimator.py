@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from skincal.calib.online import clock, design, stats
+from skincal.calib.online import clock, design, fit, split, stats
 from skincal.calib.online.design import excitation
 from skincal.calib.online.fit import JOINT_ACTIVE_RPS, decide, inflation, residuals, solve_unit, window_means
 from skincal.calib.online.options import OnlineOptions, UnitStatus, is_settled
@@ -43,9 +43,8 @@ from skincal.calib.position import judge_position
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.rest import link_moving
 from skincal.calib.signals import frame_signals
-from skincal.calib.timing import compose_clock, resolved_speed
+from skincal.calib.timing import resolved_speed
 from skincal.data.dataset import JointStates
-from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.result import CalibrationResult, UnitResult, with_events
 from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
@@ -360,16 +359,17 @@ class OnlineCalibrator:
         cls = np.stack([~moving, moving], axis=1)[..., None, None]  # (L, 2, M, 1, 1)
         elapsed = s - st.t_ref
         rows_a = stats.accel_rows(np.broadcast_to(a, (L, M, 3)), u, K, du, dK, ug, elapsed)[:, None] * cls
-        Za = stats.gram(rows_a)
-        if g is not None:
-            Zg = stats.gram(stats.gyro_rows(np.broadcast_to(g, (L, M, 3)), w, dw, elapsed)[:, None] * cls)
-        else:
-            Zg = np.zeros_like(st.Zg)
+        rows_g = None if g is None else stats.gyro_rows(np.broadcast_to(g, (L, M, 3)), w, dw, elapsed)[:, None] * cls
+        speed = grid.speed[np.clip(np.searchsorted(grid.t, s), 0, grid.t.size - 1)][:, np.asarray(st.links) - 1].T
+        st.ledger.setup(L)
+        parts = split.pieces(s, rows_a, rows_g, moving, speed, *st.ledger.start(float(s[0])))
+        st.ledger.add(parts)
+        Za, Zg = sum(p.Za for p in parts), sum(p.Zg for p in parts)
         n_moving = moving.sum(axis=1).astype(float)
         st.Za += Za
         st.Zg += Zg
         st.moving += n_moving
-        chunk = (float(s[0]), float(s[-1]), Za, Zg, n_moving)
+        chunk = (float(s[0]), float(s[-1]), Za, Zg, n_moving, parts)
         st.chunks.append(chunk)
         horizon = s[-1] - self.options.history_s
         while st.chunks and st.chunks[0][1] < horizon:
@@ -409,9 +409,13 @@ class OnlineCalibrator:
         if not undecided and not st.decided and len(st.links) > 1 and st.moving[k] > MIN_MOVING and determined:
             self._keep_only(st, link)
             k = 0
-        reached = bool(
-            not undecided and np.all(pos_std <= o.target_position_m) and np.all(rot_std <= o.target_rotation_deg)
-        )
+        def within(p: FloatArray, r: FloatArray) -> bool:
+            return bool(not undecided and np.all(p <= o.target_position_m) and np.all(r <= o.target_rotation_deg))
+
+        reached = within(pos_std, rot_std)
+        if reached and not rests_only(st, k) and (checked := fit.split_check(st, link)) is not None:  # result's std
+            pos_std, rot_std = pos_std * np.asarray(checked.axes_position), rot_std * np.asarray(checked.axes_rotation)
+            reached = within(pos_std, rot_std)
         missing = ""
         if undecided:
             missing = f"link undecided between {', '.join(map(str, ambiguous))}: move joint {max(ambiguous)}"
@@ -439,7 +443,9 @@ class OnlineCalibrator:
         st.links = [link]
         st.Za, st.Zg, st.moving = st.Za[k : k + 1].copy(), st.Zg[k : k + 1].copy(), st.moving[k : k + 1].copy()
         both = [*st.chunks, *(r[3] for r in st.raw if r[3] is not None)]  # a chunk's statistics: link k's only
-        kept = {id(c): (c[0], c[1], c[2][k : k + 1], c[3][k : k + 1], c[4][k : k + 1]) for c in both}
+        kept = {id(c): (*c[:2], c[2][k : k + 1], c[3][k : k + 1], c[4][k : k + 1], [p.link(k) for p in c[5]])
+                for c in both}  # fmt: skip
+        st.ledger.keep_link(k)
         st.chunks = deque(kept[id(c)] for c in st.chunks)
         st.raw = deque((t, a, g, None if c is None else kept[id(c)]) for t, a, g, c in st.raw)
         st.solutions = {link: st.solutions[link]}
@@ -497,10 +503,12 @@ class OnlineCalibrator:
         shape_a, shape_g = st.Za.shape, st.Zg.shape
         st.Za, st.Zg, st.moving = np.zeros(shape_a), np.zeros(shape_g), np.zeros(len(st.links))
         st.sigmas = {}
-        for _, _, Za, Zg, mv in chunks:
+        st.ledger.clear()
+        for _, _, Za, Zg, mv, parts in chunks:
             st.Za += Za
             st.Zg += Zg
             st.moving += mv
+            st.ledger.add(parts)
         st.win_sum, st.win_n, st.win_stat, st.win_count = np.zeros(3), 0, 0.0, 0
         st.solutions, st.status, st.dirty = {}, None, True
         st.best_joint, st.best_joint_t = None, float("-inf")
@@ -524,29 +532,8 @@ class OnlineCalibrator:
             sol = st.solutions[s.link]
             kappa = inflation(st)
             cov = sol.pose_covariance() * kappa
-            idx_b = slice(12, 15)
-            G = sol.R @ np.linalg.inv(sol.A)
-            Ginv = np.linalg.inv(G)
-            cov_b = Ginv @ sol.cov[idx_b, idx_b] @ Ginv.T * kappa
-            # the clock: the mapping composed with the residual (stats: the samples saw s + tau + d (s - t_ref))
-            offset, drift = compose_clock(st.offset or 0.0, st.drift, sol.tau, sol.drift)
-            drift_std_ppm = 1e6 * float(np.sqrt(max(sol.cov[stats.DRIFT, stats.DRIFT] * kappa, 0.0)))
-            imu = ImuCalibration(
-                accel_bias_mps2=sol.b,
-                accel_bias_std_mps2=np.sqrt(np.clip(np.diag(cov_b), 0, None)),
-                accel_scale_misalignment=sol.A,
-                time_offset_s=offset,
-                time_offset_std_s=float(np.sqrt(max(sol.cov[stats.TAU, stats.TAU] * kappa, 0.0))),
-                time_reference_s=st.t_ref,
-                clock_drift_ppm=1e6 * drift + (st.steps.drift_ppm if st.steps is not None else 0.0),
-                clock_drift_std_ppm=drift_std_ppm,
-                clock_resync_steps=None if st.steps is None else st.steps.n_steps,
-                clock_resync_period_s=None if st.steps is None else st.steps.period_s,
-                clock_resync_step_s=None if st.steps is None else st.steps.mean_step_s,
-                gyro_bias_rps=sol.gyro_bias if st.has_gyro else None,
-                gravity_mps2=float(np.linalg.norm(self.gravity) / (1.0 + sol.gravity_scale)),
-                gravity_std_mps2=float(np.linalg.norm(self.gravity) * np.sqrt(max(sol.cov[22, 22] * kappa, 0.0))),
-            )
+            std = np.sqrt(np.clip(np.diag(cov), 0.0, None))  # the status's before its split check (applied below)
+            imu, drift, drift_std_ppm = fit.imu_calibration(st, sol, kappa, self.gravity)
             warnings: list[str] = []
             if np.isfinite(st.offset_sharpness) and st.offset_sharpness < clock.ALIGN_SHARPNESS:
                 warnings.append("time offset uncertain (no motion to align the unit's clock on)")
@@ -576,10 +563,11 @@ class OnlineCalibrator:
             }
             notes += clock.notes(st)
             unit = UnitResult(
-                pose=s.pose, observable=True, position_std_m=s.position_std_m, rotation_std_deg=s.rotation_std_deg,
+                pose=s.pose, observable=True, position_std_m=std[:3], rotation_std_deg=np.degrees(std[3:]),
                 warnings=tuple(warnings), extras=extras, imu=imu, pose_covariance=cov, notes=tuple(notes),
             )  # fmt: skip
             rests = rests_only(st, st.links.index(s.link) if s.link in st.links else 0)
+            unit = unit if rests else fit.split_checked(st, s.link, unit)  # as mle: units with a position
             units[name] = judge_position(unit, rests, static_only=st.clock_provisional)
         top: dict[str, Any] = {"late_samples": self.late, "cpu_s": self.cpu_s}
         result = CalibrationResult("online", self.chain.name, dataset_sha256, time.perf_counter() - self._t_start,

@@ -1,16 +1,20 @@
 """The streaming calibrator's fit of one unit from its Grams: the residuals (:func:`residuals`), their
 correlation inflation (:func:`window_means`, :func:`inflation`), each candidate link's pose solved with
-per-class noise levels (:func:`solve_unit`) and the link decision (:func:`decide`, :func:`cost`)."""
+per-class noise levels (:func:`solve_unit`), its parts' (:func:`solve_part`, :func:`split_checked`) and the
+link decision (:func:`decide`, :func:`cost`)."""
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.stats import chi2
 
-from skincal.calib.online import stats
+from skincal.calib import consistency
+from skincal.calib.online import split, stats
 from skincal.calib.online.options import OnlineOptions
 from skincal.calib.online.unit import MOVING, REST, UnitState
-from skincal.calib.timing import CLOCK_DRIFT_MIN_SPAN_S
+from skincal.calib.timing import CLOCK_DRIFT_MIN_SPAN_S, compose_clock
+from skincal.data.imu_calibration import ImuCalibration
+from skincal.data.result import UnitResult
 from skincal.kinematics.transforms import FloatArray
 
 SCALE_STD_LIMIT = 0.01
@@ -100,6 +104,12 @@ def weighted(st: UnitState, k: int, sig: FloatArray) -> tuple[FloatArray, FloatA
     ``n sigma_rest^2`` is removed from that block of both classes (bias-corrected least squares),
     once the unit's link is decided (a wrong candidate's rest residual is not the sensor's noise).
     """
+    return weigh(st.Za[k], st.Zg[k], sig, st.decided, bool(st.has_gyro))
+
+
+def weigh(Za2: FloatArray, Zg2: FloatArray, sig: FloatArray, decided: bool, gyro: bool
+          ) -> tuple[FloatArray, FloatArray | None]:  # fmt: skip
+    """:func:`weighted` of one link's Grams ``(2, NA, NA)`` and ``(2, NG, NG)`` (rest, moving classes)."""
 
     def corrected(Z: FloatArray, noise: float) -> FloatArray:
         Z = Z.copy()
@@ -107,14 +117,14 @@ def weighted(st: UnitState, k: int, sig: FloatArray) -> tuple[FloatArray, FloatA
         Z[d, d] -= min(Z[9, 9] * noise**2, 0.5 * float(np.min(Z[d, d])))  # Z[9, 9]: the class's samples
         return Z
 
-    if not st.decided:  # a wrong candidate's rest residual is not the sensor noise: no correction yet
-        Za = st.Za[k, REST] / sig[0] ** 2 + st.Za[k, MOVING] / sig[1] ** 2
-        Zg = st.Zg[k, REST] / sig[2] ** 2 + st.Zg[k, MOVING] / sig[3] ** 2 if st.has_gyro else None
+    if not decided:  # a wrong candidate's rest residual is not the sensor noise: no correction yet
+        Za = Za2[REST] / sig[0] ** 2 + Za2[MOVING] / sig[1] ** 2
+        Zg = Zg2[REST] / sig[2] ** 2 + Zg2[MOVING] / sig[3] ** 2 if gyro else None
         return Za, Zg
-    Za = corrected(st.Za[k, REST], sig[0]) / sig[0] ** 2 + corrected(st.Za[k, MOVING], sig[0]) / sig[1] ** 2
+    Za = corrected(Za2[REST], sig[0]) / sig[0] ** 2 + corrected(Za2[MOVING], sig[0]) / sig[1] ** 2
     Zg = None
-    if st.has_gyro:
-        Zg = corrected(st.Zg[k, REST], sig[2]) / sig[2] ** 2 + corrected(st.Zg[k, MOVING], sig[2]) / sig[3] ** 2
+    if gyro:
+        Zg = corrected(Zg2[REST], sig[2]) / sig[2] ** 2 + corrected(Zg2[MOVING], sig[2]) / sig[3] ** 2
     return Za, Zg
 
 
@@ -184,6 +194,34 @@ def solve_unit(st: UnitState, o: OnlineOptions) -> None:
     st.dirty = False
 
 
+def solve_part(st: UnitState, link: int, Za2: FloatArray, Zg2: FloatArray, span_s: float) -> stats.Solution | None:
+    """A part of decided ``link``'s data (Grams ``(2, NA, NA)``, ``(2, NG, NG)`` spanning ``span_s`` s) solved
+    as :func:`solve_unit` solves the whole: the stream's noise levels, its scale/misalignment choice, the
+    drift prior of the part's span (:mod:`skincal.calib.online.split`)."""
+    if Za2[:, 9, 9].sum() < 10:
+        return None
+    Za, Zg = weigh(Za2, Zg2, st.sigmas[link], st.decided, bool(st.has_gyro))
+    drift = stats.DRIFT_PRIOR if span_s >= CLOCK_DRIFT_MIN_SPAN_S else stats.DRIFT_SHORT_PRIOR
+    scale = stats.SCALE_PRIOR if st.scale_estimated else stats.SCALE_FIXED
+    return stats.solve(Za, Zg, 1.0, 1.0, R0=st.solutions[link].R, scale_prior=scale, drift_prior=drift,
+                       drift_total=st.drift)  # fmt: skip
+
+
+def split_check(st: UnitState, link: int) -> consistency.Consistency | None:
+    """The split check of ``link``'s estimate (:func:`skincal.calib.online.split.check`; None: no data)."""
+    kappa = inflation(st)
+    full = np.sqrt(np.clip(np.diag(st.solutions[link].pose_covariance()) * kappa, 0.0, None))
+    return split.check(st.ledger, st.links.index(link), full,
+                       lambda Za2, Zg2, span: solve_part(st, link, Za2, Zg2, span), kappa)  # fmt: skip
+
+
+def split_checked(st: UnitState, link: int, unit: UnitResult) -> UnitResult:
+    """``unit`` (the result of ``link``'s estimate) with its :func:`split_check` applied
+    (:func:`skincal.calib.consistency.apply`; as it is without data)."""
+    checked = split_check(st, link)
+    return unit if checked is None else consistency.apply(unit, checked)
+
+
 def decide(st: UnitState, joint_active_s: FloatArray) -> tuple[int | None, float, list[int]]:
     """Best link, its margin and the links still ambiguous with it (``joint_active_s`` ``(n,)``: how long each
     joint has moved, s)."""
@@ -220,3 +258,33 @@ def cost(st: UnitState, link: int, sig: FloatArray) -> float:
     if st.has_gyro:
         cost += sum(stats.residual_sum(st.Zg[k, c], sol.x_g) / sig[2 + c] ** 2 for c in (REST, MOVING))
     return float(cost)
+
+
+def imu_calibration(st: UnitState, sol: stats.Solution, kappa: float, gravity: FloatArray
+                    ) -> tuple[ImuCalibration, float, float]:  # fmt: skip
+    """The unit's IMU errors and clock at ``sol`` (std inflated by ``kappa``; ``gravity`` the dataset's, base
+    frame, m/s^2), with the composed mapping's drift (dimensionless) and the drift's std, ppm."""
+    idx_b = slice(12, 15)
+    G = sol.R @ np.linalg.inv(sol.A)
+    Ginv = np.linalg.inv(G)
+    cov_b = Ginv @ sol.cov[idx_b, idx_b] @ Ginv.T * kappa
+    # the clock: the mapping composed with the residual (stats: the samples saw s + tau + d (s - t_ref))
+    offset, drift = compose_clock(st.offset or 0.0, st.drift, sol.tau, sol.drift)
+    drift_std_ppm = 1e6 * float(np.sqrt(max(sol.cov[stats.DRIFT, stats.DRIFT] * kappa, 0.0)))
+    imu = ImuCalibration(
+        accel_bias_mps2=sol.b,
+        accel_bias_std_mps2=np.sqrt(np.clip(np.diag(cov_b), 0, None)),
+        accel_scale_misalignment=sol.A,
+        time_offset_s=offset,
+        time_offset_std_s=float(np.sqrt(max(sol.cov[stats.TAU, stats.TAU] * kappa, 0.0))),
+        time_reference_s=st.t_ref,
+        clock_drift_ppm=1e6 * drift + (st.steps.drift_ppm if st.steps is not None else 0.0),
+        clock_drift_std_ppm=drift_std_ppm,
+        clock_resync_steps=None if st.steps is None else st.steps.n_steps,
+        clock_resync_period_s=None if st.steps is None else st.steps.period_s,
+        clock_resync_step_s=None if st.steps is None else st.steps.mean_step_s,
+        gyro_bias_rps=sol.gyro_bias if st.has_gyro else None,
+        gravity_mps2=float(np.linalg.norm(gravity) / (1.0 + sol.gravity_scale)),
+        gravity_std_mps2=float(np.linalg.norm(gravity) * np.sqrt(max(sol.cov[22, 22] * kappa, 0.0))),
+    )
+    return imu, drift, drift_std_ppm

@@ -13,6 +13,7 @@ import numpy as np
 from skincal.calib.hermite import hermite
 from skincal.calib.online import stats
 from skincal.calib.online.options import UnitStatus
+from skincal.calib.online.split import Ledger
 from skincal.calib.timing import ClockSteps
 from skincal.kinematics.transforms import FloatArray
 
@@ -67,7 +68,8 @@ class UnitState:
     searched_span: float = 0.0  # span of the stream the coarse offset was last searched on, s (clock.recheck)
     clock_provisional: bool = False  # stamps taken as they are (no motion seen yet): aligned again on motion
     has_gyro: bool | None = None
-    chunks: deque = field(default_factory=deque)  # (t_min, t_max, Za, Zg, moving) per absorb call
+    chunks: deque = field(default_factory=deque)  # (t_min, t_max, Za, Zg, moving, pieces) per absorb call
+    ledger: Ledger = field(default_factory=Ledger)  # the statistics per window of the stream (split check)
     t_last: float = float("-inf")
     t_first: float = float("inf")
     dirty: bool = True
