@@ -17,6 +17,7 @@ from skincal.calib.preprocess import (
     is_low_rate,
     screen_channels,
 )
+from skincal.calib.preprocess.conditioning import SPLINE_MIN_REPORTS, spline_condition
 from skincal.data.dataset import JointStates
 from skincal.errors import DatasetError
 from skincal.kinematics import panda
@@ -110,6 +111,33 @@ def test_a_low_rate_joint_stream_keeps_the_motion_and_says_so(session):
     assert any(n.startswith("kept ") and "% of the motion" in n for n in u.notes)
     assert u.pose.link == truth.link
     assert np.linalg.norm(u.pose.p_link_su - truth.p_link_su) < 0.01  # 20 Hz joints: within a centimetre
+
+
+@pytest.mark.parametrize("reports", [8, 12, 40])
+def test_a_few_reports_of_a_slow_stream_are_conditioned(reports):
+    """The streaming calibrator conditions a slow stream block by block: 2 s of a 5 Hz stream are 10 reports,
+    too few for the error estimate's fits on every second or third report. It used to raise SciPy's
+    ``x and y length must be at least 5``; now the variance falls back to the conservative end (the
+    accelerations' own size with too few for the half-rate fit, order 1 with too few for the third-rate)."""
+    js, _ = _report_stream(rate_hz=5.0, seconds=reports / 5.0)
+    js = JointStates(js.t[:reports], js.q[:reports], js.qd[:reports])
+    out, c = spline_condition(js)
+    assert c.source == "spline" and np.all(np.isfinite(c.qdd_variance)) and np.all(c.qdd_variance >= 0)
+    if reports < 2 * SPLINE_MIN_REPORTS:
+        assert np.array_equal(c.qdd_variance, out.qdd**2)
+    else:
+        assert not np.array_equal(c.qdd_variance, out.qdd**2)
+
+
+def test_the_streaming_calibrator_takes_a_five_hertz_joint_stream(session):
+    """A 5 Hz joint stream (a robot's slow pose reports) streamed: a result for the unit, on its link."""
+    from skincal.calib.online import OnlineCalibrator, replay
+
+    low = _low_rate_session(session, rate_hz=5.0)
+    cal = OnlineCalibrator(low.robot, low.units, low.gravity)
+    replay(low, cal)
+    name = low.units[0]
+    assert cal.result().units[name].pose.link == low.truth[name].link
 
 
 def test_accelerometer_in_g_is_an_error(session):

@@ -93,6 +93,8 @@ this fraction of its median (std): resampling it linearly would smear its accele
 FINE_RATE_HZ = 250.0
 """Rate of the uniform grid a spline-conditioned stream is evaluated on, Hz (the link-signal table
 then takes every second sample, 125 Hz)."""
+SPLINE_MIN_REPORTS = 5
+"""Fewest reports a smoothing spline is fitted to (SciPy's ``make_smoothing_spline`` needs 5)."""
 ERROR_ORDER_RANGE = (1.0, 4.0)
 """Range of the convergence order ``p`` (:func:`spline_condition`) the acceleration error is
 extrapolated with."""
@@ -154,10 +156,14 @@ def spline_condition(joints: JointStates) -> tuple[JointStates, JointConditionin
         if np.ptp(q[:, j]) == 0.0:
             var[:, j] = 0.0
             continue
+        if t.size < 2 * SPLINE_MIN_REPORTS:  # too few reports for a thinned fit (a short block of a slow stream):
+            var[:, j] = qddf[:, j] ** 2  # the accelerations' own size, the conservative end
+            continue
         d2 = np.mean([(_smoothing_spline(t[k::2], q[k::2, j])(grid, 2) - qddf[:, j]) ** 2 for k in range(2)], axis=0)
-        d3 = np.mean([(_smoothing_spline(t[k::3], q[k::3, j])(grid, 2) - qddf[:, j]) ** 2 for k in range(3)], axis=0)
-        ratio = float(np.sqrt(np.mean(d3) / max(float(np.mean(d2)), 1e-300)))
-        p = _error_order(ratio, lo, hi)
+        p = lo  # every third report too few for a fit: the conservative end of the order
+        if t.size >= 3 * SPLINE_MIN_REPORTS:
+            d3 = np.mean([(_smoothing_spline(t[k::3], q[k::3, j])(grid, 2) - qddf[:, j]) ** 2 for k in range(3)], axis=0)
+            p = _error_order(float(np.sqrt(np.mean(d3) / max(float(np.mean(d2)), 1e-300))), lo, hi)
         var[:, j] = uniform_filter1d(d2, width, mode="nearest") / (2.0**p - 1.0) ** 2
     out = JointStates(t=grid, q=qf, qd=qdf, qdd=qddf)
     noise = float(np.sqrt(np.max(np.median(var, axis=0))))
