@@ -58,11 +58,10 @@ def test_merging_windows_keeps_every_sum():
     moving, speed = rng.random((L, M)) > 0.5, rng.random((L, M))
     led = split.Ledger()
     led.setup(L)
-    t0, width = led.start(float(s[0]))
-    half = M // 2
-    led.add(split.pieces(s[:half], rows_a[:, :, :half], rows_g[:, :, :half], moving[:, :half], speed[:, :half], t0, width))
-    t0, width = led.start(float(s[0]))
-    led.add(split.pieces(s[half:], rows_a[:, :, half:], rows_g[:, :, half:], moving[:, half:], speed[:, half:], t0, width))
+    for part in (slice(0, M // 2), slice(M // 2, M)):
+        t0, width = led.start(float(s[0]))
+        rows = rows_a[:, :, part], rows_g[:, :, part]
+        led.add(split.pieces(s[part], *rows, moving[:, part], speed[:, part], t0, width))
     assert led.width >= 4.0 and led.Za.shape[0] <= split.WINDOWS
     assert np.allclose(led.Za.sum(axis=0), stats.gram(rows_a))
     assert np.allclose(led.speed.sum(axis=0), speed.sum(axis=1))

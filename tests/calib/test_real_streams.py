@@ -121,7 +121,7 @@ def test_a_few_reports_of_a_slow_stream_are_conditioned(reports):
     accelerations' own size with too few for the half-rate fit, order 1 with too few for the third-rate)."""
     js, _ = _report_stream(rate_hz=5.0, seconds=reports / 5.0)
     js = JointStates(js.t[:reports], js.q[:reports], js.qd[:reports])
-    out, c = spline_condition(js)
+    out, c = spline_condition(js, error_estimate=True)
     assert c.source == "spline" and np.all(np.isfinite(c.qdd_variance)) and np.all(c.qdd_variance >= 0)
     if reports < 2 * SPLINE_MIN_REPORTS:
         assert np.array_equal(c.qdd_variance, out.qdd**2)

@@ -167,7 +167,7 @@ def arrange(
     data = arrange_unit_data(
         problem.chain, link, s.t[keep], s.accel[keep], gyro, shared.rest, shared.interpolator, problem.gravity
     )
-    p = Problem(shared.table, data, sandwich=shared.interpolator.conditioning.qdd_variance is not None)
+    p = Problem(shared.table, data, sandwich=shared.interpolator.conditioning.source == "spline")
     return decimated(p, decimate) if decimate > 1 else p
 
 

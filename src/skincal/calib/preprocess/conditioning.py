@@ -9,7 +9,7 @@ from __future__ import annotations
 import hashlib
 import math
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.ndimage import maximum_filter1d, uniform_filter1d
@@ -77,7 +77,9 @@ class JointConditioning:
     """``(N, n)`` variance of the acceleration estimate on the conditioned stream's stamps,
     rad^2/s^4 (m^2/s^4 for a prismatic joint): the interpolation error between a low-rate
     stream's reports (:func:`spline_condition`); ``None`` when the stream resolves its motion
-    (the kink test then marks the few places it does not)."""
+    (the kink test then marks the few places it does not) or when it was not estimated
+    (``spline_condition(..., error_estimate=False)``, the default: ask
+    :meth:`~skincal.calib.preprocess.JointInterpolator.qdd_variance`)."""
     report_rate_hz: float = 0.0
     """Median rate of the reported stream, Hz (0 when not measured)."""
 
@@ -116,7 +118,7 @@ def is_low_rate(t: FloatArray) -> bool:
     return float(np.std(d)) > IRREGULAR_SPREAD * dt and regular_grid(np.asarray(t, dtype=float)) is None
 
 
-def spline_condition(joints: JointStates) -> tuple[JointStates, JointConditioning]:
+def spline_condition(joints: JointStates, error_estimate: bool = False) -> tuple[JointStates, JointConditioning]:
     """A low-rate or irregular joint stream as smoothing splines of its positions, evaluated on a
     uniform :data:`FINE_RATE_HZ` grid, with the variance of the accelerations they give.
 
@@ -137,7 +139,10 @@ def spline_condition(joints: JointStates) -> tuple[JointStates, JointConditionin
     It is an estimate of the error's size, not a bound: on smooth simulated motion at 13 Hz it is
     within a factor 2 of the true error (``tests/calib/test_real_streams.py``); on the real 14 Hz
     tool-pose streams tried, ``p`` came out at 1 (the half-rate stream no longer resolves the
-    motion) and the std at 60-80 % of the accelerations' rms.
+    motion) and the std at 60-80 % of the accelerations' rms. Those five further fits per joint are
+    made only with ``error_estimate`` (:func:`with_spline_error`; :meth:`JointInterpolator.qdd_variance`
+    makes them on first use): no calibrator reads the variance, and they were five sixths of the
+    conditioning's time (the streaming calibrator conditions every block of a slow stream).
     """
     t = np.asarray(joints.t, dtype=float)
     q = np.asarray(joints.q, dtype=float)
@@ -145,36 +150,51 @@ def spline_condition(joints: JointStates) -> tuple[JointStates, JointConditionin
     step = 1.0 / FINE_RATE_HZ
     grid = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step)) + 1)
     n = q.shape[1]
-    qf, qdf, qddf, var = (np.empty((grid.size, n)) for _ in range(4))
+    qf, qdf, qddf = (np.empty((grid.size, n)) for _ in range(3))
     sigma_q = np.empty(n)
-    width = max(1, int(round(dt_report / step)))
-    lo, hi = ERROR_ORDER_RANGE
     for j in range(n):
         s = _smoothing_spline(t, q[:, j])
         qf[:, j], qdf[:, j], qddf[:, j] = s(grid), s(grid, 1), s(grid, 2)
         sigma_q[j] = float(np.std(q[:, j] - s(t)))
+    out = JointStates(t=grid, q=qf, qd=qdf, qdd=qddf)
+    noise_qd = np.asarray(joint_noise(qf, qdf)[1])
+    cond = JointConditioning(
+        source="spline", position_noise=sigma_q, velocity_noise=noise_qd, report_rate_hz=1.0 / dt_report
+    )
+    return out, with_spline_error(cond, joints, out) if error_estimate else cond
+
+
+def _thinned_shift(t: FloatArray, q: FloatArray, grid: FloatArray, qdd: FloatArray, every: int) -> FloatArray:
+    """``(G,)`` mean over the ``every`` phases of the squared change of the acceleration on ``grid`` when one
+    joint's positions ``q`` at stamps ``t`` are fitted on every ``every``-th report only (``qdd``: the full fit's)."""
+    fits = [_smoothing_spline(t[k::every], q[k::every])(grid, 2) for k in range(every)]
+    return np.mean([(f - qdd) ** 2 for f in fits], axis=0)
+
+
+def with_spline_error(cond: JointConditioning, joints: JointStates, out: JointStates) -> JointConditioning:
+    """``cond`` of a spline-conditioned stream with its acceleration error estimated
+    (:func:`spline_condition`: ``qdd_variance`` on ``out``'s stamps and ``qdd_noise``) from the reported
+    ``joints``."""
+    t, q = np.asarray(joints.t, dtype=float), np.asarray(joints.q, dtype=float)
+    grid, qddf = np.asarray(out.t, dtype=float), np.asarray(out.qdd, dtype=float)
+    width = max(1, int(round(float(np.median(np.diff(t))) * FINE_RATE_HZ)))
+    lo, hi = ERROR_ORDER_RANGE
+    var = np.empty_like(qddf)
+    for j in range(q.shape[1]):
         if np.ptp(q[:, j]) == 0.0:
             var[:, j] = 0.0
             continue
         if t.size < 2 * SPLINE_MIN_REPORTS:  # too few reports for a thinned fit (a short block of a slow stream):
             var[:, j] = qddf[:, j] ** 2  # the accelerations' own size, the conservative end
             continue
-        d2 = np.mean([(_smoothing_spline(t[k::2], q[k::2, j])(grid, 2) - qddf[:, j]) ** 2 for k in range(2)], axis=0)
+
+        d2 = _thinned_shift(t, q[:, j], grid, qddf[:, j], 2)
         p = lo  # every third report too few for a fit: the conservative end of the order
         if t.size >= 3 * SPLINE_MIN_REPORTS:
-            d3 = np.mean([(_smoothing_spline(t[k::3], q[k::3, j])(grid, 2) - qddf[:, j]) ** 2 for k in range(3)], axis=0)
+            d3 = _thinned_shift(t, q[:, j], grid, qddf[:, j], 3)
             p = _error_order(float(np.sqrt(np.mean(d3) / max(float(np.mean(d2)), 1e-300))), lo, hi)
         var[:, j] = uniform_filter1d(d2, width, mode="nearest") / (2.0**p - 1.0) ** 2
-    out = JointStates(t=grid, q=qf, qd=qdf, qdd=qddf)
-    noise = float(np.sqrt(np.max(np.median(var, axis=0))))
-    return out, JointConditioning(
-        source="spline",
-        position_noise=sigma_q,
-        velocity_noise=np.asarray(joint_noise(qf, qdf)[1]),
-        qdd_noise=noise,
-        qdd_variance=var,
-        report_rate_hz=1.0 / dt_report,
-    )
+    return replace(cond, qdd_noise=float(np.sqrt(np.max(np.median(var, axis=0)))), qdd_variance=var)
 
 
 SMOOTHING_SPAN = 1.0

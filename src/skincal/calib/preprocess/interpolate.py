@@ -14,6 +14,7 @@ from skincal.calib.preprocess.conditioning import (
     JointConditioning,
     condition_joint_stream,
     estimate_qdd,
+    with_spline_error,
 )
 from skincal.data.dataset import JointStates
 from skincal.errors import CalibrationError
@@ -43,6 +44,7 @@ class JointInterpolator:
                 f"joint stream has {np.asarray(joints.t).shape[0]} samples; at least 7 are needed to estimate qdd"
             )
         use_reported = use_dataset_qdd and joints.qdd is not None
+        self._reported = joints
         joints, self.conditioning = (joints, JointConditioning()) if use_reported else condition_joint_stream(
             joints, qdd_window_s
         )
@@ -116,6 +118,10 @@ class JointInterpolator:
         """``(M, n)`` variance of the joint accelerations at instants ``t`` (M,) (linear in the
         conditioned stream's :attr:`JointConditioning.qdd_variance`), rad^2/s^4; ``None`` when the
         conditioning did not estimate one (a stream that resolves its motion)."""
+        if self.conditioning.source == "spline" and self.conditioning.qdd_variance is None:
+            with self._lock:  # the error estimate's fits, once, on first use
+                if self.conditioning.qdd_variance is None:
+                    self.conditioning = with_spline_error(self.conditioning, self._reported, self._joints)
         var = self.conditioning.qdd_variance
         if var is None:
             return None
