@@ -18,7 +18,7 @@ from skincal.calib.metrics import evaluate
 from skincal.errors import ConfigError
 from skincal.hw.emulator import DeviceClock, SkinEmulator
 from skincal.viz.meter import meter_line, meter_table
-from skincal.workflows.live import Target, follow_dataset, parse_target, record_live
+from skincal.workflows.live import Target, follow_dataset, parse_target, record_live, report_spacing_checked
 from skincal.workflows.session import simulate_dataset
 
 
@@ -257,3 +257,24 @@ def test_live_viewer_draws_the_units_and_their_ellipsoids_converging(fast_ds):
         assert f"/robot/link{status.pose.link}/live_sigma_{name}" not in nodes
     finally:
         v.close()
+
+
+def test_a_followed_recording_of_a_low_rate_joint_stream_carries_the_report_spacing_term(fast_ds):
+    """``calibrate --follow`` of a recording whose joint stream is a robot's ~14 Hz reports: the result says
+    what the report spacing does to each pose (``joint_rate``, as ``mle``'s result does, from the part of the
+    recording replayed with every second and third report), or why it could not; std only grow. A
+    controller's 1 kHz stream is left alone."""
+    ds = simulate_dataset("panda", "random", units=1, noise="realistic", protocol="fast", seed=1, joints="report14")
+    base = follow_dataset(ds, speed=None, stop_at_target=False, watch=True).result  # watch: no report-spacing check
+    out = follow_dataset(ds, speed=None, stop_at_target=False)
+    assert set(out.result.units) == set(base.units) and out.result.units
+    for name, unit in out.result.units.items():
+        before = base.units[name]
+        assert "joint_rate" not in before.extras
+        said = any(n.startswith("joint-rate check not applied") for n in unit.notes)
+        assert said or "joint_rate" in unit.extras, unit.notes
+        if "joint_rate" in unit.extras:
+            b = np.asarray(unit.extras["joint_rate"]["bias_position_m"])
+            expected = np.sqrt(np.asarray(before.position_std_m) ** 2 + b**2)
+            assert np.allclose(unit.position_std_m, expected, rtol=1e-9)
+    assert report_spacing_checked(fast_ds, base, math.inf) is base  # 1 kHz: no replay, the result as it is

@@ -77,6 +77,8 @@ class Consistency:
             per link-frame axis (all 1 when the block is consistent).
         disagrees: what disagrees, e.g. ``"time: position z 12.3 mm (4.1 std)"``.
         failed: splits whose parts could not be calibrated, with why.
+        chi2_time_offset, dof_time_offset, inflation_time_offset: the same for the unit's time offset, where
+            the parts estimate one of their own (the streaming calibrator's; None: not compared).
     """
 
     chi2_position: float
@@ -89,9 +91,16 @@ class Consistency:
     failed: tuple[str, ...]
     axes_position: tuple[float, float, float] = (1.0, 1.0, 1.0)
     axes_rotation: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    chi2_time_offset: float | None = None
+    dof_time_offset: int = 0
+    inflation_time_offset: float = 1.0
 
     def to_json(self) -> dict[str, Any]:
-        return {
+        offset = {} if self.chi2_time_offset is None else {
+            "chi2_time_offset": self.chi2_time_offset, "dof_time_offset": self.dof_time_offset,
+            "inflation_time_offset": self.inflation_time_offset,
+        }  # fmt: skip
+        return offset | {
             "splits": list(SPLITS),
             "chi2_position": self.chi2_position,
             "dof_position": self.dof_position,
@@ -254,7 +263,9 @@ def normalised_difference(
     """``(6,)`` normalised difference ``z = d / sqrt(sa^2 + sb^2)`` of two parts' poses (``d`` position m
     then rotation vector rad, link frame; ``sa``, ``sb`` their std) and the components of ``split`` beyond
     :data:`Z_NAMED` std, named; NaN where a part's std exceeds ``limit`` (``(6,)``, None: no limit)."""
-    z = d / np.sqrt(sa**2 + sb**2)
+    scale = np.sqrt(sa**2 + sb**2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(scale > 0, d / scale, np.nan)  # no std on a component (held by a prior): not compared
     if limit is not None:
         with np.errstate(invalid="ignore"):
             z[~((sa <= limit) & (sb <= limit))] = np.nan
@@ -291,13 +302,17 @@ def axis_inflation(z: FloatArray, block: float) -> tuple[float, float, float]:
     return (out[0], out[1], out[2])
 
 
-def judge(z: FloatArray, named: list[str], failed: list[str]) -> Consistency:
+def judge(z: FloatArray, named: list[str], failed: list[str], z_offset: FloatArray | None = None) -> Consistency:
     """The :class:`Consistency` of normalised differences ``z`` ``(len(SPLITS), 6)`` (NaN: not compared),
-    with the components ``named`` beyond :data:`Z_NAMED` std and the parts that ``failed``."""
+    with the components ``named`` beyond :data:`Z_NAMED` std and the parts that ``failed``; ``z_offset``
+    ``(len(SPLITS),)`` those of the time offset, where the parts estimate their own (None: not compared)."""
     cp, dp, fp = block_inflation(z[:, :3])
     cr, dr, fr = block_inflation(z[:, 3:])
     ap, ar = axis_inflation(z[:, :3], fp), axis_inflation(z[:, 3:], fr)
-    return Consistency(cp, cr, dp, dr, fp, fr, tuple(named), tuple(failed), ap, ar)
+    if z_offset is None:
+        return Consistency(cp, cr, dp, dr, fp, fr, tuple(named), tuple(failed), ap, ar)
+    ct, dt, ft = block_inflation(z_offset)
+    return Consistency(cp, cr, dp, dr, fp, fr, tuple(named), tuple(failed), ap, ar, ct, dt, ft)
 
 
 def apply(unit: UnitResult, c: Consistency) -> UnitResult:
@@ -314,6 +329,11 @@ def apply(unit: UnitResult, c: Consistency) -> UnitResult:
             "independent parts of the recording disagree beyond their std ("
             + "; ".join(c.disagrees[:3]) + "): std inflated by the observed excess, " + ", ".join(parts)
         )
+    imu = unit.imu
+    if imu is not None and imu.time_offset_std_s is not None and c.inflation_time_offset > 1.0:
+        imu = replace(imu, time_offset_std_s=imu.time_offset_std_s * c.inflation_time_offset)
+        warnings.append(f"independent parts of the recording disagree on the time offset beyond its std: std "
+                        f"inflated x{c.inflation_time_offset:.1f}")  # fmt: skip
     pos = None if unit.position_std_m is None else np.asarray(unit.position_std_m, dtype=float) * np.asarray(ap)
     rot = None if unit.rotation_std_deg is None else np.asarray(unit.rotation_std_deg, dtype=float) * np.asarray(ar)
     extras = {**unit.extras, "consistency": c.to_json()}
@@ -322,7 +342,7 @@ def apply(unit: UnitResult, c: Consistency) -> UnitResult:
         T = np.diag([*ap, *ar])
         cov = T @ cov @ T
     return replace(unit, position_std_m=pos, rotation_std_deg=rot, warnings=tuple(warnings), extras=extras,
-                   pose_covariance=cov)  # fmt: skip
+                   pose_covariance=cov, imu=imu)  # fmt: skip
 
 
 def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> CalibrationResult:

@@ -245,10 +245,33 @@ def follow_dataset(
     replay(follow, cal, chunk_s=chunk_s, speed=speed, on_chunk=on_chunk)  # finish() at the end or the stop
     statuses = cal.status()  # after finish(): what was left absorbed
     reached = bool(state["reached"]) or all_reached(statuses)
-    result = dataclasses.replace(cal.result(), dataset_sha256=dataset_sha256)
+    result = cal.result() if watch else report_spacing_checked(follow, cal.result(), state["t"])  # watch: a unit moved
+    result = dataclasses.replace(result, dataset_sha256=dataset_sha256)
     if on_meter is not None:
         on_meter(statuses, state["t"] - t0, t1 - t0)
     return LiveOutcome(result, dict(statuses), reached, state["t"] - t0, t1 - t0)
+
+
+def report_spacing_checked(ds: Dataset, result: CalibrationResult, t_end: float) -> CalibrationResult:
+    """``result`` of the streaming calibrator on ``ds`` up to ``t_end`` (joint clock, s) with the report-spacing
+    term of a low-rate joint stream (:func:`skincal.calib.joint_rate.check`, as ``mle`` has it): the recording's
+    part up to ``t_end`` replayed again with every second and every third joint report. A stream at a
+    controller's rate is left alone (no replay)."""
+    from skincal.calib import joint_rate
+    from skincal.calib.online import replay
+    from skincal.calib.preprocess import is_low_rate
+    from skincal.workflows.monitoring import crop
+
+    if ds.joints is None or not result.units or not is_low_rate(ds.joints.t):
+        return result
+    part = crop(ds, -math.inf, t_end) if t_end < data_span(ds)[1] else ds
+
+    def refit(thinned: Dataset, links: dict[str, int]) -> CalibrationResult:
+        cal = make_calibrator(thinned.chain, list(links), thinned.gravity, Target())
+        replay(thinned, cal)
+        return cal.result()
+
+    return joint_rate.check(part, result, refit)
 
 
 # -- live from the UDP receiver --------------------------------------------------------------------

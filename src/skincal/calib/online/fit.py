@@ -209,8 +209,8 @@ def solve_part(st: UnitState, link: int, Za2: FloatArray, Zg2: FloatArray, span_
 
 def split_check(st: UnitState, link: int) -> consistency.Consistency | None:
     """The split check of ``link``'s estimate (:func:`skincal.calib.online.split.check`; None: no data)."""
-    kappa = inflation(st)
-    full = np.sqrt(np.clip(np.diag(st.solutions[link].pose_covariance()) * kappa, 0.0, None))
+    kappa, sol = inflation(st), st.solutions[link]
+    full = np.sqrt(np.clip(np.r_[np.diag(sol.pose_covariance()), sol.cov[stats.TAU, stats.TAU]] * kappa, 0.0, None))
     return split.check(st.ledger, st.links.index(link), full,
                        lambda Za2, Zg2, span: solve_part(st, link, Za2, Zg2, span), kappa)  # fmt: skip
 

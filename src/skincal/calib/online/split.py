@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -194,13 +195,14 @@ classes, unweighted) and the span of its windows, s."""
 
 
 def check(ledger: Ledger, k: int, full_std: FloatArray, solve: Solve, kappa: float) -> consistency.Consistency | None:
-    """The split check of candidate link ``k`` (module docstring): ``full_std`` ``(6,)`` the whole stream's
-    pose std (m, rad; position then rotation, link frame), ``solve`` a part's solver, ``kappa`` the stream's
-    variance inflation for correlated residuals (applied to each part's covariance too). None when the
-    ledger holds nothing."""
+    """The split check of candidate link ``k`` (module docstring): ``full_std`` ``(7,)`` the whole stream's
+    pose std (m, rad; position then rotation, link frame) and its time offset's (s), ``solve`` a part's
+    solver, ``kappa`` the stream's variance inflation for correlated residuals (applied to each part's
+    covariance too). The time offsets of the parts (each its residual offset ``tau`` of the one mapping)
+    are compared too. None when the ledger holds nothing."""
     if ledger.Za is None or ledger.Zg is None or ledger.n is None or not (ledger.n > 0).any():
         return None
-    parts: dict[str, tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]] = {}
+    parts: dict[str, tuple[Any, ...]] = {}  # per split: position, rotation, pose std, offset, its std; A then B
     failed: list[str] = []
     for split, sides in part_windows(ledger, k).items():
         got = []
@@ -213,16 +215,21 @@ def check(ledger: Ledger, k: int, full_std: FloatArray, solve: Solve, kappa: flo
                 failed.append(f"{split} part {side + 1}: too little data")
                 break
             std = np.sqrt(np.clip(np.diag(sol.pose_covariance()) * kappa, 0.0, None))
-            got.append((sol.p, sol.R, std))
+            got.append((sol.p, sol.R, std, sol.tau, float(np.sqrt(max(sol.cov[stats.TAU, stats.TAU] * kappa, 0.0)))))
         if len(got) == 2:
-            (pa, Ra, sa), (pb, Rb, sb) = got
-            parts[split] = (pa, Ra, sa, pb, Rb, sb)
+            parts[split] = (*got[0], *got[1])
     z = np.full((len(consistency.SPLITS), 6), np.nan)
+    z_offset = np.full(len(consistency.SPLITS), np.nan)
     named: list[str] = []
+    limit = consistency.PART_STD_LIMIT * full_std
     for i, split in enumerate(consistency.SPLITS):
         if split in parts:
-            pa, Ra, sa, pb, Rb, sb = parts[split]
+            pa, Ra, sa, ta, ua, pb, Rb, sb, tb, ub = parts[split]
             d = np.r_[pb - pa, Rotation.from_matrix(Rb @ Ra.T).as_rotvec()]
-            z[i], names = consistency.normalised_difference(split, d, sa, sb, consistency.PART_STD_LIMIT * full_std)
+            z[i], names = consistency.normalised_difference(split, d, sa, sb, limit[:6])
             named += names
-    return consistency.judge(z, named, failed)
+            if max(ua, ub) <= limit[6] and ua + ub > 0:  # the residual offsets: the offset's difference (s)
+                z_offset[i] = (tb - ta) / np.hypot(ua, ub)
+                if abs(z_offset[i]) > consistency.Z_NAMED:
+                    named.append(f"{split}: time offset {1e3 * (ta - tb):+.1f} ms ({abs(z_offset[i]):.1f} std)")
+    return consistency.judge(z, named, failed, z_offset)
