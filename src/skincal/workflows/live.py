@@ -245,11 +245,25 @@ def follow_dataset(
     replay(follow, cal, chunk_s=chunk_s, speed=speed, on_chunk=on_chunk)  # finish() at the end or the stop
     statuses = cal.status()  # after finish(): what was left absorbed
     reached = bool(state["reached"]) or all_reached(statuses)
-    result = cal.result() if watch else report_spacing_checked(follow, cal.result(), state["t"])  # watch: a unit moved
+    result = cal.result()
+    if not cal.events:  # a unit that moved is re-calibrated from the data after its move: no whole-stream replay
+        result = report_spacing_checked(follow, result, state["t"])
+        reached = reached and within_target(result, target)  # the std written, report-spacing term included
     result = dataclasses.replace(result, dataset_sha256=dataset_sha256)
     if on_meter is not None:
         on_meter(statuses, state["t"] - t0, t1 - t0)
     return LiveOutcome(result, dict(statuses), reached, state["t"] - t0, t1 - t0)
+
+
+def within_target(result: CalibrationResult, target: Target) -> bool:
+    """Every unit of ``result`` has a position and rotation std within ``target`` (a unit without a position
+    counts by its rotation, as the status does)."""
+    def ok(u: Any) -> bool:
+        p = np.zeros(3) if u.position_std_m is None else np.nan_to_num(np.asarray(u.position_std_m, float), nan=0.0)
+        r = np.asarray(u.rotation_std_deg if u.rotation_std_deg is not None else np.full(3, np.inf), dtype=float)
+        return bool(np.all(p <= target.position_m) and np.all(r <= target.rotation_deg))
+
+    return bool(result.units) and not result.failed_units and all(ok(u) for u in result.units.values())
 
 
 def report_spacing_checked(ds: Dataset, result: CalibrationResult, t_end: float) -> CalibrationResult:
@@ -258,7 +272,7 @@ def report_spacing_checked(ds: Dataset, result: CalibrationResult, t_end: float)
     part up to ``t_end`` replayed again with every second and every third joint report. A stream at a
     controller's rate is left alone (no replay)."""
     from skincal.calib import joint_rate
-    from skincal.calib.online import replay
+    from skincal.calib.online import OnlineCalibrator, OnlineOptions, replay
     from skincal.calib.preprocess import is_low_rate
     from skincal.workflows.monitoring import crop
 
@@ -267,7 +281,9 @@ def report_spacing_checked(ds: Dataset, result: CalibrationResult, t_end: float)
     part = crop(ds, -math.inf, t_end) if t_end < data_span(ds)[1] else ds
 
     def refit(thinned: Dataset, links: dict[str, int]) -> CalibrationResult:
-        cal = make_calibrator(thinned.chain, list(links), thinned.gravity, Target())
+        """The streaming calibrator on a thinned stream, the units' links its candidates, no split check."""
+        options = OnlineOptions(links=tuple(sorted(set(links.values()))), consistency=False)
+        cal = OnlineCalibrator(thinned.chain, list(links), np.asarray(thinned.gravity, dtype=float), options)
         replay(thinned, cal)
         return cal.result()
 

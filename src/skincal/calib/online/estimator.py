@@ -364,7 +364,7 @@ class OnlineCalibrator:
         st.ledger.setup(L)
         parts = split.pieces(s, rows_a, rows_g, moving, speed, *st.ledger.start(float(s[0])))
         st.ledger.add(parts)
-        Za, Zg = sum(p.Za for p in parts), sum(p.Zg for p in parts)
+        Za, Zg = (parts[0].Za, parts[0].Zg) if len(parts) == 1 else (sum(p.Za for p in parts), sum(p.Zg for p in parts))
         n_moving = moving.sum(axis=1).astype(float)
         st.Za += Za
         st.Zg += Zg
@@ -412,10 +412,10 @@ class OnlineCalibrator:
         def within(p: FloatArray, r: FloatArray) -> bool:
             return bool(not undecided and np.all(p <= o.target_position_m) and np.all(r <= o.target_rotation_deg))
 
-        reached = within(pos_std, rot_std)
-        if reached and not rests_only(st, k) and (checked := fit.split_check(st, link)) is not None:  # result's std
+        if determined and o.consistency and not rests_only(st, k) and (
+                checked := fit.split_check(st, link, reuse=True)) is not None:  # the std a result gives  # fmt: skip
             pos_std, rot_std = pos_std * np.asarray(checked.axes_position), rot_std * np.asarray(checked.axes_rotation)
-            reached = within(pos_std, rot_std)
+        reached = within(pos_std, rot_std)
         missing = ""
         if undecided:
             missing = f"link undecided between {', '.join(map(str, ambiguous))}: move joint {max(ambiguous)}"
@@ -443,8 +443,14 @@ class OnlineCalibrator:
         st.links = [link]
         st.Za, st.Zg, st.moving = st.Za[k : k + 1].copy(), st.Zg[k : k + 1].copy(), st.moving[k : k + 1].copy()
         both = [*st.chunks, *(r[3] for r in st.raw if r[3] is not None)]  # a chunk's statistics: link k's only
-        kept = {id(c): (*c[:2], c[2][k : k + 1], c[3][k : k + 1], c[4][k : k + 1], [p.link(k) for p in c[5]])
-                for c in both}  # fmt: skip
+        def one(c: tuple) -> tuple:  # copies: a view would keep every candidate's arrays alive
+            pieces = [p.link(k) for p in c[5]]
+            one_piece = len(pieces) == 1
+            Za = pieces[0].Za if one_piece else c[2][k : k + 1].copy()
+            Zg = pieces[0].Zg if one_piece else c[3][k : k + 1].copy()
+            return (*c[:2], Za, Zg, c[4][k : k + 1].copy(), pieces)
+
+        kept = {id(c): one(c) for c in both}
         st.ledger.keep_link(k)
         st.chunks = deque(kept[id(c)] for c in st.chunks)
         st.raw = deque((t, a, g, None if c is None else kept[id(c)]) for t, a, g, c in st.raw)
@@ -567,7 +573,7 @@ class OnlineCalibrator:
                 warnings=tuple(warnings), extras=extras, imu=imu, pose_covariance=cov, notes=tuple(notes),
             )  # fmt: skip
             rests = rests_only(st, st.links.index(s.link) if s.link in st.links else 0)
-            unit = unit if rests else fit.split_checked(st, s.link, unit)  # as mle: units with a position
+            unit = unit if rests or not self.options.consistency else fit.split_checked(st, s.link, unit)  # as mle
             units[name] = judge_position(unit, rests, static_only=st.clock_provisional)
         top: dict[str, Any] = {"late_samples": self.late, "cpu_s": self.cpu_s}
         result = CalibrationResult("online", self.chain.name, dataset_sha256, time.perf_counter() - self._t_start,

@@ -31,6 +31,10 @@ LINK_RELATIVE_MARGIN = 0.05
 """...and by this fraction of the best one's (the joint-derived model errors are not white noise: a
 few % of cost between two links is not evidence). A decision is final: the other links' statistics are
 then dropped, so it waits for clear evidence."""
+PART_ITERATIONS = 4
+"""Gauss-Newton iterations of a part of the split check, started from the whole stream's solution."""
+SPLIT_RECHECK = 1.1
+"""The live status's split check is made again once the unit's absorbed samples grew by this factor."""
 CORRELATION_MAX = 100.0
 """Largest variance inflation applied for autocorrelated residuals."""
 WINDOW_SAMPLES = 100
@@ -203,16 +207,25 @@ def solve_part(st: UnitState, link: int, Za2: FloatArray, Zg2: FloatArray, span_
     Za, Zg = weigh(Za2, Zg2, st.sigmas[link], st.decided, bool(st.has_gyro))
     drift = stats.DRIFT_PRIOR if span_s >= CLOCK_DRIFT_MIN_SPAN_S else stats.DRIFT_SHORT_PRIOR
     scale = stats.SCALE_PRIOR if st.scale_estimated else stats.SCALE_FIXED
-    return stats.solve(Za, Zg, 1.0, 1.0, R0=st.solutions[link].R, scale_prior=scale, drift_prior=drift,
-                       drift_total=st.drift)  # fmt: skip
+    whole = st.solutions[link]  # the start: a part's solution is a few std from the whole's
+    return stats.solve(Za, Zg, 1.0, 1.0, R0=whole.R, x0=whole.state, hold=True, iterations=PART_ITERATIONS,
+                       scale_prior=scale, drift_prior=drift, drift_total=st.drift)  # fmt: skip
 
 
-def split_check(st: UnitState, link: int) -> consistency.Consistency | None:
-    """The split check of ``link``'s estimate (:func:`skincal.calib.online.split.check`; None: no data)."""
+def split_check(st: UnitState, link: int, reuse: bool = False) -> consistency.Consistency | None:
+    """The split check of ``link``'s estimate (:func:`skincal.calib.online.split.check`; None: no data).
+    ``reuse``: the last check's, while the unit's absorbed samples grew by less than :data:`SPLIT_RECHECK`
+    since (the live status asks every second; six part solves per unit each time would cost a hundred
+    units a second of CPU)."""
+    n = float(st.ledger.n.sum()) if st.ledger.n is not None else 0.0
+    if reuse and st.split_cache is not None and st.split_cache[0] <= n < SPLIT_RECHECK * st.split_cache[0]:
+        return st.split_cache[1]
     kappa, sol = inflation(st), st.solutions[link]
     full = np.sqrt(np.clip(np.r_[np.diag(sol.pose_covariance()), sol.cov[stats.TAU, stats.TAU]] * kappa, 0.0, None))
-    return split.check(st.ledger, st.links.index(link), full,
-                       lambda Za2, Zg2, span: solve_part(st, link, Za2, Zg2, span), kappa)  # fmt: skip
+    checked = split.check(st.ledger, st.links.index(link), full, sol.R,
+                          lambda Za2, Zg2, span: solve_part(st, link, Za2, Zg2, span), kappa)  # fmt: skip
+    st.split_cache = (n, checked)
+    return checked
 
 
 def split_checked(st: UnitState, link: int, unit: UnitResult) -> UnitResult:

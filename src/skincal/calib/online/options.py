@@ -35,6 +35,7 @@ class OnlineOptions:
         accel_sigma, gyro_sigma: starting noise levels (m/s^2, rad/s); the fits' residual std take over.
         solve_every_s: each unit's estimate is refreshed during :meth:`update` after this much new data, s
             (its link decision, outlier gate and residual statistics follow it).
+        consistency: the split check (:mod:`skincal.calib.online.split`) in the status and the result.
     """
 
     block_s: float = 1.0
@@ -50,6 +51,7 @@ class OnlineOptions:
     accel_sigma: float = 0.05
     gyro_sigma: float = 0.005
     solve_every_s: float = 2.0
+    consistency: bool = True
 
     def __post_init__(self) -> None:
         for name in ("block_s", "grid_hz", "history_s", "align_s", "target_position_m", "target_rotation_deg"):

@@ -36,12 +36,17 @@ from scipy.spatial.transform import Rotation
 
 from skincal.calib import consistency
 from skincal.calib.online import stats
-from skincal.kinematics.transforms import FloatArray
+from skincal.kinematics.transforms import FloatArray, rotation_angle
 
 WINDOWS = 64
-"""Most windows a ledger keeps (pairs are merged, doubling the window, beyond): about 1 MB per decided unit."""
+"""Most windows a ledger keeps (pairs are merged, doubling the window, beyond): about 1 MB per decided unit, as
+much per candidate link of an undecided one."""
 MIN_WINDOWS = 2
 """Windows with samples each part needs to be solved."""
+MIN_MOVING = 10
+"""Moving samples a part needs for its position to be compared (the streaming calibrator's rule for a position)."""
+FAR_RAD = np.radians(30.0)
+"""A part whose rotation is this far from the whole stream's fell into another basin: not compared."""
 
 
 @dataclass(frozen=True)
@@ -59,8 +64,8 @@ class Piece:
 
     def link(self, k: int) -> Piece:
         """This piece with candidate link ``k``'s statistics only."""
-        return Piece(self.t, self.Za[k : k + 1], self.Zg[k : k + 1], self.moving[k : k + 1],
-                     self.speed[k : k + 1], self.n)  # fmt: skip
+        return Piece(self.t, self.Za[k : k + 1].copy(), self.Zg[k : k + 1].copy(), self.moving[k : k + 1].copy(),
+                     self.speed[k : k + 1].copy(), self.n)  # fmt: skip
 
 
 def pieces(s: FloatArray, rows_a: FloatArray, rows_g: FloatArray | None, moving: FloatArray, speed: FloatArray,
@@ -189,14 +194,23 @@ def part_windows(ledger: Ledger, k: int) -> dict[str, tuple[np.ndarray, np.ndarr
     }
 
 
+def _std(var: FloatArray) -> FloatArray:
+    """Std of variances ``var``; NaN (not compared) where a variance is not positive or not finite (a part whose
+    normal matrix is not positive definite there determines nothing)."""
+    with np.errstate(invalid="ignore"):
+        return np.where(np.isfinite(var) & (var > 0), np.sqrt(np.abs(var)), np.nan)
+
+
 Solve = Callable[[FloatArray, FloatArray, float], "stats.Solution | None"]
 """``solve(Za, Zg, span_s)``: a part's solution from its Grams ``(2, NA, NA)``, ``(2, NG, NG)`` (the two
 classes, unweighted) and the span of its windows, s."""
 
 
-def check(ledger: Ledger, k: int, full_std: FloatArray, solve: Solve, kappa: float) -> consistency.Consistency | None:
+def check(ledger: Ledger, k: int, full_std: FloatArray, full_R: FloatArray, solve: Solve, kappa: float
+          ) -> consistency.Consistency | None:  # fmt: skip
     """The split check of candidate link ``k`` (module docstring): ``full_std`` ``(7,)`` the whole stream's
-    pose std (m, rad; position then rotation, link frame) and its time offset's (s), ``solve`` a part's
+    pose std (m, rad; position then rotation, link frame) and its time offset's (s), ``full_R`` its rotation
+    (a part more than :data:`FAR_RAD` from it is not compared), ``solve`` a part's
     solver, ``kappa`` the stream's variance inflation for correlated residuals (applied to each part's
     covariance too). The time offsets of the parts (each its residual offset ``tau`` of the one mapping)
     are compared too. None when the ledger holds nothing."""
@@ -214,8 +228,14 @@ def check(ledger: Ledger, k: int, full_std: FloatArray, solve: Solve, kappa: flo
             if sol is None:
                 failed.append(f"{split} part {side + 1}: too little data")
                 break
-            std = np.sqrt(np.clip(np.diag(sol.pose_covariance()) * kappa, 0.0, None))
-            got.append((sol.p, sol.R, std, sol.tau, float(np.sqrt(max(sol.cov[stats.TAU, stats.TAU] * kappa, 0.0)))))
+            away = float(rotation_angle(sol.R, full_R))
+            if away > FAR_RAD:
+                failed.append(f"{split} part {side + 1}: its fit is another basin ({np.degrees(away):.0f} deg away)")
+                break
+            std = _std(np.r_[np.diag(sol.pose_covariance()), sol.cov[stats.TAU, stats.TAU]] * kappa)
+            if ledger.moving is not None and ledger.moving[w, k].sum() < MIN_MOVING:
+                std[:3] = np.nan  # rests only (the calm windows of a unit that mostly rests): no position
+            got.append((sol.p, sol.R, std[:6], sol.tau, std[6]))
         if len(got) == 2:
             parts[split] = (*got[0], *got[1])
     z = np.full((len(consistency.SPLITS), 6), np.nan)

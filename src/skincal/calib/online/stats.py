@@ -311,6 +311,8 @@ def solve(
     scale_prior: float = SCALE_PRIOR,
     drift_prior: float = DRIFT_PRIOR,
     drift_total: float = 0.0,
+    x0: FloatArray | None = None,
+    hold: bool = False,
 ) -> Solution | None:
     """Gauss-Newton minimiser of ``C`` (module docstring) from the Grams ``Za`` ``(NA, NA)`` and ``Zg``
     ``(NG, NG)`` (None: no gyroscope) with noise levels ``sigma_a`` (m/s^2), ``sigma_g`` (rad/s); ``R0``
@@ -319,14 +321,17 @@ def solve(
     residual clock drift about ``drift_total``, the drift of the mapping it adds to: the prior holds the
     mapping's whole drift (``drift_total - d`` to first order), not each re-alignment's residual, which
     would otherwise walk away by a prior's width at every re-alignment. None when the data determine
-    nothing yet."""
+    nothing yet. ``x0``: a start of the other unknowns (a :attr:`Solution.state`, at ``R0``); ``hold``: ``R0`` is
+    kept even far from the linear solution (a part of the data whose linear solution is another basin)."""
     have_g = Zg is not None and Zg[0, 0] > 0
     linear = _rotation_start(Za, Zg if have_g else None, held=R0 is not None)
     if R0 is None:
         R0 = np.eye(3) if linear is None else linear
-    elif linear is not None and float(rotation_angle(R0, linear)) > RESTART_ANGLE_RAD:
+    elif not hold and linear is not None and float(rotation_angle(R0, linear)) > RESTART_ANGLE_RAD:
         R0 = linear  # the last solution is another basin (it was fitted before the data held the rotation)
     R, x = np.array(R0, dtype=float), np.zeros(NP)  # x holds E, h, p, c, tau, k, d (dtheta always 0 at the current R)
+    if x0 is not None:  # a start for E, h, p, c, tau, k, d (a part of the data started from the whole's solution)
+        x[3:] = np.asarray(x0, dtype=float)[3:]
     wa, wg = 1.0 / sigma_a**2, (1.0 / sigma_g**2 if have_g else 0.0)
     prior = np.zeros(NP)
     prior[_E] = 1.0 / scale_prior**2
