@@ -412,8 +412,9 @@ class OnlineCalibrator:
         def within(p: FloatArray, r: FloatArray) -> bool:
             return bool(not undecided and np.all(p <= o.target_position_m) and np.all(r <= o.target_rotation_deg))
 
-        if determined and o.consistency and not rests_only(st, k) and (
-                checked := fit.split_check(st, link, reuse=True)) is not None:  # the std a result gives  # fmt: skip
+        checked = fit.split_check(st, link, fit.SPLIT_RECHECK) if determined and o.consistency and not rests_only(
+            st, k) else None  # the std a result gives  # fmt: skip
+        if checked is not None:
             pos_std, rot_std = pos_std * np.asarray(checked.axes_position), rot_std * np.asarray(checked.axes_rotation)
         reached = within(pos_std, rot_std)
         missing = ""

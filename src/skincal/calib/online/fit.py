@@ -31,8 +31,6 @@ LINK_RELATIVE_MARGIN = 0.05
 """...and by this fraction of the best one's (the joint-derived model errors are not white noise: a
 few % of cost between two links is not evidence). A decision is final: the other links' statistics are
 then dropped, so it waits for clear evidence."""
-PART_ITERATIONS = 4
-"""Gauss-Newton iterations of a part of the split check, started from the whole stream's solution."""
 SPLIT_RECHECK = 1.1
 """The live status's split check is made again once the unit's absorbed samples grew by this factor."""
 CORRELATION_MAX = 100.0
@@ -208,30 +206,34 @@ def solve_part(st: UnitState, link: int, Za2: FloatArray, Zg2: FloatArray, span_
     drift = stats.DRIFT_PRIOR if span_s >= CLOCK_DRIFT_MIN_SPAN_S else stats.DRIFT_SHORT_PRIOR
     scale = stats.SCALE_PRIOR if st.scale_estimated else stats.SCALE_FIXED
     whole = st.solutions[link]  # the start: a part's solution is a few std from the whole's
-    return stats.solve(Za, Zg, 1.0, 1.0, R0=whole.R, x0=whole.state, hold=True, iterations=PART_ITERATIONS,
-                       scale_prior=scale, drift_prior=drift, drift_total=st.drift)  # fmt: skip
+    return stats.solve(Za, Zg, 1.0, 1.0, R0=whole.R, x0=whole.state, hold=True, scale_prior=scale,
+                       drift_prior=drift, drift_total=st.drift)  # fmt: skip
 
 
-def split_check(st: UnitState, link: int, reuse: bool = False) -> consistency.Consistency | None:
+def split_check(st: UnitState, link: int, grow: float = 0.0) -> consistency.Consistency | None:
     """The split check of ``link``'s estimate (:func:`skincal.calib.online.split.check`; None: no data).
-    ``reuse``: the last check's, while the unit's absorbed samples grew by less than :data:`SPLIT_RECHECK`
-    since (the live status asks every second; six part solves per unit each time would cost a hundred
-    units a second of CPU)."""
+    ``grow``: the last check's is reused while the unit's absorbed samples grew by less than this factor
+    since (the live status asks every second, with :data:`SPLIT_RECHECK`: six part solves per unit each
+    time would cost a hundred units a second of CPU); 1: only for the same samples and solution (a result
+    right after a status); 0: never."""
     n = float(st.ledger.n.sum()) if st.ledger.n is not None else 0.0
-    if reuse and st.split_cache is not None and st.split_cache[0] <= n < SPLIT_RECHECK * st.split_cache[0]:
-        return st.split_cache[1]
-    kappa, sol = inflation(st), st.solutions[link]
+    sol = st.solutions[link]
+    if grow and st.split_cache is not None:
+        n0, sol0, checked = st.split_cache
+        if (n0 <= n < grow * n0) or (n == n0 and sol is sol0):
+            return checked
+    kappa = inflation(st)
     full = np.sqrt(np.clip(np.r_[np.diag(sol.pose_covariance()), sol.cov[stats.TAU, stats.TAU]] * kappa, 0.0, None))
     checked = split.check(st.ledger, st.links.index(link), full, sol.R,
                           lambda Za2, Zg2, span: solve_part(st, link, Za2, Zg2, span), kappa)  # fmt: skip
-    st.split_cache = (n, checked)
+    st.split_cache = (n, sol, checked)
     return checked
 
 
 def split_checked(st: UnitState, link: int, unit: UnitResult) -> UnitResult:
     """``unit`` (the result of ``link``'s estimate) with its :func:`split_check` applied
     (:func:`skincal.calib.consistency.apply`; as it is without data)."""
-    checked = split_check(st, link)
+    checked = split_check(st, link, grow=1.0)
     return unit if checked is None else consistency.apply(unit, checked)
 
 
