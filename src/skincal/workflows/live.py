@@ -237,13 +237,15 @@ def follow_dataset(
             return False
         state["asked"] = float(t)
         statuses = cal.status()
+        if stop_at_target and all_reached(statuses):  # the stop judged on a fresh split check, not a cached one
+            statuses = cal.status(fresh=True)
         if on_meter is not None:
             on_meter(statuses, float(t) - t0, t1 - t0)
         state["reached"] = all_reached(statuses)
         return stop_at_target and state["reached"]
 
-    replay(follow, cal, chunk_s=chunk_s, speed=speed, on_chunk=on_chunk)  # finish() at the end or the stop
-    statuses = cal.status()  # after finish(): what was left absorbed
+    replay(follow, cal, chunk_s=chunk_s, speed=speed, on_chunk=on_chunk)  # finish() at the data's end
+    statuses = cal.status()  # at the data's end after finish(): what was left absorbed
     reached = bool(state["reached"]) or all_reached(statuses)
     result = cal.result()
     if not cal.events:  # a unit that moved is re-calibrated from the data after its move: no whole-stream replay
@@ -255,15 +257,20 @@ def follow_dataset(
     return LiveOutcome(result, dict(statuses), reached, state["t"] - t0, t1 - t0)
 
 
-def within_target(result: CalibrationResult, target: Target) -> bool:
-    """Every unit of ``result`` has a position and rotation std within ``target`` (a unit without a position
-    counts by its rotation, as the status does)."""
+def outside_target(result: CalibrationResult, target: Target) -> list[str]:
+    """The units of ``result`` whose written position or rotation std exceeds ``target``, and those it could not
+    calibrate (a unit without a position counts by its rotation, as the status does)."""
     def ok(u: Any) -> bool:
         p = np.zeros(3) if u.position_std_m is None else np.nan_to_num(np.asarray(u.position_std_m, float), nan=0.0)
         r = np.asarray(u.rotation_std_deg if u.rotation_std_deg is not None else np.full(3, np.inf), dtype=float)
         return bool(np.all(p <= target.position_m) and np.all(r <= target.rotation_deg))
 
-    return bool(result.units) and not result.failed_units and all(ok(u) for u in result.units.values())
+    return [*result.failed_units, *(name for name, u in result.units.items() if not ok(u))]
+
+
+def within_target(result: CalibrationResult, target: Target) -> bool:
+    """Every unit of ``result`` is calibrated within ``target`` by its written std (:func:`outside_target`)."""
+    return bool(result.units) and not outside_target(result, target)
 
 
 def report_spacing_checked(ds: Dataset, result: CalibrationResult, t_end: float) -> CalibrationResult:
@@ -281,8 +288,9 @@ def report_spacing_checked(ds: Dataset, result: CalibrationResult, t_end: float)
     part = crop(ds, -math.inf, t_end) if t_end < data_span(ds)[1] else ds
 
     def refit(thinned: Dataset, links: dict[str, int]) -> CalibrationResult:
-        """The streaming calibrator on a thinned stream, the units' links its candidates, no split check."""
-        options = OnlineOptions(links=tuple(sorted(set(links.values()))), consistency=False)
+        """The streaming calibrator on a thinned stream as on the full one (its candidates all links: one
+        candidate never makes a unit decided, which weighs its data otherwise), without the split check."""
+        options = OnlineOptions(consistency=False)
         cal = OnlineCalibrator(thinned.chain, list(links), np.asarray(thinned.gravity, dtype=float), options)
         replay(thinned, cal)
         return cal.result()

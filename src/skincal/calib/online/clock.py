@@ -246,7 +246,7 @@ def restart(st: UnitState, shift: tuple[float, float] | None = None) -> None:
         st.Za, st.Zg, st.moving = np.zeros_like(st.Za), np.zeros_like(st.Zg), np.zeros(len(st.links))
         st.ledger.clear()
     st.chunks = deque()
-    st.solutions, st.status, st.dirty = {}, None, True
+    st.solutions, st.status, st.dirty, st.split_cache = {}, None, True, None
     st.win_sum, st.win_n, st.win_stat, st.win_count = np.zeros(3), 0, 0.0, 0
     if not frozen:
         st.t_last, st.t_first = float("-inf"), float("inf")

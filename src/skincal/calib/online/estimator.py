@@ -201,6 +201,7 @@ class OnlineCalibrator:
             if (grid := self._grid_arrays()) is not None:  # the whole stream's peak (its kept samples pending again)
                 clock.recheck(self._u[u], grid, None, None, None, self.options, final=True)
             self._absorb_unit(u, final=True)
+            self._u[u].split_cache = None  # the status after the data's end gives the std a result writes
         self.cpu_s += time.process_time() - c0
 
     def _joint_arrays(self) -> tuple[FloatArray, FloatArray, FloatArray] | None:
@@ -456,10 +457,12 @@ class OnlineCalibrator:
         st.chunks = deque(kept[id(c)] for c in st.chunks)
         st.raw = deque((t, a, g, None if c is None else kept[id(c)]) for t, a, g, c in st.raw)
         st.solutions = {link: st.solutions[link]}
-        st.decided = True
+        st.decided, st.split_cache = True, None
 
-    def status(self) -> dict[str, UnitStatus]:
-        """Every unit's :class:`UnitStatus` now."""
+    def status(self, fresh: bool = False) -> dict[str, UnitStatus]:
+        """Every unit's :class:`UnitStatus` now (``fresh``: its split check made again, not the last one's)."""
+        for u in self.units if fresh else ():
+            self._u[u].split_cache = None
         return {u: self._status(u) for u in self.units}
 
     def unit_state(self, unit: str) -> UnitState:
@@ -517,7 +520,7 @@ class OnlineCalibrator:
             st.moving += mv
             st.ledger.add(parts)
         st.win_sum, st.win_n, st.win_stat, st.win_count = np.zeros(3), 0, 0.0, 0
-        st.solutions, st.status, st.dirty = {}, None, True
+        st.solutions, st.status, st.dirty, st.split_cache = {}, None, True, None
         st.best_joint, st.best_joint_t = None, float("-inf")
 
     def record_event(self, event: Mapping) -> None:

@@ -22,7 +22,9 @@ def replay(
     """Feed ``dataset``'s joint states and IMU streams to ``calibrator`` in arrival order, ``chunk_s``
     of data at a time (each unit's samples by their stamps), at ``speed`` times real time (None: as
     fast as possible), calling ``update()`` per chunk and ``on_chunk(t_end)``; stops early when
-    ``on_chunk`` returns True; ``finish()`` at the end (also after an early stop)."""
+    ``on_chunk`` returns True; ``finish()`` at the data's end only: after an early stop the calibrator stays as
+    the stop found it (finishing would absorb the pending samples against a last joint block conditioned
+    without its future margin: on a simulated Panda stopped at 13.6 s of 77.5 s, one unit's std 0.25 -> 1.5 mm)."""
     if dataset.joints is None:
         raise ConfigError("online calibration needs the dataset's joint states")
     if not (np.isfinite(chunk_s) and chunk_s > 0):
@@ -56,5 +58,5 @@ def replay(
             if ahead > 0:
                 time.sleep(ahead)
         if on_chunk is not None and on_chunk(edge):
-            break
+            return  # stopped (at a target): the state it was judged on, not a last block without its margin
     calibrator.finish()

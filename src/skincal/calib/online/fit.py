@@ -32,7 +32,9 @@ LINK_RELATIVE_MARGIN = 0.05
 few % of cost between two links is not evidence). A decision is final: the other links' statistics are
 then dropped, so it waits for clear evidence."""
 SPLIT_RECHECK = 1.1
-"""The live status's split check is made again once the unit's absorbed samples grew by this factor."""
+"""The live status's split check is made again once the unit's absorbed samples grew by this factor..."""
+SPLIT_STD_CHANGE = 0.2
+"""...or a component of its unchecked std changed by this fraction (the factors are relative to it)."""
 CORRELATION_MAX = 100.0
 """Largest variance inflation applied for autocorrelated residuals."""
 WINDOW_SAMPLES = 100
@@ -212,21 +214,26 @@ def solve_part(st: UnitState, link: int, Za2: FloatArray, Zg2: FloatArray, span_
 
 def split_check(st: UnitState, link: int, grow: float = 0.0) -> consistency.Consistency | None:
     """The split check of ``link``'s estimate (:func:`skincal.calib.online.split.check`; None: no data).
-    ``grow``: the last check's is reused while the unit's absorbed samples grew by less than this factor
-    since (the live status asks every second, with :data:`SPLIT_RECHECK`: six part solves per unit each
-    time would cost a hundred units a second of CPU); 1: only for the same samples and solution (a result
-    right after a status); 0: never."""
+    ``grow``: the last check's is reused for the same link while the unit's absorbed samples grew by less
+    than this factor and its unchecked std moved by less than :data:`SPLIT_STD_CHANGE` since (the live status
+    asks every second, with :data:`SPLIT_RECHECK`: six part solves per unit each time would cost a hundred
+    units a second of CPU); 1: only for the same samples and solution (a result right after a status); 0:
+    never. A restart of the unit's statistics (clock re-alignment, link decision, moved unit) clears it."""
     n = float(st.ledger.n.sum()) if st.ledger.n is not None else 0.0
     sol = st.solutions[link]
-    if grow and st.split_cache is not None:
-        n0, sol0, checked = st.split_cache
-        if (n0 <= n < grow * n0) or (n == n0 and sol is sol0):
-            return checked
     kappa = inflation(st)
     full = np.sqrt(np.clip(np.r_[np.diag(sol.pose_covariance()), sol.cov[stats.TAU, stats.TAU]] * kappa, 0.0, None))
+    if grow and st.split_cache is not None:
+        link0, n0, sol0, full0, checked = st.split_cache
+        same = link0 == link and (n == n0 and sol is sol0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            steady = bool(np.all(np.abs(full / full0 - 1.0) < SPLIT_STD_CHANGE))  # NaN (a zero std): not steady
+        close = link0 == link and n0 <= n < grow * n0 and steady
+        if same or (grow > 1.0 and close):
+            return checked
     checked = split.check(st.ledger, st.links.index(link), full, sol.R,
                           lambda Za2, Zg2, span: solve_part(st, link, Za2, Zg2, span), kappa)  # fmt: skip
-    st.split_cache = (n, sol, checked)
+    st.split_cache = (link, n, sol, full, checked)
     return checked
 
 

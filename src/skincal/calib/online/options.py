@@ -62,6 +62,8 @@ class OnlineOptions:
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ConfigError(f"online calibrator: {name} must be a non-negative number, got {v}")
+        if not isinstance(self.consistency, bool):
+            raise ConfigError(f"online calibrator: consistency must be true or false, got {self.consistency!r}")
         if self.history_s < 2 * self.align_s:
             raise ConfigError("online calibrator: history_s must be at least twice align_s")
 

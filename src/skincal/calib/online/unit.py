@@ -70,7 +70,7 @@ class UnitState:
     has_gyro: bool | None = None
     chunks: deque = field(default_factory=deque)  # (t_min, t_max, Za, Zg, moving, pieces) per absorb call
     ledger: Ledger = field(default_factory=Ledger)  # the statistics per window of the stream (split check)
-    split_cache: tuple | None = None  # (absorbed samples, Solution, Consistency | None) of the last split check
+    split_cache: tuple | None = None  # (link, absorbed samples, Solution, unchecked std, Consistency | None)
     t_last: float = float("-inf")
     t_first: float = float("inf")
     dirty: bool = True
