@@ -251,10 +251,16 @@ def compare(
             continue
         pa, Ra, sa = pose_vector(a)
         pb, Rb, sb = pose_vector(b)
-        d = np.r_[pb - pa, Rotation.from_matrix(Rb @ Ra.T).as_rotvec()]
+        d = pose_difference(pa, Ra, pb, Rb)
         z[k], names = normalised_difference(split, d, sa, sb, limit)
         named += names
     return z, named
+
+
+def pose_difference(pa: FloatArray, Ra: FloatArray, pb: FloatArray, Rb: FloatArray) -> FloatArray:
+    """``(6,)`` pose B minus pose A: position ``pb - pa`` (m) then the rotation vector of ``Rb Ra^T`` (rad),
+    both in the link frame."""
+    return np.r_[pb - pa, Rotation.from_matrix(Rb @ Ra.T).as_rotvec()]
 
 
 def normalised_difference(

@@ -42,9 +42,8 @@ from typing import Any
 
 import numpy as np
 from scipy.optimize import brentq
-from scipy.spatial.transform import Rotation
 
-from skincal.calib.consistency import pose_vector
+from skincal.calib.consistency import pose_difference, pose_vector
 from skincal.data.dataset import Dataset, JointStates
 from skincal.data.result import CalibrationResult, UnitResult
 from skincal.kinematics.transforms import FloatArray
@@ -133,7 +132,7 @@ def _shift(full: UnitResult, fits: list[UnitResult]) -> FloatArray | None:
         if f.pose.link != full.pose.link:
             return None
         p, R, _ = pose_vector(f)
-        rows.append(np.r_[p - p0, Rotation.from_matrix(R @ R0.T).as_rotvec()])
+        rows.append(pose_difference(p0, R0, p, R))
     return np.mean(rows, axis=0)
 
 

@@ -32,7 +32,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from skincal.calib import consistency
 from skincal.calib.online import stats
@@ -245,7 +244,7 @@ def check(ledger: Ledger, k: int, full_std: FloatArray, full_R: FloatArray, solv
     for i, split in enumerate(consistency.SPLITS):
         if split in parts:
             pa, Ra, sa, ta, ua, pb, Rb, sb, tb, ub = parts[split]
-            d = np.r_[pb - pa, Rotation.from_matrix(Rb @ Ra.T).as_rotvec()]
+            d = consistency.pose_difference(pa, Ra, pb, Rb)
             z[i], names = consistency.normalised_difference(split, d, sa, sb, limit[:6])
             named += names
             if max(ua, ub) <= limit[6] and ua + ub > 0:  # the residual offsets: the offset's difference (s)
