@@ -285,3 +285,43 @@ def test_a_followed_recording_of_a_low_rate_joint_stream_carries_the_report_spac
             expected = np.sqrt(np.asarray(before.position_std_m) ** 2 + b**2)
             assert np.allclose(unit.position_std_m, expected, rtol=1e-9)
     assert report_spacing_checked(fast_ds, base, math.inf) is base  # 1 kHz: no replay, the result as it is
+
+
+def test_a_stopped_follow_gives_the_result_of_the_data_so_far_and_says_so():
+    """``stop`` set while following (a user's Ctrl-C): the result of the data until then, a note saying so;
+    set during the report-spacing replays of a low-rate stream: the result without the term, said in a note
+    (no term made of a replay cut short)."""
+    import threading
+
+    from skincal.workflows.monitoring import crop
+
+    ds = simulate_dataset("panda", "random", units=1, noise="realistic", protocol="fast", seed=2, joints="report14")
+    ds = crop(ds, -math.inf, float(ds.joints.t[0]) + 30.0)
+    stop = threading.Event()
+
+    def meter(_statuses, t_data, _t_end):
+        if t_data >= 20.0:
+            stop.set()
+
+    lines: list[str] = []
+    out = follow_dataset(ds, speed=None, stop_at_target=False, on_meter=meter, stop=stop, on_progress=lines.append)
+    assert out.stopped and 20.0 <= out.t_data < 21.0 and out.t_end > 29.0
+    assert any(n.startswith("stopped by the user after 20.") for n in out.result.notes), out.result.notes
+    assert not any(line.startswith("report spacing") for line in lines)  # stopped: no replays started
+    assert out.result.units  # 20 s of a fast protocol calibrate the unit
+
+    stop = threading.Event()
+
+    def progress(line: str) -> None:
+        lines.append(line)
+        if "replay 2 of 5" in line:
+            stop.set()
+
+    lines.clear()
+    out = follow_dataset(ds, speed=None, stop_at_target=False, stop=stop, on_progress=progress)
+    assert not out.stopped and out.t_data == pytest.approx(out.t_end)  # the data were followed to their end
+    assert [line for line in lines if line.startswith("report spacing")][-1].startswith(
+        "report spacing of the 13 Hz joint stream: replay 2 of 5"
+    ), lines
+    assert any(n.startswith("report-spacing term") and "stopped by the user" in n for n in out.result.notes)
+    assert all("joint_rate" not in u.extras for u in out.result.units.values())

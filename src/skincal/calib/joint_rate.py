@@ -55,6 +55,16 @@ RATIO_MAX = 0.5
 is outside Richardson's regime: the check is not applied."""
 MIN_THINNED_REPORTS = 30
 """A thinned stream with fewer reports than this is not calibrated (the check is then skipped)."""
+THINNINGS = (2, 3)
+"""The stream is refitted on every ``k``-th report for each ``k`` here, once per phase (``k`` refits)."""
+
+
+def replays(t: np.ndarray) -> int:
+    """How many refits :func:`check` makes of a joint stream stamped ``t`` (its thinnings that keep
+    :data:`MIN_THINNED_REPORTS` reports, one per phase)."""
+    return sum(every for every in THINNINGS if len(t) // every >= MIN_THINNED_REPORTS)
+
+
 AXES = ("x", "y", "z")
 
 Refit = Callable[[Dataset, dict[str, int]], CalibrationResult]
@@ -212,8 +222,8 @@ def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> Calibrat
     if not links:
         return result
     rate_hz = 1.0 / float(np.median(np.diff(j.t)))
-    fits: dict[int, list[CalibrationResult]] = {2: [], 3: []}
-    for every in (2, 3):
+    fits: dict[int, list[CalibrationResult]] = {every: [] for every in THINNINGS}
+    for every in THINNINGS:
         if len(j.t) // every < MIN_THINNED_REPORTS:
             continue
         for phase in range(every):

@@ -191,9 +191,12 @@ def _calibrate_follow(
 ) -> None:  # fmt: skip
     """``--follow``: replay ``source`` (a dataset or a ROS bag) into the online calibrator at ``speed``
     with the live meter (a rich table on a terminal, a line per second otherwise), stop at the target
-    or the data's end and write the result atomically (nothing is written when interrupted)."""
+    or the data's end and write the result atomically. The first Ctrl-C (or SIGTERM) stops the follow and
+    writes the result of the data until then (a note in it says so); a second one aborts, writing nothing."""
     import math
+    import signal
 
+    from skincal.cli.signals import stop_on_signals
     from skincal.data.result import sha256_file, write_result
     from skincal.io.atomic import check_output
     from skincal.workflows.live import (
@@ -222,12 +225,23 @@ def _calibrate_follow(
                       f"{float(event.get('t_detected_s', math.nan)):.1f} s); re-calibrating it from the data "
                       "after the change", highlight=False)  # fmt: skip
 
-    with meter:
+    def progress(line: str) -> None:
+        console.print(line, markup=False, highlight=False)
+
+    with meter, stop_on_signals() as stop:
         outcome = follow_dataset(ds, target, speed=None if speed == 0 else speed, units=list(unit) if unit else None,
-                                 on_meter=meter.show, dataset_sha256=digest, watch=watch, on_event=moved)  # fmt: skip
+                                 on_meter=meter.show, dataset_sha256=digest, watch=watch, on_event=moved,
+                                 stop=stop, on_progress=progress)  # fmt: skip
         meter.show(outcome.statuses, outcome.t_data, outcome.t_end, force_draw=True)
-    write_result(outcome.result, out)
-    if watch:
+        write_result(outcome.result, out)  # a second signal aborts the write too (atomic: nothing or all)
+    spacing_cut = any(n.startswith("report-spacing term") and "stopped by the user" in n for n in outcome.result.notes)
+    if outcome.stopped or spacing_cut:
+        what = "Ctrl-C" if stop.signum == signal.SIGINT else "SIGTERM"
+        data = f"after {outcome.t_data:.1f} s of data (of {outcome.t_end or 0.0:.1f} s): the result of the data so far"
+        console.print(f"[yellow]stopped[/] ({what}) " + (data if outcome.stopped else "at the data's end")
+                      + (", without the report-spacing term of the slow joint stream" if spacing_cut else ""),
+                      highlight=False)  # fmt: skip
+    elif watch:
         events = outcome.result.events
         console.print(f"watched to the data's end: {len(events)} unit move(s) recorded in the result", highlight=False)
     elif outcome.reached:
@@ -244,6 +258,8 @@ def _calibrate_follow(
         console.print(f"[yellow]warning[/]: the data ended ({outcome.t_data:.1f} s) before the target "
                       f"{target.text()}: {missing} of {len(outcome.statuses)} units not there", highlight=False)
     console.print(f"wrote {shown(out)}", highlight=False)
+    if not outcome.result.units:  # written, with each unit's reason: exit 1 as for the batch methods
+        raise typer.Exit(NO_UNIT_EXIT)
 
 
 def _calibrate_relative(

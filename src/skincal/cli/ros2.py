@@ -3,36 +3,17 @@ dataset published as a robot and its skin would publish it)."""
 
 from __future__ import annotations
 
-import contextlib
 import os
-import signal
-import threading
-from collections.abc import Iterator
 from pathlib import Path
 
 import typer
 
 from skincal.cli.app import LiveMeter, app, console, shown
+from skincal.cli.signals import stop_on_signals
 from skincal.errors import ConfigError
 
 DOMAIN_HELP = "ROS 2 domain id (default: ROS_DOMAIN_ID, else 0)"
 INTERFACE_HELP = "network interface to join (default: loopback only, multicast off)"
-
-
-@contextlib.contextmanager
-def _stop_on_signals() -> Iterator[threading.Event]:
-    """An event set by Ctrl-C (SIGINT) or SIGTERM while the command runs (main thread only); the previous
-    handlers are restored afterwards."""
-    stop = threading.Event()
-    if threading.current_thread() is not threading.main_thread():
-        yield stop
-        return
-    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield stop
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
 
 
 @app.command("ros2-play")
@@ -69,7 +50,7 @@ def ros2_play(
         urdf = _checked_description(robot_description, ds.robot)
     joined = join(domain, interface)
     console.print(f"joined {joined.joined}", highlight=False)
-    with _stop_on_signals() as stop:
+    with stop_on_signals() as stop:
         report = play_dataset(ds, joined.participant, rate=None if rate == 0 else rate, origin_ns=origin_ns,
                               robot_description=urdf, wait_s=wait, stop=stop)  # fmt: skip
     joined.close()
@@ -141,7 +122,7 @@ def ros2(
                               base_link=base_link, tip_link=tip_link)  # fmt: skip
     try:
         with meter:
-            with _stop_on_signals() as stop:
+            with stop_on_signals() as stop:
                 why = session.run(stop, on_meter=meter.show)
                 outcome = session.finish()
             if outcome is not None:

@@ -238,3 +238,43 @@ def run_async(main: Any) -> Any:
             if wakeup is not None:
                 with contextlib.suppress(OSError, ValueError):
                     signal.set_wakeup_fd(wakeup)
+
+
+class StopRequest(threading.Event):
+    """An event set by the first SIGINT (Ctrl-C) or SIGTERM inside :func:`stop_on_signals`; ``signum``
+    says which (None: not set by a signal)."""
+
+    signum: int | None = None
+
+
+@contextlib.contextmanager
+def stop_on_signals() -> Iterator[StopRequest]:
+    """For a command whose normal end is a signal (``ros2``) or that writes what it has when asked to stop
+    (``calibrate --follow``): the first SIGINT or SIGTERM sets the yielded event instead of raising, and puts
+    the previous handlers back, so a later signal does what it did before (inside :func:`unwinds`: raises,
+    nothing half-written is kept; one within :data:`GRACE_S` of the first is ignored there, so a double
+    press does not lose what the first one asked to keep). Main thread only (elsewhere the event is never
+    set by a signal); the previous handlers are restored when the block ends."""
+    stop = StopRequest()
+    if threading.current_thread() is not threading.main_thread():
+        yield stop
+        return
+    previous: dict[int, Any] = {}
+
+    def on_first(signum: int, _frame: Any) -> None:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        _state.signum, _state.at = signum, time.monotonic()  # handled: the watcher must not send it again
+        stop.signum = signum
+        stop.set()
+
+    for sig in _SIGNALS:
+        current = signal.getsignal(sig)
+        if sig == signal.SIGINT and current == signal.SIG_IGN:  # a background job keeps ignoring Ctrl-C
+            continue
+        previous[sig] = signal.signal(sig, on_first)
+    try:
+        yield stop
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

@@ -21,6 +21,7 @@ import asyncio
 import dataclasses
 import math
 import re
+import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -135,6 +136,8 @@ class LiveOutcome:
     t_data: float
     t_end: float | None
     notes: tuple[str, ...] = ()
+    stopped: bool = False
+    """The user stopped the follow (``stop``) before the data's end or the target."""
 
 
 MeterCallback = Callable[[Mapping[str, "UnitStatus"], float, "float | None"], None]
@@ -194,14 +197,19 @@ def follow_dataset(
     status_every_s: float = STATUS_EVERY_S,
     watch: bool = False,
     on_event: Callable[[dict], None] | None = None,
+    stop: threading.Event | None = None,
+    on_progress: Callable[[str], None] | None = None,
 ) -> LiveOutcome:
     """Replay ``ds`` into a streaming calibrator (at ``speed`` data seconds per wall second, ``None``: as
     fast as possible) until every unit reaches ``target`` (``stop_at_target``) or the data end;
     ``on_meter`` and the stop test every ``status_every_s`` of data. ``watch``: a moved-unit monitor
     (:class:`skincal.calib.online.monitor.MovedUnitMonitor`) watches every settled unit to the data's
     end (no stop at the target); a unit that moved is re-calibrated from the data after the change,
-    the event goes to the result's ``events`` and to ``on_event``. Ctrl-C propagates (nothing is
-    written here)."""
+    the event goes to the result's ``events`` and to ``on_event``. ``stop`` set (a user's Ctrl-C, from
+    another thread or a signal handler): the replay ends at the next chunk and the outcome is the result of
+    the data until then (``stopped``; a result note says so); set during the report-spacing replays, the
+    term is left out and a note says so. ``on_progress(line)`` tells of the work after the replay. Nothing is
+    written here."""
     from skincal.calib.online import replay
 
     chain, joints = ds.require_joints("calibrate --follow")
@@ -229,10 +237,13 @@ def follow_dataset(
         if on_event is not None:
             monitor.on_alarm = lambda _alarm: on_event(dict(cal.events[-1])) if cal.events else None
         stop_at_target = False
-    state = {"t": t0, "reached": False, "asked": -math.inf}
+    state = {"t": t0, "reached": False, "asked": -math.inf, "stopped": False}
 
     def on_chunk(t: float) -> bool:
         state["t"] = float(t)
+        if stop is not None and stop.is_set():
+            state["stopped"] = True
+            return True
         if t - state["asked"] < status_every_s - 1e-9:
             return False
         state["asked"] = float(t)
@@ -247,14 +258,20 @@ def follow_dataset(
     replay(follow, cal, chunk_s=chunk_s, speed=speed, on_chunk=on_chunk)  # finish() at the data's end
     statuses = cal.status()  # at the data's end after finish(): what was left absorbed
     reached = bool(state["reached"]) or all_reached(statuses)
+    stopped = bool(state["stopped"])
+    if on_progress is not None:
+        on_progress(f"computing the result of {len(names)} unit(s) from {state['t'] - t0:.1f} s of data")
     result = cal.result()
+    if stopped:
+        result = dataclasses.replace(result, notes=(*result.notes, f"stopped by the user after {state['t'] - t0:.1f}"
+                                                    f" s of {t1 - t0:.1f} s of data"))  # fmt: skip
     if not cal.events:  # a unit that moved is re-calibrated from the data after its move: no whole-stream replay
-        result = report_spacing_checked(follow, result, state["t"])
+        result = report_spacing_checked(follow, result, state["t"], stop=stop, on_progress=on_progress)
         reached = reached and within_target(result, target)  # the std written, report-spacing term included
     result = dataclasses.replace(result, dataset_sha256=dataset_sha256)
     if on_meter is not None:
         on_meter(statuses, state["t"] - t0, t1 - t0)
-    return LiveOutcome(result, dict(statuses), reached, state["t"] - t0, t1 - t0)
+    return LiveOutcome(result, dict(statuses), reached, state["t"] - t0, t1 - t0, stopped=stopped)
 
 
 def outside_target(result: CalibrationResult, target: Target) -> list[str]:
@@ -273,11 +290,15 @@ def within_target(result: CalibrationResult, target: Target) -> bool:
     return bool(result.units) and not outside_target(result, target)
 
 
-def report_spacing_checked(ds: Dataset, result: CalibrationResult, t_end: float) -> CalibrationResult:
+def report_spacing_checked(
+    ds: Dataset, result: CalibrationResult, t_end: float, *, stop: threading.Event | None = None,
+    on_progress: Callable[[str], None] | None = None,
+) -> CalibrationResult:  # fmt: skip
     """``result`` of the streaming calibrator on ``ds`` up to ``t_end`` (joint clock, s) with the report-spacing
     term of a low-rate joint stream (:func:`skincal.calib.joint_rate.check`, as ``mle`` has it): the recording's
     part up to ``t_end`` replayed again with every second and every third joint report. A stream at a
-    controller's rate is left alone (no replay)."""
+    controller's rate is left alone (no replay). ``on_progress(line)`` before each replay; ``stop`` set before
+    or during them: ``result`` as given, with a note that the term was left out."""
     from skincal.calib import joint_rate
     from skincal.calib.online import OnlineCalibrator, OnlineOptions, replay
     from skincal.calib.preprocess import is_low_rate
@@ -285,17 +306,37 @@ def report_spacing_checked(ds: Dataset, result: CalibrationResult, t_end: float)
 
     if ds.joints is None or not result.units or not is_low_rate(ds.joints.t):
         return result
+    why = "report-spacing term of the low-rate joint stream not applied: stopped by the user before its replays ended"
+    left_out = dataclasses.replace(result, notes=(*result.notes, why))
+    if stop is not None and stop.is_set():
+        return left_out
     part = crop(ds, -math.inf, t_end) if t_end < data_span(ds)[1] else ds
+    rate_hz = 1.0 / float(np.median(np.diff(part.joints.t))) if part.joints is not None else math.nan
+    done = [0]
 
     def refit(thinned: Dataset, links: dict[str, int]) -> CalibrationResult:
         """The streaming calibrator on a thinned stream as on the full one (its candidates all links: one
         candidate never makes a unit decided, which weighs its data otherwise), without the split check."""
+        done[0] += 1
+        if on_progress is not None:
+            on_progress(f"report spacing of the {rate_hz:.0f} Hz joint stream: replay {done[0]} of "
+                        f"{joint_rate.replays(part.joints.t)} (every second and every third report)")  # fmt: skip
         options = OnlineOptions(consistency=False)
         cal = OnlineCalibrator(thinned.chain, list(links), np.asarray(thinned.gravity, dtype=float), options)
-        replay(thinned, cal)
+        replay(thinned, cal, on_chunk=None if stop is None else lambda _t: stop.is_set())
+        if stop is not None and stop.is_set():
+            raise _Stopped
         return cal.result()
 
-    return joint_rate.check(part, result, refit)
+    try:
+        return joint_rate.check(part, result, refit)
+    except _Stopped:
+        return left_out
+
+
+class _Stopped(BaseException):
+    """Raised out of a report-spacing replay when the user stopped: past ``joint_rate.check``'s handling of a
+    failed thinned fit (an ``Exception``), so no term is made of a replay cut short."""
 
 
 # -- live from the UDP receiver --------------------------------------------------------------------
