@@ -138,7 +138,7 @@ def test_a_second_signal_after_the_first_aborts_and_a_double_press_is_kept(tmp_p
     """:func:`skincal.cli.signals.stop_on_signals` inside :func:`~skincal.cli.signals.unwinds`: the first
     SIGINT sets the event (no exception), a second one within the grace time is ignored, one after it
     raises as before (the command ends 130 and writes nothing)."""
-    code = f"""
+    code = """
 import os, signal, time
 from skincal.cli.signals import GRACE_S, stop_on_signals, unwinds
 with unwinds(), stop_on_signals() as stop:
