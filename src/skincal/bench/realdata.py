@@ -149,6 +149,7 @@ def _unit_record(unit: Any) -> dict[str, Any]:
         "position_weak": positioned and is_weak(unit.position_std_m),
         "n_moving_samples": unit.extras.get("n_moving_samples"),
         "joint_rate": unit.extras.get("joint_rate"),
+        "covariance_sandwich": _finite_or_none(unit.extras.get("covariance_sandwich")),
         "warnings": list(unit.warnings),
     }
 

@@ -46,7 +46,15 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from skincal.calib.model import accelerometer, link_specific_force, sym_from_e
-from skincal.calib.robust import huber_weights, pinv, pinv_step, residual_correlation, robust_sigma
+from skincal.calib.robust import (
+    SANDWICH_BLOCK_S,
+    huber_weights,
+    pinv,
+    pinv_step,
+    residual_correlation,
+    robust_sigma,
+    sandwich_factors,
+)
 from skincal.kinematics.transforms import FloatArray, skew
 
 PRIOR_STD = {"e": 0.05, "d": 1e-3, "c": 1e-3, "k": 0.002}
@@ -57,11 +65,6 @@ block stays near zero and its prior std enters the covariance instead of an arbi
 value. Gravity 0.2 %: the spread of the local gravity magnitude over the Earth's surface
 (9.780-9.832 m/s^2) about the 9.81 a dataset usually states; a unit whose data cannot separate it
 from its position then carries that uncertainty honestly in its position std."""
-SANDWICH_BLOCK_S = 3.0
-"""Length of the blocks of moving samples whose scores :func:`sandwich_inflation` sums, s: longer
-than a 14 Hz joint stream's interpolation error stays correlated with the motion (on the real ABB
-recordings, 1 s blocks left the tool-axis lever arm 1.7-2.2x over-confident across recordings, 3 s
-blocks 1.3-1.6x; measured, real data), and still about twenty blocks in a recording of a minute."""
 MAX_STEP = {"theta": 0.5, "p": 0.5}
 """Largest Gauss-Newton step of the rotation (rad) and position (m); a larger one is scaled down."""
 SIGMA_FLOOR = 1e-3
@@ -465,16 +468,11 @@ def sandwich_inflation(
 ) -> FloatArray:
     """``(P,)`` factors by which each parameter's std is raised to what the residuals themselves say.
 
-    The model covariance ``cov`` trusts the noise model (white after the autocorrelation factor).
-    The block sandwich ``H^-1 (sum_b g_b g_b^T) H^-1`` does not: ``g_b = sum_{i in b} J_i^T W_i r_i``
-    sums each sample's score over blocks of ``block_s`` seconds of the moving samples (each rest
-    row its own block), so errors correlated in time *and with the regressors* (a low-rate joint
-    stream's interpolation error that follows the motion, a path-dependent model error) count as
-    often as they repeat. With ``B`` blocks the sandwich std is itself uncertain by about
-    ``sqrt(1 / (2 B))``; a factor ``std_sandwich / std_model`` is applied only beyond the 99 % point
-    of that noise, so honest data keep their std (in 1 % of the parameters by a few percent). The
-    sandwich is scaled by ``B_m / (B_m - 1)`` (``B_m`` blocks of moving samples), the usual correction of
-    a cluster sandwich for its few clusters.
+    The block sandwich (:func:`skincal.calib.robust.sandwich_factors`, the rule the streaming calibrator
+    shares) sums each sample's score ``J_i^T W_i r_i`` over blocks of ``block_s`` seconds of the moving
+    samples (each rest row its own block), so errors correlated in time *and with the regressors* (a
+    low-rate joint stream's interpolation error that follows the motion, a path-dependent model error)
+    count as often as they repeat.
 
     Args:
         cov: the model covariance (``P, P``); ``H_inv``: the (pseudo-)inverse of the normal matrix
@@ -486,12 +484,7 @@ def sandwich_inflation(
     nb = int(block.max()) + 1
     summed = np.zeros((nb, scores.shape[1]))
     np.add.at(summed, block, scores)
-    cov_sw = H_inv @ (summed.T @ summed) @ H_inv
-    moving_blocks = nb - n_static
-    if moving_blocks > 1:  # the small-sample correction of a cluster sandwich, B / (B - 1)
-        cov_sw = cov_sw * (moving_blocks / (moving_blocks - 1.0))
-    ratio = np.sqrt(np.maximum(np.diag(cov_sw), 0.0) / np.maximum(np.diag(cov), 1e-300))
-    return np.where(ratio > 1.0 + 2.33 * np.sqrt(0.5 / nb), ratio, 1.0)
+    return sandwich_factors(cov, H_inv, summed, nb - n_static)
 
 
 def _row_scores(Jr: FloatArray) -> FloatArray:

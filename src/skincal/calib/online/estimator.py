@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from skincal.calib import consistency
 from skincal.calib.online import clock, design, fit, split, stats
 from skincal.calib.online.design import excitation
 from skincal.calib.online.fit import JOINT_ACTIVE_RPS, decide, inflation, residuals, solve_unit, window_means
@@ -103,18 +104,15 @@ class OnlineCalibrator:
         self.units = names
         self.gravity = np.asarray(gravity, dtype=float).reshape(3)
         L = len(links)
-        self._u = {
-            u: UnitState(
-                list(links), np.zeros((L, 2, stats.NA, stats.NA)), np.zeros((L, 2, stats.NG, stats.NG)), np.zeros(L)
-            )
-            for u in names
-        }
+        grams = (L, 2, stats.NA, stats.NA), (L, 2, stats.NG, stats.NG)
+        self._u = {u: UnitState(list(links), np.zeros(grams[0]), np.zeros(grams[1]), np.zeros(L)) for u in names}
         self._jt: list[FloatArray] = []
         self._jq: list[FloatArray] = []
         self._jqd: list[FloatArray | None] = []
         self._joints: tuple[FloatArray, FloatArray, FloatArray] | None = None
         self._frontier: float | None = None  # end of the processed joint blocks
         self._grid: list[Grid] = []  # per block, every link
+        self.spline = False  # a block's joint stream was conditioned by smoothing splines (low-rate): sandwich as mle
         self._grid_cat: Grid | None = None
         self.q_now: FloatArray | None = None
         self.late = 0
@@ -254,6 +252,7 @@ class OnlineCalibrator:
         if sel.sum() < 8:
             return
         interp = JointInterpolator(JointStates(t=t[sel], q=q[sel], qd=qd[sel]))
+        self.spline = self.spline or interp.conditioning.source == "spline"
         dt = 1.0 / o.grid_hz
         k0 = int(np.ceil((T0 - 1e-12) / dt))
         k1 = int(np.ceil((T1 - 1e-12) / dt))
@@ -413,10 +412,11 @@ class OnlineCalibrator:
         def within(p: FloatArray, r: FloatArray) -> bool:
             return bool(not undecided and np.all(p <= o.target_position_m) and np.all(r <= o.target_rotation_deg))
 
-        checked = fit.split_check(st, link, fit.SPLIT_RECHECK) if determined and o.consistency and not rests_only(
-            st, k) else None  # the std a result gives  # fmt: skip
-        if checked is not None:
-            pos_std, rot_std = pos_std * np.asarray(checked.axes_position), rot_std * np.asarray(checked.axes_rotation)
+        if determined and not rests_only(st, k):  # the std a result gives: sandwich, split check
+            shown, _, checked = fit.reported(st, link, fit.SPLIT_RECHECK, self.spline, o.consistency)
+            std = np.sqrt(np.clip(np.diag(shown.pose_covariance() * kappa), 0.0, None))
+            f_p, f_r = (checked.axes_position, checked.axes_rotation) if checked is not None else (1.0, 1.0)
+            pos_std, rot_std = std[:3] * np.asarray(f_p), np.degrees(std[3:]) * np.asarray(f_r)
         reached = within(pos_std, rot_std)
         missing = ""
         if undecided:
@@ -539,10 +539,12 @@ class OnlineCalibrator:
             if s.pose is None or s.link is None or s.missing:
                 failed[name] = s.missing or "no estimate"
                 continue
-            sol = st.solutions[s.link]
+            rests = rests_only(st, st.links.index(s.link) if s.link in st.links else 0)
+            sol, factors, checked = (st.solutions[s.link], None, None) if rests else fit.reported(
+                st, s.link, 1.0, self.spline, self.options.consistency)  # the status's  # fmt: skip
             kappa = inflation(st)
             cov = sol.pose_covariance() * kappa
-            std = np.sqrt(np.clip(np.diag(cov), 0.0, None))  # the status's before its split check (applied below)
+            std = np.sqrt(np.clip(np.diag(cov), 0.0, None))  # before the split check (applied below)
             imu, drift, drift_std_ppm = fit.imu_calibration(st, sol, kappa, self.gravity)
             warnings: list[str] = []
             if np.isfinite(st.offset_sharpness) and st.offset_sharpness < clock.ALIGN_SHARPNESS:
@@ -570,14 +572,14 @@ class OnlineCalibrator:
                 "realigned": st.realigned,
                 "clock_rechecked": st.rechecked,
                 "scale_estimated": st.scale_estimated,
+                "covariance_sandwich": None if factors is None else np.r_[factors[0:3], factors[15:18]],
             }
             notes += clock.notes(st)
             unit = UnitResult(
                 pose=s.pose, observable=True, position_std_m=std[:3], rotation_std_deg=np.degrees(std[3:]),
                 warnings=tuple(warnings), extras=extras, imu=imu, pose_covariance=cov, notes=tuple(notes),
             )  # fmt: skip
-            rests = rests_only(st, st.links.index(s.link) if s.link in st.links else 0)
-            unit = unit if rests or not self.options.consistency else fit.split_checked(st, s.link, unit)  # as mle
+            unit = unit if checked is None else consistency.apply(unit, checked)  # as mle
             units[name] = judge_position(unit, rests, static_only=st.clock_provisional)
         top: dict[str, Any] = {"late_samples": self.late, "cpu_s": self.cpu_s}
         result = CalibrationResult("online", self.chain.name, dataset_sha256, time.perf_counter() - self._t_start,

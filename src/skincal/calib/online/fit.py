@@ -1,9 +1,12 @@
 """The streaming calibrator's fit of one unit from its Grams: the residuals (:func:`residuals`), their
 correlation inflation (:func:`window_means`, :func:`inflation`), each candidate link's pose solved with
-per-class noise levels (:func:`solve_unit`), its parts' (:func:`solve_part`, :func:`split_checked`) and the
-link decision (:func:`decide`, :func:`cost`)."""
+per-class noise levels (:func:`solve_unit`), what a status and a result report of it (:func:`reported`: the
+block sandwich of a low-rate joint stream, :func:`sandwich`, and the split check of its parts, :func:`solve_part`)
+and the link decision (:func:`decide`, :func:`cost`)."""
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 from scipy.stats import chi2
@@ -12,9 +15,9 @@ from skincal.calib import consistency
 from skincal.calib.online import split, stats
 from skincal.calib.online.options import OnlineOptions
 from skincal.calib.online.unit import MOVING, REST, UnitState
+from skincal.calib.robust import SANDWICH_BLOCK_S, sandwich_factors
 from skincal.calib.timing import CLOCK_DRIFT_MIN_SPAN_S, compose_clock
 from skincal.data.imu_calibration import ImuCalibration
-from skincal.data.result import UnitResult
 from skincal.kinematics.transforms import FloatArray
 
 SCALE_STD_LIMIT = 0.01
@@ -35,6 +38,8 @@ SPLIT_RECHECK = 1.1
 """The live status's split check is made again once the unit's absorbed samples grew by this factor..."""
 SPLIT_STD_CHANGE = 0.2
 """...or a component of its unchecked std changed by this fraction (the factors are relative to it)."""
+MIN_SANDWICH_BLOCKS = 3
+"""Blocks of moving samples the block sandwich needs (fewer: not applied)."""
 CORRELATION_MAX = 100.0
 """Largest variance inflation applied for autocorrelated residuals."""
 WINDOW_SAMPLES = 100
@@ -113,22 +118,25 @@ def weighted(st: UnitState, k: int, sig: FloatArray) -> tuple[FloatArray, FloatA
 
 def weigh(Za2: FloatArray, Zg2: FloatArray, sig: FloatArray, decided: bool, gyro: bool
           ) -> tuple[FloatArray, FloatArray | None]:  # fmt: skip
-    """:func:`weighted` of one link's Grams ``(2, NA, NA)`` and ``(2, NG, NG)`` (rest, moving classes)."""
+    """:func:`weighted` of one link's Grams ``(..., 2, NA, NA)`` and ``(..., 2, NG, NG)`` (rest, moving classes;
+    leading axes: e.g. windows)."""
 
     def corrected(Z: FloatArray, noise: float) -> FloatArray:
         Z = Z.copy()
-        d = np.arange(9)
-        Z[d, d] -= min(Z[9, 9] * noise**2, 0.5 * float(np.min(Z[d, d])))  # Z[9, 9]: the class's samples
+        d = np.arange(9)  # Z[9, 9]: the class's samples
+        Z[..., d, d] -= np.minimum(Z[..., 9, 9] * noise**2, 0.5 * np.min(Z[..., d, d], axis=-1))[..., None]
         return Z
 
+    a_rest, a_moving, g_rest, g_moving = Za2[..., REST, :, :], Za2[..., MOVING, :, :], Zg2[..., REST, :, :], Zg2[
+        ..., MOVING, :, :]  # fmt: skip
     if not decided:  # a wrong candidate's rest residual is not the sensor noise: no correction yet
-        Za = Za2[REST] / sig[0] ** 2 + Za2[MOVING] / sig[1] ** 2
-        Zg = Zg2[REST] / sig[2] ** 2 + Zg2[MOVING] / sig[3] ** 2 if gyro else None
+        Za = a_rest / sig[0] ** 2 + a_moving / sig[1] ** 2
+        Zg = g_rest / sig[2] ** 2 + g_moving / sig[3] ** 2 if gyro else None
         return Za, Zg
-    Za = corrected(Za2[REST], sig[0]) / sig[0] ** 2 + corrected(Za2[MOVING], sig[0]) / sig[1] ** 2
+    Za = corrected(a_rest, sig[0]) / sig[0] ** 2 + corrected(a_moving, sig[0]) / sig[1] ** 2
     Zg = None
     if gyro:
-        Zg = corrected(Zg2[REST], sig[2]) / sig[2] ** 2 + corrected(Zg2[MOVING], sig[2]) / sig[3] ** 2
+        Zg = corrected(g_rest, sig[2]) / sig[2] ** 2 + corrected(g_moving, sig[2]) / sig[3] ** 2
     return Za, Zg
 
 
@@ -212,36 +220,96 @@ def solve_part(st: UnitState, link: int, Za2: FloatArray, Zg2: FloatArray, span_
                        drift_prior=drift, drift_total=st.drift)  # fmt: skip
 
 
-def split_check(st: UnitState, link: int, grow: float = 0.0) -> consistency.Consistency | None:
-    """The split check of ``link``'s estimate (:func:`skincal.calib.online.split.check`; None: no data).
-    ``grow``: the last check's is reused for the same link while the unit's absorbed samples grew by less
-    than this factor and its unchecked std moved by less than :data:`SPLIT_STD_CHANGE` since (the live status
-    asks every second, with :data:`SPLIT_RECHECK`: six part solves per unit each time would cost a hundred
-    units a second of CPU); 1: only for the same samples and solution (a result right after a status); 0:
-    never. A restart of the unit's statistics (clock re-alignment, link decision, moved unit) clears it."""
+def sandwich(st: UnitState, link: int, sol: stats.Solution, kappa: float, windows: np.ndarray | None = None
+             ) -> tuple[stats.Solution, FloatArray | None]:  # fmt: skip
+    """``sol`` (``link``'s fit of the ledger's ``windows``, all by default) with its covariance raised to the
+    block sandwich's where the residuals follow the motion, as ``mle`` raises its own for a low-rate joint
+    stream (:func:`skincal.calib.robust.sandwich_factors`), and the ``(NP,)`` factors (None: too few blocks).
+
+    A window's score is ``g = J_a^T (Z_a x_a - z_a) + J_g^T (Z_g x_g - z_g)`` of its weighted Grams (the
+    Gauss-Newton Jacobians :func:`~skincal.calib.online.stats.linearise` at ``sol``): the sum of its
+    samples' ``J_i^T W_i r_i``, so a block's score is the sum of its windows'. Moving samples are summed
+    over blocks of windows at least :data:`~skincal.calib.robust.SANDWICH_BLOCK_S` long, each window's rest
+    samples are a block of their own (``mle``: each rest row its own); the model covariance compared is
+    ``cov kappa`` (the correlation inflation)."""
+    if st.ledger.Za is None:
+        return sol, None
+    (rest, _), (moving_scores, moving_w) = window_scores(st, link, sol, windows)
+    group = max(int(np.ceil(SANDWICH_BLOCK_S / st.ledger.width - 1e-9)), 1)
+    blocks, at = np.unique(moving_w // group, return_inverse=True)  # each moving window's block
+    if blocks.size < MIN_SANDWICH_BLOCKS:
+        return sol, None
+    moving = np.zeros((blocks.size, stats.NP))
+    np.add.at(moving, at, moving_scores)
+    factors = sandwich_factors(sol.cov * kappa, sol.cov, np.concatenate([rest, moving]), blocks.size)
+    if np.all(factors == 1.0):
+        return sol, factors
+    return replace(sol, cov=sol.cov * np.outer(factors, factors)), factors
+
+
+def window_scores(st: UnitState, link: int, sol: stats.Solution, windows: np.ndarray | None = None
+                  ) -> tuple[tuple[FloatArray, np.ndarray], tuple[FloatArray, np.ndarray]]:  # fmt: skip
+    """Per class (rest, then moving) the scores ``(B, NP)`` of the ledger's ``windows`` (all by default) that
+    hold samples of that class, at ``sol`` of ``link``, and those windows' indices ``(B,)``: a window's score is
+    ``J_a^T (Z_a x_a - z_a) + J_g^T (Z_g x_g - z_g)`` of its class's weighted Grams (:func:`weigh`), half the
+    gradient of its part of ``C`` (:mod:`~skincal.calib.online.stats`) in the Gauss-Newton unknowns."""
+    ledger = st.ledger
+    assert ledger.Za is not None and ledger.Zg is not None and ledger.n is not None
+    k = st.links.index(link)
+    use = np.flatnonzero((ledger.n > 0) if windows is None else (ledger.n > 0) & windows)
+    _, Ja, _, Jg = stats.linearise(sol.R, sol.state)
+    na, ng = stats.NA - 1, stats.NG - 1
+    out = []
+    for c in (REST, MOVING):  # each class weighted alone: (W, NA, NA), (W, NG, NG)
+        one_a, one_g = np.zeros((use.size, 2, stats.NA, stats.NA)), np.zeros((use.size, 2, stats.NG, stats.NG))
+        one_a[:, c], one_g[:, c] = ledger.Za[use, k, c], ledger.Zg[use, k, c]
+        Za, Zg = weigh(one_a, one_g, st.sigmas[link], st.decided, bool(st.has_gyro))
+        g = (Za[:, :na, :na] @ sol.x_a - Za[:, :na, na]) @ Ja
+        if Zg is not None:
+            g = g + (Zg[:, :ng, :ng] @ sol.x_g - Zg[:, :ng, ng]) @ Jg
+        held = ledger.Za[use, k, c, 9, 9] > 0
+        out.append((g[held], use[held]))
+    return out[0], out[1]
+
+
+def reported(st: UnitState, link: int, grow: float = 0.0, spline: bool = False, consistency_check: bool = True
+             ) -> tuple[stats.Solution, FloatArray | None, consistency.Consistency | None]:  # fmt: skip
+    """What a status and a result report of ``link``'s estimate: its solution with the covariance the std are
+    read from (:func:`sandwich`'d for a joint stream conditioned by ``spline`` s, as ``mle``), the sandwich's
+    factors (None: not applied) and the split check of that solution (:func:`skincal.calib.online.split.check`;
+    None: no data or ``consistency_check`` off). ``grow``: the last answer is reused for the same link while
+    the unit's absorbed samples grew by less than this factor and its unchecked std moved by less than
+    :data:`SPLIT_STD_CHANGE` since (the live status asks every second, with :data:`SPLIT_RECHECK`: six part
+    solves per unit each time would cost a hundred units a second of CPU); 1: only for the same samples and
+    solution (a result right after a status); 0: never. A restart of the unit's statistics (clock
+    re-alignment, link decision, moved unit) clears it."""
     n = float(st.ledger.n.sum()) if st.ledger.n is not None else 0.0
     sol = st.solutions[link]
     kappa = inflation(st)
     full = np.sqrt(np.clip(np.r_[np.diag(sol.pose_covariance()), sol.cov[stats.TAU, stats.TAU]] * kappa, 0.0, None))
+    key = (link, spline, consistency_check)
     if grow and st.split_cache is not None:
-        link0, n0, sol0, full0, checked = st.split_cache
-        same = link0 == link and (n == n0 and sol is sol0)
+        key0, n0, sol0, full0, answer = st.split_cache
+        same = key0 == key and (n == n0 and sol is sol0)
         with np.errstate(divide="ignore", invalid="ignore"):
             steady = bool(np.all(np.abs(full / full0 - 1.0) < SPLIT_STD_CHANGE))  # NaN (a zero std): not steady
-        close = link0 == link and n0 <= n < grow * n0 and steady
+        close = key0 == key and n0 <= n < grow * n0 and steady
         if same or (grow > 1.0 and close):
-            return checked
-    checked = split.check(st.ledger, st.links.index(link), full, sol.R,
-                          lambda Za2, Zg2, span: solve_part(st, link, Za2, Zg2, span), kappa)  # fmt: skip
-    st.split_cache = (link, n, sol, full, checked)
-    return checked
+            return answer
+    shown, factors = sandwich(st, link, sol, kappa) if spline else (sol, None)
+    checked = None
+    if consistency_check:
+        shown_std = np.sqrt(np.clip(np.r_[np.diag(shown.pose_covariance()), shown.cov[stats.TAU, stats.TAU]] * kappa,
+                                    0.0, None))  # fmt: skip
 
+        def solve(Za2: FloatArray, Zg2: FloatArray, span: float, windows: np.ndarray) -> stats.Solution | None:
+            part = solve_part(st, link, Za2, Zg2, span)
+            return part if part is None or not spline else sandwich(st, link, part, kappa, windows)[0]
 
-def split_checked(st: UnitState, link: int, unit: UnitResult) -> UnitResult:
-    """``unit`` (the result of ``link``'s estimate) with its :func:`split_check` applied
-    (:func:`skincal.calib.consistency.apply`; as it is without data)."""
-    checked = split_check(st, link, grow=1.0)
-    return unit if checked is None else consistency.apply(unit, checked)
+        checked = split.check(st.ledger, st.links.index(link), shown_std, sol.R, solve, kappa)
+    answer = (shown, factors, checked)
+    st.split_cache = (key, n, sol, full, answer)
+    return answer
 
 
 def decide(st: UnitState, joint_active_s: FloatArray) -> tuple[int | None, float, list[int]]:

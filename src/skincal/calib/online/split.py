@@ -200,9 +200,9 @@ def _std(var: FloatArray) -> FloatArray:
         return np.where(np.isfinite(var) & (var > 0), np.sqrt(np.abs(var)), np.nan)
 
 
-Solve = Callable[[FloatArray, FloatArray, float], "stats.Solution | None"]
-"""``solve(Za, Zg, span_s)``: a part's solution from its Grams ``(2, NA, NA)``, ``(2, NG, NG)`` (the two
-classes, unweighted) and the span of its windows, s."""
+Solve = Callable[[FloatArray, FloatArray, float, np.ndarray], "stats.Solution | None"]
+"""``solve(Za, Zg, span_s, windows)``: a part's solution from its Grams ``(2, NA, NA)``, ``(2, NG, NG)`` (the
+two classes, unweighted), the span of its windows, s, and which of the ledger's windows they are ``(W,)``."""
 
 
 def check(ledger: Ledger, k: int, full_std: FloatArray, full_R: FloatArray, solve: Solve, kappa: float
@@ -223,7 +223,7 @@ def check(ledger: Ledger, k: int, full_std: FloatArray, full_R: FloatArray, solv
             sol = None
             if int(w.sum()) >= MIN_WINDOWS:
                 span = float(np.ptp(np.flatnonzero(w)) + 1) * ledger.width
-                sol = solve(ledger.Za[w, k].sum(axis=0), ledger.Zg[w, k].sum(axis=0), span)
+                sol = solve(ledger.Za[w, k].sum(axis=0), ledger.Zg[w, k].sum(axis=0), span, w)
             if sol is None:
                 failed.append(f"{split} part {side + 1}: too little data")
                 break
