@@ -94,3 +94,11 @@ def test_thinned_keeps_every_kth_report():
         assert np.array_equal(th.t, t[phase::every]) and np.array_equal(th.q, q[phase::every])
         assert th.qdd is None
     assert ds.joints.t.size == 20  # the input is not modified
+
+
+def test_the_thinnings_are_those_that_keep_enough_reports():
+    """Every second and every third report while each keeps MIN_THINNED_REPORTS; a shorter stream only the
+    thinnings that still do (what the progress line names and counts)."""
+    assert jr.thinnings(np.arange(90)) == (2, 3)
+    assert jr.thinnings(np.arange(89)) == (2,)
+    assert jr.thinnings(np.arange(59)) == ()

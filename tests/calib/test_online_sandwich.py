@@ -120,3 +120,25 @@ def test_a_controller_stream_gets_no_sandwich():
     assert not cal.spline
     result = cal.result()
     assert result.units and all(u.extras["covariance_sandwich"] is None for u in result.units.values())
+
+
+def test_a_cached_check_is_applied_to_the_current_solution(report14):
+    """Between split checks (the live status reuses the last check while the data grow by < 10 % and the std move
+    by < 20 %) what is reported is the current solution with the last check's factors (sandwich and split), not
+    the last solution."""
+    from dataclasses import replace
+
+    _, cal, _ = report14
+    st = cal.unit_state("su1")
+    link = next(iter(st.solutions))
+    sol = st.solutions[link]
+    try:
+        first = fit.reported(st, link, 0.0, True, True)  # made now, and cached
+        assert first[1] is not None and max(first[1]) > 1.0  # this unit's std are raised by the sandwich
+        st.solutions[link] = replace(sol, cov=sol.cov * 1.1)  # a new solution, std 5 % larger
+        shown, factors, checked = fit.reported(st, link, fit.SPLIT_RECHECK, True, True)
+        assert checked is first[2] and factors is first[1]  # the check reused...
+        assert np.allclose(shown.cov, sol.cov * 1.1 * np.outer(factors, factors), rtol=1e-12)  # ...on the new one
+        assert np.allclose(np.diag(shown.cov), 1.1 * np.diag(first[0].cov), rtol=1e-12)
+    finally:
+        st.solutions[link], st.split_cache = sol, None

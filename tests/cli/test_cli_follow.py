@@ -137,7 +137,8 @@ def test_ctrl_c_during_follow_writes_the_result_of_the_data_so_far(data, tmp_pat
 def test_a_second_signal_after_the_first_aborts_and_a_double_press_is_kept(tmp_path):
     """:func:`skincal.cli.signals.stop_on_signals` inside :func:`~skincal.cli.signals.unwinds`: the first
     SIGINT sets the event (no exception), a second one within the grace time is ignored, one after it
-    raises as before (the command ends 130 and writes nothing)."""
+    raises as before (the command ends 130 and writes nothing); a second one within the grace time that lands
+    after the command ended is ignored too (the command's own exit code is kept)."""
     code = """
 import os, signal, time
 from skincal.cli.signals import GRACE_S, stop_on_signals, unwinds
@@ -155,10 +156,19 @@ with unwinds(), stop_on_signals() as stop:
         time.sleep(1.0)
     except KeyboardInterrupt:
         print("later: raised", flush=True)
+with unwinds():
+    with stop_on_signals() as stop:
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.2)
+    print("stopped: " + str(stop.is_set()), flush=True)
+os.kill(os.getpid(), signal.SIGINT)  # a double press's second signal as the command has ended
+time.sleep(0.3)
+print("exit code kept", flush=True)
 """
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.split("\n")[:3] == ["first: set", "double press: ignored", "later: raised"], proc.stdout
+    assert proc.stdout.split("\n")[:5] == ["first: set", "double press: ignored", "later: raised", "stopped: True",
+                                            "exit code kept"], proc.stdout  # fmt: skip
 
 
 @pytest.mark.adversarial

@@ -307,8 +307,19 @@ def test_a_stopped_follow_gives_the_result_of_the_data_so_far_and_says_so():
     out = follow_dataset(ds, speed=None, stop_at_target=False, on_meter=meter, stop=stop, on_progress=lines.append)
     assert out.stopped and 20.0 <= out.t_data < 21.0 and out.t_end > 29.0
     assert any(n.startswith("stopped by the user after 20.") for n in out.result.notes), out.result.notes
+    assert "report-spacing term of the low-rate joint stream not computed: stopped by the user before its replays" in (
+        out.result.notes)  # fmt: skip
     assert not any(line.startswith("report spacing") for line in lines)  # stopped: no replays started
     assert out.result.units  # 20 s of a fast protocol calibrate the unit
+    for name, unit in out.result.units.items():  # the last status is the written std (no cached split check)
+        assert np.allclose(out.statuses[name].position_std_m, unit.position_std_m, rtol=1e-9)
+        assert np.allclose(out.statuses[name].rotation_std_deg, unit.rotation_std_deg, rtol=1e-9)
+
+    stop = threading.Event()
+    stop.set()  # set before a replay whose one chunk is the last: that is the data's end, not a user's stop
+    short = crop(ds, -math.inf, float(ds.joints.t[0]) + 8.0)
+    out = follow_dataset(short, speed=None, stop_at_target=False, chunk_s=60.0, stop=stop)
+    assert not out.stopped and not any(n.startswith("stopped by the user") for n in out.result.notes)
 
     stop = threading.Event()
 
@@ -323,5 +334,6 @@ def test_a_stopped_follow_gives_the_result_of_the_data_so_far_and_says_so():
     assert [line for line in lines if line.startswith("report spacing")][-1].startswith(
         "report spacing of the 13 Hz joint stream: replay 2 of 5"
     ), lines
-    assert any(n.startswith("report-spacing term") and "stopped by the user" in n for n in out.result.notes)
+    assert "report-spacing term of the low-rate joint stream not applied: stopped by the user during its replays" in (
+        out.result.notes)  # fmt: skip
     assert all("joint_rate" not in u.extras for u in out.result.units.values())

@@ -59,10 +59,10 @@ THINNINGS = (2, 3)
 """The stream is refitted on every ``k``-th report for each ``k`` here, once per phase (``k`` refits)."""
 
 
-def replays(t: np.ndarray) -> int:
-    """How many refits :func:`check` makes of a joint stream stamped ``t`` (its thinnings that keep
-    :data:`MIN_THINNED_REPORTS` reports, one per phase)."""
-    return sum(every for every in THINNINGS if len(t) // every >= MIN_THINNED_REPORTS)
+def thinnings(t: np.ndarray) -> tuple[int, ...]:
+    """The thinnings :func:`check` refits a joint stream stamped ``t`` with: those of :data:`THINNINGS` that keep
+    :data:`MIN_THINNED_REPORTS` reports (one refit per phase, ``k`` for every ``k``-th report)."""
+    return tuple(every for every in THINNINGS if len(t) // every >= MIN_THINNED_REPORTS)
 
 
 AXES = ("x", "y", "z")
@@ -223,9 +223,7 @@ def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> Calibrat
         return result
     rate_hz = 1.0 / float(np.median(np.diff(j.t)))
     fits: dict[int, list[CalibrationResult]] = {every: [] for every in THINNINGS}
-    for every in THINNINGS:
-        if len(j.t) // every < MIN_THINNED_REPORTS:
-            continue
+    for every in thinnings(j.t):
         for phase in range(every):
             try:
                 fits[every].append(refit(thinned(dataset, every, phase), links))

@@ -234,13 +234,12 @@ def _calibrate_follow(
                                  stop=stop, on_progress=progress)  # fmt: skip
         meter.show(outcome.statuses, outcome.t_data, outcome.t_end, force_draw=True)
         write_result(outcome.result, out)  # a second signal aborts the write too (atomic: nothing or all)
-    spacing_cut = any(n.startswith("report-spacing term") and "stopped by the user" in n for n in outcome.result.notes)
-    if outcome.stopped or spacing_cut:
-        what = "Ctrl-C" if stop.signum == signal.SIGINT else "SIGTERM"
-        data = f"after {outcome.t_data:.1f} s of data (of {outcome.t_end or 0.0:.1f} s): the result of the data so far"
-        console.print(f"[yellow]stopped[/] ({what}) " + (data if outcome.stopped else "at the data's end")
-                      + (", without the report-spacing term of the slow joint stream" if spacing_cut else ""),
-                      highlight=False)  # fmt: skip
+    what = "Ctrl-C" if stop.signum == signal.SIGINT else "SIGTERM"
+    notes = outcome.result.notes
+    spacing_cut = any(n.startswith("report-spacing term") and "stopped by the user" in n for n in notes)
+    if outcome.stopped:
+        console.print(f"[yellow]stopped[/] ({what}) after {outcome.t_data:.1f} s of data (of {outcome.t_end or 0.0:.1f}"
+                      " s): the result of the data so far", highlight=False)  # fmt: skip
     elif watch:
         events = outcome.result.events
         console.print(f"watched to the data's end: {len(events)} unit move(s) recorded in the result", highlight=False)
@@ -257,6 +256,13 @@ def _calibrate_follow(
         missing = sum(1 for s in outcome.statuses.values() if not s.reached)
         console.print(f"[yellow]warning[/]: the data ended ({outcome.t_data:.1f} s) before the target "
                       f"{target.text()}: {missing} of {len(outcome.statuses)} units not there", highlight=False)
+    if spacing_cut and not outcome.stopped:
+        console.print(f"[yellow]stopped[/] ({what}) before the report-spacing term of the slow joint stream was made: "
+                      "the result written without it", highlight=False)  # fmt: skip
+    elif stop.is_set() and not outcome.stopped:
+        console.print(f"{what} after the data's end: the result is complete", highlight=False)
+    for name, why in outcome.result.failed_units.items():
+        console.print(f"not calibrated: {shown(name)}: {shown(why)}", highlight=False)
     console.print(f"wrote {shown(out)}", highlight=False)
     if not outcome.result.units:  # written, with each unit's reason: exit 1 as for the batch methods
         raise typer.Exit(NO_UNIT_EXIT)

@@ -206,8 +206,9 @@ def unwinds() -> Iterator[None]:
         _state.deferring = True  # a signal during the restore is kept, not raised half-way through it
         _state.active = False
         sys.unraisablehook = previous_hook
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        recent = _state.signum is not None and time.monotonic() - _state.at < GRACE_S
+        for sig, handler in previous.items():  # within the first signal's grace: a further one still ignored
+            signal.signal(sig, _after_grace(handler, _state.at + GRACE_S) if recent else handler)
         if previous_fd is not None:
             with contextlib.suppress(OSError, ValueError):
                 signal.set_wakeup_fd(previous_fd)
@@ -215,6 +216,23 @@ def unwinds() -> Iterator[None]:
         pending, _state.pending = _state.pending, None
     if pending is not None:  # received, never raised (lost near the end, or during the restore): raised now
         raise _exception(pending)
+
+
+def _after_grace(previous: Any, until: float) -> Any:
+    """A handler that ignores SIGTERM/SIGINT until ``until`` (``time.monotonic``) and then does what ``previous``
+    does: a command that ends within a first signal's grace (``stop_on_signals`` wrote its result) keeps its exit
+    code when a second signal of a double press lands as the process exits."""
+
+    def handler(signum: int, frame: Any) -> None:
+        if time.monotonic() < until:
+            return
+        signal.signal(signum, previous)
+        if callable(previous):
+            previous(signum, frame)
+        elif previous == signal.SIG_DFL:
+            os.kill(os.getpid(), signum)
+
+    return handler
 
 
 def run_async(main: Any) -> Any:

@@ -180,7 +180,8 @@ def _view_follow(
         update_live(viewer, statuses, q, meter_line(statuses, target.position_m, target.rotation_deg, t_data, t_end))
 
     try:
-        outcome = follow_dataset(ds, target, speed=None if speed == 0 else speed, on_meter=on_meter)
+        outcome = follow_dataset(ds, target, speed=None if speed == 0 else speed, on_meter=on_meter,
+                                 on_progress=lambda line: console.print(line, markup=False, highlight=False))
         line = meter_line(outcome.statuses, target.position_m, target.rotation_deg, outcome.t_data, outcome.t_end)
         update_live(viewer, outcome.statuses, None, line)
         console.print(line, markup=False, highlight=False, soft_wrap=True)

@@ -241,7 +241,7 @@ def follow_dataset(
 
     def on_chunk(t: float) -> bool:
         state["t"] = float(t)
-        if stop is not None and stop.is_set():
+        if stop is not None and stop.is_set() and t < t1 - 1e-9:  # on the last chunk: the data's end
             state["stopped"] = True
             return True
         if t - state["asked"] < status_every_s - 1e-9:
@@ -256,9 +256,10 @@ def follow_dataset(
         return stop_at_target and state["reached"]
 
     replay(follow, cal, chunk_s=chunk_s, speed=speed, on_chunk=on_chunk)  # finish() at the data's end
-    statuses = cal.status()  # at the data's end after finish(): what was left absorbed
-    reached = bool(state["reached"]) or all_reached(statuses)
     stopped = bool(state["stopped"])
+    # at the data's end after finish() (what was left absorbed), or where the user stopped: not a cached split check
+    statuses = cal.status(fresh=stopped)
+    reached = bool(state["reached"]) or all_reached(statuses)
     if on_progress is not None:
         on_progress(f"computing the result of {len(names)} unit(s) from {state['t'] - t0:.1f} s of data")
     result = cal.result()
@@ -298,7 +299,8 @@ def report_spacing_checked(
     term of a low-rate joint stream (:func:`skincal.calib.joint_rate.check`, as ``mle`` has it): the recording's
     part up to ``t_end`` replayed again with every second and every third joint report. A stream at a
     controller's rate is left alone (no replay). ``on_progress(line)`` before each replay; ``stop`` set before
-    or during them: ``result`` as given, with a note that the term was left out."""
+    or during them: ``result`` as given, with a note that the term was not computed (before) or left out
+    (during: no term is made of a replay cut short)."""
     from skincal.calib import joint_rate
     from skincal.calib.online import OnlineCalibrator, OnlineOptions, replay
     from skincal.calib.preprocess import is_low_rate
@@ -306,12 +308,18 @@ def report_spacing_checked(
 
     if ds.joints is None or not result.units or not is_low_rate(ds.joints.t):
         return result
-    why = "report-spacing term of the low-rate joint stream not applied: stopped by the user before its replays ended"
-    left_out = dataclasses.replace(result, notes=(*result.notes, why))
+
+    def noted(why: str) -> CalibrationResult:
+        note = f"report-spacing term of the low-rate joint stream {why}"
+        return dataclasses.replace(result, notes=(*result.notes, note))
+
     if stop is not None and stop.is_set():
-        return left_out
+        return noted("not computed: stopped by the user before its replays")
     part = crop(ds, -math.inf, t_end) if t_end < data_span(ds)[1] else ds
-    rate_hz = 1.0 / float(np.median(np.diff(part.joints.t))) if part.joints is not None else math.nan
+    assert part.joints is not None
+    rate_hz = 1.0 / float(np.median(np.diff(part.joints.t)))
+    used = joint_rate.thinnings(part.joints.t)
+    which = " and ".join({2: "every second", 3: "every third"}.get(k, f"every {k}th") for k in used) + " report"
     done = [0]
 
     def refit(thinned: Dataset, links: dict[str, int]) -> CalibrationResult:
@@ -319,8 +327,8 @@ def report_spacing_checked(
         candidate never makes a unit decided, which weighs its data otherwise), without the split check."""
         done[0] += 1
         if on_progress is not None:
-            on_progress(f"report spacing of the {rate_hz:.0f} Hz joint stream: replay {done[0]} of "
-                        f"{joint_rate.replays(part.joints.t)} (every second and every third report)")  # fmt: skip
+            on_progress(f"report spacing of the {rate_hz:.0f} Hz joint stream: replay {done[0]} of {sum(used)} "
+                        f"({which})")  # fmt: skip
         options = OnlineOptions(consistency=False)
         cal = OnlineCalibrator(thinned.chain, list(links), np.asarray(thinned.gravity, dtype=float), options)
         replay(thinned, cal, on_chunk=None if stop is None else lambda _t: stop.is_set())
@@ -331,7 +339,7 @@ def report_spacing_checked(
     try:
         return joint_rate.check(part, result, refit)
     except _Stopped:
-        return left_out
+        return noted("not applied: stopped by the user during its replays")
 
 
 class _Stopped(BaseException):

@@ -242,9 +242,14 @@ def sandwich(st: UnitState, link: int, sol: stats.Solution, kappa: float, window
     moving = np.zeros((blocks.size, stats.NP))
     np.add.at(moving, at, moving_scores)
     factors = sandwich_factors(sol.cov * kappa, sol.cov, np.concatenate([rest, moving]), blocks.size)
-    if np.all(factors == 1.0):
-        return sol, factors
-    return replace(sol, cov=sol.cov * np.outer(factors, factors)), factors
+    return with_factors(sol, factors), factors
+
+
+def with_factors(sol: stats.Solution, factors: FloatArray | None) -> stats.Solution:
+    """``sol`` with each unknown's std multiplied by ``factors`` ``(NP,)`` (None or all 1: ``sol`` itself)."""
+    if factors is None or np.all(factors == 1.0):
+        return sol
+    return replace(sol, cov=sol.cov * np.outer(factors, factors))
 
 
 def window_scores(st: UnitState, link: int, sol: stats.Solution, windows: np.ndarray | None = None
@@ -279,10 +284,10 @@ def reported(st: UnitState, link: int, grow: float = 0.0, spline: bool = False, 
     factors (None: not applied) and the split check of that solution (:func:`skincal.calib.online.split.check`;
     None: no data or ``consistency_check`` off). ``grow``: the last answer is reused for the same link while
     the unit's absorbed samples grew by less than this factor and its unchecked std moved by less than
-    :data:`SPLIT_STD_CHANGE` since (the live status asks every second, with :data:`SPLIT_RECHECK`: six part
-    solves per unit each time would cost a hundred units a second of CPU); 1: only for the same samples and
-    solution (a result right after a status); 0: never. A restart of the unit's statistics (clock
-    re-alignment, link decision, moved unit) clears it."""
+    :data:`SPLIT_STD_CHANGE` since, its factors applied to the current solution (the live status asks every
+    second, with :data:`SPLIT_RECHECK`: six part solves per unit each time would cost a hundred units a second
+    of CPU); 1: only for the same samples and solution (a result right after a status); 0: never. A restart of
+    the unit's statistics (clock re-alignment, link decision, moved unit) clears it."""
     n = float(st.ledger.n.sum()) if st.ledger.n is not None else 0.0
     sol = st.solutions[link]
     kappa = inflation(st)
@@ -294,8 +299,11 @@ def reported(st: UnitState, link: int, grow: float = 0.0, spline: bool = False, 
         with np.errstate(divide="ignore", invalid="ignore"):
             steady = bool(np.all(np.abs(full / full0 - 1.0) < SPLIT_STD_CHANGE))  # NaN (a zero std): not steady
         close = key0 == key and n0 <= n < grow * n0 and steady
-        if same or (grow > 1.0 and close):
+        if same:
             return answer
+        if grow > 1.0 and close:  # the factors of the last answer, applied to the current solution
+            factors, checked = answer[1], answer[2]
+            return (with_factors(sol, factors), factors, checked)
     shown, factors = sandwich(st, link, sol, kappa) if spline else (sol, None)
     checked = None
     if consistency_check:
