@@ -142,3 +142,21 @@ def test_a_cached_check_is_applied_to_the_current_solution(report14):
         assert np.allclose(np.diag(shown.cov), 1.1 * np.diag(first[0].cov), rtol=1e-12)
     finally:
         st.solutions[link], st.split_cache = sol, None
+
+
+def test_a_stream_too_short_for_the_sandwich_says_its_std_are_unchecked(report14):
+    """A low-rate stream with fewer than three windows of motion has no sandwich: the unit's result says its std
+    were not checked against the residuals (6 s of the session: the one unit calibrated by then); with enough
+    windows (each its own block when the 3 s blocks are too few) the factors are there and nothing is said."""
+    from skincal.workflows.monitoring import crop
+
+    ds, _, _ = report14
+    for length, expected in ((6.0, {"su1": False}), (12.0, dict.fromkeys(ds.units, True))):
+        part = crop(ds, -np.inf, float(ds.joints.t[0]) + length)
+        cal = OnlineCalibrator(part.robot, part.units, part.gravity)
+        replay(part, cal)
+        units = cal.result().units
+        assert set(units) == set(expected), (length, list(units))
+        for name, unit in units.items():
+            said = any(w.startswith("std not checked against the residuals") for w in unit.warnings)
+            assert said == (unit.extras["covariance_sandwich"] is None) == (not expected[name]), (length, name)

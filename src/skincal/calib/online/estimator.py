@@ -546,9 +546,7 @@ class OnlineCalibrator:
             cov = sol.pose_covariance() * kappa
             std = np.sqrt(np.clip(np.diag(cov), 0.0, None))  # before the split check (applied below)
             imu, drift, drift_std_ppm = fit.imu_calibration(st, sol, kappa, self.gravity)
-            warnings: list[str] = []
-            if np.isfinite(st.offset_sharpness) and st.offset_sharpness < clock.ALIGN_SHARPNESS:
-                warnings.append("time offset uncertain (no motion to align the unit's clock on)")
+            warnings = fit.unit_warnings(st, self.spline and not rests and factors is None)
             notes: list[str] = []
             if drift_std_ppm > DRIFT_UNDETERMINED_PPM:
                 notes.append(

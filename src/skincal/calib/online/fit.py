@@ -13,6 +13,7 @@ from scipy.stats import chi2
 
 from skincal.calib import consistency
 from skincal.calib.online import split, stats
+from skincal.calib.online.clock import ALIGN_SHARPNESS
 from skincal.calib.online.options import OnlineOptions
 from skincal.calib.online.unit import MOVING, REST, UnitState
 from skincal.calib.robust import SANDWICH_BLOCK_S, sandwich_factors
@@ -230,19 +231,35 @@ def sandwich(st: UnitState, link: int, sol: stats.Solution, kappa: float, window
     Gauss-Newton Jacobians :func:`~skincal.calib.online.stats.linearise` at ``sol``): the sum of its
     samples' ``J_i^T W_i r_i``, so a block's score is the sum of its windows'. Moving samples are summed
     over blocks of windows at least :data:`~skincal.calib.robust.SANDWICH_BLOCK_S` long, each window's rest
-    samples are a block of their own (``mle``: each rest row its own); the model covariance compared is
-    ``cov kappa`` (the correlation inflation)."""
+    samples are a block of their own (``mle``: each rest row its own), each window a block when that makes fewer
+    than :data:`MIN_SANDWICH_BLOCKS`; the model covariance compared is ``cov kappa`` (the correlation
+    inflation)."""
     if st.ledger.Za is None:
         return sol, None
     (rest, _), (moving_scores, moving_w) = window_scores(st, link, sol, windows)
     group = max(int(np.ceil(SANDWICH_BLOCK_S / st.ledger.width - 1e-9)), 1)
     blocks, at = np.unique(moving_w // group, return_inverse=True)  # each moving window's block
+    if blocks.size < MIN_SANDWICH_BLOCKS:  # a short stream: its windows as blocks (shorter, but some check)
+        blocks, at = np.unique(moving_w, return_inverse=True)
     if blocks.size < MIN_SANDWICH_BLOCKS:
         return sol, None
     moving = np.zeros((blocks.size, stats.NP))
     np.add.at(moving, at, moving_scores)
     factors = sandwich_factors(sol.cov * kappa, sol.cov, np.concatenate([rest, moving]), blocks.size)
     return with_factors(sol, factors), factors
+
+
+def unit_warnings(st: UnitState, unchecked: bool) -> list[str]:
+    """The warnings of a unit's result: a time offset without motion to align on; ``unchecked``: a low-rate joint
+    stream whose block sandwich could not be formed (fewer than :data:`MIN_SANDWICH_BLOCKS` windows of motion), so
+    its std were never held against what the residuals show."""
+    out = []
+    if np.isfinite(st.offset_sharpness) and st.offset_sharpness < ALIGN_SHARPNESS:
+        out.append("time offset uncertain (no motion to align the unit's clock on)")
+    if unchecked:
+        out.append(f"std not checked against the residuals (a low-rate joint stream with fewer than "
+                   f"{MIN_SANDWICH_BLOCKS} windows of motion): they may be too small")  # fmt: skip
+    return out
 
 
 def with_factors(sol: stats.Solution, factors: FloatArray | None) -> stats.Solution:
