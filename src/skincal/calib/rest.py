@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from skincal.calib.preprocess import joint_noise, white_noise_std
-from skincal.calib.robust import residual_correlation
+from skincal.calib.robust import run_correlation
 from skincal.data.dataset import DYNAMIC, STATIC, JointStates, Segments
 from skincal.kinematics.transforms import FloatArray
 
@@ -295,8 +295,7 @@ def unit_rest_runs(
             f"static segment moved: {len(gone)} of {len(candidates)} rest period(s) dropped because the unit's "
             f"IMU moved in them ({where}; accelerometer spread above {limit_a:.3g} m/s^2)"
         )
-    deviations = [accel[a:b] - accel[a:b].mean(axis=0) for a, b in keep]
-    correlation = residual_correlation(np.concatenate(deviations)) if deviations else 1.0
+    correlation = run_correlation([accel[a:b] for a, b in keep]) if keep else 1.0
     return RestRuns(
         np.array(keep, dtype=np.intp).reshape(-1, 2),
         rest,

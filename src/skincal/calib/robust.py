@@ -66,6 +66,18 @@ def pinv_step(H: FloatArray, g: FloatArray) -> tuple[FloatArray, FloatArray]:
     return step, null
 
 
+RHO_CUTOFF = 0.05
+"""The lags of an integrated autocorrelation are summed until the first at or below this correlation."""
+
+
+def _integrated(rho: FloatArray) -> float:
+    """``1 + 2 sum_k rho_k`` over the lags ``k >= 1`` of ``rho`` ``(K + 1,)`` before the first at or below
+    :data:`RHO_CUTOFF` (the noisy tail of a sample autocorrelation is left out)."""
+    low = np.flatnonzero(rho[1:] <= RHO_CUTOFF)
+    end = int(low[0]) + 1 if low.size else len(rho)
+    return 1.0 + 2.0 * float(np.sum(rho[1:end]))
+
+
 def residual_correlation(r: FloatArray, max_lag: int = 20) -> float:
     """Integrated autocorrelation ``1 + 2 sum_k rho_k`` of the moving residuals (>= 1).
 
@@ -78,13 +90,56 @@ def residual_correlation(r: FloatArray, max_lag: int = 20) -> float:
     var = np.sum(x * x)
     if var <= 0:
         return 1.0
-    total = 0.0
-    for k in range(1, max_lag + 1):
-        rho = float(np.sum(x[k:] * x[:-k]) / var)
-        if rho <= 0.05:
+    rho = np.array([1.0] + [float(np.sum(x[k:] * x[:-k]) / var) for k in range(1, max_lag + 1)])
+    return _integrated(rho)
+
+
+MIN_RUN_LAGS = 5
+"""Fewest lags :func:`run_correlation` sums (``10`` samples per lag: 50 samples at least)."""
+
+
+def run_correlation(runs: list[FloatArray], max_lag: int = 20, iterations: int = 3) -> float:
+    """Integrated autocorrelation ``tau = 1 + 2 sum_k rho_k`` (>= 1) of a noise seen in short runs
+    ``(n_r, 3)``, each known only about its own mean (the rest runs of a unit).
+
+    Deviations from a run's mean ``x_t = e_t - mean(e)`` are correlated less than the noise: with
+    ``Var(mean) ~ sigma^2 tau / n`` (``n`` samples), ``E[sum_t x_t x_(t+k)] ~ (n - k)(gamma_k - sigma^2
+    tau / n)``, so the lag sums ``C_k`` pooled over the runs (and axes) give ``rho_k = (C_k / sigma^2 +
+    3 tau sum_r (n_r - k) / n_r) / (3 sum_r (n_r - k))`` with ``sigma^2 = C_0 / (3 (N - R tau))`` (``N``
+    samples in ``R`` runs). ``tau`` takes ``iterations`` such steps from ``tau = 1``:
+    their fixed point is unstable when runs are a few correlation times short, so a few steps remove
+    most of the bias without it (AR(1) noise of lag-1 correlation 0.6, truncated sum 3.77, 300 draws:
+    5 runs of 28 samples give a median 2.90 after one step, 3.61 after three, 3.72 at the fixed point
+    but with 5 % of the draws at the cap; 10 runs of 55 samples 3.32, 3.80, 3.82; measured, simulated
+    noise). ``tau`` stays below ``N / (4 R)`` (a run's mean taking a quarter of its variance). 1 with
+    fewer than 50 samples (:data:`MIN_RUN_LAGS` lags of 10 samples each).
+    """
+    runs = [r - r.mean(axis=0) for r in runs if len(r) > 1]
+    n = np.array([len(r) for r in runs], dtype=float)
+    N, R = float(n.sum()), len(runs)
+    max_lag = min(max_lag, int(N) // 10)
+    if max_lag < MIN_RUN_LAGS:
+        return 1.0
+    lags = np.arange(max_lag + 1)
+    C = np.zeros(max_lag + 1)
+    for r in runs:
+        C[0] += np.sum(r * r)
+        for k in range(1, min(max_lag, len(r) - 1) + 1):
+            C[k] += np.sum(r[k:] * r[:-k])
+    if C[0] <= 0:
+        return 1.0
+    axes = runs[0].shape[1] if runs[0].ndim > 1 else 1
+    pairs = np.maximum(n[None, :] - lags[:, None], 0.0)  # (K + 1, R) products per lag and run
+    S, B = axes * pairs.sum(axis=1), axes * (pairs / n[None, :]).sum(axis=1)
+    tau, cap = 1.0, 0.25 * N / R
+    for _ in range(iterations):
+        var = C[0] / (S[0] - B[0] * tau)
+        rho = np.where(S > 0, (C / var + B * tau) / np.maximum(S, 1.0), 0.0)
+        new = min(_integrated(rho), cap)
+        if abs(new - tau) < 1e-6:
             break
-        total += rho
-    return 1.0 + 2.0 * total
+        tau = new
+    return tau
 
 
 def sandwich_factors(cov: FloatArray, H_inv: FloatArray, block_scores: FloatArray, moving_blocks: int) -> FloatArray:
