@@ -59,7 +59,9 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(argv: list[str] | None) -> int:
     from skincal.errors import SkincalError
+    from skincal.io.atomic import forget_claims
 
+    forget_claims()  # an earlier command of this process (tests, a notebook) claimed its own outputs
     try:
         code = app(args=argv, prog_name="skincal", standalone_mode=False)
     except SkincalError as exc:

@@ -52,9 +52,12 @@ class DatasetWriter:
         file: the open ``h5py.File`` (for what lies outside the layout: a recorder's own attributes, copies).
     """
 
-    def __init__(self, path: str | Path, *, libver: str | tuple[str, str] | None = None) -> None:
+    def __init__(
+        self, path: str | Path, *, libver: str | tuple[str, str] | None = None, exclusive: bool = False
+    ) -> None:
         self.path = Path(path)
-        self.file = h5py.File(self.path, "w", libver=libver)
+        # exclusive: create the file only if it does not exist (h5py mode "x"), never truncate another's
+        self.file = h5py.File(self.path, "x" if exclusive else "w", libver=libver)
 
     def __enter__(self) -> DatasetWriter:
         return self

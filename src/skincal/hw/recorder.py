@@ -51,7 +51,7 @@ from skincal.errors import ConfigError, DatasetError
 from skincal.hw.clock import ClockFit
 from skincal.hw.packet import JointPacket, SkinPacket
 from skincal.hw.receiver import Delivery, ReceiverStats, StreamKey
-from skincal.io.atomic import atomic_path
+from skincal.io.atomic import atomic_path, release_claim
 from skincal.kinematics.chain import SerialChain
 from skincal.names import name_problem, printable
 
@@ -189,10 +189,13 @@ class Recorder:
         self._names: dict[int, str | None] = {}
         self._joint_source: tuple[int, int] | None = None  # (robot id, n_joints)
         self._last_flush_s = host_clock()
-        try:
-            self._file: DatasetWriter | None = DatasetWriter(self.path)
+        try:  # without overwrite, a file that appeared since the check above is never truncated
+            self._file: DatasetWriter | None = DatasetWriter(self.path, exclusive=not overwrite)
+        except FileExistsError:
+            raise ConfigError(f"{self.path}: a file appeared there as the recording started; not overwritten") from None
         except OSError as exc:
             raise DatasetError(f"{self.path}: cannot create the recording: {exc}") from exc
+        release_claim(self.path)  # the live file is this recording's own: its final rewrite replaces it
         self._file.start(
             dict(
                 description=description, recording_complete=False, t_origin_host_s=self.t_origin_s,

@@ -84,7 +84,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a fresh temporary path in ``path``'s directory; on clean exit replace ``path`` with it.
 
     The caller writes and closes the temporary file inside the ``with`` block. Afterwards it is
-    fsynced and moved onto ``path`` with :func:`os.replace` (atomic on POSIX and Windows), and the
+    fsynced and moved onto ``path`` with :func:`os.replace` (atomic on POSIX and Windows; an output that
+    :func:`check_output` claimed as new is linked there only if still absent, :func:`_commit_new`), and the
     directory is fsynced so the rename survives a power cut. If the block raises, the temporary is
     removed and ``path`` keeps its previous contents. The temporary is created empty with the usual
     permissions (``0o666`` minus the umask) so the final file is not private by accident. Its name
@@ -116,12 +117,66 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         os.close(fd)
         yield tmp
         _fsync_path(tmp)
-        os.replace(tmp, target)
+        key = os.path.abspath(target)
+        if key in _CLAIMED:
+            _commit_new(tmp, target)
+            _CLAIMED.discard(key)
+        else:
+            os.replace(tmp, target)
     except BaseException:
         with contextlib.suppress(OSError):  # absent (never made), or not removable: the error says why
             os.unlink(tmp)
         raise
     _fsync_path(directory, directory=True)
+
+
+_CLAIMED: set[str] = set()
+"""Absolute paths of outputs that :func:`check_output` found absent without ``force``: the command
+claimed them as new files, so :func:`atomic_path` does not replace one that appeared while it ran
+(the CLI forgets them at each command's start, :func:`forget_claims`)."""
+
+
+def forget_claims() -> None:
+    """Forget the outputs claimed by earlier :func:`check_output` calls of this process."""
+    _CLAIMED.clear()
+
+
+def release_claim(path: str | Path) -> None:
+    """The command created ``path`` itself (a recorder's live file, made exclusively): its later writes
+    through :func:`atomic_path` replace it."""
+    _CLAIMED.discard(os.path.abspath(path))
+
+
+def _commit_new(tmp: Path, target: Path) -> None:
+    """Move ``tmp`` to ``target`` only if ``target`` still does not exist (a hard link fails on an existing
+    name: the test and the move are one step). If it appeared meanwhile it keeps its contents; the output
+    is linked to the first free ``<stem>-<n><suffix>`` beside it and a :class:`ConfigError` names both (the
+    caller's clean-up then removes ``tmp``). A file system without hard links falls back to a test, then
+    the rename."""
+    from skincal.errors import ConfigError
+
+    try:
+        os.link(tmp, target, follow_symlinks=False)
+    except FileExistsError:
+        kept = None
+        for n in range(1, 1000):
+            alt = target.with_name(f"{target.stem}-{n}{target.suffix}")
+            try:
+                os.link(tmp, alt, follow_symlinks=False)
+            except FileExistsError:
+                continue
+            except OSError:
+                break
+            kept = alt
+            break
+        where = f"this command's output is in {kept}" if kept is not None else "this command's output was not kept"
+        raise ConfigError(f"{target} appeared while this command ran and was not overwritten; {where}") from None
+    except OSError:  # no hard links here (some network and FAT file systems)
+        if os.path.lexists(target):
+            raise ConfigError(f"{target} appeared while this command ran and was not overwritten") from None
+        os.replace(tmp, target)
+        return
+    os.unlink(tmp)
 
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> None:
@@ -177,7 +232,10 @@ def check_output(path: str | Path, *, force: bool = False, inputs: tuple[str | P
     overwritten, even with ``force``), an existing file unless ``force``, a directory, anything else
     that is not a regular file (a FIFO, a device node such as ``/dev/null``, a socket: the rename of
     :func:`atomic_path` would replace it with a regular file, so ``force`` never applies to it), a
-    file in a folder that does not exist, or a name too long for the file system with its temporary."""
+    file in a folder that does not exist, or a name too long for the file system with its temporary.
+    Without ``force`` the absent output is claimed as new: a file another process puts there while this
+    one works is not replaced by :func:`atomic_path` at the end (the output goes beside it, named in
+    the error)."""
     from skincal.errors import ConfigError
 
     out = Path(path)
@@ -194,4 +252,9 @@ def check_output(path: str | Path, *, force: bool = False, inputs: tuple[str | P
         raise ConfigError(f"{out}: the folder {parent} does not exist")
     if out.exists() and not force:
         raise ConfigError(f"{out} exists; pass --force to overwrite it")
+    key = os.path.abspath(out)
+    if force or os.path.lexists(out):  # may be replaced (a dangling symlink is, as before)
+        _CLAIMED.discard(key)
+    else:
+        _CLAIMED.add(key)
     return out
