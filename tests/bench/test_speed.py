@@ -63,3 +63,14 @@ def test_refuses_an_existing_json_without_force(tmp_path, capsys):
     out.write_text("{}")
     assert main(["benchmark", "speed", "--quick", "--json", str(out)]) == 2
     assert out.read_text() == "{}" and "exists" in capsys.readouterr().err
+
+
+def test_a_pipe_sees_the_progress_of_long_work(tmp_path, capsys):
+    """Off a terminal (as here) the spinner is replaced by plain lines on stderr: the start at once,
+    then what finished (a benchmark of minutes is never silent in a log); stdout keeps only the table."""
+    assert main(["benchmark", "speed", "--quick", "--json", str(tmp_path / "s.json")]) == 0
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert lines[0] == "benchmarking speed...", captured.err
+    assert any(line.startswith("done: ") for line in lines[1:]), captured.err
+    assert "benchmarking" not in captured.out

@@ -101,6 +101,42 @@ class Throttle:
         return True
 
 
+class Status:
+    """What long work is doing: on a terminal rich's transient spinner line on stderr, elsewhere (a pipe,
+    a CI log) plain lines on stderr, the first at once and then each new one at most every 2 s, so
+    that long work is never silent in a log. A context manager; :meth:`update` gives the new text
+    (user text is escaped: :func:`shown`)."""
+
+    def __init__(self, message: str) -> None:
+        self.message = message
+        self.throttle = Throttle(2.0)
+        self._status: Any = None
+        self._line: str | None = None
+
+    def __enter__(self) -> Status:
+        if err_console.is_terminal:
+            self._status = err_console.status(self.message)
+            self._status.__enter__()
+        else:
+            self._print(self.message)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._status is not None:
+            self._status.__exit__(*exc)
+
+    def update(self, text: str) -> None:
+        if self._status is not None:
+            self._status.update(text)
+        elif text != self._line and self.throttle.due():
+            self._print(text)
+
+    def _print(self, text: str) -> None:
+        self._line = text
+        self.throttle.due(force=True)
+        err_console.print(text, highlight=False, soft_wrap=True)
+
+
 class LiveMeter:
     """The live meter of a command that follows a calibration (``calibrate --follow``, ``ros2``): on a
     terminal a rich table redrawn in place, elsewhere one plain line printed when it changes; drawn at

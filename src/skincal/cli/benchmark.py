@@ -15,7 +15,7 @@ import typer
 
 from skincal.bench import options
 from skincal.bench.harness import FORCE, typer_command
-from skincal.cli.app import app, console, err_console, shown
+from skincal.cli.app import Status, app, console, err_console, shown
 
 benchmark_app = typer.Typer(help="Reproduce the paper's benchmarks.", no_args_is_help=True)
 app.add_typer(benchmark_app, name="benchmark")
@@ -92,7 +92,7 @@ def mle(v: dict[str, Any]) -> None:
 
     _check_json(v["json_out"], v["force"])
 
-    with console.status("benchmarking mle...") as status:
+    with Status("benchmarking mle...") as status:
         doc = bench_mle.run_mle_benchmark(
             runs=v["runs"], quick=v["quick"], with_om=v["om"], progress=lambda m: status.update(m)
         )
@@ -115,7 +115,7 @@ def speed(v: dict[str, Any]) -> None:
     _check_json(v["json_out"], v["force"])
     harness = bench_speed.HARNESS
     config = harness.config(v)
-    with console.status("benchmarking speed...") as status:
+    with Status("benchmarking speed...") as status:
         # one job after the other (workers=1): each job's CPU time, memory and latency are its own
         doc, run = run_harness(harness, config, workers=1, progress=lambda r: status.update(f"done: {r['kind']}"))
     for line in harness.report(config, doc, run):
@@ -133,7 +133,7 @@ def realdata(v: dict[str, Any]) -> None:
 
     _check_json(v["json_out"], v["force"])
     methods = chosen_methods(v["om"], v["online"])
-    with console.status("benchmarking recordings...") as status:
+    with Status("benchmarking recordings...") as status:
         doc = run_realdata_benchmark(
             v["folder"], methods, workers=v["workers"], progress=lambda n: status.update(shown(n))
         )

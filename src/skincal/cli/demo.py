@@ -6,7 +6,7 @@ import time
 
 import typer
 
-from skincal.cli.app import app, console, seed_option, shown
+from skincal.cli.app import Status, app, console, seed_option, shown
 
 
 @app.command()
@@ -30,11 +30,11 @@ def demo(
         f"'{protocol}' protocol, method '{method}'"
     )
     start = time.perf_counter()
-    with console.status("simulating the calibration session..."):
+    with Status("simulating the calibration session..."):
         ds = simulate_dataset("panda", "paper", None, noise, protocol, seed)
     t_sim = time.perf_counter() - start
     console.print(f"simulated {ds.duration:.0f} s of robot motion in {t_sim:.2f} s")
-    with console.status(f"calibrating with '{method}' (links found from the data)..."):
+    with Status(f"calibrating with '{method}' (links found from the data)..."):
         result = calibrate(ds, method, seed=seed, workers=2)
     ev = evaluate(result, ds)
     table = Table(title=f"{method}: calibrated {len(result.units)} units in {result.runtime_s:.2f} s")
