@@ -121,11 +121,15 @@ def run_correlation(runs: list[FloatArray], max_lag: int = 20, iterations: int =
     if max_lag < MIN_RUN_LAGS:
         return 1.0
     lags = np.arange(max_lag + 1)
+    x = np.concatenate(runs)  # the runs end to end: a lag's products across a run's end are taken out
+    x = x.reshape(len(x), -1)
+    starts = np.cumsum(n.astype(int))[:-1]  # where runs 2..R begin
     C = np.zeros(max_lag + 1)
-    for r in runs:
-        C[0] += np.sum(r * r)
-        for k in range(1, min(max_lag, len(r) - 1) + 1):
-            C[k] += np.sum(r[k:] * r[:-k])
+    C[0] = float(np.sum(x * x))
+    for k in lags[1:]:
+        across = np.unique((starts[:, None] - np.arange(1, k + 1)[None, :]).ravel())  # i < start <= i + k
+        across = across[(across >= 0) & (across + k < len(x))]
+        C[k] = float(np.sum(x[k:] * x[:-k])) - float(np.sum(x[across] * x[across + k]))
     if C[0] <= 0:
         return 1.0
     axes = runs[0].shape[1] if runs[0].ndim > 1 else 1
