@@ -406,7 +406,7 @@ class OnlineCalibrator:
             clock.realign(st, sol.tau, sol.drift)
             self._absorb_unit(name)  # the kept samples again, at once: the status (and a result) never shows the gap
             return self._status(name, advise)
-        if not undecided and not st.decided and len(st.links) > 1 and st.moving[k] > MIN_MOVING and determined:
+        if not undecided and not st.decided and st.moving[k] > MIN_MOVING and determined:  # one candidate too
             self._keep_only(st, link)
             k = 0
         def within(p: FloatArray, r: FloatArray) -> bool:
