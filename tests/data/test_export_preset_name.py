@@ -44,3 +44,19 @@ def test_the_same_result_exports_onto_its_urdf(tmp_path):
 def test_a_preset_result_still_exports_without_robot(tmp_path):
     frames = export_result(_result({2: "link2", 3: "link3"}), "yaml", tmp_path / "skin.yaml")
     assert sorted(f.parent for f in frames) == ["ur5_dh_link2", "ur5_dh_link3"]
+
+
+def test_a_urdf_result_onto_another_robots_urdf_is_a_one_line_refusal(tmp_path):
+    """A Z1 result (link names of the Z1's URDF) onto the UR5's URDF: refused naming both robots and the
+    links, never exported (it used to end in an internal error: the message's own variable shadowed
+    the escaping function it called)."""
+    result = CalibrationResult(
+        method="mle", robot="z1", dataset_sha256="", runtime_s=0.1,
+        units={"su1": UnitResult(pose=SkinUnitPose.from_quaternion(2, np.array([0.05, 0.0, 0.06]),
+                                                                     np.array([1.0, 0.0, 0.0, 0.0])),
+                                 extras={"link_name": "link02"})},
+    )  # fmt: skip
+    out = tmp_path / "skin.urdf"
+    with pytest.raises(ConfigError, match=r"the result is for robot 'z1' \(units on link02\), not for robot"):
+        export_result(result, "urdf", out, robot=str(registry_urdf("ur5")))
+    assert not out.exists()

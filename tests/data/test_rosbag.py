@@ -208,6 +208,18 @@ def test_nan_samples_dropped_with_count_or_error_when_all_nan(tmp_path):
         read_bag(bag2, "panda")
 
 
+def test_joint_states_with_fewer_positions_than_names_say_so(tmp_path):
+    """Every JointState names the Panda's 7 joints but carries 6 positions (a malformed publisher): the
+    error says that, instead of naming a blank joint as missing."""
+    ts = _store(2)
+    kind, msgs = _joint_msgs(ts, T)
+    for _, m in msgs:
+        m.position = m.position[:6]
+    bag = _write(tmp_path / "b", 2, {"/joint_states": (kind, msgs), "/su1/imu": _imu_msgs(ts, T, UP_G)})
+    with pytest.raises(DatasetError, match=r"carry 6 position\(s\) for 7 joint name\(s\)"):
+        read_bag(bag, "panda")
+
+
 def test_unknown_topic_wrong_type_and_empty_bag(tmp_path):
     ts = _store(2)
     bag = _write(tmp_path / "b", 2, {"/joint_states": _joint_msgs(ts, T), "/su1/imu": _imu_msgs(ts, T, UP_G)})

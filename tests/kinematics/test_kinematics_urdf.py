@@ -185,6 +185,10 @@ def test_a_continuous_joint_is_a_revolute_joint_without_position_limits(tmp_path
         ),
         ("<link name='a'", {}, "not a valid URDF"),
         ('<!DOCTYPE r [<!ENTITY x "y">]><link name="&x;"/>', {}, "not a valid URDF"),
+        ("".join(map(_link, "abcb")) + _joint("j1", "a", "b") + _joint("j2", "b", "c"), {},
+         r"not a valid URDF \(two links named 'b'\)"),
+        ("".join(map(_link, "abc")) + _joint("j1", "a", "b") + _joint("j1", "b", "c"), {},
+         r"not a valid URDF \(two joints named 'j1'\)"),
     ],
 )
 def test_urdf_errors_are_one_line(body, kwargs, message):

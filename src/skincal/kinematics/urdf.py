@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import io
 import re
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -79,6 +80,10 @@ def parse_urdf(text: str, source: str):  # -> yourdfpy.URDF
     joints = sum(1 for _ in root.iterchildren("joint"))
     if joints > MAX_URDF_JOINTS:  # before yourdfpy builds them all (the chain takes at most MAX_JOINTS)
         raise ConfigError(f"{source}: {joints} joints is too many for a URDF (at most {MAX_URDF_JOINTS})")
+    for kind in ("link", "joint"):  # yourdfpy keeps the last of two same-named elements: the tree is ambiguous
+        twice = sorted(n for n, c in Counter(str(e.get("name")) for e in root.iterchildren(kind)).items() if c > 1)
+        if twice:
+            raise ConfigError(f"{source}: not a valid URDF (two {kind}s named {printable(twice[0])!r})")
     docinfo = root.getroottree().docinfo
     dtd = docinfo.internalDTD
     if docinfo.public_id or docinfo.system_url or (dtd is not None and any(True for _ in dtd.iterentities())):

@@ -82,9 +82,9 @@ def result_chain(result: CalibrationResult, target: SerialChain, source: SerialC
             return target if target.same_motion(preset) else preset
         if result.robot == target.name and names_match(target):
             return target
-    shown = ", ".join(sorted({shown(n) for n in recorded.values() if isinstance(n, str)})) or "unnamed links"
+    on = ", ".join(sorted({shown(n) for n in recorded.values() if isinstance(n, str)})) or "unnamed links"
     raise ConfigError(
-        f"the result is for robot '{shown(str(result.robot))}' (units on {shown}), not for robot "
+        f"the result is for robot '{shown(str(result.robot))}' (units on {on}), not for robot "
         f"'{shown(target.name)}': give the dataset it was computed from (--dataset) to export it onto another "
         "description of that robot"
     )

@@ -115,6 +115,7 @@ def joint_states_from(scan: BagPass, chain: SerialChain, source: str) -> tuple[n
         raise ConfigError(f"joint_names has {len(wanted)} names but robot '{chain.name}' has {n} joints")
     matched: dict[tuple[str, ...], tuple[np.ndarray | None, list[str]]] = {}
     keep, q_rows, qd_rows = [], [], []
+    uneven: tuple[int, int] | None = None
     for i, (_, _, (names, pos, vel)) in enumerate(jrows):  # per message: name order may differ between messages
         if names not in matched:
             if wanted is not None:
@@ -130,6 +131,8 @@ def joint_states_from(scan: BagPass, chain: SerialChain, source: str) -> tuple[n
             else:
                 matched[names] = (None, [f"joint{j}" for j in range(1, n + 1)])
         cols = matched[names][0]
+        if cols is not None and pos.shape[0] != len(names):
+            uneven = (int(pos.shape[0]), len(names))  # a malformed message: positions and names differ in count
         if cols is None or pos.shape[0] != len(names):
             continue
         keep.append(i)
@@ -146,6 +149,13 @@ def joint_states_from(scan: BagPass, chain: SerialChain, source: str) -> tuple[n
                 )
             )
         missing = min((m for _, m in matched.values()), key=len)
+        if not missing and uneven is not None:  # the names matched, the positions did not
+            raise DatasetError(
+                printable(
+                    f"{source}: topic {topic}: the messages carry {uneven[0]} position(s) for {uneven[1]} joint "
+                    "name(s); a JointState's position list must be as long as its name list"
+                )
+            )
         raise DatasetError(
             printable(
                 f"{source}: topic {topic}: joint{'s' if len(missing) > 1 else ''} {', '.join(missing)} of robot "
