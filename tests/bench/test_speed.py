@@ -66,8 +66,9 @@ def test_refuses_an_existing_json_without_force(tmp_path, capsys):
 
 
 def test_a_pipe_sees_the_progress_of_long_work(tmp_path, capsys):
-    """Off a terminal (as here) the spinner is replaced by plain lines on stderr: the start at once,
-    then what finished (a benchmark of minutes is never silent in a log); stdout keeps only the table."""
+    """Off a terminal (as here) the spinner is replaced by plain lines on stderr once the work has lasted
+    2 s: the start, then what finished (a benchmark of minutes is never silent in a log; a command that
+    fails at once prints its one-line error alone); stdout keeps only the table."""
     assert main(["benchmark", "speed", "--quick", "--json", str(tmp_path / "s.json")]) == 0
     captured = capsys.readouterr()
     lines = captured.err.splitlines()

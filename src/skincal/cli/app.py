@@ -103,14 +103,18 @@ class Throttle:
 
 class Status:
     """What long work is doing: on a terminal rich's transient spinner line on stderr, elsewhere (a pipe,
-    a CI log) plain lines on stderr, the first at once and then each new one at most every 2 s, so
-    that long work is never silent in a log. A context manager; :meth:`update` gives the new text
-    (user text is escaped: :func:`shown`)."""
+    a CI log) plain lines on stderr once the work has lasted :data:`QUIET_S`: the message, then each new
+    update at most every :data:`QUIET_S`, so that long work is never silent in a log while a command
+    that fails at once still prints its one-line error alone. A context manager; :meth:`update` gives
+    the new text (user text is escaped by the caller: :func:`shown`)."""
+
+    QUIET_S = 2.0
 
     def __init__(self, message: str) -> None:
         self.message = message
-        self.throttle = Throttle(2.0)
+        self.throttle = Throttle(self.QUIET_S)
         self._status: Any = None
+        self._timer: Any = None
         self._line: str | None = None
 
     def __enter__(self) -> Status:
@@ -118,18 +122,29 @@ class Status:
             self._status = err_console.status(self.message)
             self._status.__enter__()
         else:
-            self._print(self.message)
+            import threading
+
+            self.throttle.due(force=True)  # the first update is due QUIET_S after the start
+            self._timer = threading.Timer(self.QUIET_S, self._started)
+            self._timer.daemon = True
+            self._timer.start()
         return self
 
     def __exit__(self, *exc: object) -> None:
         if self._status is not None:
             self._status.__exit__(*exc)
+        if self._timer is not None:
+            self._timer.cancel()
 
     def update(self, text: str) -> None:
         if self._status is not None:
             self._status.update(text)
         elif text != self._line and self.throttle.due():
             self._print(text)
+
+    def _started(self) -> None:
+        if self._line is None:
+            self._print(self.message)
 
     def _print(self, text: str) -> None:
         self._line = text
