@@ -9,9 +9,11 @@ from cli_subprocess import one_line_error, run_cli
 
 
 @pytest.mark.adversarial
-@pytest.mark.parametrize("option", [["--duration", "nan"], ["--flush-every", "nan"], ["--flush-every", "inf"]])
+@pytest.mark.parametrize("option", [["--duration", "nan"], ["--duration", "inf"], ["--duration", "-1"],
+                                    ["--flush-every", "nan"], ["--flush-every", "inf"], ["--flush-every", "1e308"]])
 def test_record_refuses_nan_durations(tmp_path: Path, option: list[str]) -> None:
-    """``--duration nan`` stopped at once and ``--flush-every nan`` never flushed, both with exit 0."""
+    """``--duration nan`` stopped at once and ``--flush-every nan`` never flushed, both with exit 0;
+    ``--duration inf`` and ``--flush-every 1e308`` were accepted (never stopped, never flushed by time)."""
     one_line_error(run_cli(["record", "--port", "0", "--out", "rec.h5", *option], tmp_path))
     assert not (tmp_path / "rec.h5").exists()
 

@@ -36,6 +36,8 @@ def _status_table(stats, recorder, receiver) -> Table:  # noqa: ANN001  (types f
 
 MAX_UNIT_SAMPLES_BOUND = 1 << 40
 """Largest ``record --max-unit-samples``: far beyond any session, well within HDF5's 64-bit sizes."""
+MAX_FLUSH_EVERY_S = 3600.0
+"""Longest time between two flushes of a recording to disk, s (a crash loses at most this much)."""
 
 
 @app.command()
@@ -81,8 +83,10 @@ def record(
     check_output(out, force=force)  # before binding: a FIFO, a device or a missing folder loses no session
     check_bind(bind, public, "--bind", "receive from beyond this machine")
     chain = get_robot(robot) if robot else None
-    if not (math.isfinite(flush_every) and flush_every > 0):  # NaN would never flush
-        raise ConfigError(f"--flush-every {flush_every} s must be a finite number > 0")
+    if not (math.isfinite(flush_every) and 0 < flush_every <= MAX_FLUSH_EVERY_S):  # NaN, 1e308: never flushed by time
+        raise ConfigError(f"--flush-every {flush_every:g} s must be a number > 0 and at most {MAX_FLUSH_EVERY_S:g} s")
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise ConfigError(f"--duration {duration:g} s must be a finite number > 0 (leave it out: until Ctrl-C)")
     if max_units < 1 or max_unit_samples < 1:
         raise ConfigError(f"--max-units {max_units} and --max-unit-samples {max_unit_samples} must be >= 1")
     if max_unit_samples > MAX_UNIT_SAMPLES_BOUND:  # an HDF5 size is a 64-bit integer; 1e20 was an internal error
