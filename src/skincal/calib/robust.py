@@ -90,8 +90,13 @@ def residual_correlation(r: FloatArray, max_lag: int = 20) -> float:
     var = np.sum(x * x)
     if var <= 0:
         return 1.0
-    rho = np.array([1.0] + [float(np.sum(x[k:] * x[:-k]) / var) for k in range(1, max_lag + 1)])
-    return _integrated(rho)
+    total = 0.0
+    for k in range(1, max_lag + 1):  # lag by lag: white residuals stop after the first
+        rho = float(np.sum(x[k:] * x[:-k]) / var)
+        if rho <= RHO_CUTOFF:
+            break
+        total += rho
+    return 1.0 + 2.0 * total
 
 
 MIN_RUN_LAGS = 5

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -114,7 +115,7 @@ class Status:
         self.message = message
         self.throttle = Throttle(self.QUIET_S)
         self._status: Any = None
-        self._timer: Any = None
+        self._timer: threading.Timer | None = None
         self._line: str | None = None
 
     def __enter__(self) -> Status:
@@ -122,8 +123,6 @@ class Status:
             self._status = err_console.status(self.message)
             self._status.__enter__()
         else:
-            import threading
-
             self.throttle.due(force=True)  # the first update is due QUIET_S after the start
             self._timer = threading.Timer(self.QUIET_S, self._started)
             self._timer.daemon = True

@@ -83,10 +83,9 @@ def record(
     check_output(out, force=force)  # before binding: a FIFO, a device or a missing folder loses no session
     check_bind(bind, public, "--bind", "receive from beyond this machine")
     chain = get_robot(robot) if robot else None
-    if not (math.isfinite(flush_every) and 0 < flush_every <= MAX_FLUSH_EVERY_S):  # NaN, 1e308: never flushed by time
+    if not 0 < flush_every <= MAX_FLUSH_EVERY_S:  # NaN, inf, 1e308: never flushed by time
         raise ConfigError(f"--flush-every {flush_every:g} s must be a number > 0 and at most {MAX_FLUSH_EVERY_S:g} s")
-    if duration is not None and not (math.isfinite(duration) and duration > 0):
-        raise ConfigError(f"--duration {duration:g} s must be a finite number > 0 (leave it out: until Ctrl-C)")
+    _check_duration(duration, "to record until Ctrl-C")
     if max_units < 1 or max_unit_samples < 1:
         raise ConfigError(f"--max-units {max_units} and --max-unit-samples {max_unit_samples} must be >= 1")
     if max_unit_samples > MAX_UNIT_SAMPLES_BOUND:  # an HDF5 size is a 64-bit integer; 1e20 was an internal error
@@ -238,14 +237,20 @@ MAX_DRIFT_PPM = 1e4
 """Largest ``--drift-ppm`` of ``emulate`` (1 %: real oscillators drift by well under 100 ppm)."""
 
 
+def _check_duration(duration: float | None, absent: str) -> None:
+    """Refuse a ``--duration`` that is not a finite number > 0 (NaN stopped at once, inf never); ``absent``
+    says what leaving it out does."""
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise ConfigError(f"--duration {duration:g} s must be a finite number > 0 (leave it out {absent})")
+
+
 def _check_emulate_figures(port: int, duration: float | None, clock_offset: float, drift_ppm: float) -> None:
     """Refuse ``emulate``'s absurd figures before the dataset is read, each naming its option and range: port 0
     sent to nowhere, a negative or NaN duration played nothing or everything, a NaN/inf offset or drift was a
     NumPy warning and a packet error after 'sending ...' (issue 27, absurd numeric options)."""
     if not 1 <= port <= 65535:
         raise ConfigError(f"--port {port} must be in 1..65535")
-    if duration is not None and not (math.isfinite(duration) and duration > 0):
-        raise ConfigError(f"--duration {duration:g} s must be a finite number > 0 (leave it out to play everything)")
+    _check_duration(duration, "to play everything")
     if not (math.isfinite(clock_offset) and abs(clock_offset) <= MAX_CLOCK_OFFSET_S):
         raise ConfigError(f"--clock-offset {clock_offset:g} s must be a finite number in "
                           f"[-{MAX_CLOCK_OFFSET_S:g}, {MAX_CLOCK_OFFSET_S:g}]")
