@@ -56,6 +56,9 @@ def _rms_per_segment(values: FloatArray, segment: np.ndarray) -> tuple[np.ndarra
 
 
 def _activity(samples: UnitSamples, values: FloatArray, absolute_floor: float, n_joints: int) -> FloatArray:
+    finite = np.all(np.isfinite(values), axis=1)  # a gyroscope's readings at its rail are NaN
+    if not finite.all():
+        samples, values = samples.select(finite), values[finite]
     static = samples.kind == 0
     floor = absolute_floor
     if np.any(static):
@@ -179,10 +182,13 @@ def activity_in(samples: UnitSamples, mask: np.ndarray, *, use_gyro: bool = Fals
     static = samples.kind == 0
     out = 0.0
     for values, absolute_floor in channels:
+        finite = np.all(np.isfinite(values), axis=1)  # a gyroscope's readings at its rail are NaN
         floor = absolute_floor
-        if np.any(static):
-            _, rms_static = _rms_per_segment(values[static], samples.segment[static])
+        if np.any(static & finite):
+            _, rms_static = _rms_per_segment(values[static & finite], samples.segment[static & finite])
             floor = max(absolute_floor, ACTIVITY_RATIO * float(np.median(rms_static)))
-        v = values[mask]
+        v = values[mask & finite]
+        if len(v) < 3:
+            continue
         out = max(out, float(np.sqrt(np.mean(np.sum((v - v.mean(axis=0)) ** 2, axis=1)))) / floor)
     return out

@@ -38,7 +38,11 @@ def sample_account(problem: UnitProblem, p: Problem) -> dict:
     other = max(motion - kept - kinks - ends - saturated - stuck, 0)
     counts = {"motion": motion, "kept": kept, "kinks": kinks, "saturated": saturated, "stuck": stuck,
               "ends": ends, "other": other}
-    return {**counts, "shares": {k: (v / motion if motion else 0.0) for k, v in counts.items() if k != "motion"}}
+    g = p.data.rows.moving_g
+    # kept samples whose gyroscope reading was at its rail: the accelerometer's reading is used, the gyroscope's not
+    gyro_rail = 0 if g is None else int(np.count_nonzero(~np.all(np.isfinite(g), axis=1)))
+    shares = {k: (v / motion if motion else 0.0) for k, v in counts.items() if k != "motion"}
+    return {**counts, "gyro_saturated": gyro_rail, "shares": shares}
 
 
 ACCOUNT_WORDS = {
@@ -52,11 +56,18 @@ ACCOUNT_WORDS = {
 
 def describe_account(account: dict) -> str:
     """One line for :func:`sample_account`: "kept 52 % of the motion (1065 samples): 31 % at the
-    joint stream's kinks, 17 % saturated"."""
+    joint stream's kinks, 17 % saturated" (and, where a gyroscope clipped, in how many of the kept
+    samples its reading was left out)."""
     sh = account["shares"]
     dropped = [f"{100 * sh[k]:.0f} % {w}" for k, w in ACCOUNT_WORDS.items() if account[k] > 0]
     head = f"kept {100 * sh['kept']:.0f} % of the motion ({account['kept']} of {account['motion']} samples)"
-    return head + (": " + ", ".join(dropped) if dropped else "")
+    rail = account.get("gyro_saturated", 0)
+    tail = (
+        f"; the gyroscope's reading left out at its rail in {rail} of the kept ({100 * rail / account['kept']:.0f} %)"
+        if rail and account["kept"]
+        else ""
+    )
+    return head + (": " + ", ".join(dropped) if dropped else "") + tail
 
 
 NULL_POSITION_SCALE_M = 0.1

@@ -64,7 +64,7 @@ def gyro_rates(problem: UnitProblem) -> tuple[FloatArray, FloatArray] | None:
         return None
     table: SignalTable = problem.shared.table
     g_t = table.grid_t
-    keep = (s.t >= g_t[0]) & (s.t <= g_t[-1])
+    keep = (s.t >= g_t[0]) & (s.t <= g_t[-1]) & np.all(np.isfinite(s.gyro), axis=1)  # NaN: at its rail
     w = np.column_stack([np.interp(s.t[keep], g_t, c) for c in table.angular_speed.T])
     g = s.gyro[keep]
     still = np.max(w, axis=1) < GYRO_STILL_RATE

@@ -158,6 +158,7 @@ def _gyro_scale(problem: UnitProblem, link: int) -> GyroScale | None:
     table = shared.table
     assert s.gyro is not None
     inside = (s.t >= table.t[0]) & (s.t <= table.t[-1]) & shared.interpolator.reliable(s.t)
+    inside &= np.all(np.isfinite(s.gyro), axis=1)  # a reading at the gyroscope's rail is NaN
     if inside.sum() < 12:
         return None
     w = table.omega_at(link, s.t[inside])

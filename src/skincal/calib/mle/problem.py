@@ -185,7 +185,8 @@ def start_state(p: Problem) -> State:
     if S >= 2:
         R, b = static_rotation_and_bias(rows.static_u, rows.static_f, rows.static_weight)
     elif rows.moving_g is not None and lin is not None:
-        R, b = wahba(lin.w, rows.moving_g - bg), np.zeros(3)
+        ok = np.all(np.isfinite(rows.moving_g), axis=1)  # NaN: a reading at the gyroscope's rail
+        R, b = wahba(lin.w[ok], rows.moving_g[ok] - bg), np.zeros(3)
     else:
         raise CalibrationError(
             f"only {S} rest period(s) for link {p.data.link} and no gyroscope; at least 2 distinct static "

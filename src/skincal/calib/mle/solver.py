@@ -324,6 +324,17 @@ def _gyro_rows_compact(
     return r, J, cols
 
 
+def _finite_gyro_rows(r: FloatArray, J: FloatArray) -> np.ndarray:
+    """``(S + M,)`` the gyroscope rows with a reading; the others (NaN: the reading was at the gyroscope's
+    rail, :func:`~skincal.calib.preprocess.unit_samples`) are zeroed in ``r`` and ``J`` in place, so they
+    add nothing to the normal equations, the scores or the residual statistics."""
+    ok = np.all(np.isfinite(r), axis=1)
+    if not ok.all():
+        r[~ok] = 0.0
+        J[:, ~ok] = 0.0
+    return ok
+
+
 def apply_step(state: State, blocks: Blocks, delta: FloatArray) -> State:
     """``state`` moved by the parameter step ``delta`` ``(P,)`` (rotation on the manifold, ``R <- R Exp(dtheta)``;
     the other blocks added)."""
@@ -416,9 +427,11 @@ def solve(
             cost = float(np.sum(w * np.sum(r * r, axis=1)))
             if use_gyro:
                 r_g, J_g, cols_g = _gyro_rows_compact(state, blocks, lin, rows)
+                ok_g = _finite_gyro_rows(r_g, J_g)
                 norm_g = np.linalg.norm(r_g, axis=1) * base
-                sigma_g = max(robust_sigma(norm_g[S:] if len(r_g) > S else norm_g), 0.1 * sigma_floor)
-                w_g = (base**2) * huber_weights(norm_g, sigma_g) / sigma_g**2
+                moving_ok = norm_g[S:][ok_g[S:]]
+                sigma_g = max(robust_sigma(moving_ok if moving_ok.size else norm_g[ok_g]), 0.1 * sigma_floor)
+                w_g = ok_g * (base**2) * huber_weights(norm_g, sigma_g) / sigma_g**2
                 H_g_c, g_g = normal_equations(J_g, w_g, overwrite=True)
                 H_gyro = np.zeros_like(H)
                 H_gyro[np.ix_(cols_g, cols_g)] = H_g_c
@@ -444,7 +457,7 @@ def solve(
     rho = residual_correlation(r[S:])
     H_p, _ = prior_terms(state, blocks)
     if use_gyro:
-        rho_g = residual_correlation(r_g[S:])
+        rho_g = residual_correlation(r_g[S:][ok_g[S:]])
         info = (H - H_gyro - H_p) / rho + H_gyro / rho_g + H_p
     else:
         info = (H - H_p) / rho + H_p

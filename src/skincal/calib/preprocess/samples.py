@@ -24,7 +24,9 @@ class SampleAccount:
         n_total: samples in the stream.
         n_nonfinite: samples with a non-finite accelerometer reading.
         n_outside: samples whose (shifted) instant lies outside the joint stream.
-        n_saturated: samples at a saturating extreme of some channel (accelerometer or gyroscope).
+        n_saturated: samples dropped at a saturating extreme of the accelerometer.
+        n_gyro_saturated: samples kept whose gyroscope reading is at a rail (NaN in
+            :attr:`UnitSamples.gyro`: every consumer leaves that reading out).
         n_stuck: samples where an accelerometer axis had stopped updating.
         saturated_t: ``(K,)`` instants of the saturated samples (shifted to the joint clock), s.
         warnings: the screening's and the unit check's warnings.
@@ -37,6 +39,7 @@ class SampleAccount:
     n_outside: int = 0
     n_saturated: int = 0
     n_stuck: int = 0
+    n_gyro_saturated: int = 0
     saturated_t: FloatArray | None = None
     warnings: tuple[str, ...] = ()
     unit_warnings: tuple[str, ...] = ()
@@ -50,7 +53,8 @@ class UnitSamples:
         unit: unit name.
         t: ``(M,)`` sample instants, s (shifted by ``time_offset_s`` when one was applied).
         accel: ``(M, 3)`` measured specific force in the unit frame, m/s^2.
-        gyro: ``(M, 3)`` measured angular rate in the unit frame, rad/s, or ``None``.
+        gyro: ``(M, 3)`` measured angular rate in the unit frame, rad/s, or ``None``; a row is NaN
+            where the reading was at the gyroscope's rail (the accelerometer's reading is kept).
         q, qd, qdd: ``(M, n)`` joint states at ``t``.
         segment: ``(M,)`` index into the dataset's segments, -1 outside every segment.
         kind: ``(M,)`` :data:`STATIC` / :data:`DYNAMIC`, -1 outside every segment.
@@ -142,12 +146,16 @@ def unit_samples(
     gyro = None if imu.gyro is None else np.asarray(imu.gyro, dtype=float)[keep]
     screen = screen_channels(unit, accel, gyro, t)
     usable = screen.keep
+    gyro_lost = np.zeros(len(t), dtype=bool) if screen.gyro_saturated is None else screen.gyro_saturated
+    if gyro is not None and gyro_lost.any():
+        gyro = np.where(gyro_lost[:, None], np.nan, gyro)
     account = SampleAccount(
         n_total=int(finite.size),
         n_nonfinite=int(np.count_nonzero(~finite)),
         n_outside=int(np.count_nonzero(finite & ~inside_joints)),
         n_saturated=int(np.count_nonzero(screen.saturated)),
         n_stuck=int(np.count_nonzero(~usable & ~screen.saturated)),
+        n_gyro_saturated=int(np.count_nonzero(gyro_lost)),
         saturated_t=t[screen.saturated],
         warnings=tuple(unit_warnings) + screen.warnings,
         unit_warnings=tuple(unit_warnings),
