@@ -35,7 +35,7 @@ from skincal.data.dataset import NO_JOINTS_MESSAGE, STATIC, Dataset
 from skincal.data.result import CalibrationResult, UnitResult
 from skincal.errors import CalibrationError, ConfigError, DatasetError, SkincalError
 from skincal.kinematics.chain import SerialChain
-from skincal.parallel import can_fork, imap
+from skincal.parallel import can_fork, imap, one_blas_thread
 
 
 @dataclass(frozen=True)
@@ -144,6 +144,7 @@ _Outcome = tuple[str, UnitResult | None, CalibrationError | None]
 :class:`UnitDataError` when its data could not be used at all)."""
 
 
+@one_blas_thread
 def calibrate(
     dataset: Dataset,
     method: str = "mle",
@@ -236,18 +237,8 @@ def calibrate(
     n_workers = max(1, min(int(workers), len(names), os.cpu_count() or 1))  # more would only oversubscribe
     pool: Executor | None = None
     forked: Generator[tuple[int, _Outcome], None, None] | None = None
-    if n_workers == 1:
-        # one BLAS thread, as in the worker processes: the small per-unit matrices gain nothing from
-        # more, and results are then identical whatever ``workers`` is
-        from threadpoolctl import threadpool_limits
-
-        def serial() -> Iterator[_Outcome]:
-            for k, name in enumerate(names):
-                with threadpool_limits(limits=1, user_api="blas"):
-                    outcome = one(k, name)
-                yield outcome
-
-        outcomes = serial()
+    if n_workers == 1:  # one BLAS thread (the decorator), as in the worker processes: results are identical
+        outcomes: Iterator[_Outcome] = (one(k, name) for k, name in enumerate(names))
     elif can_fork():
         interpolator.warm()  # computed once here, inherited by every child
         warm = getattr(shared, "warm", None)

@@ -70,6 +70,7 @@ from skincal.data.result import REFERENCE_LINK, CalibrationResult, UnitResult
 from skincal.errors import ConfigError, DatasetError
 from skincal.kinematics.transforms import FloatArray, nearest_rotation
 from skincal.names import name_problem, printable
+from skincal.parallel import one_blas_thread
 from skincal.skin.pose import SkinUnitPose
 
 __all__ = [
@@ -111,6 +112,7 @@ class RelativeOptions:
     consistency: bool = True
 
 
+@one_blas_thread
 def calibrate_relative(
     dataset: Dataset,
     reference: str,

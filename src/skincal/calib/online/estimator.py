@@ -5,23 +5,20 @@ Flow (all instants on the joint clock, s; the unit's stamps are mapped by its co
     add_joint_states / add_imu      any order, never blocking (buffers)
         │
     update():
-      1. joint blocks: when the joint stream reaches T1 + margin + max_delay, the block [T0, T1) is
-         conditioned exactly as the batch calibrator conditions a whole stream
-         (:class:`~skincal.calib.preprocess.JointInterpolator` over [T0 - margin, T1 + margin]) and
-         the link signals ``u, K, w`` (and ``du/ds``, ``dw/ds``) of EVERY link are evaluated on a
-         uniform grid (``grid_hz``) once for all units; the grid is kept for ``history_s``;
-      2. per unit: once its stream spans ``align_s`` of motion, its coarse time offset is found by
-         cross-correlation (:func:`~skincal.calib.timing.coarse_time_offset`, as ``mle`` does), then
-         each sample whose instant is on the grid adds its rows to the Gram matrices of every
-         candidate link (:mod:`skincal.calib.online.stats`: a fixed-size sufficient statistic, so
-         the cost per sample is constant and no sample is kept);
-    status(): per unit, the pose solved from the Grams of each candidate link; the link whose model
-      explains the data best wins once the others are worse by a clear chi-square margin; std from
-      the normal matrix inflated by the residuals' autocorrelation; what is missing and which joint
-      to move (largest D-optimal gain of a short excitation of that joint at the current posture).
+      1. joint blocks: when the joint stream reaches T1 + margin + max_delay, the block [T0, T1) is conditioned
+         exactly as the batch calibrator conditions a whole stream (:class:`~skincal.calib.preprocess.JointInterpolator`
+         over [T0 - margin, T1 + margin]) and the link signals ``u, K, w`` (and ``du/ds``, ``dw/ds``) of EVERY
+         link are evaluated on a uniform grid (``grid_hz``) once for all units; the grid is kept for ``history_s``;
+      2. per unit: once its stream spans ``align_s`` of motion, its coarse time offset is found by cross-correlation
+         (:func:`~skincal.calib.timing.coarse_time_offset`, as ``mle`` does), then each sample whose instant is on the
+         grid adds its rows to the Gram matrices of every candidate link (:mod:`skincal.calib.online.stats`: a
+         fixed-size sufficient statistic, so the cost per sample is constant and no sample is kept);
+    status(): per unit, the pose solved from the Grams of each candidate link; the link whose model explains the data
+      best wins once the others are worse by a clear chi-square margin; std from the normal matrix inflated by the
+      residuals' autocorrelation; what is missing, and the joint whose short excitation gains the most (D-optimal).
 
-A unit decided on its link keeps only that link's statistics (the others' are dropped). Samples
-that arrive after their part of the grid left the history are counted as ``late`` and dropped.
+A unit decided on its link keeps only that link's statistics (the others' are dropped). Samples that arrive after
+their part of the grid left the history are counted as ``late`` and dropped. Processing runs with one BLAS thread.
 """
 
 from __future__ import annotations
@@ -51,6 +48,7 @@ from skincal.errors import ConfigError
 from skincal.kinematics.chain import SerialChain
 from skincal.kinematics.transforms import FloatArray
 from skincal.names import name_problem
+from skincal.parallel import one_blas_thread
 from skincal.skin.pose import SkinUnitPose
 
 __all__ = ["OnlineCalibrator", "OnlineOptions", "UnitStatus", "excitation"]
@@ -176,6 +174,7 @@ class OnlineCalibrator:
             st.pending_g.append(None if g is None else g[ok])
 
     # ---------------------------------------------------------------- processing
+    @one_blas_thread
     def update(self) -> int:
         """Absorb every complete block; returns the number of IMU samples absorbed."""
         c0 = time.process_time()
@@ -191,6 +190,7 @@ class OnlineCalibrator:
         self.cpu_s += time.process_time() - c0
         return n
 
+    @one_blas_thread
     def finish(self) -> None:
         """End of data: process the joint stream to its end and absorb what can be."""
         c0 = time.process_time()
@@ -459,6 +459,7 @@ class OnlineCalibrator:
         st.solutions = {link: st.solutions[link]}
         st.decided, st.split_cache = True, None
 
+    @one_blas_thread
     def status(self, fresh: bool = False) -> dict[str, UnitStatus]:
         """Every unit's :class:`UnitStatus` now (``fresh``: its split check made again, not the last one's)."""
         for u in self.units if fresh else ():
@@ -528,6 +529,7 @@ class OnlineCalibrator:
         self.events.append(dict(event))
 
     # ---------------------------------------------------------------- result
+    @one_blas_thread
     def result(self, dataset_sha256: str = "") -> CalibrationResult:
         """The current estimates as a :class:`CalibrationResult` (method ``online``): units with a
         determined pose; the others under ``failed_units`` with what is missing."""
