@@ -35,7 +35,12 @@ def simulate(
         help="protocol preset: paper-sim, paper-real, fast (fitted to the robot), or a motion .json written by "
         "skincal protocol (simulated as it is: the rehearsal of a real session)",
     ),
-    seed: int = typer.Option(0, callback=seed_option, help="random seed (placements, poses, noise)"),
+    seed: int = typer.Option(
+        0,
+        callback=seed_option,
+        help="random seed (one stream: placements first, then poses, then noise; so a preset's poses differ from "
+        "skincal protocol's of the same seed: to simulate a planned motion give its .json as --protocol)",
+    ),
     backend: str = typer.Option("analytic", help="analytic (exact, fast) or mujoco (independent physics)"),
     mujoco_mode: str = typer.Option(
         "kinematic", help="mujoco backend: kinematic (imposed motion) or dynamic (1 kHz velocity servos)"
