@@ -417,3 +417,23 @@ def test_correlated_residuals_inflate_the_std_before_five_windows_but_white_ones
         assert inflation(SimpleNamespace(win_count=count, win_stat=60.0 * 3 * count)) == pytest.approx(60.0)
     assert inflation(SimpleNamespace(win_count=2, win_stat=1507.3)) == CORRELATION_MAX  # the real recording's
     assert inflation(SimpleNamespace(win_count=MIN_WINDOWS, win_stat=2.0 * 3 * MIN_WINDOWS)) == pytest.approx(2.0)
+
+
+def test_a_gyroscope_at_its_rail_drops_its_reading_and_keeps_the_accelerometer_sample():
+    """As in ``mle``: a sample whose gyroscope alone is at its rail keeps its accelerometer reading (the fast
+    motion that clipped it is what determines the lever arm best), and its gyroscope rows add nothing."""
+    from skincal.calib.online.unit import UnitState, unsaturated
+
+    rng = np.random.default_rng(5)
+    M = 400
+    a = rng.normal(0.0, 3.0, (M, 3))
+    g = np.clip(rng.normal(0.0, 4.0, (M, 3)), -4.276, 4.276)  # a +-245 deg/s gyroscope clips
+    st = UnitState([3], np.zeros((1, 2, stats.NA, stats.NA)), np.zeros((1, 2, stats.NG, stats.NG)), np.zeros(1))
+    keep, g_out = unsaturated(st, a, g)
+    at_rail = np.any(np.abs(g) >= 4.276, axis=1)
+    assert at_rail.mean() > 0.5 and keep.all()
+    assert np.array_equal(np.isnan(g_out).any(axis=1), at_rail) and np.array_equal(g_out[~at_rail], g[~at_rail])
+    w, dw = rng.normal(size=(M, 3)), rng.normal(size=(M, 3))
+    Z = stats.gyro_rows(g_out, w, dw)
+    assert np.all(Z[at_rail] == 0.0) and np.array_equal(Z[~at_rail], stats.gyro_rows(g, w, dw)[~at_rail])
+    assert np.allclose(stats.gram(Z), stats.gram(stats.gyro_rows(g[~at_rail], w[~at_rail], dw[~at_rail])))

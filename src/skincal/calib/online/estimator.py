@@ -326,7 +326,7 @@ class OnlineCalibrator:
     def _absorb(self, name: str, st: UnitState, grid: Grid, s: FloatArray, a: FloatArray,
                 g: FloatArray | None) -> tuple[int, tuple | None]:  # fmt: skip
         """Absorb samples at instants ``s``: their count and chunk ``(s0, s1, Za, Zg, moving)`` (None: none)."""
-        unsat = unsaturated(st, a, g)
+        unsat, g = unsaturated(st, a, g)  # a gyroscope's readings at its rail: NaN rows
         if not unsat.all():
             s, a, g = s[unsat], a[unsat], None if g is None else g[unsat]
         u, K, w, dw, du, dK, ug, ok = signals_at(grid, s, st.links)

@@ -130,7 +130,8 @@ def accel_rows(
 
 def gyro_rows(g: FloatArray, w: FloatArray, dw: FloatArray, elapsed: FloatArray | None = None) -> FloatArray:
     """``(..., M, 3, NG)`` rows of equation (2) for rates ``g`` ``(..., M, 3)`` (unit frame), the link's
-    ``w``, ``dw`` ``(..., M, 3)`` (link frame) and ``elapsed = s - t_ref`` ``(M,)`` s (None: no drift)."""
+    ``w``, ``dw`` ``(..., M, 3)`` (link frame) and ``elapsed = s - t_ref`` ``(M,)`` s (None: no drift).
+    A reading with a NaN (at the gyroscope's rail) gives zero rows: it adds nothing to a Gram."""
     Z = np.zeros((*w.shape[:-1], 3, NG))
     for i in range(3):
         Z[..., i, 3 * i : 3 * i + 3] = g
@@ -139,6 +140,9 @@ def gyro_rows(g: FloatArray, w: FloatArray, dw: FloatArray, elapsed: FloatArray 
     if elapsed is not None:
         Z[..., 13] = -dw * np.asarray(elapsed, dtype=float)[:, None]
     Z[..., 14] = w
+    missing = ~np.all(np.isfinite(np.broadcast_to(g, w.shape)), axis=-1)
+    if missing.any():
+        Z[missing] = 0.0
     return Z
 
 

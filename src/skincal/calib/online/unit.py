@@ -135,10 +135,13 @@ def signals_at(grid: Grid, s: FloatArray, links: Sequence[int]):
     return (*sig, grid.ok[i] & grid.ok[i + 1])
 
 
-def unsaturated(st: UnitState, a: FloatArray, g: FloatArray | None) -> np.ndarray:
-    """``(M,)`` samples below the sensors' saturation: a largest reading that recurs exactly (a
-    clipped register) is taken as the range, and every sample reaching it on any axis is dropped."""
+def unsaturated(st: UnitState, a: FloatArray, g: FloatArray | None) -> tuple[np.ndarray, FloatArray | None]:
+    """``(M,)`` samples whose accelerometer is below its saturation, and the gyroscope's readings with NaN
+    rows where it is at its rail (:func:`~skincal.calib.online.stats.gyro_rows` leaves them out; the
+    sample's accelerometer reading needs no gyroscope, as in ``mle``): a largest reading that recurs
+    exactly (a clipped register) is taken as the range."""
     keep = np.ones(a.shape[0], dtype=bool)
+    rail = np.zeros(a.shape[0], dtype=bool)
     for i, x in enumerate((a, g)):
         if x is None or x.size == 0:
             continue
@@ -151,9 +154,15 @@ def unsaturated(st: UnitState, a: FloatArray, g: FloatArray | None) -> np.ndarra
         else:
             st.peak_count[i] += float((m == st.peak[i]).sum())
         if st.peak_count[i] >= 2 and st.peak[i] >= SATURATION_FLOOR[i]:
-            keep &= np.all(m < st.peak[i], axis=1)
-    st.saturated += int((~keep).sum())
-    return keep
+            at_rail = ~np.all(m < st.peak[i], axis=1)
+            if i == 0:
+                keep &= ~at_rail
+            else:
+                rail |= at_rail
+    st.saturated += int((~keep | rail).sum())
+    if g is not None and rail.any():
+        g = np.where(rail[:, None], np.nan, g)
+    return keep, g
 
 
 def rests_only(st: UnitState, k: int) -> bool:
