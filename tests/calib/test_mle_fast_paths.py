@@ -104,6 +104,7 @@ def test_a_part_fit_without_diagnostics_keeps_the_pose_and_std(short):
 
 
 def test_the_parts_reuse_the_full_runs_alignment_to_the_same_result(short):
+    """The full run and the split check's six parts in forked workers (workers=2) give what one process gives."""
     serial = calibrate(short, "mle", workers=1)  # the parts take the full run's alignments
     forked = calibrate(short, "mle", workers=2)  # the full run in workers: the parts align again
     assert set(serial.units) == set(forked.units) == set(short.units)

@@ -306,11 +306,16 @@ def calibrate(
                     )  # fmt: skip
                 except CalibrationError as exc:
                     part_failed[name] = str(exc)
-                steps.advance("checking independent parts of the recording")
             return CalibrationResult(method, dataset.chain.name, "", 0.0, units, failed_units=part_failed)
 
-        result = check(tagged, result, refit)
-        steps.reach(steps.consistency_end, "checking independent parts of the recording")
+        if spec.align is not None and n_workers > 1:  # found here once, before the parts' processes fork
+            for name in result.units:
+                if name not in alignments:
+                    alignments[name] = spec.align(shared, tagged.imu[name])
+
+        stage = "checking independent parts of the recording"
+        result = check(tagged, result, refit, workers=n_workers, done=lambda: steps.advance(stage))
+        steps.reach(steps.consistency_end, stage)
     if getattr(parsed, "joint_rate", False):  # the report-spacing check (skincal.calib.joint_rate)
         from skincal.calib.joint_rate import check as joint_rate_check
 

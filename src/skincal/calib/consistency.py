@@ -43,6 +43,7 @@ from scipy.stats import chi2 as chi2_dist
 from skincal.data.dataset import Dataset, ImuStream, TofStream
 from skincal.data.result import REFERENCE_LINK, CalibrationResult, UnitResult
 from skincal.kinematics.transforms import FloatArray
+from skincal.parallel import can_fork, imap
 
 WINDOW_S = 4.0
 """Length of the alternate windows of the ``interleaved`` split, s."""
@@ -351,9 +352,15 @@ def apply(unit: UnitResult, c: Consistency) -> UnitResult:
                    pose_covariance=cov, imu=imu)  # fmt: skip
 
 
-def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> CalibrationResult:
+def check(
+    dataset: Dataset, result: CalibrationResult, refit: Refit, workers: int = 1,
+    done: Callable[[], None] | None = None,
+) -> CalibrationResult:  # fmt: skip
     """``result`` with each unit's :class:`Consistency` (``extras["consistency"]``) and its std inflated
-    where the parts disagree (module docstring); ``refit`` runs the method on each part."""
+    where the parts disagree (module docstring); ``refit`` runs the method on each part. With ``workers``
+    > 1 (and :func:`~skincal.parallel.can_fork`) the six parts are calibrated in forked processes (the same
+    results: each part's fit depends on its data and seed only); ``done()`` is called here once per unit of
+    each part as the part's result comes (a progress bar's step)."""
     if not result.units:
         return result
     links = {name: int(u.pose.link) for name, u in result.units.items() if u.observable}
@@ -365,20 +372,29 @@ def check(dataset: Dataset, result: CalibrationResult, refit: Refit) -> Calibrat
         lively: dict[int, np.ndarray] | None = lively_of(dataset, links.values())
     except Exception:  # noqa: BLE001
         lively = None
-    for split in SPLITS:
-        for side in (0, 1):
-            try:
-                part = refit(_part(dataset, split, side, links, lively), links)
-            except Exception as exc:  # noqa: BLE001 - a part that cannot be calibrated is a finding, not a crash
-                for u in links:
-                    errors[u].append(f"{split} part {side + 1}: {exc}")
-                part = None
+    jobs = [(split, side) for split in SPLITS for side in (0, 1)]
+
+    def one(job: tuple[str, int]) -> tuple[CalibrationResult | None, str]:
+        try:
+            return refit(_part(dataset, job[0], job[1], links, lively), links), ""
+        except Exception as exc:  # noqa: BLE001 - a part that cannot be calibrated is a finding, not a crash
+            return None, str(exc)
+
+    n = min(int(workers), len(jobs)) if can_fork() else 1
+    for k, (part, failure) in imap(one, jobs, n, fork=True, one_blas_thread=True):
+        split, side = jobs[k]
+        if done is not None:
+            for _ in links:
+                done()
+        if part is None:
             for u in links:
-                got = None if part is None else part.units.get(u)
-                if part is not None and got is None:
-                    reason = part.failed_units.get(u, "not calibrated")
-                    errors[u].append(f"{split} part {side + 1}: {reason}")
-                outcomes[u].setdefault(split, []).append(got)
+                errors[u].append(f"{split} part {side + 1}: {failure}")
+        for u in links:
+            got = None if part is None else part.units.get(u)
+            if part is not None and got is None:
+                reason = part.failed_units.get(u, "not calibrated")
+                errors[u].append(f"{split} part {side + 1}: {reason}")
+            outcomes[u].setdefault(split, []).append(got)
     units = dict(result.units)
     for name in links:
         pairs = {s: (v[0], v[1]) for s, v in outcomes[name].items() if v[0] is not None and v[1] is not None}
