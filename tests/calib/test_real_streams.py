@@ -270,3 +270,18 @@ def test_so101_fast_with_a_realistic_gyroscope_is_named_and_stays_honest():
         d_rot = np.degrees(Rotation.from_matrix(unit.pose.R_link_su @ truth.R_link_su.T).as_rotvec())
         z_r = d_rot / unit.rotation_std_deg
         assert np.all(np.abs(z_p) < 4) and np.all(np.abs(z_r) < 4), (name, z_p, z_r)
+
+
+def test_a_gyroscope_stuck_at_its_rail_is_not_used_at_all(session):
+    """A gyroscope whose every reading is its rail (a stuck register): its readings dropped sample by sample
+    left the rests without a gyroscope and its clock search without motion (a unit 0.5 s and 120 mm off).
+    It is not used at all: the result is the accelerometer-only one, and the warning says why."""
+    name = session.units[0]
+    link = {name: session.truth[name].link}
+    stuck = _with_imu(session, gyro=np.full_like(session.imu[name].gyro, 4.276))
+    none = _with_imu(session, gyro=None)
+    u = calibrate(stuck, "mle", links=link).units[name]
+    ref = calibrate(none, "mle", links=link).units[name]
+    assert any("gyroscope at its rail in 100% of the samples" in w and "not used" in w for w in u.warnings)
+    assert np.all(np.abs(u.pose.p_link_su - ref.pose.p_link_su) < 0.1 * ref.position_std_m)
+    assert abs(u.imu.time_offset_s - ref.imu.time_offset_s) < 1e-3

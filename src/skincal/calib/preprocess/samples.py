@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from skincal.calib.preprocess.interpolate import JointInterpolator
-from skincal.calib.preprocess.screening import check_accel_units, screen_channels
+from skincal.calib.preprocess.screening import GYRO_RAIL_MAX_SHARE, check_accel_units, screen_channels
 from skincal.data.dataset import DYNAMIC, STATIC, Dataset, Segments
 from skincal.errors import CalibrationError
 from skincal.kinematics.transforms import FloatArray
@@ -147,7 +147,13 @@ def unit_samples(
     screen = screen_channels(unit, accel, gyro, t)
     usable = screen.keep
     gyro_lost = np.zeros(len(t), dtype=bool) if screen.gyro_saturated is None else screen.gyro_saturated
-    if gyro is not None and gyro_lost.any():
+    extra: tuple[str, ...] = ()
+    rail_share = np.count_nonzero(gyro_lost) / max(np.count_nonzero(usable), 1)
+    if gyro is not None and rail_share > GYRO_RAIL_MAX_SHARE:
+        extra = (f"gyroscope at its rail in {100 * rail_share:.0f}% of the samples (stuck, or a range too small for "
+                 "this motion): not used",)  # fmt: skip
+        gyro, gyro_lost = None, np.zeros(len(t), dtype=bool)
+    elif gyro is not None and gyro_lost.any():
         gyro = np.where(gyro_lost[:, None], np.nan, gyro)
     account = SampleAccount(
         n_total=int(finite.size),
@@ -157,7 +163,7 @@ def unit_samples(
         n_stuck=int(np.count_nonzero(~usable & ~screen.saturated)),
         n_gyro_saturated=int(np.count_nonzero(gyro_lost)),
         saturated_t=t[screen.saturated],
-        warnings=tuple(unit_warnings) + screen.warnings,
+        warnings=tuple(unit_warnings) + screen.warnings + extra,
         unit_warnings=tuple(unit_warnings),
     )
     t, accel = t[usable], accel[usable]

@@ -53,7 +53,7 @@ def _rails(x: FloatArray, minimum: float, pile_up: bool = False) -> list[tuple[i
         fin = a[np.isfinite(a)]
         if fin.size == 0:
             continue
-        for extreme in (fin.max(), fin.min()):
+        for extreme in dict.fromkeys((fin.max(), fin.min())):  # one rail when the axis never leaves it
             hits = a == extreme
             n_hits = np.count_nonzero(hits)
             if not (abs(extreme) > minimum and hits.mean() > SATURATION_FRACTION and n_hits > 3):
@@ -62,6 +62,20 @@ def _rails(x: FloatArray, minimum: float, pile_up: bool = False) -> list[tuple[i
                 continue
             out.append((k, float(extreme), hits))
     return out
+
+
+GYRO_RAIL_MAX_SHARE = 0.5
+"""A gyroscope at its rail in more than this share of its samples is not used at all (not for the clock
+search either): its rest readings are gone too (a stuck register), and without them its bias and the
+clock's cross-correlation rest on clipped motion alone (a stuck one aligned a unit 0.5 s off)."""
+
+
+def gyro_rail_share(gyro: FloatArray) -> float:
+    """The share of the samples ``gyro`` ``(M, 3)`` with some axis at a rail (:func:`screen_channels`'s test)."""
+    at = np.zeros(len(gyro), dtype=bool)
+    for _, _, hits in _rails(np.asarray(gyro, dtype=float), GYRO_SATURATION_MIN, pile_up=True):
+        at |= hits
+    return float(at.mean()) if len(at) else 0.0
 
 
 def screen_channels(
