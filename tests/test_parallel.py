@@ -84,3 +84,46 @@ def test_calibrate_runs_its_split_check_with_one_blas_thread(monkeypatch):
     result = calibrate(ds, "mle")
     assert seen and all(n == 1 for n in seen[0])
     assert "consistency" in next(iter(result.units.values())).extras
+
+
+def test_one_blas_thread_nested_keeps_the_limit_until_the_outermost_call_leaves():
+    """Nested calls (calibrate inside a decorated caller) share one limit: the inner call's end must not restore
+    it under the outer one, and the outer one's end restores what was before."""
+    from skincal.parallel import one_blas_thread
+
+    before = _blas_threads()
+    seen: list[list[int]] = []
+
+    @one_blas_thread
+    def inner() -> None:
+        seen.append(_blas_threads())
+
+    @one_blas_thread
+    def outer() -> None:
+        inner()
+        seen.append(_blas_threads())  # after the inner call has left
+
+    outer()
+    assert len(seen) == 2 and all(n == 1 for threads in seen for n in threads)
+    assert _blas_threads() == before
+
+
+def test_an_interrupted_run_does_not_wait_for_its_running_items():
+    """Ctrl-C during a forked run terminates the running items instead of waiting for them (the split check's
+    parts take seconds each: SIGTERM took 11 s to end a 24-unit calibrate; a service manager kills at 10 s)."""
+    import signal
+    import threading
+    import time
+
+    start = time.monotonic()
+    main = threading.main_thread().ident
+    assert main is not None
+    timer = threading.Timer(1.0, lambda: signal.pthread_kill(main, signal.SIGINT))  # a real Ctrl-C, in its wait
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            for _ in imap(time.sleep, [60.0, 60.0, 60.0], 2, fork=True):
+                pass
+    finally:
+        timer.cancel()
+    assert time.monotonic() - start < 10.0

@@ -24,6 +24,7 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 from collections.abc import Callable, Generator, Iterable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from functools import partial, wraps
@@ -77,9 +78,10 @@ def running_forked() -> int:
     return len(_FORKED)
 
 
-_BLAS_CONTROLLER: Any = None
-"""The :class:`threadpoolctl.ThreadpoolController` of :func:`one_blas_thread`, made on first use (by then
-NumPy's and SciPy's BLAS are loaded): limiting through it costs 13 us, ``threadpool_limits`` 0.7 ms."""
+_BLAS_LOCK = threading.Lock()
+_BLAS_DEPTH = 0
+_BLAS_LIMIT_NOW: Any = None
+"""The :func:`one_blas_thread` limit in force (a ``threadpoolctl`` limiter) and how many calls are inside it."""
 
 
 def one_blas_thread(fn: Callable[P, R]) -> Callable[P, R]:
@@ -87,19 +89,40 @@ def one_blas_thread(fn: Callable[P, R]) -> Callable[P, R]:
     (27 x 27 normal matrices, 3 x 3 rotations), which more threads only slow down, badly so on a busy
     machine: one ``eigh`` of a 27 x 27 matrix took 15 ms with OpenBLAS's two threads while another process
     ran, 0.06 ms with one; the unit fits ran with one already, the split check's part fits did not (12.0
-    -> 5.6 CPU s for 6 units, simulated). Results do not depend on it."""
+    -> 5.6 CPU s for 6 units, simulated). Results do not depend on it. Overlapping calls (threads, nesting)
+    share one limit, restored when the last leaves."""
 
     @wraps(fn)
     def limited(*args: P.args, **kwargs: P.kwargs) -> R:
-        global _BLAS_CONTROLLER
-        if _BLAS_CONTROLLER is None:
-            from threadpoolctl import ThreadpoolController
-
-            _BLAS_CONTROLLER = ThreadpoolController()
-        with _BLAS_CONTROLLER.limit(limits=1, user_api="blas"):
+        _enter_one_blas_thread()
+        try:
             return fn(*args, **kwargs)
+        finally:
+            _leave_one_blas_thread()
 
     return limited
+
+
+def _enter_one_blas_thread() -> None:
+    """The limit is the process's: the first of overlapping calls (threads, nesting) sets it, the last restores.
+    Each first call lists the loaded BLAS libraries afresh (0.7 ms), so one loaded since is limited too."""
+    global _BLAS_DEPTH, _BLAS_LIMIT_NOW
+    with _BLAS_LOCK:
+        if _BLAS_DEPTH == 0:
+            import scipy.linalg  # noqa: F401 - SciPy's own BLAS loaded before the libraries are listed
+            from threadpoolctl import threadpool_limits
+
+            _BLAS_LIMIT_NOW = threadpool_limits(limits=1, user_api="blas")
+        _BLAS_DEPTH += 1
+
+
+def _leave_one_blas_thread() -> None:
+    global _BLAS_DEPTH, _BLAS_LIMIT_NOW
+    with _BLAS_LOCK:
+        _BLAS_DEPTH -= 1
+        if _BLAS_DEPTH == 0 and _BLAS_LIMIT_NOW is not None:
+            _BLAS_LIMIT_NOW.restore_original_limits()
+            _BLAS_LIMIT_NOW = None
 
 
 def _start_worker(one_blas_thread: bool) -> None:
@@ -116,6 +139,15 @@ def _start_worker(one_blas_thread: bool) -> None:
 def _call_forked(token: int, item: Any) -> Any:
     """Entry point of a forked worker: the inherited function of run ``token`` on one (pickled) item."""
     return _FORKED[token](item)
+
+
+def _terminate_workers(pool: ProcessPoolExecutor) -> None:
+    """SIGTERM to every worker of ``pool`` now (an interrupted run: the signal reached this process only, and a
+    worker's item can take seconds). ``ProcessPoolExecutor`` has no public way before Python 3.14's
+    ``terminate_workers``; without its process table nothing is done (the shutdown then waits)."""
+    for process in list((getattr(pool, "_processes", None) or {}).values()):
+        if process.is_alive():
+            process.terminate()
 
 
 def imap(
@@ -140,7 +172,8 @@ def imap(
         one_blas_thread: limit each worker to one BLAS thread.
 
     Items not yet started when the caller stops iterating (or an error ends the run) are cancelled; the
-    call returns once the running ones have ended.
+    call returns once the running ones have ended. An interruption (Ctrl-C, SIGTERM: a ``BaseException``
+    that is not an ``Exception``) terminates the running ones instead of waiting for them.
     """
     if workers <= 1:
         for k, item in enumerate(items):
@@ -181,6 +214,10 @@ def imap(
             k = pending.pop(future)
             refill()
             yield k, result
+    except BaseException as exc:
+        if not isinstance(exc, Exception | GeneratorExit):  # Ctrl-C, SIGTERM: the running items are not waited for
+            _terminate_workers(pool)
+        raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         if token is not None:

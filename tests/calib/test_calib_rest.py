@@ -231,3 +231,18 @@ def test_unit_rest_runs_too_short_runs_are_not_candidates():
     accel = np.random.default_rng(0).normal(0, 0.01, (300, 3)) + [0, 0, 9.81]
     out = unit_rest_runs(mask, t, accel, None)
     np.testing.assert_array_equal(out.bounds, [(106, 194)])
+
+
+def test_a_gyroscope_reading_left_out_at_its_rail_drops_no_rest_run():
+    """A NaN gyroscope row (a reading at its rail, left out) inside one rest run made that run's spread NaN, the
+    median spread NaN and the limit NaN: every run failed the check (10 of 10 dropped as "moved")."""
+    from skincal.calib.rest import unit_rest_runs
+
+    rng = np.random.default_rng(7)
+    t = np.arange(10_000) * 0.01
+    rest = (t % 10.0) < 5.0  # 10 rests of 5 s, 5 s of motion between
+    accel = np.where(rest[:, None], 0.0, 2.0 * np.sin(t)[:, None]) + rng.normal(0.0, 0.02, (t.size, 3))
+    gyro = np.where(rest[:, None], 0.0, np.cos(t)[:, None]) + rng.normal(0.0, 0.005, (t.size, 3))
+    gyro[3 * 1000 + 250] = np.nan  # inside the fourth rest
+    runs = unit_rest_runs(rest, t, accel, gyro)
+    assert len(runs.bounds) == 10 and len(runs.dropped) == 0

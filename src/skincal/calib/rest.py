@@ -213,7 +213,13 @@ class RestRuns:
 
 
 def _spread(x: FloatArray, a: int, b: int) -> float:
-    return float(np.max(np.std(x[a:b], axis=0)))
+    """Largest per-axis std of the readings ``x[a:b]`` with a value (a gyroscope's at its rail are NaN); 0
+    with fewer than two."""
+    run = x[a:b]
+    ok = np.all(np.isfinite(run), axis=1)
+    if not ok.all():
+        run = run[ok]
+    return float(np.max(np.std(run, axis=0))) if len(run) >= 2 else 0.0
 
 
 def unit_rest_runs(

@@ -72,8 +72,10 @@ def arrange_unit_data(
     w_s, tm_s = np.zeros(S), np.zeros(S)
     for k, (a, b) in enumerate(runs.bounds):  # np.mean per run: its pairwise sums (a rests-only fit's null
         f_s[k] = accel[a:b].mean(axis=0)  # space is decided at round-off, so keep this arithmetic)
-        if gyro is not None:
-            g_s[k] = gyro[a:b].mean(axis=0)
+        if gyro is not None:  # the readings with a value (NaN at the gyroscope's rail; none: a NaN row)
+            run = gyro[a:b]
+            ok = np.all(np.isfinite(run), axis=1)
+            g_s[k] = run.mean(axis=0) if ok.all() else run[ok].mean(axis=0) if ok.any() else np.nan
         w_s[k] = b - a
         tm_s[k] = 0.5 * (t[a] + t[b - 1])
         q_s[k] = interpolator.nearest(t[a:b])[0].mean(axis=0)

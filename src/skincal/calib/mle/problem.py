@@ -173,7 +173,10 @@ def arrange(
 
 def gyro_bias_start(rows: Rows) -> FloatArray:
     """The gyroscope's reading at rest: the median of its rest runs' means, rad/s (0 without any)."""
-    return np.median(rows.static_g, axis=0) if rows.static_g is not None and len(rows.static_g) else np.zeros(3)
+    if rows.static_g is None:
+        return np.zeros(3)
+    g = rows.static_g[np.all(np.isfinite(rows.static_g), axis=1)]  # a run all at the rail: NaN
+    return np.median(g, axis=0) if len(g) else np.zeros(3)
 
 
 def start_state(p: Problem) -> State:

@@ -159,7 +159,7 @@ def unsaturated(st: UnitState, a: FloatArray, g: FloatArray | None) -> tuple[np.
                 keep &= ~at_rail
             else:
                 rail |= at_rail
-    st.saturated += int((~keep | rail).sum())
+    st.saturated += int((~keep).sum())  # samples not absorbed (a gyroscope's rail leaves its reading out only)
     if g is not None and rail.any():
         g = np.where(rail[:, None], np.nan, g)
     return keep, g

@@ -334,6 +334,8 @@ def _qdd_steps(q: FloatArray, window: int, sigma: FloatArray, dt: float) -> np.n
     if q.shape[0] < wide:
         return np.zeros(q.shape[0], dtype=bool)
     step, per_sigma = qdd_steps(q, wide, dt, STEP_POLYORDER)
+    h = wide // 2
+    step[:h], step[-h:] = 0.0, 0.0  # no whole window there: the padding's flat ends are no steps of the motion
     return np.any(np.abs(step) > STEP_FACTOR * np.asarray(sigma) * per_sigma + STEP_FLOOR, axis=1)
 
 
