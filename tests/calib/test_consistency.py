@@ -14,9 +14,11 @@ from skincal.calib.consistency import (
     EXCITATION_WINDOW_S,
     PART_STD_LIMIT,
     SPLITS,
+    apply,
     axis_inflation,
     block_inflation,
     compare,
+    judge,
     lively_windows,
     part_masks,
 )
@@ -72,6 +74,18 @@ def _unit(p_mm, std_mm, std_deg=0.1):
     pose = SkinUnitPose(link=2, R_link_su=np.eye(3), p_link_su=1e-3 * np.asarray(p_mm, dtype=float))
     std = 1e-3 * np.asarray(std_mm, dtype=float)
     return UnitResult(pose=pose, position_std_m=std, rotation_std_deg=np.full(3, std_deg))
+
+
+def test_the_warning_names_what_disagrees_or_says_none_alone_does():
+    """Two std on every component of every split inflate the block (chi2 72 on 18 dof) with no component
+    beyond Z_NAMED: the warning says so instead of printing empty parentheses."""
+    unit = _unit([0, 0, 0], [1.0, 1.0, 1.0])
+    jointly = apply(unit, judge(np.full((len(SPLITS), 6), 2.0), [], []))
+    (warning,) = [w for w in jointly.warnings if "disagree" in w]
+    assert "()" not in warning and "jointly" in warning
+    assert np.allclose(jointly.position_std_m, 2e-3)
+    named = apply(unit, judge(np.full((len(SPLITS), 6), 2.0), ["position z +4.0 mm (4.0 std, time)"], []))
+    assert "(position z +4.0 mm (4.0 std, time))" in [w for w in named.warnings if "disagree" in w][0]
 
 
 def test_a_part_that_does_not_determine_a_component_is_not_compared():

@@ -437,3 +437,27 @@ def test_a_gyroscope_at_its_rail_drops_its_reading_and_keeps_the_accelerometer_s
     Z = stats.gyro_rows(g_out, w, dw)
     assert np.all(Z[at_rail] == 0.0) and np.array_equal(Z[~at_rail], stats.gyro_rows(g, w, dw)[~at_rail])
     assert np.allclose(stats.gram(Z), stats.gram(stats.gyro_rows(g[~at_rail], w[~at_rail], dw[~at_rail])))
+
+
+def test_a_gyroscope_clipped_below_the_old_floor_is_at_its_rail_in_both_calibrators():
+    """A gyroscope stream clipped at 1.5 rad/s (a range or a driver clip below 2 rad/s) was taken at face value by
+    the streaming calibrator (12 std off in rotation, no warning) while ``mle`` left those readings out: both now
+    flag the same samples, and the streaming result warns."""
+    from skincal.calib.online.fit import unit_warnings
+    from skincal.calib.online.unit import UnitState, unsaturated
+    from skincal.calib.preprocess.screening import screen_channels
+
+    rng = np.random.default_rng(8)
+    M = 600
+    a = rng.normal(0.0, 3.0, (M, 3))
+    g = np.clip(rng.normal(0.0, 1.2, (M, 3)), -1.5, 1.5)
+    grams = np.zeros((1, 2, stats.NA, stats.NA)), np.zeros((1, 2, stats.NG, stats.NG)), np.zeros(1)
+    st = UnitState([3], *grams)
+    _, g_out = unsaturated(st, a, g)
+    batch = screen_channels("su1", a, g)
+    online_rail = np.isnan(g_out).any(axis=1)
+    assert 0.3 < online_rail.mean() < 0.9
+    assert np.array_equal(online_rail, batch.gyro_saturated)
+    assert st.gyro_saturated == online_rail.sum() and st.saturated == 0
+    assert any("gyroscope at its rail" in w for w in unit_warnings(st, False))
+    assert not any("rail" in w for w in unit_warnings(UnitState([3], *grams), False))

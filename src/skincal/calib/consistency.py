@@ -332,9 +332,10 @@ def apply(unit: UnitResult, c: Consistency) -> UnitResult:
             return f"{what} " + " ".join(f"{a} x{v:.1f}" for a, v in zip(AXES, f, strict=True))
 
         parts = [said("position", ap)] * (fp > 1.0) + [said("rotation", ar)] * (fr > 1.0)
+        which = f" ({'; '.join(c.disagrees[:3])})" if c.disagrees else " (jointly, no component alone)"
         warnings.append(
-            "independent parts of the recording disagree beyond their std ("
-            + "; ".join(c.disagrees[:3]) + "): std inflated by the observed excess, " + ", ".join(parts)
+            f"independent parts of the recording disagree beyond their std{which}: std inflated by the observed "
+            "excess, " + ", ".join(parts)
         )
     imu = unit.imu
     if imu is not None and imu.time_offset_std_s is not None and c.inflation_time_offset > 1.0:

@@ -55,10 +55,6 @@ __all__ = ["OnlineCalibrator", "OnlineOptions", "UnitStatus", "excitation"]
 """``OnlineOptions``, ``UnitStatus`` (:mod:`~skincal.calib.online.options`) and ``excitation``
 (:mod:`~skincal.calib.online.design`) are re-exported: their import path from here is kept."""
 
-DRIFT_UNDETERMINED_PPM = 100.0
-"""A residual clock drift whose std exceeds this (ppm) is not determined yet: the result says so."""
-DRIFT_NOTE_SIGMAS, DRIFT_NOTE_PPM = 4.0, 20.0
-"""A drift beyond this many std and ppm is named in the result (``mle``'s rule)."""
 MIN_MOVING = 200
 """Moving samples of the best link before its link is decided."""
 GATE_SIGMAS = 6.0
@@ -549,16 +545,7 @@ class OnlineCalibrator:
             std = np.sqrt(np.clip(np.diag(cov), 0.0, None))  # before the split check (applied below)
             imu, drift, drift_std_ppm = fit.imu_calibration(st, sol, kappa, self.gravity)
             warnings = fit.unit_warnings(st, self.spline and not rests and factors is None)
-            notes: list[str] = []
-            if drift_std_ppm > DRIFT_UNDETERMINED_PPM:
-                notes.append(
-                    f"clock drift not determined yet (std {drift_std_ppm:.0f} ppm over {st.t_last - st.t_first:.0f} s"
-                    " of data): the time offset holds near the data's start"
-                )
-            elif abs(drift) * 1e6 > max(DRIFT_NOTE_SIGMAS * drift_std_ppm, DRIFT_NOTE_PPM):
-                notes.append(
-                    f"clock drifts: {drift * 1e6:+.0f} ppm relative to the robot's clock (estimated and corrected)"
-                )
+            notes = fit.unit_notes(st, drift, drift_std_ppm)
             extras: dict[str, Any] = {
                 "link_name": self.chain.link_names[s.link] if self.chain.link_names else f"link{s.link}",
                 "link_margin": s.link_margin if np.isfinite(s.link_margin) else None,
@@ -569,6 +556,7 @@ class OnlineCalibrator:
                 "residual_correlation": kappa,
                 "outliers": st.outliers,
                 "saturated_samples": st.saturated,
+                "gyro_saturated_samples": st.gyro_saturated,
                 "realigned": st.realigned,
                 "clock_rechecked": st.rechecked,
                 "scale_estimated": st.scale_estimated,

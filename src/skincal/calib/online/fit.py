@@ -52,6 +52,12 @@ EARLY_FALSE_ALARM = 1e-3
 probability (a chi-square with 3 degrees of freedom per window): clear evidence is not held back."""
 
 
+DRIFT_UNDETERMINED_PPM = 100.0
+"""A residual clock drift whose std exceeds this (ppm) is not determined yet: the result says so."""
+DRIFT_NOTE_SIGMAS, DRIFT_NOTE_PPM = 4.0, 20.0
+"""A drift beyond this many std and ppm is named in the result (``mle``'s rule)."""
+
+
 def residuals(
     sol: stats.Solution,
     a: FloatArray,
@@ -250,15 +256,31 @@ def sandwich(st: UnitState, link: int, sol: stats.Solution, kappa: float, window
 
 
 def unit_warnings(st: UnitState, unchecked: bool) -> list[str]:
-    """The warnings of a unit's result: a time offset without motion to align on; ``unchecked``: a low-rate joint
+    """The warnings of a unit's result: a time offset without motion to align on; a gyroscope at its rail
+    (those readings left out, as ``mle`` does); ``unchecked``: a low-rate joint
     stream whose block sandwich could not be formed (fewer than :data:`MIN_SANDWICH_BLOCKS` windows of motion), so
     its std were never held against what the residuals show."""
     out = []
     if np.isfinite(st.offset_sharpness) and st.offset_sharpness < ALIGN_SHARPNESS:
         out.append("time offset uncertain (no motion to align the unit's clock on)")
+    if st.gyro_saturated:  # as mle's screening warns
+        out.append(f"gyroscope at its rail in {st.gyro_saturated} samples; those gyroscope readings are ignored "
+                   "(the accelerometer's are kept)")  # fmt: skip
     if unchecked:
         out.append(f"std not checked against the residuals (a low-rate joint stream with fewer than "
                    f"{MIN_SANDWICH_BLOCKS} windows of motion): they may be too small")  # fmt: skip
+    return out
+
+
+def unit_notes(st: UnitState, drift: float, drift_std_ppm: float) -> list[str]:
+    """The notes of a unit's result: its clock drift, undetermined or estimated (``drift`` s/s, its std in
+    ppm)."""
+    out = []
+    if drift_std_ppm > DRIFT_UNDETERMINED_PPM:
+        out.append(f"clock drift not determined yet (std {drift_std_ppm:.0f} ppm over {st.t_last - st.t_first:.0f} s"
+                   " of data): the time offset holds near the data's start")  # fmt: skip
+    elif abs(drift) * 1e6 > max(DRIFT_NOTE_SIGMAS * drift_std_ppm, DRIFT_NOTE_PPM):
+        out.append(f"clock drifts: {drift * 1e6:+.0f} ppm relative to the robot's clock (estimated and corrected)")
     return out
 
 

@@ -14,6 +14,7 @@ from skincal.calib.hermite import hermite
 from skincal.calib.online import stats
 from skincal.calib.online.options import UnitStatus
 from skincal.calib.online.split import Ledger
+from skincal.calib.preprocess.screening import GYRO_SATURATION_MIN, SATURATION_MIN
 from skincal.calib.timing import ClockSteps
 from skincal.kinematics.transforms import FloatArray
 
@@ -23,9 +24,11 @@ noise; a moving one's adds the errors of the joint-derived accelerations), so th
 (:func:`~skincal.calib.rest.link_moving`)."""
 MIN_POSITION_MOVING = 10
 """A unit whose link has fewer moving samples than this holds no position (rests only)."""
-SATURATION_FLOOR = (1.5 * 9.80665, 2.0)
-"""A recurring largest reading is taken as the sensor's range only from 1.5 g (m/s^2) and 2 rad/s up:
-no accelerometer used on skin saturates below 2 g, nor a gyroscope below 250 deg/s."""
+SATURATION_FLOOR = (SATURATION_MIN, GYRO_SATURATION_MIN)
+"""A recurring largest reading is taken as the sensor's range only beyond the batch screening's floors
+(m/s^2, rad/s: :data:`~skincal.calib.preprocess.screening.SATURATION_MIN` and
+:data:`~skincal.calib.preprocess.screening.GYRO_SATURATION_MIN`), so both calibrators leave out the same
+readings."""
 
 
 @dataclass(frozen=True)
@@ -88,7 +91,8 @@ class UnitState:
     best_joint: int | None = None
     peak: FloatArray = field(default_factory=lambda: np.zeros(2))  # largest |reading| seen: accel, gyro
     peak_count: FloatArray = field(default_factory=lambda: np.zeros(2))  # how often exactly that value came
-    saturated: int = 0
+    saturated: int = 0  # samples not absorbed: the accelerometer at its rail
+    gyro_saturated: int = 0  # samples absorbed without their gyroscope reading (at its rail)
     t_solved: float = float("-inf")
     align_tried: float = float("-inf")
     raw: deque = field(default_factory=deque)  # absorbed (stamps, accel, gyro) within the history, to realign
@@ -160,6 +164,7 @@ def unsaturated(st: UnitState, a: FloatArray, g: FloatArray | None) -> tuple[np.
             else:
                 rail |= at_rail
     st.saturated += int((~keep).sum())  # samples not absorbed (a gyroscope's rail leaves its reading out only)
+    st.gyro_saturated += int((rail & keep).sum())
     if g is not None and rail.any():
         g = np.where(rail[:, None], np.nan, g)
     return keep, g
