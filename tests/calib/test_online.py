@@ -406,17 +406,16 @@ def test_correlated_residuals_inflate_the_std_before_five_windows_but_white_ones
     """``fit.inflation``: below MIN_WINDOWS windows, applied only when white residuals could not reach it
     (a real 14 Hz joint stream's windows give hundreds of times white noise's value from the first); white
     residuals' windows (simulated, unit variance) leave it at 1 until MIN_WINDOWS."""
-    from types import SimpleNamespace
-
     from skincal.calib.online.fit import CORRELATION_MAX, MIN_WINDOWS, inflation
+    from skincal.calib.online.unit import Windows
 
     rng = np.random.default_rng(8)
     for count in range(1, MIN_WINDOWS):
         white = sum(float(np.sum(rng.normal(size=3) ** 2)) for _ in range(count))  # n |mean|^2 of white windows
-        assert inflation(SimpleNamespace(win_count=count, win_stat=white)) == 1.0
-        assert inflation(SimpleNamespace(win_count=count, win_stat=60.0 * 3 * count)) == pytest.approx(60.0)
-    assert inflation(SimpleNamespace(win_count=2, win_stat=1507.3)) == CORRELATION_MAX  # the real recording's
-    assert inflation(SimpleNamespace(win_count=MIN_WINDOWS, win_stat=2.0 * 3 * MIN_WINDOWS)) == pytest.approx(2.0)
+        assert inflation(Windows(count=count, stat=white)) == 1.0
+        assert inflation(Windows(count=count, stat=60.0 * 3 * count)) == pytest.approx(60.0)
+    assert inflation(Windows(count=2, stat=1507.3)) == CORRELATION_MAX  # the real recording's
+    assert inflation(Windows(count=MIN_WINDOWS, stat=2.0 * 3 * MIN_WINDOWS)) == pytest.approx(2.0)
 
 
 def test_a_gyroscope_at_its_rail_drops_its_reading_and_keeps_the_accelerometer_sample():

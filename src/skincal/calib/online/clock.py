@@ -247,7 +247,7 @@ def restart(st: UnitState, shift: tuple[float, float] | None = None) -> None:
         st.ledger.clear()
     st.chunks = deque()
     st.solutions, st.status, st.dirty, st.split_cache = {}, None, True, None
-    st.win_sum, st.win_n, st.win_stat, st.win_count = np.zeros(3), 0, 0.0, 0
+    st.windows = {}
     if not frozen:
         st.t_last, st.t_first = float("-inf"), float("inf")
     for t, a, g, _ in raw[::-1]:

@@ -195,6 +195,9 @@ class OnlineCalibrator:
             if (grid := self._grid_arrays()) is not None:  # the whole stream's peak (its kept samples pending again)
                 clock.recheck(self._u[u], grid, None, None, None, self.options, final=True)
             self._absorb_unit(u, final=True)
+            self._status(u, advise=False)  # the solutions and the leading link at the data's end
+            if (grid := self._grid_arrays()) is not None:
+                fit.rewindow(self._u[u], grid, lambda t, st=self._u[u]: clock.instants(st, t))
             self._u[u].split_cache = None  # the status after the data's end gives the std a result writes
         self.cpu_s += time.process_time() - c0
 
@@ -333,12 +336,13 @@ class OnlineCalibrator:
         if s.size == 0:
             return 0, None
         moving = link_moving(w, dw)  # (L, M)
-        sol = st.solutions.get(st.links[0]) if st.decided else None
-        if sol is not None:
-            r = residuals(sol, a, u[0], K[0], du[0], dK[0], ug[0], s - st.t_ref)
-            sig = st.sigmas[st.links[0]]
-            rn = r / np.maximum(np.where(moving[0], sig[1], sig[0]), 1e-9)[:, None]
-            settled = st.status is not None and is_settled(st.status)
+        lead = st.links[0] if st.decided and st.links[0] in st.solutions else None  # windows: a decided link's
+        if lead is not None:
+            j = st.links.index(lead)
+            r = residuals(st.solutions[lead], a, u[j], K[j], du[j], dK[j], ug[j], s - st.t_ref)
+            sig = st.sigmas[lead]
+            rn = r / np.maximum(np.where(moving[j], sig[1], sig[0]), 1e-9)[:, None]
+            settled = st.decided and st.status is not None and is_settled(st.status)
             keep = np.linalg.norm(rn, axis=1) <= GATE_SIGMAS * np.sqrt(3.0) if settled else np.ones(s.size, bool)
             if self.on_residuals is not None and settled:
                 self.on_residuals(name, s, rn)
@@ -348,7 +352,7 @@ class OnlineCalibrator:
                 du, dK, ug = du[:, keep], dK[:, keep], ug[:, keep]
                 g, moving = None if g is None else g[keep], moving[:, keep]
                 rn = rn[keep]
-            window_means(st, rn)
+            window_means(st.windows.setdefault(lead, fit.Windows()), rn)
         if s.size == 0:
             return 0, None
         L, M = u.shape[0], s.size
@@ -391,7 +395,7 @@ class OnlineCalibrator:
                               st.t_last, st.offset is not None)  # fmt: skip
         sol = st.solutions[link]
         k = st.links.index(link)
-        kappa = inflation(st)
+        kappa = inflation(st.windows.get(link))
         cov = sol.pose_covariance() * kappa
         std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         pos_std, rot_std = std[:3], np.degrees(std[3:])
@@ -453,6 +457,7 @@ class OnlineCalibrator:
         st.chunks = deque(kept[id(c)] for c in st.chunks)
         st.raw = deque((t, a, g, None if c is None else kept[id(c)]) for t, a, g, c in st.raw)
         st.solutions = {link: st.solutions[link]}
+        st.windows = {link: st.windows[link]} if link in st.windows else {}
         st.decided, st.split_cache = True, None
 
     @one_blas_thread
@@ -479,7 +484,7 @@ class OnlineCalibrator:
             return None, np.zeros((6, 6))
         sol = st.solutions[link]
         idx = np.r_[0:3, 15:18]
-        C = sol.cov[np.ix_(idx, idx)] * inflation(st)
+        C = sol.cov[np.ix_(idx, idx)] * inflation(st.windows.get(link))
         return link, np.linalg.inv(C)
 
     def pose_information_rate(
@@ -516,7 +521,7 @@ class OnlineCalibrator:
             st.Zg += Zg
             st.moving += mv
             st.ledger.add(parts)
-        st.win_sum, st.win_n, st.win_stat, st.win_count = np.zeros(3), 0, 0.0, 0
+        st.windows = {}
         st.solutions, st.status, st.dirty, st.split_cache = {}, None, True, None
         st.best_joint, st.best_joint_t = None, float("-inf")
 
@@ -540,7 +545,7 @@ class OnlineCalibrator:
             rests = rests_only(st, st.links.index(s.link) if s.link in st.links else 0)
             sol, factors, checked = (st.solutions[s.link], None, None) if rests else fit.reported(
                 st, s.link, 1.0, self.spline, self.options.consistency)  # the status's  # fmt: skip
-            kappa = inflation(st)
+            kappa = inflation(st.windows.get(s.link))
             cov = sol.pose_covariance() * kappa
             std = np.sqrt(np.clip(np.diag(cov), 0.0, None))  # before the split check (applied below)
             imu, drift, drift_std_ppm = fit.imu_calibration(st, sol, kappa, self.gravity)

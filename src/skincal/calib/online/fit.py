@@ -6,6 +6,7 @@ and the link decision (:func:`decide`, :func:`cost`)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -15,7 +16,8 @@ from skincal.calib import consistency
 from skincal.calib.online import split, stats
 from skincal.calib.online.clock import ALIGN_SHARPNESS
 from skincal.calib.online.options import OnlineOptions
-from skincal.calib.online.unit import MOVING, REST, UnitState
+from skincal.calib.online.unit import MOVING, REST, Grid, UnitState, Windows, accel_at_rail, signals_at, windowed_link
+from skincal.calib.rest import link_moving
 from skincal.calib.robust import SANDWICH_BLOCK_S, sandwich_factors
 from skincal.calib.timing import CLOCK_DRIFT_MIN_SPAN_S, compose_clock
 from skincal.data.imu_calibration import ImuCalibration
@@ -77,33 +79,59 @@ def residuals(
     return a @ G.T - h - Kp - du * T - sol.gravity_scale * (u - ug) - u
 
 
-def window_means(st: UnitState, rn: FloatArray) -> None:
-    """Add normalised residuals ``rn`` ``(M, 3)`` to the unit's windows of :data:`WINDOW_SAMPLES`."""
+def window_means(w: Windows, rn: FloatArray) -> None:
+    """Add normalised residuals ``rn`` ``(M, 3)`` to a link's windows ``w`` of :data:`WINDOW_SAMPLES`."""
     i = 0
     while i < rn.shape[0]:
-        take = min(WINDOW_SAMPLES - st.win_n, rn.shape[0] - i)
-        st.win_sum += rn[i : i + take].sum(axis=0)
-        st.win_n += take
+        take = min(WINDOW_SAMPLES - w.n, rn.shape[0] - i)
+        w.sum += rn[i : i + take].sum(axis=0)
+        w.n += take
         i += take
-        if st.win_n >= WINDOW_SAMPLES:
-            st.win_stat += float(st.win_sum @ st.win_sum) / st.win_n
-            st.win_count += 1
-            st.win_sum, st.win_n = np.zeros(3), 0
+        if w.n >= WINDOW_SAMPLES:
+            w.stat += float(w.sum @ w.sum) / w.n
+            w.count += 1
+            w.sum, w.n = np.zeros(3), 0
 
 
-def inflation(st: UnitState) -> float:
-    """Variance inflation for correlated residuals: the variance of the residuals' means over windows
-    of :data:`WINDOW_SAMPLES` consecutive samples against white noise's (``n |mean|^2`` averages 3
-    for white residuals of unit variance). It covers every correlation shorter than a window, incl.
-    the slow errors of joint-derived accelerations, which a lag-1 autocorrelation misses. From
+def rewindow(st: UnitState, grid: Grid, instants: Callable[[FloatArray], FloatArray]) -> bool:
+    """At the data's end: the windows of a unit whose leading link has fewer than :data:`MIN_WINDOWS` of them
+    (its clock aligned at the data's end only, as on a 12 s real recording, so nothing was windowed as it came;
+    or its link never decided) formed again from its kept samples (``st.raw``, stamps mapped to the robot's
+    clock by ``instants``) at the final solution, when they fill that many. Whether it did."""
+    lead = windowed_link(st)
+    if lead is None or not st.raw:
+        return False
+    w = st.windows.get(lead)
+    if (w is not None and w.count >= MIN_WINDOWS) or sum(len(r[0]) for r in st.raw) < MIN_WINDOWS * WINDOW_SAMPLES:
+        return False
+    sol, sig, fresh = st.solutions[lead], st.sigmas[lead], Windows()
+    for t, a, _, _ in st.raw:
+        s = instants(t)
+        keep = (s >= grid.t[0]) & (s <= grid.t[-1]) & ~accel_at_rail(st, a)
+        if not keep.any():
+            continue
+        u, K, om, dom, du, dK, ug, ok = signals_at(grid, s[keep], [lead])
+        moving = link_moving(om, dom)[0]
+        r = residuals(sol, a[keep], u[0], K[0], du[0], dK[0], ug[0], s[keep] - st.t_ref)
+        rn = r / np.maximum(np.where(moving, sig[1], sig[0]), 1e-9)[:, None]
+        window_means(fresh, rn[ok])
+    st.windows[lead] = fresh
+    return True
+
+
+def inflation(w: Windows | None) -> float:
+    """Variance inflation for correlated residuals: the variance of the residuals' means over a link's windows
+    ``w`` of :data:`WINDOW_SAMPLES` consecutive samples against white noise's (``n |mean|^2`` averages 3
+    for white residuals of unit variance; None: no windows yet, 1). It covers every correlation shorter than a
+    window, incl. the slow errors of joint-derived accelerations, which a lag-1 autocorrelation misses. From
     :data:`MIN_WINDOWS` windows on it is applied as it is; before, only when it is beyond what white
     residuals reach (:data:`EARLY_FALSE_ALARM`): a real recording whose residuals are strongly correlated
     shows an honest std from its first window, not an uninflated one that jumps at the data's end."""
-    if st.win_count == 0:
+    if w is None or w.count == 0:
         return 1.0
-    dof = 3 * st.win_count
-    ratio = st.win_stat / dof
-    if st.win_count < MIN_WINDOWS and ratio < chi2.isf(EARLY_FALSE_ALARM, dof) / dof:
+    dof = 3 * w.count
+    ratio = w.stat / dof
+    if w.count < MIN_WINDOWS and ratio < chi2.isf(EARLY_FALSE_ALARM, dof) / dof:
         return 1.0
     return float(np.clip(ratio, 1.0, CORRELATION_MAX))
 
@@ -329,7 +357,7 @@ def reported(st: UnitState, link: int, grow: float = 0.0, spline: bool = False, 
     the unit's statistics (clock re-alignment, link decision, moved unit) clears it."""
     n = float(st.ledger.n.sum()) if st.ledger.n is not None else 0.0
     sol = st.solutions[link]
-    kappa = inflation(st)
+    kappa = inflation(st.windows.get(link))
     full = np.sqrt(np.clip(np.r_[np.diag(sol.pose_covariance()), sol.cov[stats.TAU, stats.TAU]] * kappa, 0.0, None))
     key = (link, spline, consistency_check)
     if grow and st.split_cache is not None:
@@ -372,7 +400,7 @@ def decide(st: UnitState, joint_active_s: FloatArray) -> tuple[int | None, float
     costs = {k: cost(st, k, ref) for k in st.solutions}
     best_link = min(costs, key=costs.__getitem__)
     c0 = costs[best_link]
-    kappa = inflation(st)
+    kappa = inflation(st.windows.get(best_link)) if st.decided else 1.0  # undecided: chi-square margins as fitted
     others = sorted(v for k, v in costs.items() if k != best_link)
     margin = others[0] / c0 if c0 > 0 else float("inf")
     ambiguous = [k for k, v in costs.items() if v - c0 < max(LINK_CHI2_MARGIN * kappa, LINK_RELATIVE_MARGIN * c0)]

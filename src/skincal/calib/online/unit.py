@@ -55,6 +55,18 @@ class Grid:
 
 
 @dataclass
+class Windows:
+    """A link's normalised residuals in windows of consecutive samples (the correlation inflation,
+    :func:`~skincal.calib.online.fit.inflation`): the open window's sum and count, and over closed
+    windows the sum of ``n |mean|^2`` (3 per window for white residuals of unit variance) and their count."""
+
+    sum: FloatArray = field(default_factory=lambda: np.zeros(3))
+    n: int = 0
+    stat: float = 0.0
+    count: int = 0
+
+
+@dataclass
 class UnitState:
     """One unit's state in the streaming calibrator: per candidate link its Grams (rest and moving
     classes) and fits, its pending samples, its clock mapping and its residual statistics."""
@@ -81,10 +93,7 @@ class UnitState:
     # link (0: the common weights of undecided candidates) -> [accel rest, accel moving, gyro rest, gyro moving]
     sigmas: dict[int, FloatArray] = field(default_factory=dict)
     decided: bool = False
-    win_sum: FloatArray = field(default_factory=lambda: np.zeros(3))  # normalised residuals of the open window
-    win_n: int = 0
-    win_stat: float = 0.0  # sum over closed windows of n |mean|^2 (3 per window for white residuals)
-    win_count: int = 0
+    windows: dict[int, Windows] = field(default_factory=dict)  # link -> its residual windows (correlation)
     outliers: int = 0
     status: UnitStatus | None = None
     best_joint_t: float = float("-inf")
@@ -168,6 +177,25 @@ def unsaturated(st: UnitState, a: FloatArray, g: FloatArray | None) -> tuple[np.
     if g is not None and rail.any():
         g = np.where(rail[:, None], np.nan, g)
     return keep, g
+
+
+def accel_at_rail(st: UnitState, a: FloatArray) -> np.ndarray:
+    """``(M,)`` readings ``a`` at the accelerometer's rail as :func:`unsaturated` found it so far (no update)."""
+    if st.peak_count[0] >= 2 and st.peak[0] >= SATURATION_FLOOR[0]:
+        return ~np.all(np.abs(a) < st.peak[0], axis=1)
+    return np.zeros(a.shape[0], dtype=bool)
+
+
+def windowed_link(st: UnitState) -> int | None:
+    """The link whose residuals the unit's correlation windows hold at the data's end: its decided link, else
+    the leader of its candidates once its pose is determined (a unit never decided, as on a short real
+    recording, still shows its correlated residuals in its std); None: none."""
+    if st.decided:
+        return st.links[0] if st.links[0] in st.solutions else None
+    status = st.status
+    if status is None or status.link not in st.solutions or status.link not in st.sigmas:
+        return None
+    return status.link if np.all(np.isfinite(status.position_std_m)) else None
 
 
 def rests_only(st: UnitState, k: int) -> bool:
