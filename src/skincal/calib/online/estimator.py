@@ -37,7 +37,7 @@ from skincal.calib.online.design import excitation
 from skincal.calib.online.fit import JOINT_ACTIVE_RPS, decide, inflation, residuals, solve_unit, window_means
 from skincal.calib.online.options import OnlineOptions, UnitStatus, is_settled
 from skincal.calib.online.unit import Grid, UnitState, keep_pending, rests_only, signals_at, take_pending, unsaturated
-from skincal.calib.position import judge_position
+from skincal.calib.position import judge_position, weak_position
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.rest import link_moving
 from skincal.calib.signals import frame_signals
@@ -59,6 +59,8 @@ MIN_MOVING = 200
 """Moving samples of the best link before its link is decided."""
 GATE_SIGMAS = 6.0
 """Once a unit's link is decided, samples whose residual exceeds this many std are not absorbed."""
+POSE_MISSING = "pose not determined yet: "
+"""How a status's ``missing`` starts when the std exceed :data:`UNDETERMINED_M` or :data:`UNDETERMINED_DEG`."""
 UNDETERMINED_M = 0.05
 UNDETERMINED_DEG = 20.0
 """Std beyond these (m, deg) counts as undetermined."""
@@ -422,7 +424,7 @@ class OnlineCalibrator:
         if undecided:
             missing = f"link undecided between {', '.join(map(str, ambiguous))}: move joint {max(ambiguous)}"
         elif not determined and not rests_answer:
-            missing = "pose not determined yet: " + (
+            missing = POSE_MISSING + (
                 f"no motion of its link (joints 1-{link})" if rests_only(st, k) else "needs rests in more orientations"
             )  # fmt: skip
         if not determined:
@@ -539,7 +541,10 @@ class OnlineCalibrator:
         for name in self.units:
             s = self._status(name, advise=False)
             st = self._u[name]
-            if s.pose is None or s.link is None or s.missing:
+            # as mle: a decided link and rotation with a weakly determined position are written (its std and a
+            # warning say how weak); an undecided link or an undetermined rotation is a failure
+            rotation_only = s.missing.startswith(POSE_MISSING) and bool(np.all(np.isfinite(s.rotation_std_deg)))
+            if s.pose is None or s.link is None or (s.missing and not rotation_only):
                 failed[name] = s.missing or "no estimate"
                 continue
             rests = rests_only(st, st.links.index(s.link) if s.link in st.links else 0)
@@ -573,7 +578,7 @@ class OnlineCalibrator:
                 warnings=tuple(warnings), extras=extras, imu=imu, pose_covariance=cov, notes=tuple(notes),
             )  # fmt: skip
             unit = unit if checked is None else consistency.apply(unit, checked)  # as mle
-            units[name] = judge_position(unit, rests, static_only=st.clock_provisional)
+            units[name] = weak_position(judge_position(unit, rests, static_only=st.clock_provisional))
         top: dict[str, Any] = {"late_samples": self.late, "cpu_s": self.cpu_s}
         result = CalibrationResult("online", self.chain.name, dataset_sha256, time.perf_counter() - self._t_start,
                                    units, top, failed_units=failed)  # fmt: skip
