@@ -14,7 +14,7 @@ from skincal.calib.hermite import hermite
 from skincal.calib.online import stats
 from skincal.calib.online.options import UnitStatus
 from skincal.calib.online.split import Ledger
-from skincal.calib.preprocess.screening import GYRO_SATURATION_MIN, SATURATION_MIN
+from skincal.calib.preprocess.screening import GYRO_SATURATION_MIN, SATURATION_FRACTION, SATURATION_MIN
 from skincal.calib.timing import ClockSteps
 from skincal.kinematics.transforms import FloatArray
 
@@ -100,6 +100,7 @@ class UnitState:
     best_joint: int | None = None
     peak: FloatArray = field(default_factory=lambda: np.zeros(2))  # largest |reading| seen: accel, gyro
     peak_count: FloatArray = field(default_factory=lambda: np.zeros(2))  # how often exactly that value came
+    screened: FloatArray = field(default_factory=lambda: np.zeros(2))  # readings screened: accel, gyro
     saturated: int = 0  # samples not absorbed: the accelerometer at its rail
     gyro_saturated: int = 0  # samples absorbed without their gyroscope reading (at its rail)
     t_solved: float = float("-inf")
@@ -158,7 +159,8 @@ def unsaturated(st: UnitState, a: FloatArray, g: FloatArray | None) -> tuple[np.
     for i, x in enumerate((a, g)):
         if x is None or x.size == 0:
             continue
-        if np.abs(x).max() < SATURATION_FLOOR[i] and st.peak_count[i] < 2:
+        st.screened[i] += x.shape[0]
+        if np.abs(x).max() < SATURATION_FLOOR[i] and not at_rail_now(st, i):
             continue  # a quantised reading at rest repeats its largest value too: not a range
         m = np.abs(x)
         top = float(m.max())
@@ -166,7 +168,7 @@ def unsaturated(st: UnitState, a: FloatArray, g: FloatArray | None) -> tuple[np.
             st.peak[i], st.peak_count[i] = top, float((m == top).sum())
         else:
             st.peak_count[i] += float((m == st.peak[i]).sum())
-        if st.peak_count[i] >= 2 and st.peak[i] >= SATURATION_FLOOR[i]:
+        if at_rail_now(st, i):
             at_rail = ~np.all(m < st.peak[i], axis=1)
             if i == 0:
                 keep &= ~at_rail
@@ -179,9 +181,18 @@ def unsaturated(st: UnitState, a: FloatArray, g: FloatArray | None) -> tuple[np.
     return keep, g
 
 
+def at_rail_now(st: UnitState, i: int) -> bool:
+    """Whether channel ``i`` (0 accelerometer, 1 gyroscope) has shown a rail so far: its largest reading beyond
+    :data:`SATURATION_FLOOR` recurring exactly more than 3 times and in more than
+    :data:`~skincal.calib.preprocess.screening.SATURATION_FRACTION` of its samples (the batch screening's
+    rule; a consumer IMU's quantised peak recurs twice by chance)."""
+    count = st.peak_count[i]
+    return bool(st.peak[i] >= SATURATION_FLOOR[i] and count > 3 and count > SATURATION_FRACTION * st.screened[i])
+
+
 def accel_at_rail(st: UnitState, a: FloatArray) -> np.ndarray:
     """``(M,)`` readings ``a`` at the accelerometer's rail as :func:`unsaturated` found it so far (no update)."""
-    if st.peak_count[0] >= 2 and st.peak[0] >= SATURATION_FLOOR[0]:
+    if at_rail_now(st, 0):
         return ~np.all(np.abs(a) < st.peak[0], axis=1)
     return np.zeros(a.shape[0], dtype=bool)
 
