@@ -197,8 +197,8 @@ class OnlineCalibrator:
             if (grid := self._grid_arrays()) is not None:  # the whole stream's peak (its kept samples pending again)
                 clock.recheck(self._u[u], grid, None, None, None, self.options, final=True)
             self._absorb_unit(u, final=True)
-            self._status(u, advise=False)  # the solutions and the leading link at the data's end
-            if (grid := self._grid_arrays()) is not None:
+            if fit.needs_rewindow(self._u[u]) and (grid := self._grid_arrays()) is not None:
+                self._status(u, advise=False)  # the solutions and the leading link at the data's end
                 fit.rewindow(self._u[u], grid, lambda t, st=self._u[u]: clock.instants(st, t))
             self._u[u].split_cache = None  # the status after the data's end gives the std a result writes
         self.cpu_s += time.process_time() - c0

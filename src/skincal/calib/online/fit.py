@@ -94,6 +94,11 @@ def window_means(w: Windows, rn: FloatArray) -> None:
             w.sum, w.n = np.zeros(3), 0
 
 
+def needs_rewindow(st: UnitState) -> bool:
+    """Whether no link of the unit holds :data:`MIN_WINDOWS` residual windows yet (:func:`rewindow` may form them)."""
+    return bool(st.raw) and all(w.count < MIN_WINDOWS for w in st.windows.values())
+
+
 def rewindow(st: UnitState, grid: Grid, instants: Callable[[FloatArray], FloatArray]) -> bool:
     """At the data's end: the windows of a unit whose leading link has fewer than :data:`MIN_WINDOWS` of them
     (its clock aligned at the data's end only, as on a 12 s real recording, so nothing was windowed as it came;
