@@ -121,9 +121,9 @@ def test_real_recordings_each_get_an_answer():
         assert by_method["online"]["calibrated"] == 19 and all(50.0 < t < 250.0 for t in offsets), offsets
         assert abs(np.median(offsets) - np.median(g["time_offsets_ms"])) < 15.0
         # its rotation std carry a weakly determined scale's uncertainty and its correlated residuals as mle's
-        # do (measured 0.5-1.5 per axis; 1.4-2.2 when it fixed the scale and windowed no unit aligned late)
+        # do (measured 0.52-1.58 per axis; up to 2.2 when it windowed the late-aligned units but fixed the scale)
         online_rotation = by_method["online"]["rotation_deviation_rms_std"]
-        assert max(online_rotation) <= 1.6, online_rotation
+        assert max(online_rotation) <= 1.7, online_rotation
     # the two IMUs of the board were recorded at once: 19 sessions paired, per method that calibrated both
     pairs = {p["method"]: p for p in doc["paired"]}
     assert len(pairs["mle"]["sessions"]) == 19 and pairs["mle"]["time_offset_difference_ms"]["std"] is not None
