@@ -5,6 +5,7 @@ arrival order, data skincal did not make (the independent MuJoCo generator), and
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -467,3 +468,24 @@ def test_a_gyroscope_clipped_below_the_old_floor_is_at_its_rail_in_both_calibrat
     _, q_out = unsaturated(fresh, a, q)
     assert not np.isnan(q_out).any() and fresh.gyro_saturated == 0
     assert not screen_channels("su1", a, q).gyro_saturated.any()
+
+
+def test_a_followed_unit_whose_gyroscope_is_stuck_at_its_rail_is_calibrated_from_its_accelerometer():
+    """``calibrate --follow`` of a unit whose gyroscope y axis reads its +250 deg/s rail throughout (a stuck
+    register): every gyroscope reading is left out, the unit is calibrated from its accelerometer as ``mle``
+    calibrates it, with a warning, and its pose is within its std."""
+    from skincal.workflows.session import simulate_dataset
+
+    ds = simulate_dataset("panda", "random", 1, "realistic", "fast", seed=3)
+    ((name, s),) = ds.imu.items()
+    gyro = np.array(s.gyro, dtype=float)
+    gyro[:, 1] = np.radians(250.0)
+    ds = replace(ds, imu={name: replace(s, gyro=gyro)})
+    cal = OnlineCalibrator(ds.robot, [name], ds.gravity)
+    replay(ds, cal)
+    unit = cal.result().units[name]
+    assert unit.pose.link == ds.truth[name].link
+    assert unit.extras["gyro_saturated_samples"] >= 0.9 * unit.extras["samples"]
+    assert any("gyroscope at its rail" in w for w in unit.warnings)
+    err = (unit.pose.p_link_su - ds.truth[name].p_link_su) / np.asarray(unit.position_std_m)
+    assert np.all(np.abs(err) < 4.0), err
