@@ -1,4 +1,4 @@
-"""The default calibrator's targets: ``python benchmarks/bench_mle.py [--runs 20] [--quick] [--no-om]
+"""The default calibrator's targets: ``python benchmarks/bench_mle.py [--placements 20] [--quick] [--no-om]
 [--json out.json]`` (the figures of ``skincal benchmark mle``; a thin script over
 :mod:`skincal.bench.mle`)."""
 
@@ -19,7 +19,7 @@ def main() -> None:
     args = parse_args(__doc__.splitlines()[0], options.MLE)
     console = Console()
     with console.status("benchmarking mle...") as status:
-        doc = run_mle_benchmark(runs=args.runs, quick=args.quick, with_om=args.om, progress=status.update)
+        doc = run_mle_benchmark(runs=args.placements, quick=args.quick, with_om=args.om, progress=status.update)
     console.print_json(json.dumps(doc))
     if args.json_out is not None:
         write_bytes_atomic(args.json_out, json.dumps(doc, indent=2).encode())

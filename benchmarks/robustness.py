@@ -2,7 +2,7 @@
 thin script over :mod:`skincal.bench.robustness`).
 
 Usage: ``python benchmarks/robustness.py [--quick] [--robots panda,sawyer,ur5e] [--backends analytic,mujoco]
-[--faults knock,gravity] [--seeds 5] [--protocol paper-sim] [--seed 0] [--workers 2] [--dask tcp://host:8786]
+[--faults knock,gravity] [--placements 5] [--protocol paper-sim] [--seed 0] [--workers 2] [--dask tcp://host:8786]
 [--out robustness.json]`` (``--list`` lists the faults).
 """
 

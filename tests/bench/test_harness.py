@@ -15,7 +15,7 @@ from skincal.bench.harness import FORCE, Opt, RunInfo, parse, run_harness, typer
 from skincal.errors import ConfigError
 
 OPTIONS = (
-    Opt("runs", int, 20, "runs"),
+    Opt("runs", int, 20, "runs", aliases=("--repeats",)),
     Opt("quick", bool, False, "quick"),
     Opt("om", bool, True, "om"),
     Opt("sets", int | None, None, "sets"),
@@ -30,6 +30,8 @@ CASES = [
     (["--runs", "3", "--quick", "--no-om", "--sets", "2", "--json", "x.json", "--storage", "sqlite3", "--list"],
      {"runs": 3, "quick": True, "om": False, "sets": 2, "json_out": Path("x.json"), "storage": "sqlite3",
       "list_faults": True}),
+    (["--repeats", "4"], {"runs": 4, "quick": False, "om": True, "sets": None, "json_out": None, "storage": "mcap",
+                          "list_faults": False}),  # an older name, still accepted
 ]  # fmt: skip
 
 
@@ -58,6 +60,20 @@ def test_argparse_and_typer_read_the_same_options_the_same_way(argv, expected):
     assert typer_values(argv) == expected
 
 
+def test_a_count_of_placements_is_called_placements_in_every_benchmark():
+    """``--runs`` (mle) and ``--seeds`` (robustness) both counted random placements, while ``--seeds`` elsewhere
+    lists seeds: both are ``--placements`` now, the old names kept as aliases; robustness's ``--out`` takes
+    ``--json`` as every other benchmark does."""
+    from skincal.bench import options
+
+    for group, old in ((options.MLE, "--runs"), (options.ROBUSTNESS, "--seeds")):
+        (o,) = [o for o in group if o.name == "placements"]
+        assert o.cli_flag == "--placements" and o.aliases == (old,)
+        for argv in ([old, "3"], ["--placements", "3"]):
+            assert parse("t", group, argv)["placements"] == 3
+    assert parse("t", options.ROBUSTNESS, ["--json", "x.json"])["out"] == Path("x.json")
+
+
 def test_argparse_refuses_a_value_outside_the_choices():
     with pytest.raises(SystemExit):
         parse("test", OPTIONS, ["--storage", "zip"])
@@ -69,7 +85,7 @@ def test_argparse_refuses_a_value_outside_the_choices():
 )  # fmt: skip
 def test_every_benchmark_declares_its_options_once_with_unique_flags(module):
     options = getattr(importlib.import_module("skincal.bench.options"), module.upper())
-    flags = [o.cli_flag for o in options]
+    flags = [f for o in options for f in (o.cli_flag, *o.aliases)]
     assert len(set(flags)) == len(flags) and len({o.name for o in options}) == len(options)
     defaults = parse("test", options, [])
     assert defaults == {o.name: o.default for o in options}

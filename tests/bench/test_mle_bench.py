@@ -14,8 +14,10 @@ from skincal.errors import ConfigError
 
 
 def test_runs_below_one_is_a_usage_error(capsys):
-    assert main(["benchmark", "mle", "--quick", "--runs", "0"]) == 2
-    assert "--runs must be at least 1" in capsys.readouterr().err
+    assert main(["benchmark", "mle", "--quick", "--runs", "0"]) == 2  # the older name of --placements
+    assert "--placements must be at least 1" in capsys.readouterr().err
+    assert main(["benchmark", "mle", "--quick", "--placements", "0"]) == 2
+    assert "--placements must be at least 1" in capsys.readouterr().err
 
 
 @pytest.fixture

@@ -50,6 +50,7 @@ class Opt:
         many: takes one or more values after the flag (``--seeds 0 1 2``), a list.
         choices: the allowed values (argparse checks them; typer shows them in the help).
         positional: a required argument without a flag (``skincal benchmark realdata DIR``).
+        aliases: older command-line names still accepted (``--runs`` of ``--placements``), shown in the help.
     """
 
     name: str
@@ -62,6 +63,7 @@ class Opt:
     many: bool = False
     choices: tuple[Any, ...] | None = None
     positional: bool = False
+    aliases: tuple[str, ...] = ()
 
     @property
     def cli_flag(self) -> str:
@@ -101,7 +103,7 @@ def add_arguments(parser: argparse.ArgumentParser, options: Sequence[Opt]) -> ar
                 kw["type"] = base
             if o.choices:
                 kw["choices"] = list(o.choices)
-        parser.add_argument(o.cli_flag, **kw)
+        parser.add_argument(o.cli_flag, *o.aliases, **kw)
     return parser
 
 
@@ -135,7 +137,10 @@ def _typer_parameter(o: Opt) -> inspect.Parameter:
     help_text = o.help
     if o.choices and help_text is not None and not all(str(c) in help_text for c in o.choices):
         help_text = f"{help_text} ({', '.join(o.choices)})"
-    default = typer.Argument(..., help=help_text) if o.positional else typer.Option(o.default, decl, help=help_text)
+    if o.positional:
+        default = typer.Argument(..., help=help_text)
+    else:
+        default = typer.Option(o.default, decl, *o.aliases, help=help_text)
     return inspect.Parameter(o.name, inspect.Parameter.KEYWORD_ONLY, default=default, annotation=annotation)
 
 

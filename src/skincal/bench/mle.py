@@ -111,7 +111,7 @@ def run_mle_benchmark(
     if runs is None:
         runs = QUICK_RUNS if quick else 20
     if runs < 1:
-        raise ConfigError(f"--runs must be at least 1, got {runs}")
+        raise ConfigError(f"--placements must be at least 1, got {runs}")
     note = progress or (lambda _msg: None)
     skipped: list[str] = []
     out: dict[str, Any] = {"runs": runs, "quick": quick, "skipped": skipped}

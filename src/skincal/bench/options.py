@@ -33,13 +33,14 @@ ROBUSTNESS = (
     Opt("backends", str | None, None,
         "comma-separated backends: analytic, mujoco (kinematic), mujoco-dynamic (default analytic,mujoco)"),
     Opt("faults", str | None, None, "comma-separated faults (default all of them; see --list)"),
-    Opt("seeds", int | None, None, "random placements of 6 units per cell (default 5; quick 1)"),
-    Opt("quick", bool, False, "1 seed and the short fast protocol"),
+    Opt("placements", int | None, None, "random placements of 6 units per cell (default 5; quick 1)",
+        aliases=("--seeds",)),
+    Opt("quick", bool, False, "1 placement and the short fast protocol"),
     Opt("protocol", str | None, None, "protocol preset (default paper-sim; quick fast)"),
     Opt("seed", int, 0, "first placement seed"),
     WORKERS,
     DASK,
-    Opt("out", Path | None, None, "write every cell and job record here (JSON)"),
+    Opt("out", Path | None, None, "write every cell and job record here (JSON)", aliases=("--json",)),
     Opt("force", bool, False, "overwrite --out if it exists"),
     Opt("list_faults", bool, False, "list the faults and exit", flag="--list", switch=False),
 )  # fmt: skip
@@ -47,7 +48,8 @@ ROBUSTNESS = (
 
 
 MLE = (
-    Opt("runs", int | None, None, "random placements per robot (default 20; 1 with --quick)"),
+    Opt("placements", int | None, None, "random placements per robot (default 20; 1 with --quick)",
+        aliases=("--runs",)),
     Opt("quick", bool, False, "fast protocol and 1 placement per robot, for a smoke test"),
     Opt("om", bool, True, "also time the paper's OM on the same data"),
     Opt("json_out", Path | None, None, "also write the figures as JSON", flag="--json"),

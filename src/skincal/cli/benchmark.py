@@ -94,7 +94,7 @@ def mle(v: dict[str, Any]) -> None:
 
     with Status("benchmarking mle...") as status:
         doc = bench_mle.run_mle_benchmark(
-            runs=v["runs"], quick=v["quick"], with_om=v["om"], progress=lambda m: status.update(m)
+            runs=v["placements"], quick=v["quick"], with_om=v["om"], progress=lambda m: status.update(m)
         )
     console.print_json(json.dumps(doc))
     _write_json(doc, v["json_out"])

@@ -160,7 +160,7 @@ class RobustnessHarness:
     def config(self, values: Mapping[str, Any]) -> RobustnessConfig:
         """:func:`config_from_options` of the parsed options."""
         v = values
-        return config_from_options(v["robots"], v["backends"], v["faults"], v["seeds"], v["quick"], v["protocol"],
+        return config_from_options(v["robots"], v["backends"], v["faults"], v["placements"], v["quick"], v["protocol"],
                                    v["seed"])  # fmt: skip
 
     def summary(self, config: RobustnessConfig, records: list[dict[str, Any]], run: RunInfo) -> dict[str, Any]:
