@@ -74,6 +74,16 @@ def test_a_count_of_placements_is_called_placements_in_every_benchmark():
     assert parse("t", options.ROBUSTNESS, ["--json", "x.json"])["out"] == Path("x.json")
 
 
+@pytest.mark.parametrize("argv", [["robustness", "--placements", "0"], ["robustness", "--seeds", "-2"],
+                                  ["mle", "--placements", "-1"], ["mle", "--runs", "0"]])  # fmt: skip
+def test_a_count_of_no_placements_is_refused_by_its_name(argv, capsys):
+    from skincal.cli import main
+
+    assert main(["benchmark", *argv, "--quick"]) == 2
+    err = capsys.readouterr().err
+    assert "--placements must be at least 1" in err and len(err.strip().splitlines()) == 1
+
+
 def test_argparse_refuses_a_value_outside_the_choices():
     with pytest.raises(SystemExit):
         parse("test", OPTIONS, ["--storage", "zip"])

@@ -71,8 +71,10 @@ class RobustnessConfig:
             unknown = [x for x in given if x not in known]
             if unknown:
                 raise ConfigError(f"robustness: unknown {what}(s) {', '.join(unknown)} (known: {', '.join(known)})")
-        if self.seeds < 1 or self.n_units < 2:
-            raise ConfigError(f"robustness: seeds must be >= 1 and units >= 2, got {self.seeds} and {self.n_units}")
+        if self.seeds < 1:
+            raise ConfigError(f"--placements must be at least 1, got {self.seeds}")
+        if self.n_units < 2:
+            raise ConfigError(f"robustness: units must be >= 2, got {self.n_units}")
         if self.protocol not in PROTOCOLS:
             raise ConfigError(f"robustness: unknown protocol '{self.protocol}' (presets: {', '.join(PROTOCOLS)})")
 
