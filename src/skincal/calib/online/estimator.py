@@ -554,7 +554,7 @@ class OnlineCalibrator:
             cov = sol.pose_covariance() * kappa
             std = np.sqrt(np.clip(np.diag(cov), 0.0, None))  # before the split check (applied below)
             imu, drift, drift_std_ppm = fit.imu_calibration(st, sol, kappa, self.gravity)
-            warnings = fit.unit_warnings(st, self.spline and not rests and factors is None)
+            warnings = fit.unit_warnings(st, self.spline and not rests and factors is None, sol)
             notes = fit.unit_notes(st, drift, drift_std_ppm)
             extras: dict[str, Any] = {
                 "link_name": self.chain.link_names[s.link] if self.chain.link_names else f"link{s.link}",
@@ -569,7 +569,7 @@ class OnlineCalibrator:
                 "gyro_saturated_samples": st.gyro_saturated,
                 "realigned": st.realigned,
                 "clock_rechecked": st.rechecked,
-                "scale_estimated": st.scale_estimated,
+                "scale_estimated": fit.scale_std(sol) <= fit.SCALE_STD_LIMIT,
                 "covariance_sandwich": None if factors is None else np.r_[factors[0:3], factors[15:18]],
             }
             notes += clock.notes(st)

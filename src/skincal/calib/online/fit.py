@@ -236,8 +236,7 @@ def solve_unit(st: UnitState, o: OnlineOptions) -> None:
                 sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R, **clock) or sol
             # as mle: the scale/misalignment always fitted under its prior; where the data leave it weakly
             # determined, the prior holds it near zero and its uncertainty stays in the std (fixing it dropped
-            # that: a real 150 mm/s linear move's rotation came out 0.2 deg std, 2.3 deg off)
-            st.scale_estimated = bool(np.sqrt(np.clip(np.diag(sol.cov)[3:12], 0.0, None)).max() <= SCALE_STD_LIMIT)
+            # that: a real 150 mm/s linear move's rotation came out 0.2 deg std, 2.3 deg off); scale_std says
         st.sigmas[link] = sig if st.decided else class_sigmas(st, k, sol, common)
         sols[link] = sol
     st.solutions = sols
@@ -288,17 +287,23 @@ def sandwich(st: UnitState, link: int, sol: stats.Solution, kappa: float, window
     return with_factors(sol, factors), factors
 
 
-def unit_warnings(st: UnitState, unchecked: bool) -> list[str]:
-    """The warnings of a unit's result: a time offset without motion to align on; a gyroscope at its rail
+def scale_std(sol: stats.Solution) -> float:
+    """The largest std of the accelerometer's scale/misalignment elements at ``sol`` (estimated where it is at
+    most :data:`SCALE_STD_LIMIT`)."""
+    return float(np.sqrt(np.clip(np.diag(sol.cov)[3:12], 0.0, None)).max())
+
+
+def unit_warnings(st: UnitState, unchecked: bool, sol: stats.Solution | None = None) -> list[str]:
+    """The warnings of a unit's result at ``sol``: a time offset without motion to align on; a weakly determined
+    scale/misalignment; a gyroscope at its rail
     (those readings left out, as ``mle`` does); ``unchecked``: a low-rate joint
     stream whose block sandwich could not be formed (fewer than :data:`MIN_SANDWICH_BLOCKS` windows of motion), so
     its std were never held against what the residuals show."""
     out = []
     if np.isfinite(st.offset_sharpness) and st.offset_sharpness < ALIGN_SHARPNESS:
         out.append("time offset uncertain (no motion to align the unit's clock on)")
-    sol = st.solutions.get(st.links[0]) if st.decided else None
-    if sol is not None and not st.scale_estimated:  # as mle warns
-        worst = float(np.sqrt(np.clip(np.diag(sol.cov)[3:12], 0.0, None)).max())
+    worst = 0.0 if sol is None else scale_std(sol)
+    if worst > SCALE_STD_LIMIT:  # as mle warns
         prior = 100 * stats.SCALE_PRIOR
         out.append(f"scale/misalignment weakly determined by the data (std up to {100 * worst:.1f} %, held near "
                    f"zero by a {prior:.0f} % prior; its uncertainty is in the reported std)")  # fmt: skip

@@ -229,12 +229,15 @@ class Solution:
 
     def pose_covariance(self) -> FloatArray:
         """``(6, 6)`` covariance of ``(x, y, z, rx, ry, rz)`` in the LINK frame's axes (m^2, rad^2): the
-        position block and the rotation block turned from unit axes to link axes (``phi = R dtheta``)."""
+        position block and the rotation block turned from unit axes to link axes (``phi = R dtheta``),
+        symmetric to the last bit (a normal matrix's inverse is only to its round-off, which a result file
+        refuses beyond 1e-9 of the std product)."""
         idx = np.r_[np.arange(15, 18), np.arange(0, 3)]
         C = self.cov[np.ix_(idx, idx)]
         T = np.eye(6)
         T[3:, 3:] = self.R
-        return T @ C @ T.T
+        out = T @ C @ T.T
+        return 0.5 * (out + out.T)
 
 
 def _vec_jacobians(R: FloatArray, F: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:

@@ -109,7 +109,6 @@ class UnitState:
     realigned: int = 0
     rechecked: int = 0  # coarse mappings replaced by a search on a longer stream (clock.recheck)...
     recheck_shift_s: float = 0.0  # ...and the last replacement's change of the offset, s
-    scale_estimated: bool = False
     # the clock mapping s = t' - offset - drift (t' - t_ref), t' the stamps less their re-sync steps
     drift: float = 0.0
     t_ref: float = 0.0
