@@ -105,10 +105,7 @@ def rewindow(st: UnitState, grid: Grid, instants: Callable[[FloatArray], FloatAr
     or its link never decided) formed again from its kept samples (``st.raw``, stamps mapped to the robot's
     clock by ``instants``) at the final solution, when they fill that many. Whether it did."""
     lead = windowed_link(st)
-    if lead is None or not st.raw:
-        return False
-    w = st.windows.get(lead)
-    if (w is not None and w.count >= MIN_WINDOWS) or sum(len(r[0]) for r in st.raw) < MIN_WINDOWS * WINDOW_SAMPLES:
+    if lead is None or not needs_rewindow(st) or sum(len(r[0]) for r in st.raw) < MIN_WINDOWS * WINDOW_SAMPLES:
         return False
     sol, sig, fresh = st.solutions[lead], st.sigmas[lead], Windows()
     for t, a, _, _ in st.raw:
@@ -235,8 +232,8 @@ def solve_unit(st: UnitState, o: OnlineOptions) -> None:
                 Za, Zg = weighted(st, k, sig)
                 sol = stats.solve(Za, Zg, 1.0, 1.0, R0=sol.R, **clock) or sol
             # as mle: the scale/misalignment always fitted under its prior; where the data leave it weakly
-            # determined, the prior holds it near zero and its uncertainty stays in the std (fixing it dropped
-            # that: a real 150 mm/s linear move's rotation came out 0.2 deg std, 2.3 deg off); scale_std says
+            # determined (scale_std), the prior holds it near zero and its uncertainty stays in the std (fixing
+            # it dropped that: a real 150 mm/s linear move's rotation came out 0.2 deg std, 2.3 deg off)
         st.sigmas[link] = sig if st.decided else class_sigmas(st, k, sol, common)
         sols[link] = sol
     st.solutions = sols
@@ -295,10 +292,9 @@ def scale_std(sol: stats.Solution) -> float:
 
 def unit_warnings(st: UnitState, unchecked: bool, sol: stats.Solution | None = None) -> list[str]:
     """The warnings of a unit's result at ``sol``: a time offset without motion to align on; a weakly determined
-    scale/misalignment; a gyroscope at its rail
-    (those readings left out, as ``mle`` does); ``unchecked``: a low-rate joint
-    stream whose block sandwich could not be formed (fewer than :data:`MIN_SANDWICH_BLOCKS` windows of motion), so
-    its std were never held against what the residuals show."""
+    scale/misalignment; a gyroscope at its rail (those readings left out, as ``mle`` does); ``unchecked``: a
+    low-rate joint stream whose block sandwich could not be formed (fewer than :data:`MIN_SANDWICH_BLOCKS`
+    windows of motion), so its std were never held against what the residuals show."""
     out = []
     if np.isfinite(st.offset_sharpness) and st.offset_sharpness < ALIGN_SHARPNESS:
         out.append("time offset uncertain (no motion to align the unit's clock on)")
