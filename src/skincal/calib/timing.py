@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skincal.calib.preprocess.screening import GYRO_RAIL_MAX_SHARE, gyro_rail_share
+from skincal.calib.preprocess.screening import GYRO_RAIL_MAX_SHARE, gyro_lost_share
 from skincal.kinematics.transforms import FloatArray
 
 MAX_OFFSET_S = 0.5
@@ -183,8 +183,8 @@ def coarse_time_offset(
     g = profile.t
     n = profile.angular_speed.shape[1]
     candidates = list(range(1, n + 1)) if links is None else list(links)
-    if gyro is not None and gyro_rail_share(gyro) > GYRO_RAIL_MAX_SHARE:
-        gyro = None  # at its rail throughout (stuck): it shows no motion to align on; the accelerometer does
+    if gyro is not None and gyro_lost_share(gyro, accel, t) > GYRO_RAIL_MAX_SHARE:
+        gyro = None  # at its rail or stuck throughout: it shows no motion to align on; the accelerometer does
     if gyro is not None:
         b = np.median(gyro, axis=0)
         measured = np.minimum(np.linalg.norm(gyro - b, axis=1), profile.resolved_rps)

@@ -150,8 +150,8 @@ def unit_samples(
     extra: tuple[str, ...] = ()
     rail_share = np.count_nonzero(gyro_lost) / max(np.count_nonzero(usable), 1)
     if gyro is not None and rail_share > GYRO_RAIL_MAX_SHARE:
-        extra = (f"gyroscope at its rail in {100 * rail_share:.0f}% of the samples (stuck, or a range too small for "
-                 "this motion): not used",)  # fmt: skip
+        extra = (f"gyroscope at its rail or stuck in {100 * rail_share:.0f}% of the samples (a register that stopped "
+                 "updating, or a range too small for this motion): not used",)  # fmt: skip
         gyro, gyro_lost = None, np.zeros(len(t), dtype=bool)
     elif gyro is not None and gyro_lost.any():
         gyro = np.where(gyro_lost[:, None], np.nan, gyro)

@@ -26,13 +26,26 @@ above any reading at rest)."""
 class Screening:
     """The outcome of :func:`screen_channels`: ``keep`` ``(M,)`` usable samples (their accelerometer
     reading), ``saturated`` ``(M,)`` samples dropped at an accelerometer rail, ``gyro_saturated``
-    ``(M,)`` kept samples whose gyroscope reading alone is at a rail (that reading is unusable, the
+    ``(M,)`` kept samples whose gyroscope reading alone is at a rail or stuck (that reading is unusable, the
     accelerometer's is not), and the warnings."""
 
     keep: np.ndarray
     saturated: np.ndarray
     warnings: tuple[str, ...]
     gyro_saturated: np.ndarray | None = None
+
+
+STUCK_MIN_S = 1.0
+"""A run of exactly repeated consecutive readings of one accelerometer axis lasting this long, s, (or
+:data:`STUCK_MIN_FRACTION` of the stream, and at least :data:`STUCK_MIN_SAMPLES` samples)..."""
+STUCK_MIN_FRACTION = 0.02
+STUCK_MIN_SAMPLES = 10
+STUCK_OTHERS_PTP = 0.2
+"""...while another axis of the same samples varies by more than this, m/s^2 peak to peak, is a register
+that stopped updating (:func:`screen_readings`; streamed: :class:`~skincal.calib.online.stuck.StuckScreen`)."""
+GYRO_STUCK_OTHERS_PTP = 0.05
+"""The same for a gyroscope axis, whose other axes vary by more than this, rad/s peak to peak (3 deg/s: ten
+times a MEMS gyroscope's noise at 100 Hz) (:func:`screen_channels`)."""
 
 
 RAIL_BAND = 0.05
@@ -70,38 +83,116 @@ search either): its rest readings are gone too (a stuck register), and without t
 clock's cross-correlation rest on clipped motion alone (a stuck one aligned a unit 0.5 s off)."""
 
 
-def gyro_rail_share(gyro: FloatArray) -> float:
-    """The share of the samples ``gyro`` ``(M, 3)`` with some axis at a rail (:func:`screen_channels`'s test)."""
-    at = np.zeros(len(gyro), dtype=bool)
-    for _, _, hits in _rails(np.asarray(gyro, dtype=float), GYRO_SATURATION_MIN, pile_up=True):
-        at |= hits
-    return float(at.mean()) if len(at) else 0.0
+def gyro_lost(gyro: FloatArray, accel: FloatArray, t: FloatArray | None = None) -> tuple[np.ndarray, list[str]]:
+    """``(M,)`` samples whose gyroscope reading ``gyro`` ``(M, 3)`` rad/s is unusable, and the warnings: some
+    axis at a rail (beyond :data:`GYRO_SATURATION_MIN`, piled up there) or stuck (:func:`stuck_runs`: the
+    other gyroscope axes varying by more than :data:`GYRO_STUCK_OTHERS_PTP`, or the accelerometer ``accel``
+    ``(M, 3)`` by more than :data:`STUCK_OTHERS_PTP`: a dead gyroscope reading zeros on every axis while the
+    unit moves is stuck too). ``t``: the stamps, s (the stuck runs' length)."""
+    gyro, accel = np.asarray(gyro, dtype=float), np.asarray(accel, dtype=float)
+    lost = np.zeros(len(gyro), dtype=bool)
+    warnings = []
+    for k, value, hits in _rails(gyro, GYRO_SATURATION_MIN, pile_up=True):
+        lost |= hits
+        warnings.append(
+            f"gyroscope {'xyz'[k]} axis saturates at {value:+.4g} rad/s ({np.degrees(value):+.0f} deg/s) in "
+            f"{100 * hits.mean():.1f}% of samples; those gyroscope readings are ignored (the accelerometer's "
+            "are kept)"
+        )
+    min_run = stuck_min_run(len(gyro), t)
+    runs = stuck_runs(gyro, t, min_run, GYRO_STUCK_OTHERS_PTP, GYRO_SATURATION_MIN, accel, STUCK_OTHERS_PTP)
+    for k, value, i, j, count, span in runs:
+        lost[i : j + 1] = True
+        warnings.append(f"gyroscope {'xyz'[k]} axis stuck at {value:.4g} rad/s {span} ({count} gyroscope readings "
+                        "ignored; the accelerometer's are kept)")  # fmt: skip
+    return lost, warnings
+
+
+def gyro_lost_share(gyro: FloatArray, accel: FloatArray, t: FloatArray | None = None) -> float:
+    """The share of the samples whose gyroscope reading is unusable (:func:`gyro_lost`)."""
+    return float(gyro_lost(gyro, accel, t)[0].mean()) if len(gyro) else 0.0
 
 
 def screen_channels(
-    unit: str, accel: FloatArray, gyro: FloatArray | None = None, t: FloatArray | None = None, **stuck: float
+    unit: str, accel: FloatArray, gyro: FloatArray | None = None, t: FloatArray | None = None
 ) -> Screening:
     """:func:`screen_readings` of the accelerometer, and the same saturation test on the gyroscope
     (rails beyond :data:`GYRO_SATURATION_MIN`): a gyroscope at its rail under-reads the rotation
     exactly when it matters most, so its reading there is unusable; the sample's accelerometer
     reading is not (it needs no gyroscope), and dropping it too would leave only the slower motion,
     where a joint stream's acceleration estimate errs the most (SO-101's ``fast`` motion with a
-    +-245 deg/s gyroscope: 46 mm off, 8 std, when those samples were dropped whole).
-    ``stuck``: the stuck-axis test's options."""
-    keep, warnings = screen_readings(unit, accel, t, **stuck)
+    +-245 deg/s gyroscope: 46 mm off, 8 std, when those samples were dropped whole). A stuck
+    gyroscope axis (:func:`gyro_lost`) leaves its readings out the same way (one stuck at 0.37 rad/s from
+    30 % of a simulated Panda session put ``mle`` on the wrong link, 148 mm off; a dead one reading zeros,
+    90 mm off at 4.5 std)."""
+    t = None if t is None else np.asarray(t, dtype=float)
+    keep, warnings = screen_readings(unit, accel, t)
     saturated = np.zeros(len(keep), dtype=bool)
     for _, _, hits in _rails(np.asarray(accel, dtype=float), SATURATION_MIN):
         saturated |= hits
     gyro_saturated = np.zeros(len(keep), dtype=bool)
     if gyro is not None:
-        for k, value, hits in _rails(np.asarray(gyro, dtype=float), GYRO_SATURATION_MIN, pile_up=True):
-            gyro_saturated |= hits
-            warnings.append(
-                f"gyroscope {'xyz'[k]} axis saturates at {value:+.4g} rad/s ({np.degrees(value):+.0f} deg/s) in "
-                f"{100 * hits.mean():.1f}% of samples; those gyroscope readings are ignored (the accelerometer's "
-                "are kept)"
-            )
+        gyro_saturated, gyro_warnings = gyro_lost(gyro, accel, t)
+        warnings += gyro_warnings
     return Screening(keep, saturated & ~keep, tuple(warnings), gyro_saturated & keep)
+
+
+def stuck_min_run(n: int, t: FloatArray | None, min_s: float = STUCK_MIN_S,
+                  min_fraction: float = STUCK_MIN_FRACTION) -> float:  # fmt: skip
+    """The samples a run of repeats needs to be a stuck axis in a stream of ``n`` samples stamped ``t`` (s; None:
+    unknown): ``min_s`` at the median sample interval or ``min_fraction`` of the stream, whichever is shorter,
+    and at least :data:`STUCK_MIN_SAMPLES`."""
+    min_run = min_fraction * n
+    if t is not None and n > 1:
+        dt = float(np.median(np.diff(t)))
+        if dt > 0:
+            min_run = min(min_run, min_s / dt)
+    return max(min_run, float(STUCK_MIN_SAMPLES))
+
+
+def stuck_runs(
+    x: FloatArray,
+    t: FloatArray | None,
+    min_run: float,
+    others_ptp: float,
+    rail_min: float,
+    also: FloatArray | None = None,
+    also_ptp: float = np.inf,
+) -> list[tuple[int, float, int, int, int, str]]:
+    """The stuck axes of a channel ``x`` ``(M, 3)``: runs of exactly repeated consecutive values of one axis,
+    at least ``min_run`` long, while another axis of the same samples varies by more than ``others_ptp`` peak
+    to peak (a unit at rest whose noise stays below one LSB repeats its readings too, but then its other axes
+    do not move); a run at the axis' extreme beyond ``rail_min`` is a rail, left to the saturation test. Runs
+    are judged on the complete (finite) samples. Returns ``(axis, value, first, last, samples, span)`` with
+    ``first``/``last`` indices into ``x`` and ``span`` the words "from 30.0 s to 42.0 s" (stamps ``t``, s, or
+    sample indices when ``t`` is None; "to the end" for a run that reaches it). ``also`` ``(M, J)``: another
+    channel of the same samples whose varying by more than ``also_ptp`` shows the unit moving too."""
+    rows = np.flatnonzero(np.all(np.isfinite(x), axis=1))
+    fin = x[rows]
+    extra = np.zeros((rows.size, 0)) if also is None else np.asarray(also, dtype=float)[rows]
+    limit = np.r_[np.full(x.shape[1] - 1, others_ptp), np.full(extra.shape[1], also_ptp)]
+    out = []
+    for k in range(x.shape[1]):
+        af, others = fin[:, k], np.hstack([np.delete(fin, k, axis=1), extra])
+        same = np.concatenate([[False], af[1:] == af[:-1], [False]])  # same[i]: sample i repeats sample i - 1
+        edges = np.flatnonzero(np.diff(same.astype(np.int8)))
+        for i0, i1 in zip(edges[::2], edges[1::2], strict=True):
+            start, end = int(i0), int(i1) + 1  # finite samples [start, end) hold one value
+            value = float(af[start])
+            if end - start < min_run:
+                continue
+            if abs(value) > rail_min and value in (af.max(), af.min()):
+                continue  # a rail: the saturation test judges it
+            if not np.any(np.ptp(others[start:end], axis=0) > limit):
+                continue  # the whole unit is still
+            i, j = int(rows[start]), int(rows[end - 1])
+            last = end == rows.size
+            if t is None:
+                span = f"from sample {i} " + ("to the end" if last else f"to sample {j}")
+            else:
+                span = f"from {t[i]:.1f} s " + ("to the end" if last else f"to {t[j]:.1f} s")
+            out.append((k, value, i, j, end - start, span))
+    return out
 
 
 def screen_readings(
@@ -109,9 +200,9 @@ def screen_readings(
     accel: FloatArray,
     t: FloatArray | None = None,
     *,
-    stuck_min_s: float = 1.0,
-    stuck_min_fraction: float = 0.02,
-    stuck_others_ptp: float = 0.2,
+    stuck_min_s: float = STUCK_MIN_S,
+    stuck_min_fraction: float = STUCK_MIN_FRACTION,
+    stuck_others_ptp: float = STUCK_OTHERS_PTP,
 ) -> tuple[np.ndarray, list[str]]:
     """Reject what no method can use: a stuck accelerometer axis and saturated samples. Returns the
     mask of usable samples and the warnings.
@@ -131,40 +222,15 @@ def screen_readings(
     keep = np.ones(n, dtype=bool)
     warnings: list[str] = []
     t = None if t is None else np.asarray(t, dtype=float)
-    min_run = stuck_min_fraction * n
-    if t is not None and n > 1:
-        dt = float(np.median(np.diff(t)))
-        if dt > 0:
-            min_run = min(min_run, stuck_min_s / dt)
-    min_run = max(min_run, 10.0)
-    rows = np.flatnonzero(np.all(np.isfinite(accel), axis=1))  # runs are judged on the complete samples
-    fin = accel[rows]
+    min_run = stuck_min_run(n, t, stuck_min_s, stuck_min_fraction)
+    for k, axis in enumerate("xyz"):
+        if n > 10 and np.ptp(accel[:, k]) < 1e-9:
+            raise CalibrationError(f"unit '{unit}': accelerometer {axis} axis is stuck at {accel[0, k]:.4g} m/s^2")
+    for k, value, i, j, count, span in stuck_runs(accel, t, min_run, stuck_others_ptp, SATURATION_MIN):
+        keep[i : j + 1] = False
+        warnings.append(f"accelerometer {'xyz'[k]} axis stuck at {value:.4g} m/s^2 {span} ({count} samples ignored)")
     for k, axis in enumerate("xyz"):
         a = accel[:, k]
-        if a.size > 10 and np.ptp(a) < 1e-9:
-            raise CalibrationError(f"unit '{unit}': accelerometer {axis} axis is stuck at {a[0]:.4g} m/s^2")
-        af, others = fin[:, k], np.delete(fin, k, axis=1)
-        same = np.concatenate([[False], af[1:] == af[:-1], [False]])  # same[i]: sample i repeats sample i - 1
-        edges = np.flatnonzero(np.diff(same.astype(np.int8)))
-        for i0, i1 in zip(edges[::2], edges[1::2], strict=True):
-            start, end = int(i0), int(i1) + 1  # finite samples [start, end) hold one value
-            value = float(af[start])
-            if end - start < min_run:
-                continue
-            if abs(value) > SATURATION_MIN and value in (af.max(), af.min()):
-                continue  # a rail: the saturation test below judges it
-            if not np.max(np.ptp(others[start:end], axis=0)) > stuck_others_ptp:
-                continue  # the whole unit is still: repeated readings below one LSB of noise
-            i, j = rows[start], rows[end - 1]
-            keep[i : j + 1] = False
-            last = end == rows.size
-            if t is None:
-                span = f"from sample {i} " + ("to the end" if last else f"to sample {j}")
-            else:
-                span = f"from {t[i]:.1f} s " + ("to the end" if last else f"to {t[j]:.1f} s")
-            warnings.append(
-                f"accelerometer {axis} axis stuck at {value:.4g} m/s^2 {span} ({end - start} samples ignored)"
-            )
         for extreme in (a.max(), a.min()):
             hits = a == extreme
             if abs(extreme) > SATURATION_MIN and hits.mean() > SATURATION_FRACTION and np.count_nonzero(hits) > 3:
