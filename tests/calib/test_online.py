@@ -440,7 +440,8 @@ def test_correlated_residuals_inflate_the_std_before_five_windows_but_white_ones
 def test_a_gyroscope_at_its_rail_drops_its_reading_and_keeps_the_accelerometer_sample():
     """As in ``mle``: a sample whose gyroscope alone is at its rail keeps its accelerometer reading (the fast
     motion that clipped it is what determines the lever arm best), and its gyroscope rows add nothing."""
-    from skincal.calib.online.unit import UnitState, unsaturated
+    from skincal.calib.online.screen import unsaturated
+    from skincal.calib.online.unit import UnitState
 
     rng = np.random.default_rng(5)
     M = 400
@@ -462,7 +463,8 @@ def test_a_gyroscope_clipped_below_the_old_floor_is_at_its_rail_in_both_calibrat
     the streaming calibrator (12 std off in rotation, no warning) while ``mle`` left those readings out: both now
     flag the same samples, and the streaming result warns."""
     from skincal.calib.online.fit import unit_warnings
-    from skincal.calib.online.unit import UnitState, unsaturated
+    from skincal.calib.online.screen import unsaturated
+    from skincal.calib.online.unit import UnitState
     from skincal.calib.preprocess.screening import screen_channels
 
     rng = np.random.default_rng(8)

@@ -36,7 +36,8 @@ from skincal.calib.online import clock, design, fit, split, stats
 from skincal.calib.online.design import excitation
 from skincal.calib.online.fit import JOINT_ACTIVE_RPS, decide, inflation, residuals, solve_unit, window_means
 from skincal.calib.online.options import OnlineOptions, UnitStatus, is_settled
-from skincal.calib.online.unit import Grid, UnitState, keep_pending, rests_only, signals_at, take_pending, unsaturated
+from skincal.calib.online.screen import admit, unsaturated
+from skincal.calib.online.unit import Grid, UnitState, keep_pending, rests_only, signals_at, take_pending
 from skincal.calib.position import judge_position, weak_position
 from skincal.calib.preprocess import JointInterpolator
 from skincal.calib.rest import link_moving
@@ -167,9 +168,7 @@ class OnlineCalibrator:
         if g is not None:
             ok &= np.all(np.isfinite(g), axis=1)
         if t.size and ok.any():
-            st.pending_t.append(t[ok])
-            st.pending_a.append(a[ok])
-            st.pending_g.append(None if g is None else g[ok])
+            admit(st, t[ok], a[ok], None if g is None else g[ok])
 
     # ---------------------------------------------------------------- processing
     @one_blas_thread
@@ -194,6 +193,7 @@ class OnlineCalibrator:
         c0 = time.process_time()
         self._blocks(final=True)
         for u in self.units:
+            admit(self._u[u], np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)) if self._u[u].has_gyro else None, True)
             if (grid := self._grid_arrays()) is not None:  # the whole stream's peak (its kept samples pending again)
                 clock.recheck(self._u[u], grid, None, None, None, self.options, final=True)
             self._absorb_unit(u, final=True)
@@ -318,7 +318,7 @@ class OnlineCalibrator:
         if not ready.any():
             return 0
         g_ready = None if g is None else g[ready]
-        n, chunk = self._absorb(name, st, grid, s[ready], a[ready], g_ready)
+        n, chunk = self._absorb(name, st, grid, s[ready], a[ready], st.stuck.gyro_masked(t[ready], g_ready))
         st.raw.append((t[ready], a[ready], g_ready, chunk))
         while st.raw and clock.instants(st, st.raw[0][0][-1:])[0] < tg[0]:
             st.raw.popleft()  # its part of the grid is gone: it could not be absorbed again (its statistics stay)
@@ -567,6 +567,8 @@ class OnlineCalibrator:
                 "outliers": st.outliers,
                 "saturated_samples": st.saturated,
                 "gyro_saturated_samples": st.gyro_saturated,
+                "stuck_samples": st.stuck.dropped,
+                "gyro_stuck_samples": st.stuck.gyro_dropped,
                 "realigned": st.realigned,
                 "clock_rechecked": st.rechecked,
                 "scale_estimated": fit.scale_std(sol) <= fit.SCALE_STD_LIMIT,

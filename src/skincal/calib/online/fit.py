@@ -16,7 +16,8 @@ from skincal.calib import consistency
 from skincal.calib.online import split, stats
 from skincal.calib.online.clock import ALIGN_SHARPNESS
 from skincal.calib.online.options import OnlineOptions
-from skincal.calib.online.unit import MOVING, REST, Grid, UnitState, Windows, accel_at_rail, signals_at, windowed_link
+from skincal.calib.online.screen import accel_at_rail
+from skincal.calib.online.unit import MOVING, REST, Grid, UnitState, Windows, signals_at, windowed_link
 from skincal.calib.rest import link_moving
 from skincal.calib.robust import SANDWICH_BLOCK_S, sandwich_factors
 from skincal.calib.timing import CLOCK_DRIFT_MIN_SPAN_S, compose_clock
@@ -292,7 +293,8 @@ def scale_std(sol: stats.Solution) -> float:
 
 def unit_warnings(st: UnitState, unchecked: bool, sol: stats.Solution | None = None) -> list[str]:
     """The warnings of a unit's result at ``sol``: a time offset without motion to align on; a weakly determined
-    scale/misalignment; a gyroscope at its rail (those readings left out, as ``mle`` does); ``unchecked``: a
+    scale/misalignment; an accelerometer axis stuck or at its rail (those samples left out) and a gyroscope at
+    its rail (those readings left out), as ``mle``'s screening warns; ``unchecked``: a
     low-rate joint stream whose block sandwich could not be formed (fewer than :data:`MIN_SANDWICH_BLOCKS`
     windows of motion), so its std were never held against what the residuals show."""
     out = []
@@ -303,6 +305,9 @@ def unit_warnings(st: UnitState, unchecked: bool, sol: stats.Solution | None = N
         prior = 100 * stats.SCALE_PRIOR
         out.append(f"scale/misalignment weakly determined by the data (std up to {100 * worst:.1f} %, held near "
                    f"zero by a {prior:.0f} % prior; its uncertainty is in the reported std)")  # fmt: skip
+    out += st.stuck.warnings()  # as mle's screening warns
+    if st.saturated:
+        out.append(f"accelerometer at its rail in {st.saturated} samples; those samples are ignored")
     if st.gyro_saturated:  # as mle's screening warns
         out.append(f"gyroscope at its rail in {st.gyro_saturated} samples; those gyroscope readings are ignored "
                    "(the accelerometer's are kept)")  # fmt: skip

@@ -1,6 +1,6 @@
 """What the streaming calibrator keeps: the link signals on its grid (:class:`Grid`, read back at the
 samples' instants by :func:`signals_at`) and per unit its statistics, pending samples and clock
-(:class:`UnitState`), with the sample screening (:func:`unsaturated`)."""
+(:class:`UnitState`); the samples' screening is :mod:`~skincal.calib.online.screen`'s."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from skincal.calib.hermite import hermite
 from skincal.calib.online import stats
 from skincal.calib.online.options import UnitStatus
 from skincal.calib.online.split import Ledger
-from skincal.calib.preprocess.screening import GYRO_SATURATION_MIN, SATURATION_FRACTION, SATURATION_MIN
+from skincal.calib.online.stuck import StuckScreen
 from skincal.calib.timing import ClockSteps
 from skincal.kinematics.transforms import FloatArray
 
@@ -24,11 +24,6 @@ noise; a moving one's adds the errors of the joint-derived accelerations), so th
 (:func:`~skincal.calib.rest.link_moving`)."""
 MIN_POSITION_MOVING = 10
 """A unit whose link has fewer moving samples than this holds no position (rests only)."""
-SATURATION_FLOOR = (SATURATION_MIN, GYRO_SATURATION_MIN)
-"""A recurring largest reading is taken as the sensor's range only beyond the batch screening's floors
-(m/s^2, rad/s: :data:`~skincal.calib.preprocess.screening.SATURATION_MIN` and
-:data:`~skincal.calib.preprocess.screening.GYRO_SATURATION_MIN`), so both calibrators leave out the same
-readings."""
 
 
 @dataclass(frozen=True)
@@ -114,6 +109,7 @@ class UnitState:
     t_ref: float = 0.0
     steps: ClockSteps | None = None
     t_seen: float = float("-inf")  # newest stamp searched for re-sync steps
+    stuck: StuckScreen = field(default_factory=StuckScreen)  # the stuck-axis test, before the samples are pending
 
 
 def keep_pending(st: UnitState, t: FloatArray, a: FloatArray, g: FloatArray | None) -> None:
@@ -146,54 +142,6 @@ def signals_at(grid: Grid, s: FloatArray, links: Sequence[int]):
         dy[..., :3], dy[..., 3:12].reshape(L, M, 3, 3), y[..., 15:18],
     )  # fmt: skip
     return (*sig, grid.ok[i] & grid.ok[i + 1])
-
-
-def unsaturated(st: UnitState, a: FloatArray, g: FloatArray | None) -> tuple[np.ndarray, FloatArray | None]:
-    """``(M,)`` samples whose accelerometer is below its saturation, and the gyroscope's readings with NaN
-    rows where it is at its rail (:func:`~skincal.calib.online.stats.gyro_rows` leaves them out; the
-    sample's accelerometer reading needs no gyroscope, as in ``mle``): a largest reading that recurs
-    exactly (a clipped register) is taken as the range."""
-    keep = np.ones(a.shape[0], dtype=bool)
-    rail = np.zeros(a.shape[0], dtype=bool)
-    for i, x in enumerate((a, g)):
-        if x is None or x.size == 0:
-            continue
-        st.screened[i] += x.shape[0]
-        if np.abs(x).max() < SATURATION_FLOOR[i] and not at_rail_now(st, i):
-            continue  # a quantised reading at rest repeats its largest value too: not a range
-        m = np.abs(x)
-        top = float(m.max())
-        if top > st.peak[i]:
-            st.peak[i], st.peak_count[i] = top, float((m == top).sum())
-        else:
-            st.peak_count[i] += float((m == st.peak[i]).sum())
-        if at_rail_now(st, i):
-            at_rail = ~np.all(m < st.peak[i], axis=1)
-            if i == 0:
-                keep &= ~at_rail
-            else:
-                rail |= at_rail
-    st.saturated += int((~keep).sum())  # samples not absorbed (a gyroscope's rail leaves its reading out only)
-    st.gyro_saturated += int((rail & keep).sum())
-    if g is not None and rail.any():
-        g = np.where(rail[:, None], np.nan, g)
-    return keep, g
-
-
-def at_rail_now(st: UnitState, i: int) -> bool:
-    """Whether channel ``i`` (0 accelerometer, 1 gyroscope) has shown a rail so far: its largest reading beyond
-    :data:`SATURATION_FLOOR` recurring exactly more than 3 times and in more than
-    :data:`~skincal.calib.preprocess.screening.SATURATION_FRACTION` of its samples (the batch screening's
-    rule; a consumer IMU's quantised peak recurs twice by chance)."""
-    count = st.peak_count[i]
-    return bool(st.peak[i] >= SATURATION_FLOOR[i] and count > 3 and count > SATURATION_FRACTION * st.screened[i])
-
-
-def accel_at_rail(st: UnitState, a: FloatArray) -> np.ndarray:
-    """``(M,)`` readings ``a`` at the accelerometer's rail as :func:`unsaturated` found it so far (no update)."""
-    if at_rail_now(st, 0):
-        return ~np.all(np.abs(a) < st.peak[0], axis=1)
-    return np.zeros(a.shape[0], dtype=bool)
 
 
 def windowed_link(st: UnitState) -> int | None:
