@@ -93,8 +93,9 @@ class UnitState:
     status: UnitStatus | None = None
     best_joint_t: float = float("-inf")
     best_joint: int | None = None
-    peak: FloatArray = field(default_factory=lambda: np.zeros(2))  # largest |reading| seen: accel, gyro
-    peak_count: FloatArray = field(default_factory=lambda: np.zeros(2))  # how often exactly that value came
+    # per channel (accel, gyro) each axis' largest reading and largest negated one (x, y, z, -x, -y, -z) seen...
+    peak: FloatArray = field(default_factory=lambda: np.zeros((2, 6)))
+    peak_count: FloatArray = field(default_factory=lambda: np.zeros((2, 6)))  # ...and how often exactly it came
     screened: FloatArray = field(default_factory=lambda: np.zeros(2))  # readings screened: accel, gyro
     saturated: int = 0  # samples not absorbed: the accelerometer at its rail
     gyro_saturated: int = 0  # samples absorbed without their gyroscope reading (at its rail)

@@ -180,3 +180,27 @@ def test_an_online_session_with_a_frozen_axis_names_it_and_keeps_its_accuracy(se
     assert got.extras["stuck_samples"] == int(stuck[0].split("(")[1].split()[0]) > 3000
     err = np.linalg.norm(got.pose.p_link_su - ds.truth["su5"].p_link_su)
     assert err < 2e-4 and err < 4 * np.linalg.norm(got.position_std_m)
+
+
+def test_asymmetric_rails_of_each_axis_are_found_in_chunks_as_the_batch_screening_finds_them():
+    """A real MPU6050 clips one axis at +19.56 and -19.67 m/s^2 and another at +19.24: each axis' two extremes
+    are rails of their own. The streaming screen took the largest magnitude of all axes as the one range and kept
+    the samples at the smaller rails (here the +19.56 and +19.24 ones)."""
+    from skincal.calib.online import stats
+    from skincal.calib.online.screen import unsaturated
+    from skincal.calib.online.unit import UnitState
+    from skincal.calib.preprocess.screening import screen_channels
+
+    rng = np.random.default_rng(9)
+    M = 3000
+    a = rng.normal(0.0, 8.0, (M, 3))
+    a[:, 0] = np.clip(a[:, 0], -19.67, 19.56)
+    a[:, 1] = np.clip(a[:, 1], -30.0, 19.24)
+    g = rng.normal(0.0, 0.3, (M, 3))
+    st = UnitState([3], np.zeros((1, 2, stats.NA, stats.NA)), np.zeros((1, 2, stats.NG, stats.NG)), np.zeros(1))
+    keep = np.concatenate([unsaturated(st, a[i : i + 100], g[i : i + 100])[0] for i in range(0, M, 100)])
+    batch = screen_channels("su1", a, g)
+    clipped = (a[:, 0] >= 19.56) | (a[:, 0] <= -19.67) | (a[:, 1] >= 19.24)
+    assert np.array_equal(~batch.keep, clipped)
+    # the first chunks hold a rail before it recurs often enough: the stream finds it from then on
+    assert np.array_equal(~keep[1000:], clipped[1000:]) and st.saturated == int((~keep).sum()) >= 0.8 * clipped.sum()
