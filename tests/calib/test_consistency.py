@@ -88,6 +88,21 @@ def test_the_warning_names_what_disagrees_or_says_none_alone_does():
     assert "(position z +4.0 mm (4.0 std, time))" in [w for w in named.warnings if "disagree" in w][0]
 
 
+def test_a_part_in_another_basin_is_warned_of_and_a_part_with_too_little_data_is_not():
+    """A streamed part whose rotation fit lies 30 deg or more from the whole's is not compared; it was only in the
+    consistency block (a dead gyroscope's unit on the wrong link, 304 mm off, had one and no warning)."""
+    from skincal.calib.consistency import ANOTHER_BASIN
+
+    unit = _unit([0, 0, 0], [1.0, 1.0, 1.0])
+    z = np.full((len(SPLITS), 6), np.nan)
+    far = apply(unit, judge(z, [], [f"time part 2: {ANOTHER_BASIN} (41 deg away)"]))
+    (warning,) = [w for w in far.warnings if "far from the whole" in w]
+    assert "time part 2: its fit is another basin (41 deg away)" in warning
+    assert far.extras["consistency"]["failed"] == ["time part 2: its fit is another basin (41 deg away)"]
+    short = apply(unit, judge(z, [], ["time part 1: too little data"]))
+    assert short.warnings == ()
+
+
 def test_a_part_that_does_not_determine_a_component_is_not_compared():
     """The calm half of a recording may not turn the unit's only joint: its position along x comes out
     1000 mm off with a 500 mm std (a 2-std difference that means nothing); the component is left out

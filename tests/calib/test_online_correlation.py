@@ -91,3 +91,20 @@ def test_a_unit_aligned_only_at_the_data_end_still_shows_its_correlated_residual
     assert unit.extras["residual_correlation"] > 1.5
     err = (unit.pose.p_link_su - ds.truth[name].p_link_su) / np.asarray(unit.position_std_m)
     assert np.all(np.abs(err) < 3.0), err
+
+
+def test_a_strong_correlation_is_warned_of_as_mle_warns_and_its_cap_is_named():
+    """The streaming result carried its correlation factor silently, even at its cap (there the std may still be
+    too small): beyond mle's threshold it now says so in mle's words."""
+    from skincal.calib.online import stats
+    from skincal.calib.online.fit import CORRELATION_MAX, unit_warnings
+    from skincal.calib.online.unit import UnitState
+    from skincal.calib.robust import CORRELATION_WARN
+
+    st = UnitState([3], np.zeros((1, 2, stats.NA, stats.NA)), np.zeros((1, 2, stats.NG, stats.NG)), np.zeros(1))
+    said = [w for w in unit_warnings(st, False, None, CORRELATION_WARN) if "correlated" in w]
+    assert said == []
+    (said,) = [w for w in unit_warnings(st, False, None, 12.5) if "correlated" in w]
+    assert said.startswith("residuals strongly correlated in time (factor 12.5: ") and "cap" not in said
+    (said,) = [w for w in unit_warnings(st, False, None, CORRELATION_MAX) if "correlated" in w]
+    assert "factor 100.0, at its cap of 100: the std may still be too small" in said

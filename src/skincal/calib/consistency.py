@@ -322,11 +322,21 @@ def judge(z: FloatArray, named: list[str], failed: list[str], z_offset: FloatArr
     return Consistency(cp, cr, dp, dr, fp, fr, tuple(named), tuple(failed), ap, ar, ct, dt, ft)
 
 
+ANOTHER_BASIN = "its fit is another basin"
+"""The words of a part not compared because its fit lies far from the whole's (a streamed part: its rotation
+30 deg or more away, :data:`~skincal.calib.online.split.FAR_RAD`); :func:`apply` warns of it."""
+
+
 def apply(unit: UnitResult, c: Consistency) -> UnitResult:
     """``unit`` with its split check ``c`` (``extras["consistency"]``), its std and pose covariance inflated
-    per axis where the parts disagree, and a warning saying so."""
+    per axis where the parts disagree, and a warning saying so; a part whose fit fell into another basin (not
+    compared) is warned of too: the data do not single out one pose."""
     fp, fr, ap, ar = c.inflation_position, c.inflation_rotation, c.axes_position, c.axes_rotation
     warnings = list(unit.warnings)
+    basins = [f for f in c.failed if ANOTHER_BASIN in f]
+    if basins:
+        warnings.append(f"a part of the recording fits a pose far from the whole's ({'; '.join(basins[:2])}): the "
+                        "data may not single out one pose; check the rotation against another recording")  # fmt: skip
     if fp > 1.0 or fr > 1.0:
         def said(what: str, f: tuple[float, float, float]) -> str:
             return f"{what} " + " ".join(f"{a} x{v:.1f}" for a, v in zip(AXES, f, strict=True))

@@ -78,6 +78,11 @@ def _integrated(rho: FloatArray) -> float:
     return 1.0 + 2.0 * float(np.sum(rho[1:end]))
 
 
+CORRELATION_WARN = 4.0
+"""Residual autocorrelation factors above this are reported (model error, covariance inflated), by ``mle`` and
+the streaming calibrator alike."""
+
+
 def residual_correlation(r: FloatArray, max_lag: int = 20) -> float:
     """Integrated autocorrelation ``1 + 2 sum_k rho_k`` of the moving residuals (>= 1).
 

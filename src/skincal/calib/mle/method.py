@@ -55,6 +55,7 @@ from skincal.calib.mle.solver import (
 )
 from skincal.calib.model import sym_from_e
 from skincal.calib.preprocess import check_gyro_units
+from skincal.calib.robust import CORRELATION_WARN
 from skincal.calib.timing import (
     CLOCK_DRIFT_MIN_SPAN_S,
     OffsetSearch,
@@ -108,10 +109,6 @@ OFFSET_JUMP_WARN_S = 0.05
 
 SANDWICH_WARN = 2.0
 """A block-sandwich factor on the position std above this is reported (``solver.sandwich_inflation``)."""
-
-
-CORRELATION_WARN = 4.0
-"""Residual autocorrelation factors above this are reported (model error, covariance inflated)."""
 
 
 @dataclass(frozen=True)

@@ -554,7 +554,7 @@ class OnlineCalibrator:
             cov = sol.pose_covariance() * kappa
             std = np.sqrt(np.clip(np.diag(cov), 0.0, None))  # before the split check (applied below)
             imu, drift, drift_std_ppm = fit.imu_calibration(st, sol, kappa, self.gravity)
-            warnings = fit.unit_warnings(st, self.spline and not rests and factors is None, sol)
+            warnings = fit.unit_warnings(st, self.spline and not rests and factors is None, sol, kappa)
             notes = fit.unit_notes(st, drift, drift_std_ppm)
             extras: dict[str, Any] = {
                 "link_name": self.chain.link_names[s.link] if self.chain.link_names else f"link{s.link}",

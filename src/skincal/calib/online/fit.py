@@ -19,7 +19,7 @@ from skincal.calib.online.options import OnlineOptions
 from skincal.calib.online.screen import accel_at_rail
 from skincal.calib.online.unit import MOVING, REST, Grid, UnitState, Windows, signals_at, windowed_link
 from skincal.calib.rest import link_moving
-from skincal.calib.robust import SANDWICH_BLOCK_S, sandwich_factors
+from skincal.calib.robust import CORRELATION_WARN, SANDWICH_BLOCK_S, sandwich_factors
 from skincal.calib.timing import CLOCK_DRIFT_MIN_SPAN_S, compose_clock
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.kinematics.transforms import FloatArray
@@ -291,12 +291,14 @@ def scale_std(sol: stats.Solution) -> float:
     return float(np.sqrt(np.clip(np.diag(sol.cov)[3:12], 0.0, None)).max())
 
 
-def unit_warnings(st: UnitState, unchecked: bool, sol: stats.Solution | None = None) -> list[str]:
+def unit_warnings(st: UnitState, unchecked: bool, sol: stats.Solution | None = None, kappa: float = 1.0) -> list[str]:
     """The warnings of a unit's result at ``sol``: a time offset without motion to align on; a weakly determined
     scale/misalignment; an accelerometer axis stuck or at its rail (those samples left out) and a gyroscope at
     its rail (those readings left out), as ``mle``'s screening warns; ``unchecked``: a
     low-rate joint stream whose block sandwich could not be formed (fewer than :data:`MIN_SANDWICH_BLOCKS`
-    windows of motion), so its std were never held against what the residuals show."""
+    windows of motion), so its std were never held against what the residuals show; ``kappa``, the correlation
+    inflation applied, beyond :data:`~skincal.calib.robust.CORRELATION_WARN` (as ``mle`` warns; at its cap
+    :data:`CORRELATION_MAX` the std may still be too small)."""
     out = []
     if np.isfinite(st.offset_sharpness) and st.offset_sharpness < ALIGN_SHARPNESS:
         out.append("time offset uncertain (no motion to align the unit's clock on)")
@@ -311,6 +313,11 @@ def unit_warnings(st: UnitState, unchecked: bool, sol: stats.Solution | None = N
     if st.gyro_saturated:  # as mle's screening warns
         out.append(f"gyroscope at its rail in {st.gyro_saturated} samples; those gyroscope readings are ignored "
                    "(the accelerometer's are kept)")  # fmt: skip
+    if kappa > CORRELATION_WARN:
+        capped = kappa >= CORRELATION_MAX
+        cap = f", at its cap of {CORRELATION_MAX:.0f}: the std may still be too small" if capped else ""
+        out.append(f"residuals strongly correlated in time (factor {kappa:.1f}{cap}: unmodelled dynamics or "
+                   "joint-state errors); uncertainty inflated by it")  # fmt: skip
     if unchecked:
         out.append(f"std not checked against the residuals (a low-rate joint stream with fewer than "
                    f"{MIN_SANDWICH_BLOCKS} windows of motion): they may be too small")  # fmt: skip

@@ -229,7 +229,7 @@ def check(ledger: Ledger, k: int, full_std: FloatArray, full_R: FloatArray, solv
                 break
             away = float(rotation_angle(sol.R, full_R))
             if away > FAR_RAD:
-                failed.append(f"{split} part {side + 1}: its fit is another basin ({np.degrees(away):.0f} deg away)")
+                failed.append(f"{split} part {side + 1}: {consistency.ANOTHER_BASIN} ({np.degrees(away):.0f} deg away)")
                 break
             std = _std(np.r_[np.diag(sol.pose_covariance()), sol.cov[stats.TAU, stats.TAU]] * kappa)
             if ledger.moving is not None and ledger.moving[w, k].sum() < MIN_MOVING:
