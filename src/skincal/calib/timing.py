@@ -36,7 +36,15 @@ from skincal.calib.preprocess.screening import GYRO_RAIL_MAX_SHARE, gyro_lost_sh
 from skincal.kinematics.transforms import FloatArray
 
 MAX_OFFSET_S = 0.5
-"""Largest time offset searched, s."""
+"""Largest time offset searched, s, unless its peak lies at this edge..."""
+WIDE_OFFSET_S = 5.0
+"""...or a peak up to this offset, s, correlates better by :data:`WIDE_MARGIN` (a unit stamped 2 s off was
+aligned at 0.37 s, correlation 0.29 against 0.99 at 2.0 s, without a word: the streaming calibrator put it on
+the wrong link, 423 mm off, and ``mle`` 192 mm off). Within half the joint stream's span at most, and with a
+gyroscope only: the accelerometer's spread signal aliases at wide lags (a simulated protocol of repeated
+moves: a peak 3 s off at 0.92 against the true one's 0.70)."""
+WIDE_MARGIN = 0.2
+"""See :data:`WIDE_OFFSET_S` (normalised correlation)."""
 CLOCK_DRIFT_MIN_SPAN_S = 60.0
 """The clock drift is estimated when the unit's samples span at least this long, s (moving samples in
 ``mle``; the absorbed stream in the streaming calibrator, which holds it near 0 before,
@@ -124,6 +132,9 @@ class OffsetSearch:
         sharpness: peak correlation minus the best correlation more than ``0.25 s`` away from it
             (small: the offset is uncertain).
         source: ``"gyroscope"`` or ``"accelerometer"``.
+        widened: the gyroscope's peak within ``+-max_offset_s`` lay at its edge or a peak beyond, up to
+            ``+-``:data:`WIDE_OFFSET_S`, correlated clearly better: the offset was taken from there (a
+            clock further off than the usual latencies).
     """
 
     offset_s: float
@@ -131,6 +142,7 @@ class OffsetSearch:
     correlation: FloatArray
     sharpness: float
     source: str
+    widened: bool = False
 
 
 def normalised_xcorr(m: FloatArray, spectrum: FloatArray, p: FloatArray, size: int, max_lag: int) -> FloatArray:
@@ -163,6 +175,12 @@ def _spread_signal(t: FloatArray, accel: FloatArray, window_s: float) -> FloatAr
     mean = (c1[hi] - c1[lo]) / n
     var = np.maximum((c2[hi] - c2[lo]) / n - mean * mean, 0.0)
     return np.sqrt(var.sum(axis=1))
+
+
+def widened_note(offset_s: float) -> str:
+    """What a result notes of a coarse offset found beyond the usual search (:attr:`OffsetSearch.widened`)."""
+    return (f"clock far off the robot's: coarse time offset {offset_s * 1e3:+.0f} ms, beyond the usual "
+            f"+-{MAX_OFFSET_S * 1e3:.0f} ms (searched up to +-{WIDE_OFFSET_S:.0f} s)")  # fmt: skip
 
 
 def coarse_time_offset(
@@ -201,20 +219,33 @@ def coarse_time_offset(
     m[~inside] = np.median(measured)
     dt = float(g[1] - g[0])
     max_lag = max(1, int(np.ceil(max_offset_s / dt)))
-    best = (-np.inf, 0.0, candidates[0], np.zeros(0))
-    corr = np.full(n, np.nan)
+    wide_lag = max(max_lag, min(int(np.ceil(WIDE_OFFSET_S / dt)), g.size // 2))
     spectra = profile.spectra[source]
-    for k in candidates:
-        c = normalised_xcorr(m, spectra[:, k - 1], predicted[:, k - 1], profile.fft_size, max_lag)
-        i = int(np.argmax(c))
-        corr[k - 1] = float(c[i])
-        if c[i] > best[0]:
-            best = (float(c[i]), (parabola_peak(c, i) - max_lag) * dt, k, c)
-    peak, offset, link, c = best
-    lags = (np.arange(c.size) - max_lag) * dt
+    every = {k: normalised_xcorr(m, spectra[:, k - 1], predicted[:, k - 1], profile.fft_size, wide_lag)
+             for k in candidates}  # fmt: skip
+
+    def peak_within(lag: int) -> tuple[float, float, int, FloatArray, FloatArray, int]:
+        best = (-np.inf, 0.0, candidates[0], np.zeros(0), np.full(n, np.nan), 0)
+        corr = np.full(n, np.nan)
+        for k, full in every.items():
+            c = full[wide_lag - lag : wide_lag + lag + 1]
+            i = int(np.argmax(c))
+            corr[k - 1] = float(c[i])
+            if c[i] > best[0]:
+                best = (float(c[i]), (parabola_peak(c, i) - lag) * dt, k, c, corr, i)
+        return (*best[:4], corr, best[5])
+
+    peak, offset, link, c, corr, i = peak_within(max_lag)
+    widened = False
+    if wide_lag > max_lag and source == "gyroscope":  # at the edge, or far weaker than a peak beyond it
+        wide = peak_within(wide_lag)
+        widened = i in (0, c.size - 1) or wide[0] > peak + WIDE_MARGIN
+        if widened:
+            peak, offset, link, c, corr, _ = wide
+    lags = (np.arange(c.size) - (c.size - 1) // 2) * dt
     far = np.abs(lags - offset) > 0.25
     sharpness = peak - float(c[far].max()) if np.any(far) else peak
-    return OffsetSearch(float(offset), int(link), corr, float(sharpness), source)
+    return OffsetSearch(float(offset), int(link), corr, float(sharpness), source, widened)
 
 
 STEP_SIGMAS = 8.0

@@ -59,6 +59,7 @@ from skincal.calib.robust import CORRELATION_WARN
 from skincal.calib.timing import (
     CLOCK_DRIFT_MIN_SPAN_S,
     OffsetSearch,
+    widened_note,
 )
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.data.result import UnitResult
@@ -261,6 +262,8 @@ def _honesty(
                 f"bias drifts: the accelerometer bias changed by {change:.3g} m/s^2 over {T:.0f} s "
                 "(estimated as a linear drift)"
             )
+    if alignment is not None and alignment.widened:
+        notes.append(widened_note(alignment.offset_s))
     if alignment is not None and (
         alignment.sharpness < OFFSET_SHARPNESS_MIN or abs(total_offset - alignment.offset_s) > OFFSET_JUMP_WARN_S
     ):

@@ -20,6 +20,7 @@ from skincal.calib.timing import (
     find_clock_steps,
     motion_instants,
     motion_profile,
+    widened_note,
 )
 from skincal.kinematics.transforms import FloatArray
 
@@ -79,7 +80,7 @@ def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray
     if search.sharpness < ALIGN_SHARPNESS and span < ALIGN_WAIT_FRACTION * o.history_s:
         return  # the peak is not distinct yet: wait for more motion (the samples stay pending)
     st.offset, st.offset_sharpness, st.clock_provisional = float(search.offset_s), float(search.sharpness), False
-    st.t_ref, st.searched_span = float(ti[0]), float(span)
+    st.t_ref, st.searched_span, st.clock_widened = float(ti[0]), float(span), search.widened
     st.steps = find_clock_steps(t)
     st.t_seen = float(t[-1])
 
@@ -204,7 +205,7 @@ def recheck(st: UnitState, grid: Grid, t: FloatArray | None, a: FloatArray | Non
         return False
     st.recheck_shift_s = float(search.offset_s) - now
     st.offset, st.drift, st.t_ref = float(search.offset_s), 0.0, float(Ti[0])
-    st.offset_sharpness = float(search.sharpness)
+    st.offset_sharpness, st.clock_widened = float(search.sharpness), search.widened
     st.rechecked, st.realigned = st.rechecked + 1, 0  # a new coarse mapping: the fine re-alignments start over
     restart(st)
     return True
@@ -216,6 +217,8 @@ def notes(st: UnitState) -> list[str]:
     if st.clock_provisional:
         out.append("coarse clock search skipped: the unit's samples hold no motion (static poses only), so nothing "
                    "determines the clock offset; the stamps taken as they are")  # fmt: skip
+    if st.clock_widened and st.offset is not None:
+        out.append(widened_note(st.offset))
     if st.rechecked:
         out.append(f"coarse clock offset searched again on a longer stream ({st.rechecked} time(s)): the first "
                    f"seconds' peak was elsewhere, the offset moved by {1e3 * st.recheck_shift_s:+.0f} ms")  # fmt: skip

@@ -76,6 +76,7 @@ class UnitState:
     offset: float | None = None
     offset_sharpness: float = float("nan")
     searched_span: float = 0.0  # span of the stream the coarse offset was last searched on, s (clock.recheck)
+    clock_widened: bool = False  # that search found the offset beyond the usual range (timing.WIDE_OFFSET_S)
     clock_provisional: bool = False  # stamps taken as they are (no motion seen yet): aligned again on motion
     has_gyro: bool | None = None
     chunks: deque = field(default_factory=deque)  # (t_min, t_max, Za, Zg, moving, pieces) per absorb call
