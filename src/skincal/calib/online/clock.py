@@ -50,10 +50,12 @@ REST_ONLY_DENSITY = 0.3
 time was recorded in the rests only (:func:`holds_motion`)."""
 
 
-def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray | None, o: OnlineOptions) -> None:
+def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray | None, o: OnlineOptions,
+          final: bool = False) -> None:  # fmt: skip
     """Find the unit's coarse time offset on the grid's motion (:func:`~skincal.calib.timing.coarse_time_offset`)
     once its samples ``t, a, g`` span ``o.align_s`` with motion and the peak is distinct (or the history is
-    nearly full); else leave ``st.offset`` None."""
+    nearly full, or the data ended: ``final``, whatever they span, as ``mle`` searches a short recording);
+    else leave ``st.offset`` None."""
     tg = grid.t
     inside = (t >= tg[0]) & (t <= tg[-1])
     if inside.sum() < 20:
@@ -62,7 +64,7 @@ def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray
     short = ti[-1] - ti[0] < o.align_s
     # about to leave the grid unaligned: was it recorded in the rests only, judged up to the grid's end?
     ageing = bool(ti[0] < tg[0] + AGEING_S)
-    if short and not ageing:
+    if short and not (ageing or final):
         return
     if holds_motion(grid, ti, end=tg[-1] if short else ti[-1]) is False:
         # the robot moved while the unit recorded nothing (static poses only): nothing determines its
@@ -71,13 +73,13 @@ def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray
             st.offset, st.offset_sharpness, st.clock_provisional = 0.0, 0.0, True
             st.t_ref, st.steps, st.t_seen = float(ti[0]), find_clock_steps(t), float(t[-1])
         return
-    if short:
+    if short and not final:
         return
     search = search_span(grid, ti, a[inside], None if g is None else g[inside])
     if search is None:
         return  # no motion to align on yet
     span = ti[-1] - ti[0]
-    if search.sharpness < ALIGN_SHARPNESS and span < ALIGN_WAIT_FRACTION * o.history_s:
+    if search.sharpness < ALIGN_SHARPNESS and span < ALIGN_WAIT_FRACTION * o.history_s and not final:
         return  # the peak is not distinct yet: wait for more motion (the samples stay pending)
     st.offset, st.offset_sharpness, st.clock_provisional = float(search.offset_s), float(search.sharpness), False
     st.t_ref, st.searched_span, st.clock_widened = float(ti[0]), float(span), search.widened

@@ -292,7 +292,7 @@ class OnlineCalibrator:
         if st.offset is None:
             if final or max(t[-1], grid.t[-1]) - st.align_tried >= clock.ALIGN_RETRY_S:  # the grid moves on too
                 st.align_tried = float(max(t[-1], grid.t[-1]))
-                clock.align(st, grid, t, a, g, self.options)
+                clock.align(st, grid, t, a, g, self.options, final)
             if st.offset is None:
                 if final:
                     st.offset, st.offset_sharpness = 0.0, 0.0  # no motion to align on: the stamps as they are
