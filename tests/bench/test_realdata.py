@@ -117,6 +117,9 @@ def test_real_recordings_each_get_an_answer():
         # the streaming calibrator finds the host's lag near mle's (80-120 ms on these recordings): before, the
         # first 11 s of a 14 Hz stream held a distinct peak at 365 ms and a free drift went to -8000 ppm
         # (offsets -2..425 ms); its fine fit still walks to 130-215 ms on the S3 paths (open)
+        # every streamed recording gets a position where mle has one: a 14 Hz recording whose first second was a
+        # rest was judged "static poses only" (clock never searched, position null)
+        assert by_method["online"]["position_undetermined"] == g["position_undetermined"] == 0
         offsets = by_method["online"]["time_offsets_ms"]
         assert by_method["online"]["calibrated"] == 19 and all(50.0 < t < 250.0 for t in offsets), offsets
         assert abs(np.median(offsets) - np.median(g["time_offsets_ms"])) < 15.0

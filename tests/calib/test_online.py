@@ -509,3 +509,27 @@ def test_a_followed_unit_whose_gyroscope_is_stuck_at_its_rail_is_calibrated_from
     assert any("gyroscope at its rail" in w for w in unit.warnings)
     err = (unit.pose.p_link_su - ds.truth[name].p_link_su) / np.asarray(unit.position_std_m)
     assert np.all(np.abs(err) < 4.0), err
+
+
+def test_the_first_second_of_a_stream_is_not_judged_static_poses_only():
+    """At a stream's start every sample lies near the grid's start, which counted as "about to leave the history
+    unaligned": a real 14 Hz recording (V1000_S1, MPU6050) whose first second held a rest and the start of a move
+    that its 90 ms late stamps missed was judged "static poses only", its clock never searched and its position
+    written as null. Only a full history's oldest samples are judged that early."""
+    from skincal.calib.online import clock
+    from skincal.calib.online.unit import Grid, UnitState
+
+    tg = np.arange(0.0, 1.0, 0.01)
+    y = np.zeros((tg.size, 7, 18))
+    y[tg >= 0.9, :, 12] = 1.0  # every link turns at 1 rad/s over the last 0.1 s
+    grid = Grid(tg, y, np.zeros((tg.size, 7, 3)), np.ones(tg.size, bool), np.zeros((tg.size, 7)))
+    t = np.arange(0.0, 0.85, 0.01)  # the unit's samples so far: the rest only (stamps late)
+    a, g = np.tile([0.0, 0.0, 9.81], (t.size, 1)), np.zeros((t.size, 3))
+    grams = np.zeros((1, 2, stats.NA, stats.NA)), np.zeros((1, 2, stats.NG, stats.NG)), np.zeros(1)
+    st = UnitState([3], *grams)
+    clock.align(st, grid, t, a, g, OnlineOptions())
+    assert st.offset is None and not st.clock_provisional  # waits for more of the stream
+    # a full history whose oldest samples would be lost unaligned is judged now, as before
+    old = UnitState([3], *grams)
+    clock.align(old, grid, t, a, g, OnlineOptions(history_s=3.0, align_s=1.5))
+    assert old.offset == 0.0 and old.clock_provisional

@@ -62,8 +62,10 @@ def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray
         return
     ti = t[inside]
     short = ti[-1] - ti[0] < o.align_s
-    # about to leave the grid unaligned: was it recorded in the rests only, judged up to the grid's end?
-    ageing = bool(ti[0] < tg[0] + AGEING_S)
+    # about to leave the grid unaligned (a full history): was it recorded in the rests only, judged up to the
+    # grid's end? (At a stream's start every sample is near the grid's start: a real recording whose first second
+    # was a rest was judged "static poses only" there and never searched.)
+    ageing = bool(ti[0] < tg[0] + AGEING_S and tg[-1] - tg[0] >= o.history_s - AGEING_S)
     if short and not (ageing or final):
         return
     if holds_motion(grid, ti, end=tg[-1] if short else ti[-1]) is False:
@@ -165,15 +167,16 @@ def realign(st: UnitState, tau: float, drift: float) -> None:
 
 
 def align_on_motion(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray | None,
-                    o: OnlineOptions) -> bool:  # fmt: skip
+                    o: OnlineOptions, final: bool = False) -> bool:  # fmt: skip
     """A unit whose clock is provisional (:func:`align` saw it record in the rests only) aligned on its
-    kept and new samples ``t, a, g`` once they hold motion; on success (``True``) its statistics are
-    restarted and every kept sample (then the new ones) is absorbed again under the found clock."""
+    kept and new samples ``t, a, g`` once they hold motion (``final``: the data's end, whatever they span);
+    on success (``True``) its statistics are restarted and every kept sample (then the new ones) is absorbed
+    again under the found clock."""
     if not holds_motion(grid, t):  # the new samples: still in the rests, or nothing tells
         return False
     T, A, G = kept_with(st, t, a, g)
     st.offset = None
-    align(st, grid, T, A, G, o)
+    align(st, grid, T, A, G, o, final)
     if st.offset is None or st.clock_provisional:  # no distinct peak yet: the stamps as they are, for now
         st.offset, st.clock_provisional = 0.0, True
         return False

@@ -300,9 +300,9 @@ class OnlineCalibrator:
                     keep_pending(st, t, a, g)
                     return 0
         else:  # a provisional clock aligned on motion, or a longer stream's peak elsewhere: all pending again
-            retry = st.clock_provisional and t[-1] - st.align_tried >= clock.ALIGN_RETRY_S
+            retry = st.clock_provisional and (final or t[-1] - st.align_tried >= clock.ALIGN_RETRY_S)
             st.align_tried = float(t[-1]) if retry else st.align_tried
-            if clock.align_on_motion(st, grid, t, a, g, self.options) if retry else clock.recheck(
+            if clock.align_on_motion(st, grid, t, a, g, self.options, final) if retry else clock.recheck(
                     st, grid, t, a, g, self.options, final):  # fmt: skip
                 keep_pending(st, t, a, g)
                 return self._absorb_unit(name, final)
