@@ -27,13 +27,13 @@ def _moving_stream(seconds: float = 60.0, seed: int = 0):
     return t, accel + np.array([0.0, 0.0, 9.81]) + rng.normal(0.0, 0.02, accel.shape)
 
 
-def _streamed(t, accel, seed=0, final=True):
-    """The samples the stream screen keeps, pushed in chunks of 1-37 samples: a mask over ``t``."""
+def _streamed(t, accel, seed=0, final=True, largest=37):
+    """The samples the stream screen keeps, pushed in chunks of 1-``largest`` samples: a mask over ``t``."""
     rng = np.random.default_rng(seed)
     screen, kept, i = StuckScreen(), [], 0
     g = rng.normal(0.0, 0.01, accel.shape)  # a live gyroscope (zeros would be a dead one: stuck)
     while i < t.size:
-        j = min(t.size, i + int(rng.integers(1, 38)))
+        j = min(t.size, i + int(rng.integers(1, largest + 1)))
         out_t, out_a, out_g = screen.push(t[i:j], accel[i:j], g[i:j])
         assert out_g is not None and out_a.shape == out_g.shape
         kept.append(out_t)
@@ -43,8 +43,10 @@ def _streamed(t, accel, seed=0, final=True):
     return np.isin(t, np.concatenate(kept)), screen
 
 
-@pytest.mark.parametrize("chunks", [0, 1])
-def test_the_streamed_test_drops_what_the_batch_test_drops(chunks):
+@pytest.mark.parametrize(
+    ("chunks", "largest"), [(0, 37), (1, 37), (2, 1)], ids=["chunks", "other-chunks", "one-by-one"]
+)
+def test_the_streamed_test_drops_what_the_batch_test_drops(chunks, largest):
     t, accel = _moving_stream()
     a, b = np.searchsorted(t, [20.0, 32.0])
     accel[a:b, 2] = accel[a - 1, 2]  # z frozen for 12 s
@@ -52,7 +54,7 @@ def test_the_streamed_test_drops_what_the_batch_test_drops(chunks):
     accel[first:, 0] = accel[first - 1, 0]  # x frozen from 45 s to the end
     accel[1000:1050, 1] = accel[999, 1]  # y repeats for 0.5 s: too short, kept
     keep_batch, warn_batch = screen_readings("su1", accel, t)
-    keep, screen = _streamed(t, accel, seed=chunks)
+    keep, screen = _streamed(t, accel, seed=chunks, largest=largest)  # one by one: as a live feed may push
     # the same samples, but for a run's first one (the register's last true reading), which the stream keeps
     # when a chunk ended at it
     assert not np.any(keep_batch & ~keep)
@@ -64,6 +66,22 @@ def test_the_streamed_test_drops_what_the_batch_test_drops(chunks):
     for sp in screen.spans:
         assert (sp.axis, sp.value) in {(2, accel[a - 1, 2]), (0, accel[first - 1, 0])}
         assert sp.t1 == (t[b - 1] if sp.axis == 2 else t[-1])
+
+
+def test_the_run_length_follows_the_streams_interval_not_its_first_two_stamps():
+    """A first push of two bunched stamps (0.1 ms apart) set the 1 s run length at 10,000 samples for good: a 3 s
+    stuck axis went unseen and up to 2.5 s of samples were held back."""
+    t, accel = _moving_stream(seconds=20.0, seed=7)
+    a = int(np.searchsorted(t, 10.0))
+    accel[a : a + 300, 2] = accel[a - 1, 2]
+    screen = StuckScreen()
+    screen.push(np.array([-0.0002, -0.0001]), np.tile(accel[0], (2, 1)) + [[0.0, 0.0, 0.01], [0.0, 0.0, 0.02]], None)
+    held = 0
+    for i in range(0, t.size, 50):
+        screen.push(t[i : i + 50], accel[i : i + 50], None)
+        held = max(held, screen.held())
+    assert screen.min_run() == pytest.approx(100.0, rel=1e-9) and 0 < held <= 100
+    assert [(sp.axis, sp.n) for sp in screen.spans] == [(2, 300)]
 
 
 def test_a_run_cut_after_its_first_sample_keeps_that_true_reading():

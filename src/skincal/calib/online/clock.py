@@ -68,7 +68,7 @@ def align(st: UnitState, grid: Grid, t: FloatArray, a: FloatArray, g: FloatArray
     ageing = bool(ti[0] < tg[0] + AGEING_S and tg[-1] - tg[0] >= o.history_s - AGEING_S)
     if short and not (ageing or final):
         return
-    if holds_motion(grid, ti, end=tg[-1] if short else ti[-1]) is False:
+    if holds_motion(grid, ti, end=tg[-1] if short and not final else ti[-1]) is False:
         # the robot moved while the unit recorded nothing (static poses only): nothing determines its
         # clock, and a search would shift the rest samples into the moves
         if st.offset is None:  # the stamps as they are, aligned again once it records in motion

@@ -25,6 +25,7 @@ from then on are left out, the released ones stay.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,6 +67,10 @@ class Span:
     n: int
 
 
+INTERVALS = 256
+"""The stream's sample interval is the median of its last this many stamp intervals (a first push of two
+bunched stamps would otherwise set the 1 s run length for good)."""
+
 CHANNELS = (
     (np.full(2, STUCK_OTHERS_PTP), SATURATION_MIN),
     (np.r_[np.full(2, GYRO_STUCK_OTHERS_PTP), np.full(3, STUCK_OTHERS_PTP)], GYRO_SATURATION_MIN),
@@ -101,6 +106,8 @@ class StuckScreen:
         self._lo = [np.full(3, np.inf) for _ in CHANNELS]  # each axis' extremes so far (a rail's value is one)
         self._hi = [np.full(3, -np.inf) for _ in CHANNELS]
         self._dt = float("nan")
+        self._intervals: deque[float] = deque(maxlen=INTERVALS)
+        self._t_seen = float("-inf")
         self.spans: list[Span] = []
         self.dropped = 0
         self.gyro_dropped = 0
@@ -111,12 +118,22 @@ class StuckScreen:
         (at least ``STUCK_MIN_SAMPLES``)."""
         return max(float(STUCK_MIN_SAMPLES), STUCK_MIN_S / self._dt) if self._dt > 0 else float(STUCK_MIN_SAMPLES)
 
+    def held(self) -> int:
+        """Samples held back, waiting for their run to be judged."""
+        return 0 if self._held is None else int(self._held[0].size)
+
     def push(
         self, t: FloatArray, a: FloatArray, g: FloatArray | None, final: bool = False
     ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
         """Screen the new samples ``t`` ``(M,)`` s, ``a`` ``(M, 3)`` m/s^2, ``g`` ``(M, 3)`` rad/s or None (finite
         readings) after the held ones: the samples released (stuck accelerometer ones left out), ``g`` None
         when ``g`` is."""
+        if t.size:  # the stream's sample interval: the median of its recent intervals, across pushes
+            d = np.diff(np.r_[self._t_seen, t]) if np.isfinite(self._t_seen) else np.diff(t)
+            self._intervals.extend(d[d > 0].tolist())
+            self._t_seen = max(self._t_seen, float(t[-1]))
+            if self._intervals:
+                self._dt = float(np.median(self._intervals))
         if self._held is not None:
             ht, ha, hg = self._held
             t, a = np.concatenate([ht, t]), np.concatenate([ha, a])
@@ -125,9 +142,6 @@ class StuckScreen:
         n = t.size
         if n == 0:
             return t, a, g
-        if n > 1 and not self._dt > 0:
-            d = np.diff(t)
-            self._dt = float(np.median(d[d > 0])) if np.any(d > 0) else float("nan")
         min_run = self.min_run()
         judged, release = [], n
         for c, x in enumerate((a, g)):
@@ -136,7 +150,8 @@ class StuckScreen:
             lo, hi = np.minimum(self._lo[c], x.min(axis=0)), np.maximum(self._hi[c], x.max(axis=0))
             for k in range(3):
                 s, bad = self._judge(c, k, x, _others(c, k, a, g), min_run, lo[k], hi[k])
-                if not final and 1 < int(n - s[-1]) and not bad[-1] and self._length(c, k, x, s)[-1] < min_run:
+                length = int(self._length(c, k, x, s)[-1])  # the last run's, its released part included
+                if not final and 1 < length < min_run and not bad[-1]:
                     release = min(release, int(s[-1]))  # a repeat too short to judge yet: held from its start
                 judged.append((c, k, x, s, bad))
         keep = np.ones(release, dtype=bool)
