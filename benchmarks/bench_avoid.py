@@ -1,7 +1,7 @@
 """Benchmark of the avoidance controller (issue 7): scenarios x calibrations, and the QP step time.
 
 Usage: ``python benchmarks/bench_avoid.py [--scenarios arm,hand,walk,fast] [--placement ring|paper]
-[--seeds 0,1] [--quick] [--json out.json] [--plots docs]``
+[--seeds 0 1] [--quick] [--json out.json] [--plots docs]``
 
 Issue 17 (ISO/TS 15066 separation, any robot, dynamics): ``python benchmarks/bench_avoid.py --iso
 [--robots panda,ur5e,iiwa14] [--scenarios ...] [--modes kinematic,torque] [--beliefs mle,degraded]
@@ -42,7 +42,7 @@ def main() -> None:
         f"{'scenario':8} {'poses':18} {'seed':>4} {'clear[m]':>8} {'contacts':>8} {'maxerr[mm]':>10} {'recov[s]':>8} "
         f"{'infeas':>6} {'qp med/p95[ms]':>15} {'loop med/p95[ms]':>17}"
     )
-    seeds = [int(x) for x in args.seeds.split(",")]
+    seeds = list(args.seeds)
 
     def show(name, label, seed, m, log) -> None:
         print(

@@ -74,6 +74,20 @@ def test_a_count_of_placements_is_called_placements_in_every_benchmark():
     assert parse("t", options.ROBUSTNESS, ["--json", "x.json"])["out"] == Path("x.json")
 
 
+def test_every_benchmark_that_lists_seeds_takes_them_the_same_way():
+    """``--seeds 0 1`` in every benchmark (``bench_avoid.py`` took ``--seeds 0,1`` alone); a comma list is a
+    usage error there, not a silently different run."""
+    from skincal.bench import options
+
+    groups = [g for n in dir(options) if n.isupper() and isinstance(g := getattr(options, n), tuple)]
+    listing = [g for g in groups if any(getattr(o, "name", None) == "seeds" for o in g)]
+    assert options.AVOID in listing and len(listing) >= 4
+    for group in listing:
+        assert parse("t", group, ["--seeds", "3", "1"])["seeds"] == [3, 1]
+        with pytest.raises(SystemExit):
+            parse("t", group, ["--seeds", "0,1"])
+
+
 @pytest.mark.parametrize("argv", [["robustness", "--placements", "0"], ["robustness", "--seeds", "-2"],
                                   ["mle", "--placements", "-1"], ["mle", "--runs", "0"]])  # fmt: skip
 def test_a_count_of_no_placements_is_refused_by_its_name(argv, capsys):

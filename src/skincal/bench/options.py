@@ -113,7 +113,7 @@ ROSBAG = (
 AVOID = (
     Opt("scenarios", str, "arm,hand,walk,fast"),
     Opt("placement", str, "ring", "the simulated skin", choices=("ring", "paper")),
-    Opt("seeds", str, "0", "sensor-noise seeds, comma separated (each run once)"),
+    Opt("seeds", int, [0], "sensor-noise seeds, e.g. --seeds 0 1 (each run once)", many=True),
     Opt("quick", bool, False, "fast calibration protocol for the mle poses", switch=False),
     Opt("json", str | None, None),
     Opt("plots", str | None, None, "folder for docs/avoid_<scenario>.png (mle poses, first seed)"),

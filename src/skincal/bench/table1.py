@@ -6,8 +6,8 @@ protocol (:func:`skincal.workflows.session.make_session`, analytic simulator); e
 each set ``runs`` times (default 10) with different optimiser seeds, the link of each unit given (the
 table compares pose estimation, not link discovery). Per unit ``SU1..SU6`` (the unit on link ``k + 1``)
 and over all units: mean and standard deviation over the ``sets x runs`` trials of the position error
-(cm) and of the paper's quaternion distance ``min(|q1 - q2|, |q1 + q2|)``; also the rotation error in
-degrees and the wall time of each calibration (all units of a set, one process).
+(mm; the paper prints cm) and of the paper's quaternion distance ``min(|q1 - q2|, |q1 + q2|)``; also the
+rotation error in degrees and the wall time of each calibration (all units of a set, one process).
 
 One job is one ``(set, run)`` pair and runs every method (:func:`run_job`): a pure function of a
 picklable :class:`Job`, so it runs the same in a local process pool or on a Dask cluster. The
@@ -29,17 +29,23 @@ from skincal.bench.options import TABLE1
 from skincal.errors import ConfigError
 from skincal.protocol import ProtocolConfig, get_protocol
 
+_PAPER_POSITION_CM: dict[str, list[tuple[float, float]]] = {
+    "om": [
+        (0.28, 0.15),
+        (0.39, 0.15),
+        (0.78, 0.39),
+        (1.15, 0.88),
+        (0.80, 0.36),
+        (0.25, 0.095),
+        (0.66, 0.60),
+    ],
+    "mmm": [(5.3, 7.1), (2.6, 0.23), (5.4, 4.9), (9.5, 9.0), (1.4, 0.91), (2.3, 2.4), (4.4, 5.9)],
+}
+"""Paper Table I's position error as printed there: (mean, std) in cm for SU1..SU6 and the average."""
+
 PAPER_TABLE_I: dict[str, dict[str, list[tuple[float, float]]]] = {
     "om": {
-        "position_cm": [
-            (0.28, 0.15),
-            (0.39, 0.15),
-            (0.78, 0.39),
-            (1.15, 0.88),
-            (0.80, 0.36),
-            (0.25, 0.095),
-            (0.66, 0.60),
-        ],
+        "position_mm": [(10.0 * m, 10.0 * s) for m, s in _PAPER_POSITION_CM["om"]],
         "quaternion_distance": [
             (0.010, 0.0058),
             (0.0054, 0.0041),
@@ -51,7 +57,7 @@ PAPER_TABLE_I: dict[str, dict[str, list[tuple[float, float]]]] = {
         ],
     },
     "mmm": {
-        "position_cm": [(5.3, 7.1), (2.6, 0.23), (5.4, 4.9), (9.5, 9.0), (1.4, 0.91), (2.3, 2.4), (4.4, 5.9)],
+        "position_mm": [(10.0 * m, 10.0 * s) for m, s in _PAPER_POSITION_CM["mmm"]],
         "quaternion_distance": [
             (0.55, 0.59),
             (0.016, 0.011),
@@ -63,8 +69,8 @@ PAPER_TABLE_I: dict[str, dict[str, list[tuple[float, float]]]] = {
         ],
     },
 }
-"""Paper Table I as (mean, std) for SU1..SU6 and the average (last entry). The paper prints the
-quaternion distance multiplied by 10; these are the actual distances."""
+"""Paper Table I as (mean, std) for SU1..SU6 and the average (last entry), position in mm (the paper prints
+cm). The paper prints the quaternion distance multiplied by 10; these are the actual distances."""
 
 PAPER_RUNTIME_S = {"om": 433.0, "om-joint": 1797.0}
 """Paper Sec. V-A: wall time for 6 units, two-stage vs joint problem (i7-9750H laptop), s."""
@@ -165,7 +171,7 @@ def run_job(job: Job) -> dict[str, Any]:
     """Calibrate one set with every method once; errors per unit and wall time per method.
 
     Returns ``{"set", "run", "methods": {name: {"runtime_s", "units": {unit: {"link",
-    "position_cm", "quaternion_distance", "rotation_deg"}}, "failed": {unit: reason}}}}``.
+    "position_mm", "quaternion_distance", "rotation_deg"}}, "failed": {unit: reason}}}}``.
     """
     from skincal.calib import calibrate, evaluate
 
@@ -181,7 +187,7 @@ def run_job(job: Job) -> dict[str, Any]:
             "units": {
                 name: {
                     "link": u.link_true,
-                    "position_cm": u.position_error_mm / 10.0,
+                    "position_mm": u.position_error_mm,
                     "quaternion_distance": u.quaternion_distance,
                     "rotation_deg": u.rotation_error_deg,
                 }
@@ -218,10 +224,10 @@ def _mean_std(values: Iterable[float]) -> list[float] | None:
 def summarise(config: Table1Config, records: list[dict[str, Any]]) -> dict[str, Any]:
     """Per method: mean and std over trials per unit (``su1..``) and over all units, and wall times.
 
-    ``{"methods": {m: {"units": {u: {"link", "position_cm", "quaternion_distance", "rotation_deg"}},
+    ``{"methods": {m: {"units": {u: {"link", "position_mm", "quaternion_distance", "rotation_deg"}},
     "average": {...}, "runtime_s": [mean, std], "failed": n}}}``; each statistic is ``[mean, std]``.
     """
-    keys = ("position_cm", "quaternion_distance", "rotation_deg")
+    keys = ("position_mm", "quaternion_distance", "rotation_deg")
     summary: dict[str, Any] = {}
     for method in config.methods:
         per_unit: dict[str, dict[str, list[float]]] = {}
@@ -298,7 +304,7 @@ def table1_table(config: Table1Config, summary: dict[str, Any]):
     table.add_column("average", justify="right")
     table.add_column("wall time / set (s)", justify="right")
     metrics = (
-        ("position_cm", "position (cm)", 1.0, 2),
+        ("position_mm", "position (mm)", 1.0, 1),
         ("quaternion_distance", "quat. dist. x10", 10.0, 3),
         ("rotation_deg", "rotation (deg)", 1.0, 2),
     )
