@@ -91,8 +91,8 @@ def test_refuses_existing_out_without_force(tmp_path, capsys):
     [
         (["--robot", "no-such-robot"], "unknown robot 'no-such-robot'"),
         (["--robot", "panda", "--protocol", "slow"], "unknown protocol 'slow'"),
-        (["--robot", "panda", "--rate", "0"], "--rate must be a positive"),
-        (["--robot", "panda", "--rate", "nan"], "--rate must be a positive"),
+        (["--robot", "panda", "--rate", "0"], "--rate must be a sample rate of 10 to 10000 Hz"),
+        (["--robot", "panda", "--rate", "nan"], "--rate must be a sample rate of 10 to 10000 Hz"),
         (["--robot", "panda", "--poses", "best"], "--poses must be one of uniform, diverse"),
     ],
 )

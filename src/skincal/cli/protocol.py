@@ -8,6 +8,10 @@ import typer
 
 from skincal.cli.app import app, at_rate, console, joint_names, seed_option
 
+MIN_RATE_HZ = 10.0
+"""The lowest ``--rate``: 5 samples per period of the ``fast`` protocol's 2 Hz excitation (at 1e-9 Hz the file
+held one point of an 85 s motion, written as valid)."""
+
 
 @app.command("protocol")
 def protocol_cmd(
@@ -21,7 +25,7 @@ def protocol_cmd(
     rate: float = typer.Option(
         100.0,
         "--rate",
-        help="sample rate of the written trajectory, Hz (the limits "
+        help="sample rate of the written trajectory, 10-10000 Hz (the limits "
         "are checked at 1 kHz; a real controller interpolates)",
     ),
     out: Path = typer.Option(
@@ -111,8 +115,8 @@ def protocol_cmd(
         )
     if poses not in POSE_SELECTIONS:
         raise ConfigError(f"--poses must be one of {', '.join(POSE_SELECTIONS)}, got {poses!r}")
-    if not (math.isfinite(rate) and 0 < rate <= 10_000):
-        raise ConfigError(f"--rate must be a positive sample rate up to 10000 Hz, got {rate}")
+    if not (math.isfinite(rate) and MIN_RATE_HZ <= rate <= 10_000):  # (below, the samples no longer show the motion)
+        raise ConfigError(f"--rate must be a sample rate of {MIN_RATE_HZ:g} to 10000 Hz, got {rate:g}")
     if out.suffix == "" and out.exists():  # (check_output would call it "a folder; give a file name")
         raise ConfigError(f"{out} exists; a ROS 2 bag folder is never overwritten, even with --force (remove it)")
     check_output(out, force=force, inputs=() if robot in PRESETS else (Path(robot),))
