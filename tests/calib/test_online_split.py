@@ -44,7 +44,9 @@ def test_the_windows_sum_to_the_units_statistics(honest):
         assert np.abs(led.Za.sum(axis=0) - st.Za).max() <= 1e-9 * scale
         assert np.abs(led.Zg.sum(axis=0) - st.Zg).max() <= 1e-9 * np.abs(st.Zg).max()
         assert np.allclose(led.moving.sum(axis=0), st.moving)
-        assert led.n.sum() == pytest.approx(st.Za[0, :, 9, 9].sum())
+        # Z[9, 9] sums the samples' robust weights (<= 1 each, most exactly 1)
+        assert 0.95 * led.n.sum() <= st.Za[0, :, 9, 9].sum() <= led.n.sum() + 1e-6
+        assert cal.status()[name].samples == led.count()
         assert led.Za.shape[0] <= split.WINDOWS
 
 

@@ -58,8 +58,6 @@ __all__ = ["OnlineCalibrator", "OnlineOptions", "UnitStatus", "excitation"]
 
 MIN_MOVING = 200
 """Moving samples of the best link before its link is decided."""
-GATE_SIGMAS = 6.0
-"""Once a unit's link is decided, samples whose residual exceeds this many std are not absorbed."""
 POSE_MISSING = "pose not determined yet: "
 """How a status's ``missing`` starts when the std exceed :data:`UNDETERMINED_M` or :data:`UNDETERMINED_DEG`."""
 UNDETERMINED_M = 0.05
@@ -338,6 +336,7 @@ class OnlineCalibrator:
         if s.size == 0:
             return 0, None
         moving = link_moving(w, dw)  # (L, M)
+        huber = None
         lead = st.links[0] if st.decided and st.links[0] in st.solutions else None  # windows: a decided link's
         if lead is not None:
             j = st.links.index(lead)
@@ -345,15 +344,14 @@ class OnlineCalibrator:
             sig = st.sigmas[lead]
             rn = r / np.maximum(np.where(moving[j], sig[1], sig[0]), 1e-9)[:, None]
             settled = st.decided and st.status is not None and is_settled(st.status)
-            keep = np.linalg.norm(rn, axis=1) <= GATE_SIGMAS * np.sqrt(3.0) if settled else np.ones(s.size, bool)
+            keep, huber = fit.robust_weights(rn, settled, st.residual_norms)
             if self.on_residuals is not None and settled:
                 self.on_residuals(name, s, rn)
             st.outliers += int((~keep).sum())
             if not keep.all():
                 s, a, u, K, w, dw = s[keep], a[keep], u[:, keep], K[:, keep], w[:, keep], dw[:, keep]
                 du, dK, ug = du[:, keep], dK[:, keep], ug[:, keep]
-                g, moving = None if g is None else g[keep], moving[:, keep]
-                rn = rn[keep]
+                g, moving, rn = None if g is None else g[keep], moving[:, keep], rn[keep]
             window_means(st.windows.setdefault(lead, fit.Windows()), rn)
         if s.size == 0:
             return 0, None
@@ -362,6 +360,8 @@ class OnlineCalibrator:
         elapsed = s - st.t_ref
         rows_a = stats.accel_rows(np.broadcast_to(a, (L, M, 3)), u, K, du, dK, ug, elapsed)[:, None] * cls
         rows_g = None if g is None else stats.gyro_rows(np.broadcast_to(g, (L, M, 3)), w, dw, elapsed)[:, None] * cls
+        if huber is not None:
+            rows_a = rows_a * np.sqrt(huber)[:, None, None]
         speed = grid.speed[np.clip(np.searchsorted(grid.t, s), 0, grid.t.size - 1)][:, np.asarray(st.links) - 1].T
         st.ledger.setup(L)
         parts = split.pieces(s, rows_a, rows_g, moving, speed, *st.ledger.start(float(s[0])))
@@ -437,7 +437,7 @@ class OnlineCalibrator:
             elif advise:  # the joint to move next (a design computation a result does not need)
                 best_joint = design.best_joint(self.chain, self.gravity, self.q_now, st, link, sol)
         pose = SkinUnitPose(link, sol.R, sol.p)
-        status = UnitStatus(name, link, margin, pose, pos_std, rot_std, int(st.Za[k, :, 9, 9].sum()), int(st.moving[k]),
+        status = UnitStatus(name, link, margin, pose, pos_std, rot_std, st.ledger.count(), int(st.moving[k]),
                             missing, best_joint, reached, st.t_last, True)  # fmt: skip
         st.status = status
         return status

@@ -6,6 +6,7 @@ and the link decision (:func:`decide`, :func:`cost`)."""
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable
 from dataclasses import replace
 
@@ -19,7 +20,7 @@ from skincal.calib.online.options import OnlineOptions
 from skincal.calib.online.screen import accel_at_rail
 from skincal.calib.online.unit import MOVING, REST, Grid, UnitState, Windows, signals_at, windowed_link
 from skincal.calib.rest import link_moving
-from skincal.calib.robust import CORRELATION_WARN, SANDWICH_BLOCK_S, sandwich_factors
+from skincal.calib.robust import CORRELATION_WARN, SANDWICH_BLOCK_S, huber_weights, robust_sigma, sandwich_factors
 from skincal.calib.timing import CLOCK_DRIFT_MIN_SPAN_S, compose_clock
 from skincal.data.imu_calibration import ImuCalibration
 from skincal.kinematics.transforms import FloatArray
@@ -178,6 +179,35 @@ def weigh(Za2: FloatArray, Zg2: FloatArray, sig: FloatArray, decided: bool, gyro
         Zg = corrected(g_rest, sig[2]) / sig[2] ** 2 + corrected(g_moving, sig[2]) / sig[3] ** 2
     return Za, Zg
 
+
+GATE_SIGMAS = 6.0
+"""Once a unit is settled, samples whose residual norm exceeds this many class std per axis (times sqrt 3) are
+not absorbed."""
+HUBER = True
+"""Once a unit is settled, each absorbed sample's rows are weighted by ``mle``'s Huber weight of its residual."""
+ROBUST_SCALE_MIN = 200
+"""Recent residual norms needed before their robust scale weights the samples."""
+
+
+def robust_weights(rn: FloatArray, settled: bool, recent: deque) -> tuple[np.ndarray, FloatArray | None]:
+    """Which of the samples with residuals ``rn`` ``(M, 3)`` (in class std, at the lead link's estimate) are
+    absorbed, and the Huber weights ``w`` of those (None: all 1) that scale their rows by ``sqrt(w)``.
+
+    A settled unit's samples beyond :data:`GATE_SIGMAS` are dropped and the kept weighted by
+    :func:`~skincal.calib.robust.huber_weights` ``w = min(1, k c / |rn|)`` (``k`` = 3), ``c`` the robust scale
+    of the unit's recent residual norms ``recent`` (:func:`~skincal.calib.robust.robust_sigma`; the norms of
+    ``rn`` join it): the robust loss ``mle``'s Gauss-Newton iterates with, on a scale heavy tails do not
+    inflate as they inflate the class std. A Gram's ``Z[9, 9]`` then sums the weights, the weighted sample
+    count its noise terms need. Before a unit settles every sample counts in full: applied from the link
+    decision on, the weights moved the REAL recordings' tool-axis spread from 48 to 53 mm (MPU6050).
+    SIMULATED, UR5e ``fast``, ``wifi`` clocks, seeds 0-9: the stream's mean position error went from 1.15 to
+    0.94 times ``mle``'s (``benchmarks/bench_streaming_clock.py --robots ur5e --protocols fast``)."""
+    norm = np.linalg.norm(rn, axis=1)
+    recent.extend(norm.tolist())
+    keep = norm <= GATE_SIGMAS * np.sqrt(3.0) if settled else np.ones(len(rn), bool)
+    if not (HUBER and settled) or len(recent) < ROBUST_SCALE_MIN:
+        return keep, None
+    return keep, huber_weights(norm[keep], robust_sigma(np.fromiter(recent, float, len(recent))))
 
 def class_sigmas(st: UnitState, k: int, sol: stats.Solution, prior: FloatArray) -> FloatArray:
     """Residual std per class ``[accel rest, accel moving, gyro rest, gyro moving]`` at ``sol``

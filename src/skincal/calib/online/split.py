@@ -103,6 +103,10 @@ class Ledger:
             self.t0 = float(s0)
         return self.t0, self.width
 
+    def count(self) -> int:
+        """The samples absorbed (each in one window; a Gram's ``Z[9, 9]`` sums their robust weights instead)."""
+        return 0 if self.n is None else int(round(float(self.n.sum())))
+
     def add(self, parts: list[Piece], sign: float = 1.0) -> None:
         """Add (``sign`` 1) or take out (-1) ``parts``."""
         for p in parts:

@@ -91,6 +91,7 @@ class UnitState:
     decided: bool = False
     windows: dict[int, Windows] = field(default_factory=dict)  # link -> its residual windows (correlation)
     outliers: int = 0
+    residual_norms: deque = field(default_factory=lambda: deque(maxlen=4096))  # recent |rn| (robust scale)
     status: UnitStatus | None = None
     best_joint_t: float = float("-inf")
     best_joint: int | None = None
