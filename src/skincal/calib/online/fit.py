@@ -209,6 +209,7 @@ def robust_weights(rn: FloatArray, settled: bool, recent: deque) -> tuple[np.nda
         return keep, None
     return keep, huber_weights(norm[keep], robust_sigma(np.fromiter(recent, float, len(recent))))
 
+
 def class_sigmas(st: UnitState, k: int, sol: stats.Solution, prior: FloatArray) -> FloatArray:
     """Residual std per class ``[accel rest, accel moving, gyro rest, gyro moving]`` at ``sol``
     (a class with too few samples keeps ``prior``'s value)."""
