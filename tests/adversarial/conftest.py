@@ -49,7 +49,7 @@ def hostile(tmp_path_factory) -> dict[str, Path]:
     files["overflow_result"] = root / "overflow.json"
     files["overflow_result"].write_text(json.dumps(overflow))
 
-    bomb = root / "bomb.h5"  # declares 2**28 x 6 float64 (12 GiB) of accelerometer readings, stores none
+    bomb = root / "bomb.h5"  # declares 2**28 x 3 float64 (6 GiB) of accelerometer readings, stores none
     with h5py.File(data, "r") as src, h5py.File(bomb, "w") as dst:
         for key in src.attrs:
             dst.attrs[key] = src.attrs[key]

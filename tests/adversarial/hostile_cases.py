@@ -52,16 +52,16 @@ TABLES: dict[str, tuple[Case, ...]] = {
         Case("calibrate {data} --seed -1 -o {tmp}/r.json", NOT_A_SEED, "internal error"),
         Case("calibrate {data} -o {tmp}/{long}.json", TOO_LONG, "too late"),
         Case("calibrate {data} -o {tmp}/no/such/r.json", "folder", "too late"),
-        Case("calibrate {bomb} -o {tmp}/r.json", "", "size bound"),
-        Case("calibrate {milli_g} -o {tmp}/r.json", "", "absurd result"),
-        Case("calibrate {empty} -o {tmp}/r.json", "", "wrong file"),
-        Case("calibrate {result} -o {tmp}/r.json", "", "wrong file"),
+        Case("calibrate {bomb} -o {tmp}/r.json", "refused before reading", "size bound"),
+        Case("calibrate {milli_g} -o {tmp}/r.json", "it is in milli-g, not m/s^2", "absurd result"),
+        Case("calibrate {empty} -o {tmp}/r.json", "not a readable HDF5 file", "wrong file"),
+        Case("calibrate {result} -o {tmp}/r.json", "not a readable HDF5 file", "wrong file"),
         Case("calibrate {data} --option maxeval_static=many -o {tmp}/r.json", "maxeval_static", "silent accept"),
     ),
     "simulate": (
         Case("simulate --protocol fast -o {fifo_h5} --force", "is a FIFO", "special file"),
         Case("simulate --robot {urdf} --protocol fast -o {urdf} --force", "a dataset is an HDF5 file",
-             "input as output"),
+             "wrong file"),  # (refused by its suffix before the inputs are compared)
         Case("simulate --protocol fast --seed -1 -o {tmp}/s.h5", NOT_A_SEED, "internal error"),
         Case("simulate --units 100000 -o {tmp}/s.h5", "--units", "size bound"),
         Case("simulate --handheld --units 100000 -o {tmp}/s.h5", "--units", "size bound"),
@@ -71,7 +71,7 @@ TABLES: dict[str, tuple[Case, ...]] = {
     ),
     "protocol": (
         Case("protocol --robot panda -o {fifo_json} --force", "is a FIFO", "special file"),
-        Case("protocol --robot {urdf} -o {urdf} --force", "unknown trajectory format", "input as output"),
+        Case("protocol --robot {urdf} -o {urdf} --force", "unknown trajectory format", "wrong file"),
         Case("protocol --robot panda --seed -1 -o {tmp}/p.json", NOT_A_SEED, "internal error"),
         Case("protocol --robot panda --rate 1e-9 -o {tmp}/p.json", "--rate must be a sample rate of 10",
              "silent accept"),
@@ -81,7 +81,7 @@ TABLES: dict[str, tuple[Case, ...]] = {
         Case("export {result} -f json -o {fifo} --force", "is a FIFO", "special file"),
         Case("export {result} -f urdf --robot {urdf} -o {urdf} --force", "is the input", "input as output"),
         Case("export {result} -f urdf --robot {dup_link_urdf} -o {tmp}/e.urdf", "panda_link3", "silent accept"),
-        Case("export {data} -f csv -o {tmp}/e.csv", "", "wrong file"),
+        Case("export {data} -f csv -o {tmp}/e.csv", "not a text file", "wrong file"),
     ),
     "segment": (
         Case("segment {data} -o {fifo} --force", "is a FIFO", "special file"),
@@ -94,16 +94,16 @@ TABLES: dict[str, tuple[Case, ...]] = {
         Case("report {result} --dataset {data} --format html", "html needs --out", "wrong file"),
     ),
     "evaluate": (
-        Case("evaluate {data} --truth {data}", "", "wrong file"),
-        Case("evaluate {result} --truth {result}", "", "wrong file"),
+        Case("evaluate {data} --truth {data}", "not a text file", "wrong file"),
+        Case("evaluate {result} --truth {result}", "not a readable HDF5 file", "wrong file"),
     ),
     "info": (
-        Case("info {bomb}", "", "size bound"),
-        Case("info {empty}", "", "wrong file"),
+        Case("info {bomb}", "refused before reading", "size bound"),
+        Case("info {empty}", "not a readable HDF5 file", "wrong file"),
     ),
     "import": (
-        Case("import {fifo} -o {tmp}/i.h5", "", "wrong file"),
-        Case("import {empty} -o {tmp}/i.h5", "", "wrong file"),
+        Case("import {fifo} -o {tmp}/i.h5", "is a FIFO (named pipe)", "wrong file"),
+        Case("import {empty} -o {tmp}/i.h5", "cannot open the bag", "wrong file"),
     ),
     "emulate": (
         Case("emulate {data} --port 0", "--port 0", "silent accept"),
@@ -128,11 +128,11 @@ TABLES: dict[str, tuple[Case, ...]] = {
     ),
     "avoid": (
         Case("avoid --seed -1", NOT_A_SEED, "internal error"),
-        Case("avoid --result {data} --duration 0.1", "", "wrong file"),
+        Case("avoid --result {data} --duration 0.1", "not a text file", "wrong file"),
         Case("avoid --duration 0.1 --plot {fifo_png} --force", "is a FIFO", "special file"),
     ),
     "view": (
-        Case("view {data} --duration 0", "", "wrong file"),
+        Case("view {data} --duration 0", "not a text file", "wrong file"),
         Case("view {result} --duration -1", "--duration", "silent accept"),
     ),
     "benchmark": (

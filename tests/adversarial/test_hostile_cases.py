@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import signal
 
 import pytest
 from hostile_cases import FINDINGS, NO_TABLE, TABLES, Case
@@ -14,6 +15,27 @@ from skincal.cli import main
 pytestmark = pytest.mark.adversarial
 
 CASES = [(command, case) for command, table in TABLES.items() for case in table]
+
+
+CASE_TIMEOUT_S = 120
+"""A case that has not ended by then fails (a FIFO written to, a run without end) instead of hanging the run."""
+
+
+def _within(seconds: float, fn, *args):
+    """``fn(*args)``, failing the test when it runs beyond ``seconds`` (a POSIX interval timer; elsewhere no limit)."""
+    if not hasattr(signal, "setitimer"):
+        return fn(*args)
+
+    def expired(signum, frame):
+        raise TimeoutError(f"still running after {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        return fn(*args)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def _digest(path) -> str:
@@ -28,18 +50,20 @@ def test_a_hostile_command_line_is_a_one_line_usage_error(command, case: Case, h
     if "{fifo" in case.argv and "fifo" not in hostile:
         pytest.skip("FIFOs are POSIX")
     before = {name: _digest(path) for name, path in hostile.items()}
+    folder = sorted(next(iter(hostile.values())).parent.iterdir())
     argv = case.argv.format(tmp=tmp_path, long="x" * 300, **hostile).split(" ")
     assert argv[0] == command
     capsys.readouterr()
-    code = main(argv)
+    code = _within(CASE_TIMEOUT_S, main, argv)
     out = capsys.readouterr()
-    lines = out.err.strip().splitlines()
+    lines = out.err.strip().splitlines() or ["(nothing on stderr)"]
     assert code == 2, (code, out.err[-2000:])
     # one line, or typer's usage form: "Usage: ...", "Try ... --help", "Error: <the reason>"
     assert lines[-1].lower().startswith("error: ") and (len(lines) == 1 or lines[0].startswith("Usage: ")), out.err
     assert case.message in lines[-1], lines[-1]
     assert "Traceback" not in out.err and "internal error" not in out.err
     assert not list(tmp_path.iterdir()), "something was written"
+    assert sorted(next(iter(hostile.values())).parent.iterdir()) == folder, "something was written beside the inputs"
     assert {name: _digest(path) for name, path in hostile.items()} == before, "an input was changed"
     assert all(path.is_fifo() for name, path in hostile.items() if name.startswith("fifo"))
 
@@ -52,6 +76,7 @@ def test_every_command_has_a_table_and_every_finding_a_case():
     commands = set(get_command(app).commands)  # type: ignore[attr-defined]
     assert commands == set(TABLES) | set(NO_TABLE), commands ^ (set(TABLES) | set(NO_TABLE))
     assert {case.finding for table in TABLES.values() for case in table} == set(FINDINGS)
+    assert all(case.message for table in TABLES.values() for case in table)  # each names what it refuses
     assert all(case.argv.split(" ")[0] == command for command, table in TABLES.items() for case in table)
     assert os.path.basename(__file__).startswith("test_")
 

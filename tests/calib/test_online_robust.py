@@ -24,8 +24,9 @@ def clean():
 
 
 def _spiky(ds):
-    """``ds`` whose accelerometers read a spike of 0.5 m/s^2 (about 10 noise std) in a random direction in 5 % of
-    their samples away from the rails: heavy tails, mostly under the gate."""
+    """``ds`` whose accelerometers read a spike of 0.5 m/s^2 (about 16 noise std of ``realistic``'s 0.031 m/s^2) in a
+    random direction in 5 % of their samples away from the rails: heavy tails, above the 6-std gate at rest, under
+    it in the moving class's larger std."""
     from dataclasses import replace
 
     rng = np.random.default_rng(7)
@@ -60,11 +61,14 @@ def test_huber_weights_keep_heavy_tailed_readings_from_moving_the_estimate(clean
 
 def test_robust_weights_gate_and_weigh_only_a_settled_unit():
     rn = np.array([[0.5, 0.0, 0.0], [0.0, 4.0, 0.0], [20.0, 0.0, 0.0], [0.0, 0.0, -6.0]])
-    keep, w = fit.robust_weights(rn, False, deque([1.5382] * 500))
-    assert keep.all() and w is None  # not settled: every sample in full
+    unsettled = deque([1.5382] * 500)
+    keep, w = fit.robust_weights(rn, False, unsettled)
+    assert keep.all() and w is None and len(unsettled) == 500  # not settled: every sample in full, no scale
     keep, w = fit.robust_weights(rn, True, deque(maxlen=100))
     assert keep.tolist() == [True, True, False, True] and w is None  # 20 > 6 sqrt(3); no scale yet
     recent = deque([1.5382] * 500, maxlen=4096)  # norms whose median gives a scale of 1 class std
     keep, w = fit.robust_weights(rn, True, recent)
     np.testing.assert_allclose(w, [1.0, 3.0 / 4.0, 3.0 / 6.0], rtol=1e-3)  # min(1, 3 c / |rn|), c = 1
     assert len(recent) == 504  # the new norms join the scale's sample
+    _, w = fit.robust_weights(rn, True, deque([0.0] * 500))  # exact fits so far: the scale's floor, no NaN
+    np.testing.assert_allclose(w, [0.6, 0.3 / 4.0, 0.3 / 6.0])

@@ -12,7 +12,7 @@ import numpy as np
 from skincal.calib import rest
 from skincal.calib.online import stats
 from skincal.calib.online.options import OnlineOptions
-from skincal.calib.online.unit import Grid, UnitState
+from skincal.calib.online.unit import Grid, UnitState, undecide
 from skincal.calib.timing import (
     OffsetSearch,
     coarse_time_offset,
@@ -213,6 +213,8 @@ def recheck(st: UnitState, grid: Grid, t: FloatArray | None, a: FloatArray | Non
     st.offset_sharpness, st.clock_widened = float(search.sharpness), search.widened
     st.rechecked, st.realigned = st.rechecked + 1, 0  # a new coarse mapping: the fine re-alignments start over
     restart(st)
+    if st.decided and st.candidates:  # decided under the wrong clock: decided again under the new one
+        undecide(st)
     return True
 
 
@@ -243,7 +245,7 @@ def restart(st: UnitState, shift: tuple[float, float] | None = None) -> None:
             Zg -= chunk[3]
             moving -= chunk[4]
             st.ledger.add(chunk[5], -1.0)
-    # Z[9, 9] counts a class's samples (round-off left otherwise)
+    # Z[9, 9] sums a class's sample weights (at most 1 each; round-off left otherwise)
     frozen = shift is not None and float(Za[..., 9, 9].max()) >= 0.5
     if frozen:
         assert shift is not None
@@ -256,6 +258,7 @@ def restart(st: UnitState, shift: tuple[float, float] | None = None) -> None:
     st.chunks = deque()
     st.solutions, st.status, st.dirty, st.split_cache = {}, None, True, None
     st.windows = {}
+    st.residual_norms.clear()
     if not frozen:
         st.t_last, st.t_first = float("-inf"), float("inf")
     for t, a, g, _ in raw[::-1]:

@@ -98,9 +98,9 @@ class OnlineCalibrator:
             raise ConfigError("online calibrator: unit names repeat")
         self.units = names
         self.gravity = np.asarray(gravity, dtype=float).reshape(3)
-        L = len(links)
-        grams = (L, 2, stats.NA, stats.NA), (L, 2, stats.NG, stats.NG)
-        self._u = {u: UnitState(list(links), np.zeros(grams[0]), np.zeros(grams[1]), np.zeros(L)) for u in names}
+        L, grams = len(links), ((len(links), 2, stats.NA, stats.NA), (len(links), 2, stats.NG, stats.NG))
+        self._u = {u: UnitState(list(links), np.zeros(grams[0]), np.zeros(grams[1]), np.zeros(L), candidates=links)
+                   for u in names}
         self._jt: list[FloatArray] = []
         self._jq: list[FloatArray] = []
         self._jqd: list[FloatArray | None] = []
@@ -523,7 +523,7 @@ class OnlineCalibrator:
             st.Zg += Zg
             st.moving += mv
             st.ledger.add(parts)
-        st.windows = {}
+        st.windows, st.residual_norms = {}, deque(maxlen=st.residual_norms.maxlen)
         st.solutions, st.status, st.dirty, st.split_cache = {}, None, True, None
         st.best_joint, st.best_joint_t = None, float("-inf")
 

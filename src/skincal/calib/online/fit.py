@@ -184,30 +184,39 @@ GATE_SIGMAS = 6.0
 """Once a unit is settled, samples whose residual norm exceeds this many class std per axis (times sqrt 3) are
 not absorbed."""
 HUBER = True
-"""Once a unit is settled, each absorbed sample's rows are weighted by ``mle``'s Huber weight of its residual."""
+"""Once a unit is settled, each absorbed sample's accelerometer rows are weighted by ``mle``'s Huber weight of its
+residual."""
 ROBUST_SCALE_MIN = 200
-"""Recent residual norms needed before their robust scale weights the samples."""
+"""Recent residual norms of a settled unit needed before their robust scale weights the samples."""
+ROBUST_SCALE_FLOOR = 0.1
+"""Smallest robust scale, in class std (a run of exact fits must not give NaN weights)."""
 
 
 def robust_weights(rn: FloatArray, settled: bool, recent: deque) -> tuple[np.ndarray, FloatArray | None]:
     """Which of the samples with residuals ``rn`` ``(M, 3)`` (in class std, at the lead link's estimate) are
-    absorbed, and the Huber weights ``w`` of those (None: all 1) that scale their rows by ``sqrt(w)``.
+    absorbed, and the Huber weights ``w`` of those (None: all 1) that scale their accelerometer rows by
+    ``sqrt(w)`` (the gyroscope's rows are not weighted).
 
     A settled unit's samples beyond :data:`GATE_SIGMAS` are dropped and the kept weighted by
     :func:`~skincal.calib.robust.huber_weights` ``w = min(1, k c / |rn|)`` (``k`` = 3), ``c`` the robust scale
-    of the unit's recent residual norms ``recent`` (:func:`~skincal.calib.robust.robust_sigma`; the norms of
-    ``rn`` join it): the robust loss ``mle``'s Gauss-Newton iterates with, on a scale heavy tails do not
-    inflate as they inflate the class std. A Gram's ``Z[9, 9]`` then sums the weights, the weighted sample
-    count its noise terms need. Before a unit settles every sample counts in full: applied from the link
-    decision on, the weights moved the REAL recordings' tool-axis spread from 48 to 53 mm (MPU6050).
-    SIMULATED, UR5e ``fast``, ``wifi`` clocks, seeds 0-9: the stream's mean position error went from 1.15 to
-    0.94 times ``mle``'s (``benchmarks/bench_streaming_clock.py --robots ur5e --protocols fast``)."""
+    of the settled unit's recent residual norms ``recent`` (:func:`~skincal.calib.robust.robust_sigma`, at
+    least :data:`ROBUST_SCALE_FLOOR`; the norms of ``rn`` join it): the robust loss ``mle``'s Gauss-Newton
+    iterates with, on a scale heavy tails do not inflate as they inflate the class std. An accelerometer Gram's
+    ``Z[9, 9]`` then sums the weights, the weighted sample count its noise terms need. Before a unit settles
+    every sample counts in full, and samples absorbed again before the unit has a new estimate (a clock
+    re-alignment's) count in full too: applied from the link decision on, the weights moved the REAL
+    recordings' tool-axis spread from 48 to 53 mm (MPU6050). SIMULATED, UR5e ``fast``, ``wifi`` clocks, seeds
+    0-9: the stream's mean position error went from 1.15 to 0.94 times ``mle``'s
+    (``benchmarks/bench_streaming_clock.py --robots ur5e --protocols fast``)."""
+    if not settled:
+        return np.ones(len(rn), bool), None
     norm = np.linalg.norm(rn, axis=1)
     recent.extend(norm.tolist())
-    keep = norm <= GATE_SIGMAS * np.sqrt(3.0) if settled else np.ones(len(rn), bool)
-    if not (HUBER and settled) or len(recent) < ROBUST_SCALE_MIN:
+    keep = norm <= GATE_SIGMAS * np.sqrt(3.0)
+    if not HUBER or len(recent) < ROBUST_SCALE_MIN:
         return keep, None
-    return keep, huber_weights(norm[keep], robust_sigma(np.fromiter(recent, float, len(recent))))
+    scale = max(robust_sigma(np.fromiter(recent, float, len(recent))), ROBUST_SCALE_FLOOR)
+    return keep, huber_weights(norm[keep], scale)
 
 
 def class_sigmas(st: UnitState, k: int, sol: stats.Solution, prior: FloatArray) -> FloatArray:

@@ -66,7 +66,7 @@ class UnitState:
     """One unit's state in the streaming calibrator: per candidate link its Grams (rest and moving
     classes) and fits, its pending samples, its clock mapping and its residual statistics."""
 
-    links: list[int]
+    links: list[int]  # the candidate links (one once decided)
     Za: FloatArray  # (L, 2, NA, NA): per candidate link, rest and moving samples
     Zg: FloatArray  # (L, 2, NG, NG)
     moving: FloatArray  # (L,) moving samples per candidate link
@@ -91,7 +91,7 @@ class UnitState:
     decided: bool = False
     windows: dict[int, Windows] = field(default_factory=dict)  # link -> its residual windows (correlation)
     outliers: int = 0
-    residual_norms: deque = field(default_factory=lambda: deque(maxlen=4096))  # recent |rn| (robust scale)
+    residual_norms: deque = field(default_factory=lambda: deque(maxlen=4096))  # a settled unit's recent |rn|
     status: UnitStatus | None = None
     best_joint_t: float = float("-inf")
     best_joint: int | None = None
@@ -113,6 +113,20 @@ class UnitState:
     steps: ClockSteps | None = None
     t_seen: float = float("-inf")  # newest stamp searched for re-sync steps
     stuck: StuckScreen = field(default_factory=StuckScreen)  # the stuck-axis test, before the samples are pending
+    candidates: tuple[int, ...] = ()  # every candidate link (the calibrator's), for :func:`undecide`
+
+
+def undecide(st: UnitState) -> None:
+    """Back to every candidate link (``st.candidates``) with empty statistics: a new coarse clock mapping
+    (:func:`~skincal.calib.online.clock.recheck`) means the link was decided on samples the wrong clock placed
+    (a UR5e unit stamped 1.2 s late stayed on link 1 after its clock was found, 2.8e8 m off, SIMULATED)."""
+    L = len(st.candidates)
+    st.links, st.decided = list(st.candidates), False
+    st.Za, st.Zg, st.moving = np.zeros((L, *st.Za.shape[1:])), np.zeros((L, *st.Zg.shape[1:])), np.zeros(L)
+    st.ledger = Ledger()
+    st.chunks, st.solutions, st.sigmas, st.windows = deque(), {}, {}, {}
+    st.status, st.dirty, st.split_cache = None, True, None
+    st.residual_norms.clear()
 
 
 def keep_pending(st: UnitState, t: FloatArray, a: FloatArray, g: FloatArray | None) -> None:
