@@ -117,16 +117,13 @@ class UnitState:
 
 
 def undecide(st: UnitState) -> None:
-    """Back to every candidate link (``st.candidates``) with empty statistics: a new coarse clock mapping
+    """Back to every candidate link (``st.candidates``) with empty statistics, after
+    :func:`~skincal.calib.online.clock.restart` emptied the rest: a new coarse clock mapping
     (:func:`~skincal.calib.online.clock.recheck`) means the link was decided on samples the wrong clock placed
     (a UR5e unit stamped 1.2 s late stayed on link 1 after its clock was found, 2.8e8 m off, SIMULATED)."""
     L = len(st.candidates)
-    st.links, st.decided = list(st.candidates), False
+    st.links, st.decided, st.sigmas, st.ledger = list(st.candidates), False, {}, Ledger()
     st.Za, st.Zg, st.moving = np.zeros((L, *st.Za.shape[1:])), np.zeros((L, *st.Zg.shape[1:])), np.zeros(L)
-    st.ledger = Ledger()
-    st.chunks, st.solutions, st.sigmas, st.windows = deque(), {}, {}, {}
-    st.status, st.dirty, st.split_cache = None, True, None
-    st.residual_norms.clear()
 
 
 def keep_pending(st: UnitState, t: FloatArray, a: FloatArray, g: FloatArray | None) -> None:
