@@ -222,3 +222,41 @@ def test_asymmetric_rails_of_each_axis_are_found_in_chunks_as_the_batch_screenin
     assert np.array_equal(~batch.keep, clipped)
     # the first chunks hold a rail before it recurs often enough: the stream finds it from then on
     assert np.array_equal(~keep[1000:], clipped[1000:]) and st.saturated == int((~keep).sum()) >= 0.8 * clipped.sum()
+
+
+def _state(screen: StuckScreen):
+    runs = [(r.value, r.length, tuple(r.lo), tuple(r.hi), r.span) for rs in screen._runs for r in rs]
+    held = None if screen._held is None else tuple(None if x is None else x.tobytes() for x in screen._held)
+    return runs, held, [vars(sp) for sp in screen.spans], screen.dropped, screen.gyro_dropped, screen.t_end
+
+
+@pytest.mark.parametrize("gyro", [True, False], ids=["gyro", "no-gyro"])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_quick_path_leaves_what_the_per_axis_path_leaves(seed, gyro):
+    """Chunks in which no run can be judged take the all-axes path (:meth:`StuckScreen._release_unjudged`):
+    on a quantised stream (repeats of a few samples everywhere), with a stuck axis, a dead gyroscope axis and a
+    rail, pushed in chunks of 1-150 samples, every release and the whole state after each push are those of
+    the per-axis path, bit for bit."""
+    rng = np.random.default_rng(seed)
+    t, accel = _moving_stream(40.0, seed)
+    accel = np.round(accel / 0.04) * 0.04  # 4 cm/s^2 LSB: noise of half an LSB repeats readings often
+    accel[1200:1500, 1] = accel[1199, 1]  # stuck 3 s
+    accel[2500:2700, 0] = 19.6  # at a rail
+    gy = np.round(rng.normal(0.0, 0.01, accel.shape) / 0.01) * 0.01 if gyro else None
+    if gy is not None:
+        gy[3000:3300, 2] = 0.0  # dead
+    quick, slow = StuckScreen(), StuckScreen()
+    slow.quick = False
+    i, took_quick, pushes = 0, 0, 0
+    while i <= t.size:
+        j = min(t.size, i + int(rng.integers(1, 151)))
+        final = i == t.size
+        args = (t[i:j], accel[i:j], None if gy is None else gy[i:j])
+        took_quick += quick._no_run_can_be_judged(args[1], args[2], quick.min_run()) if j > i else 0
+        a, b = quick.push(*args, final=final), slow.push(*args, final=final)
+        pushes += 1
+        for x, y in zip(a, b, strict=True):
+            assert (x is None) == (y is None) and (x is None or np.array_equal(x, y))
+        assert _state(quick) == _state(slow)
+        i = j + final
+    assert 10 < took_quick < pushes - 3 and len(slow.spans) == 1 + gyro  # both paths taken, the stuck runs found

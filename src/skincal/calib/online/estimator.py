@@ -35,6 +35,7 @@ from skincal.calib import consistency
 from skincal.calib.online import clock, design, fit, split, stats
 from skincal.calib.online.design import excitation
 from skincal.calib.online.fit import JOINT_ACTIVE_RPS, decide, inflation, residuals, solve_unit, window_means
+from skincal.calib.online.history import GridHistory, JointBuffer
 from skincal.calib.online.options import OnlineOptions, UnitStatus, is_settled
 from skincal.calib.online.screen import admit, unsaturated
 from skincal.calib.online.unit import Grid, UnitState, keep_pending, rests_only, signals_at, take_pending
@@ -101,14 +102,10 @@ class OnlineCalibrator:
         L, grams = len(links), ((len(links), 2, stats.NA, stats.NA), (len(links), 2, stats.NG, stats.NG))
         self._u = {u: UnitState(list(links), np.zeros(grams[0]), np.zeros(grams[1]), np.zeros(L), candidates=links)
                    for u in names}
-        self._jt: list[FloatArray] = []
-        self._jq: list[FloatArray] = []
-        self._jqd: list[FloatArray | None] = []
-        self._joints: tuple[FloatArray, FloatArray, FloatArray] | None = None
+        self._joints = JointBuffer()
         self._frontier: float | None = None  # end of the processed joint blocks
-        self._grid: list[Grid] = []  # per block, every link
+        self._grid = GridHistory()  # per block, every link
         self.spline = False  # a block's joint stream was conditioned by smoothing splines (low-rate): sandwich as mle
-        self._grid_cat: Grid | None = None
         self.q_now: FloatArray | None = None
         self.late = 0
         self.joint_active_s = np.zeros(chain.n_joints)
@@ -138,9 +135,7 @@ class OnlineCalibrator:
         if not ok.all():
             t, q, qd_a = t[ok], q[ok], None if qd_a is None else qd_a[ok]
         if t.size:
-            self._jt.append(t)
-            self._jq.append(q)
-            self._jqd.append(qd_a)
+            self._joints.add(t, q, qd_a)
             self.q_now = q[np.argmax(t)].copy()
 
     def add_imu(self, unit: str, t_in: ArrayLike, accel: ArrayLike, gyro: ArrayLike | None = None) -> None:
@@ -192,41 +187,27 @@ class OnlineCalibrator:
         self._blocks(final=True)
         for u in self.units:
             admit(self._u[u], np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)) if self._u[u].has_gyro else None, True)
-            if (grid := self._grid_arrays()) is not None:  # the whole stream's peak (its kept samples pending again)
+            if (grid := self._grid.whole()) is not None:  # the whole stream's peak (its kept samples pending again)
                 clock.recheck(self._u[u], grid, None, None, None, self.options, final=True)
             self._absorb_unit(u, final=True)
-            if fit.needs_rewindow(self._u[u]) and (grid := self._grid_arrays()) is not None:
+            if fit.needs_rewindow(self._u[u]) and (grid := self._grid.whole()) is not None:
                 self._status(u, advise=False)  # the solutions and the leading link at the data's end
                 fit.rewindow(self._u[u], grid, lambda t, st=self._u[u]: clock.instants(st, t))
             self._u[u].split_cache = None  # the status after the data's end gives the std a result writes
         self.cpu_s += time.process_time() - c0
 
-    def _joint_arrays(self) -> tuple[FloatArray, FloatArray, FloatArray] | None:
-        if self._jt:
-            parts_t = ([self._joints[0]] if self._joints is not None else []) + self._jt
-            parts_q = ([self._joints[1]] if self._joints is not None else []) + self._jq
-            qd_new = [
-                np.gradient(q, t, axis=0) if qd is None and t.size > 1 else (np.zeros_like(q) if qd is None else qd)
-                for t, q, qd in zip(self._jt, self._jq, self._jqd, strict=True)
-            ]
-            parts_qd = ([self._joints[2]] if self._joints is not None else []) + qd_new
-            t = np.concatenate(parts_t)
-            order = np.argsort(t, kind="stable")
-            t = t[order]
-            keep = np.r_[True, np.diff(t) > 0]
-            self._joints = (t[keep], np.concatenate(parts_q)[order][keep], np.concatenate(parts_qd)[order][keep])
-            self._jt, self._jq, self._jqd = [], [], []
-        return self._joints
-
     def _blocks(self, final: bool) -> None:
         o = self.options
-        joints = self._joint_arrays()
+        newest = self._joints.newest
+        if self._frontier is not None and newest < self._frontier + o.block_s + o.margin_s + o.max_delay_s and (
+                not final or newest - o.margin_s <= self._frontier + 1e-9):  # fmt: skip
+            return  # no block complete: the received states stay unmerged
+        joints = self._joints.arrays()
         if joints is None or joints[0].size < 8:
             return
         t, q, qd = joints
         if self._frontier is None:
             self._frontier = float(t[0]) + o.margin_s
-        newest = float(t[-1])
         while True:
             T0 = self._frontier
             T1 = T0 + o.block_s
@@ -237,13 +218,8 @@ class OnlineCalibrator:
             self._condition_block(t, q, qd, T0, T1)
             self._frontier = T1
         # forget joint states no later block needs
-        keep = t >= self._frontier - max(o.margin_s, o.lookback_s) - 1e-9
-        if not keep.all():
-            self._joints = (t[keep], q[keep], qd[keep])
-        horizon = self._frontier - o.history_s
-        while self._grid and self._grid[0].t[-1] < horizon:
-            self._grid.pop(0)
-            self._grid_cat = None
+        self._joints.forget_before(self._frontier - max(o.margin_s, o.lookback_s) - 1e-9)
+        self._grid.forget_before(self._frontier - o.history_s)
 
     def _condition_block(self, t: FloatArray, q: FloatArray, qd: FloatArray, T0: float, T1: float) -> None:
         o = self.options
@@ -264,25 +240,10 @@ class OnlineCalibrator:
         y = np.concatenate([u, K.reshape(*K.shape[:2], 9), w, ug], axis=2)
         self.joint_active_s += (np.abs(qdg) > JOINT_ACTIVE_RPS).sum(axis=0) * dt
         self._grid.append(Grid(tg, y, dw, interp.reliable(tg), np.cumsum(np.abs(qdg), axis=1), resolved_speed(t[sel])))
-        self._grid_cat = None
-
-    def _grid_arrays(self) -> Grid | None:
-        """The kept grid blocks as one :class:`Grid` whose ``dy`` holds the time derivatives of the
-        table (central differences along the whole grid, continuous across blocks; ``w``'s exact)."""
-        if not self._grid:
-            return None
-        if self._grid_cat is None:
-            tg = np.concatenate([b.t for b in self._grid])
-            y = np.concatenate([b.y for b in self._grid])
-            dy = np.gradient(y, tg, axis=0) if tg.size > 1 else np.zeros_like(y)
-            dy[..., 12:15] = np.concatenate([b.dy for b in self._grid])  # dw/ds from the kinematics
-            ok, speed = np.concatenate([b.ok for b in self._grid]), np.concatenate([b.speed for b in self._grid])
-            self._grid_cat = Grid(tg, y, dy, ok, speed, min(b.resolved_rps for b in self._grid))
-        return self._grid_cat
 
     def _absorb_unit(self, name: str, final: bool = False) -> int:
         st = self._u[name]
-        grid = self._grid_arrays()
+        grid = self._grid.whole()
         if grid is None or not st.pending_t:
             return 0
         t, a, g = take_pending(st)

@@ -1,0 +1,140 @@
+"""What the streaming calibrator keeps of the joint stream: the joint states received, merged in stamp order
+only when a block is conditioned (:class:`JointBuffer`), and the link-signal grid of the conditioned blocks
+with its time derivatives, kept up to date block by block (:class:`GridHistory`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from skincal.calib.online.unit import Grid
+from skincal.kinematics.transforms import FloatArray
+
+KINEMATIC = slice(12, 15)
+"""The columns of :attr:`Grid.y` whose derivative (``dw``) comes from the kinematics, not from differences."""
+
+
+class JointBuffer:
+    """Joint states ``(t, q, qd)`` as received (any order, repeats allowed), merged when :meth:`arrays` is asked:
+    sorted by stamp (stable: of repeated stamps the first received is kept), ``qd`` from the positions
+    (``np.gradient`` over each received chunk) where it was not sent."""
+
+    def __init__(self) -> None:
+        self._t: list[FloatArray] = []
+        self._q: list[FloatArray] = []
+        self._qd: list[FloatArray | None] = []
+        self._merged: tuple[FloatArray, FloatArray, FloatArray] | None = None
+        self.newest = float("-inf")
+        """The latest stamp received, s."""
+
+    def add(self, t: FloatArray, q: FloatArray, qd: FloatArray | None) -> None:
+        """One chunk of finite joint states: ``t`` ``(N,)`` s, ``q`` ``(N, n)`` rad, ``qd`` ``(N, n)`` rad/s or None."""
+        self._t.append(t)
+        self._q.append(q)
+        self._qd.append(qd)
+        self.newest = max(self.newest, float(np.max(t)))
+
+    def arrays(self) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+        """The kept states merged in stamp order (None: none received)."""
+        if self._t:
+            kept = [] if self._merged is None else [self._merged]
+            qd_new = [
+                np.gradient(q, t, axis=0) if qd is None and t.size > 1 else (np.zeros_like(q) if qd is None else qd)
+                for t, q, qd in zip(self._t, self._q, self._qd, strict=True)
+            ]
+            t = np.concatenate([m[0] for m in kept] + self._t)
+            order = np.argsort(t, kind="stable")
+            t = t[order]
+            keep = np.r_[True, np.diff(t) > 0]
+            q = np.concatenate([m[1] for m in kept] + self._q)[order][keep]
+            qd = np.concatenate([m[2] for m in kept] + qd_new)[order][keep]
+            self._merged = (t[keep], q, qd)
+            self._t, self._q, self._qd = [], [], []
+        return self._merged
+
+    def forget_before(self, t0: float) -> None:
+        """Drop the merged states stamped before ``t0`` (no block needs them any more)."""
+        if self._merged is not None:
+            t, q, qd = self._merged
+            keep = t >= t0
+            if not keep.all():
+                self._merged = (t[keep], q[keep], qd[keep])
+
+
+def _gradient(t: FloatArray, y: FloatArray) -> FloatArray:
+    """``dy/dt`` along axis 0 for ``t`` ``(G,)``, ``G >= 2``: three-point differences for unevenly spaced
+    instants inside, one-sided at both ends (``np.gradient``'s non-uniform formula, ``edge_order=1``),
+
+        dy_i = -h2 / (h1 (h1 + h2)) y_{i-1} + (h2 - h1) / (h1 h2) y_i + h1 / (h2 (h1 + h2)) y_{i+1},
+
+    ``h1 = t_i - t_{i-1}``, ``h2 = t_{i+1} - t_i``."""
+    out = np.empty_like(y)
+    h = np.diff(t)
+    shape = (-1,) + (1,) * (y.ndim - 1)
+    out[0] = (y[1] - y[0]) / h[0]
+    out[-1] = (y[-1] - y[-2]) / h[-1]
+    if t.size > 2:
+        h1, h2 = h[:-1], h[1:]
+        a = (-h2 / (h1 * (h1 + h2))).reshape(shape)
+        b = ((h2 - h1) / (h1 * h2)).reshape(shape)
+        c = (h1 / (h2 * (h1 + h2))).reshape(shape)
+        out[1:-1] = a * y[:-2] + b * y[1:-1] + c * y[2:]
+    return out
+
+
+class GridHistory:
+    """The conditioned blocks' link signals (one :class:`Grid` per block, its ``dy`` only ``dw``) and, per block,
+    the derivatives of the whole table along the kept grid: three-point differences continuous across blocks,
+    one-sided at the kept grid's two ends, ``dw`` from the kinematics. Each block's are computed when it comes
+    (and its predecessor's last row and, when the oldest block goes, its successor's first row again), not the
+    whole grid's at every block."""
+
+    def __init__(self) -> None:
+        self.blocks: list[Grid] = []
+        self._dy: list[FloatArray] = []
+        self._whole: Grid | None = None
+
+    def __bool__(self) -> bool:
+        return bool(self.blocks)
+
+    def append(self, block: Grid) -> None:
+        """A new block (its instants after the kept ones'; ``block.dy`` its ``dw`` ``(G, n, 3)``, ``G >= 2``)."""
+        if self.blocks:
+            prev, prev_dy = self.blocks[-1], self._dy[-1]
+            d = _gradient(np.r_[prev.t[-2:], block.t], np.concatenate([prev.y[-2:], block.y]))
+            row = d[1]
+            row[..., KINEMATIC] = prev.dy[-1]
+            prev_dy[-1] = row  # its last row, one-sided before, now central
+            dy = d[2:]
+        else:
+            dy = _gradient(block.t, block.y)
+        dy[..., KINEMATIC] = block.dy
+        self.blocks.append(block)
+        self._dy.append(dy)
+        self._whole = None
+
+    def forget_before(self, horizon: float) -> None:
+        """Drop the blocks that end before ``horizon`` (the new oldest block's first row one-sided again)."""
+        dropped = False
+        while self.blocks and self.blocks[0].t[-1] < horizon:
+            self.blocks.pop(0)
+            self._dy.pop(0)
+            dropped = True
+        if dropped and self.blocks:
+            first, dy = self.blocks[0], self._dy[0]
+            row = (first.y[1] - first.y[0]) / (first.t[1] - first.t[0])
+            row[..., KINEMATIC] = first.dy[0]
+            dy[0] = row
+        self._whole = None if dropped else self._whole
+
+    def whole(self) -> Grid | None:
+        """The kept blocks as one :class:`Grid` whose ``dy`` is the whole table's (None: no block yet)."""
+        if not self.blocks:
+            return None
+        if self._whole is None:
+            b = self.blocks
+            self._whole = Grid(
+                np.concatenate([x.t for x in b]), np.concatenate([x.y for x in b]), np.concatenate(self._dy),
+                np.concatenate([x.ok for x in b]), np.concatenate([x.speed for x in b]),
+                min(x.resolved_rps for x in b),
+            )  # fmt: skip
+        return self._whole
