@@ -336,3 +336,29 @@ def test_a_fast_smooth_swing_stays_reliable_and_its_acceleration_steps_do_not():
     assert ok[swing].mean() >= 0.95, ok[swing].mean()
     dist = np.min(np.abs(probe[:, None] - steps[None, :]), axis=1)
     assert not np.any(ok[dist <= 0.025])
+
+
+@pytest.mark.parametrize("case", ["positions", "velocities", "jittered"])
+def test_a_stream_conditioned_for_its_later_instants_gives_the_whole_streams_values_there(case):
+    """``outputs_from``: the decisions taken on the whole stream, the filtered states and the unreliable mask
+    only from a window before the instant asked for; from that instant on, through the interpolator, the
+    whole stream's values bit for bit (the filters are local), the acceleration step 10 ms before it included."""
+    if case == "velocities":
+        rng = np.random.default_rng(1)
+        t, q, qd, _ = _excitation()
+        joints = JointStates(t=t, q=(q + rng.normal(0, 1e-4, q.shape))[:, None], qd=qd[:, None])
+    else:
+        joints = _controller_stream(seed=2, jitter_s=2e-4 if case == "jittered" else 0.0)[0]
+    t_from = 2.01
+    whole, part = JointInterpolator(joints), JointInterpolator(joints, outputs_from=t_from)
+    source = "velocities" if case == "velocities" else "positions"
+    assert part.conditioning.source == whole.conditioning.source == source
+    assert part.conditioning.regularised_stamps == (case == "jittered")
+    assert whole.t_start < t_from - 0.3 and t_from - 0.25 < part.t_start < t_from  # four 25-sample windows before
+    for key in ("position_noise", "velocity_noise", "qdd_noise", "stamp_jitter_s"):
+        np.testing.assert_array_equal(getattr(part.conditioning, key), getattr(whole.conditioning, key))
+    ti = np.linspace(t_from, whole.t_end, 3001)
+    for a, b in zip(part(ti), whole(ti), strict=True):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(part.reliable(ti), whole.reliable(ti))
+    assert not part.reliable(np.array([t_from]))[0]  # the step, before the instants asked for, is seen

@@ -226,7 +226,7 @@ class OnlineCalibrator:
         sel = (t >= T0 - max(o.margin_s, o.lookback_s) - 1e-9) & (t <= T1 + o.margin_s + 1e-9)
         if sel.sum() < 8:
             return
-        interp = JointInterpolator(JointStates(t=t[sel], q=q[sel], qd=qd[sel]))
+        interp = JointInterpolator(JointStates(t=t[sel], q=q[sel], qd=qd[sel]), outputs_from=T0)
         self.spline = self.spline or interp.conditioning.source == "spline"
         dt = 1.0 / o.grid_hz
         k0 = int(np.ceil((T0 - 1e-12) / dt))

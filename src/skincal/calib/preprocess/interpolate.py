@@ -33,11 +33,13 @@ class JointInterpolator:
     encoder positions are less noisy than the reported velocities (the usual case: an encoder
     resolves micro-radians, a velocity estimate carries mrad/s of noise), ``qd`` and ``qdd`` are
     the Savitzky-Golay first and second derivatives of the positions instead of the velocities'.
-    ``conditioning`` says what was done.
+    ``conditioning`` says what was done; ``outputs_from`` (s): only the instants from then on are asked for
+    (the stream before it decides the conditioning, :func:`condition_joint_stream`).
     """
 
     def __init__(
-        self, joints: JointStates, *, use_dataset_qdd: bool = False, qdd_window_s: float = DEFAULT_QDD_WINDOW_S
+        self, joints: JointStates, *, use_dataset_qdd: bool = False, qdd_window_s: float = DEFAULT_QDD_WINDOW_S,
+        outputs_from: float | None = None,
     ) -> None:
         if np.asarray(joints.t).shape[0] < 7:
             raise CalibrationError(
@@ -46,7 +48,7 @@ class JointInterpolator:
         use_reported = use_dataset_qdd and joints.qdd is not None
         self._reported = joints
         joints, self.conditioning = (joints, JointConditioning()) if use_reported else condition_joint_stream(
-            joints, qdd_window_s
+            joints, qdd_window_s, outputs_from
         )
         tj = np.asarray(joints.t, dtype=float)
         self.t_start, self.t_end = float(tj[0]), float(tj[-1])
