@@ -82,59 +82,74 @@ def _gradient(t: FloatArray, y: FloatArray) -> FloatArray:
 
 
 class GridHistory:
-    """The conditioned blocks' link signals (one :class:`Grid` per block, its ``dy`` only ``dw``) and, per block,
-    the derivatives of the whole table along the kept grid: three-point differences continuous across blocks,
-    one-sided at the kept grid's two ends, ``dw`` from the kinematics. Each block's are computed when it comes
-    (and its predecessor's last row and, when the oldest block goes, its successor's first row again), not the
-    whole grid's at every block."""
+    """The conditioned blocks' link signals and the derivatives of the whole table along the kept grid:
+    three-point differences continuous across blocks, one-sided at the kept grid's two ends, ``dw`` from the
+    kinematics. Each block's are computed when it comes (and its predecessor's last row again, and when the
+    oldest block goes its successor's first row), not the whole grid's at every block; the rows live in
+    buffers with room to grow, :meth:`whole` a view of them (a new buffer when full: a view taken before
+    keeps its rows, but for the two end rows' derivatives, which become central or one-sided in place)."""
 
     def __init__(self) -> None:
-        self.blocks: list[Grid] = []
-        self._dy: list[FloatArray] = []
+        self._spans: list[tuple[int, int, float]] = []  # per kept block: first row, end row, resolved_rps
+        self._buf: list[np.ndarray] = []  # t, y, dy, ok, speed
         self._whole: Grid | None = None
 
     def __bool__(self) -> bool:
-        return bool(self.blocks)
+        return bool(self._spans)
+
+    def _room(self, block: Grid) -> int:
+        """The buffers' row at which ``block`` goes (moved to new buffers, twice the kept rows' room, when full)."""
+        start = self._spans[0][0] if self._spans else 0
+        end = self._spans[-1][1] if self._spans else 0
+        G = block.t.size
+        if self._buf and end + G <= self._buf[0].shape[0]:
+            return end
+        rows = 2 * (end - start + G) + 64
+        parts = (block.t, block.y, block.y, block.ok, block.speed)
+        new = [np.empty((rows, *x.shape[1:]), dtype=x.dtype) for x in parts]
+        for old, buf in zip(self._buf, new if self._buf else (), strict=True):
+            buf[: end - start] = old[start:end]
+        self._buf = new
+        self._spans = [(a - start, b - start, r) for a, b, r in self._spans]
+        return end - start
 
     def append(self, block: Grid) -> None:
         """A new block (its instants after the kept ones'; ``block.dy`` its ``dw`` ``(G, n, 3)``, ``G >= 2``)."""
-        if self.blocks:
-            prev, prev_dy = self.blocks[-1], self._dy[-1]
-            d = _gradient(np.r_[prev.t[-2:], block.t], np.concatenate([prev.y[-2:], block.y]))
-            row = d[1]
-            row[..., KINEMATIC] = prev.dy[-1]
-            prev_dy[-1] = row  # its last row, one-sided before, now central
-            dy = d[2:]
+        i = self._room(block)
+        t, y, dy, ok, speed = self._buf
+        j = i + block.t.size
+        t[i:j], y[i:j], ok[i:j], speed[i:j] = block.t, block.y, block.ok, block.speed
+        if self._spans:  # the previous last row, one-sided before, now central
+            d = _gradient(t[i - 2 : j], y[i - 2 : j])
+            d[1, ..., KINEMATIC] = dy[i - 1, ..., KINEMATIC]
+            dy[i - 1], dy[i:j] = d[1], d[2:]
         else:
-            dy = _gradient(block.t, block.y)
-        dy[..., KINEMATIC] = block.dy
-        self.blocks.append(block)
-        self._dy.append(dy)
+            dy[i:j] = _gradient(block.t, block.y)
+        dy[i:j, ..., KINEMATIC] = block.dy
+        self._spans.append((i, j, block.resolved_rps))
         self._whole = None
 
     def forget_before(self, horizon: float) -> None:
         """Drop the blocks that end before ``horizon`` (the new oldest block's first row one-sided again)."""
+        t, y, dy = self._buf[:3] if self._buf else (None, None, None)
         dropped = False
-        while self.blocks and self.blocks[0].t[-1] < horizon:
-            self.blocks.pop(0)
-            self._dy.pop(0)
+        while self._spans and t is not None and t[self._spans[0][1] - 1] < horizon:
+            self._spans.pop(0)
             dropped = True
-        if dropped and self.blocks:
-            first, dy = self.blocks[0], self._dy[0]
-            row = (first.y[1] - first.y[0]) / (first.t[1] - first.t[0])
-            row[..., KINEMATIC] = first.dy[0]
-            dy[0] = row
-        self._whole = None if dropped else self._whole
+        if dropped:
+            self._whole = None
+            if self._spans and t is not None and y is not None and dy is not None:
+                i = self._spans[0][0]
+                row = (y[i + 1] - y[i]) / (t[i + 1] - t[i])
+                row[..., KINEMATIC] = dy[i, ..., KINEMATIC]
+                dy[i] = row
 
     def whole(self) -> Grid | None:
         """The kept blocks as one :class:`Grid` whose ``dy`` is the whole table's (None: no block yet)."""
-        if not self.blocks:
+        if not self._spans:
             return None
         if self._whole is None:
-            b = self.blocks
-            self._whole = Grid(
-                np.concatenate([x.t for x in b]), np.concatenate([x.y for x in b]), np.concatenate(self._dy),
-                np.concatenate([x.ok for x in b]), np.concatenate([x.speed for x in b]),
-                min(x.resolved_rps for x in b),
-            )  # fmt: skip
+            a, b = self._spans[0][0], self._spans[-1][1]
+            t, y, dy, ok, speed = (x[a:b] for x in self._buf)
+            self._whole = Grid(t, y, dy, ok, speed, min(r for _, _, r in self._spans))
         return self._whole
