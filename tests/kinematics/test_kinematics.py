@@ -183,3 +183,22 @@ def test_rotation_angle_is_accurate_for_tiny_and_large_angles():
     for angle in (1e-9, 1e-6, 0.3, np.pi - 1e-6):
         R = Rotation.from_rotvec(angle * axis).as_matrix()
         assert rotation_angle(np.eye(3), R) == pytest.approx(angle, rel=1e-6)
+
+
+def test_exp_rotation_is_rodrigues_and_scipys_rotation_vector():
+    """``exp_rotation`` against Rodrigues' formula ``I + sin(a) [k]x + (1 - cos(a)) [k]x^2`` and against
+    ``scipy``'s ``Rotation.from_rotvec`` over angles from 1e-12 rad to 3 rad (the Taylor branch below 1e-3)."""
+    from scipy.spatial.transform import Rotation
+
+    from skincal.kinematics.transforms import exp_rotation, skew
+
+    rng = np.random.default_rng(7)
+    for scale in 10.0 ** np.linspace(-12, 0.45, 40):
+        v = rng.normal(size=3)
+        v *= scale / np.linalg.norm(v)
+        a, K = scale, skew(v / scale)
+        rodrigues = np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K
+        R = exp_rotation(v)
+        np.testing.assert_allclose(R, rodrigues, rtol=0, atol=4e-16)
+        np.testing.assert_allclose(R, Rotation.from_rotvec(v).as_matrix(), rtol=0, atol=4e-16)
+        np.testing.assert_allclose(R @ R.T, np.eye(3), rtol=0, atol=1e-15)

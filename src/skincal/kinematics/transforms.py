@@ -6,6 +6,8 @@ shape ``(..., 4, 4)``. Quaternions are ordered (w, x, y, z) at every boundary of
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
@@ -145,6 +147,28 @@ def quaternion_distance(q_a: ArrayLike, q_b: ArrayLike) -> FloatArray:
     q_a = q_a / np.linalg.norm(q_a, axis=-1, keepdims=True)
     q_b = q_b / np.linalg.norm(q_b, axis=-1, keepdims=True)
     return np.minimum(np.linalg.norm(q_a - q_b, axis=-1), np.linalg.norm(q_a + q_b, axis=-1))
+
+
+def exp_rotation(v: ArrayLike) -> FloatArray:
+    """``Exp([v]x)`` ``(3, 3)`` of one rotation vector ``v`` ``(3,)`` (rad): through the unit quaternion
+    ``(w, x, y, z) = (cos(|v|/2), sin(|v|/2) v / |v|)`` (a Taylor series of ``sin(|v|/2) / |v|`` below 1e-3 rad),
+    the arithmetic of ``scipy.spatial.transform.Rotation.from_rotvec(v).as_matrix()`` without its object (a
+    Gauss-Newton's step in a hot loop)."""
+    v0, v1, v2 = (float(c) for c in np.asarray(v, dtype=float).reshape(3))
+    angle = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    if angle <= 1e-3:
+        a2 = angle * angle
+        scale = 0.5 - a2 / 48 + a2 * a2 / 3840
+    else:
+        scale = math.sin(angle / 2) / angle
+    x, y, z, w = scale * v0, scale * v1, scale * v2, math.cos(angle / 2)
+    x2, y2, z2, w2 = x * x, y * y, z * z, w * w
+    xy, zw, xz, yw, yz, xw = x * y, z * w, x * z, y * w, y * z, x * w
+    return np.array([
+        [x2 - y2 - z2 + w2, 2 * (xy - zw), 2 * (xz + yw)],
+        [2 * (xy + zw), -x2 + y2 - z2 + w2, 2 * (yz - xw)],
+        [2 * (xz - yw), 2 * (yz + xw), -x2 - y2 + z2 + w2],
+    ])  # fmt: skip
 
 
 def skew(v: ArrayLike) -> FloatArray:

@@ -42,9 +42,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from skincal.kinematics.transforms import FloatArray, nearest_rotation, rotation_angle, skew
+from skincal.kinematics.transforms import FloatArray, exp_rotation, nearest_rotation, rotation_angle, skew
 
 NA = 28
 """Columns of the accelerometer Gram: ``[vec(G) 9, h 3, p 3, tau 1, tau p 3, k 1, k p 3, d 1, d p 3]`` and the
@@ -240,13 +239,26 @@ class Solution:
         return 0.5 * (out + out.T)
 
 
+_GENERATORS = skew(np.eye(3))
+"""``(3, 3, 3)``: ``[e_k]x``, the generators of so(3)."""
+
+
 def _vec_jacobians(R: FloatArray, F: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """d vec(R Exp(dth) F)/d dth ``(9, 3)``, d vec(R (F + dE))/d vec(dE) ``(9, 9)``, d vec(R Exp(dth))/d dth."""
-    gens = skew(np.eye(3))  # (3, 3, 3): [e_k]x
-    JG = np.stack([(R @ gk @ F).reshape(9) for gk in gens], axis=1)
-    JR = np.stack([(R @ gk).reshape(9) for gk in gens], axis=1)
-    JE = np.asarray(np.kron(R, np.eye(3)), dtype=np.float64)
+    """d vec(R Exp(dth) F)/d dth ``(9, 3)``, d vec(R (F + dE))/d vec(dE) ``(9, 9)`` (``R kron I``: row ``3 i + a``,
+    column ``3 j + b`` is ``R_ij delta_ab``), d vec(R Exp(dth))/d dth."""
+    RG = R @ _GENERATORS  # (3, 3, 3): R [e_k]x
+    JG = (RG @ F).reshape(3, 9).T
+    JR = RG.reshape(3, 9).T
+    JE = (R[:, None, :, None] * _EYE3[None, :, None, :]).reshape(9, 9)
     return JG, JE, JR
+
+
+_EYE3 = np.eye(3)
+_JA_CONSTANT = np.zeros((NA - 1, NP))
+_JA_CONSTANT[9:12, _H], _JA_CONSTANT[12:15, _P], _JA_CONSTANT[15, _T] = _EYE3, _EYE3, 1.0
+_JA_CONSTANT[19, _K], _JA_CONSTANT[23, _D] = 1.0, 1.0
+_JG_CONSTANT = np.zeros((NG - 1, NP))
+_JG_CONSTANT[9:12, _C], _JG_CONSTANT[12, _T], _JG_CONSTANT[13, _D] = _EYE3, 1.0, 1.0
 
 
 def _rotation_start(Za: FloatArray, Zg: FloatArray | None, held: bool) -> FloatArray | None:
@@ -279,20 +291,18 @@ def linearise(R: FloatArray, x: FloatArray) -> tuple[FloatArray, FloatArray, Flo
     """The unknowns of (1) and (2) at ``R`` and ``x = [0 (3), E, h, p, c, tau, k, d]`` ``(NP,)`` and their
     Jacobians with respect to ``delta`` (module docstring): ``x_a`` ``(NA - 1,)``, ``J_a``
     ``(NA - 1, NP)``, ``x_g`` ``(NG - 1,)``, ``J_g`` ``(NG - 1, NP)``."""
-    F = np.eye(3) + x[_E].reshape(3, 3)
+    F = _EYE3 + x[_E].reshape(3, 3)
     JG, JE, JR = _vec_jacobians(R, F)
-    Ja = np.zeros((NA - 1, NP))
-    Ja[:9, _TH], Ja[:9, _E], Ja[9:12, _H], Ja[12:15, _P], Ja[15, _T] = JG, JE, np.eye(3), np.eye(3), 1.0
-    Ja[16:19, _T], Ja[16:19, _P] = x[_P], x[_T] * np.eye(3)  # d(tau p)
-    Ja[19, _K] = 1.0
-    Ja[20:23, _K], Ja[20:23, _P] = x[_P], x[_K] * np.eye(3)  # d(k p)
-    Ja[23, _D] = 1.0
-    Ja[24:27, _D], Ja[24:27, _P] = x[_P], x[_D] * np.eye(3)  # d(d p)
+    Ja = _JA_CONSTANT.copy()  # d h, d p, d tau, d k, d d: identities
+    Ja[:9, _TH], Ja[:9, _E] = JG, JE
+    Ja[16:19, _T], Ja[16:19, _P] = x[_P], x[_T] * _EYE3  # d(tau p)
+    Ja[20:23, _K], Ja[20:23, _P] = x[_P], x[_K] * _EYE3  # d(k p)
+    Ja[24:27, _D], Ja[24:27, _P] = x[_P], x[_D] * _EYE3  # d(d p)
     xa = np.concatenate([
         (R @ F).reshape(9), x[_H], x[_P], [x[_T]], x[_T] * x[_P], [x[_K]], x[_K] * x[_P], [x[_D]], x[_D] * x[_P]
     ])  # fmt: skip
-    Jg = np.zeros((NG - 1, NP))
-    Jg[:9, _TH], Jg[9:12, _C], Jg[12, _T], Jg[13, _D] = JR, np.eye(3), 1.0, 1.0
+    Jg = _JG_CONSTANT.copy()
+    Jg[:9, _TH] = JR
     xg = np.concatenate([R.reshape(9), x[_C], [x[_T]], [x[_D]]])
     return xa, Ja, xg, Jg
 
@@ -353,7 +363,7 @@ def solve(
         xa, Ja, xg, Jg = linearise(R, x)
         ga = Za[: NA - 1, : NA - 1] @ xa - Za[: NA - 1, NA - 1]
         H = wa * Ja.T @ Za[: NA - 1, : NA - 1] @ Ja + P
-        centred = np.r_[np.zeros(3), x[3:]]
+        centred = x.copy()  # x[:3] (dtheta) is 0
         centred[_D] -= drift_total
         grad = wa * Ja.T @ ga + P @ centred
         if have_g:
@@ -372,7 +382,7 @@ def solve(
         turn = float(np.linalg.norm(step[_TH]))
         if turn > MAX_TURN_RAD:  # a rotation the data do not hold yet (one gravity direction): no wild jump
             step *= MAX_TURN_RAD / turn
-        R = R @ Rotation.from_rotvec(step[_TH]).as_matrix()
+        R = R @ exp_rotation(step[_TH])
         x[3:] += step[3:]
         if np.linalg.norm(step[_TH]) < 1e-10 and it > 1:
             break
