@@ -195,11 +195,12 @@ def recheck(st: UnitState, grid: Grid, t: FloatArray | None, a: FloatArray | Non
     than the history, taken under the wrong clock, are forgotten)."""
     if st.offset is None or st.clock_provisional or not st.raw:
         return False
-    T, A, G = kept_with(st, t, a, g)
-    span = float(T[-1] - T[0])
+    last = t[-1] if t is not None and len(t) else st.raw[-1][0][-1]  # kept_with's last and first stamps
+    span = float(last - st.raw[0][0][0])
     if span < RECHECK_GROWTH * st.searched_span and not (final and span > 1.05 * st.searched_span):
         return False
     st.searched_span = span
+    T, A, G = kept_with(st, t, a, g)
     inside = (T >= grid.t[0]) & (T <= grid.t[-1])  # searched on the stamps as align searches them
     if inside.sum() < 20:
         return False
