@@ -247,16 +247,17 @@ def test_the_quick_path_leaves_what_the_per_axis_path_leaves(seed, gyro):
         gy[3000:3300, 2] = 0.0  # dead
     quick, slow = StuckScreen(), StuckScreen()
     slow.quick = False
-    i, took_quick, pushes = 0, 0, 0
+    i, pushes = 0, 0
     while i <= t.size:
         j = min(t.size, i + int(rng.integers(1, 151)))
         final = i == t.size
         args = (t[i:j], accel[i:j], None if gy is None else gy[i:j])
-        took_quick += quick._no_run_can_be_judged(args[1], args[2], quick.min_run()) if j > i else 0
         a, b = quick.push(*args, final=final), slow.push(*args, final=final)
         pushes += 1
         for x, y in zip(a, b, strict=True):
             assert (x is None) == (y is None) and (x is None or np.array_equal(x, y))
         assert _state(quick) == _state(slow)
         i = j + final
-    assert 10 < took_quick < pushes - 3 and len(slow.spans) == 1 + gyro  # both paths taken, the stuck runs found
+    took_quick = quick.quick_pushes
+    # both paths taken, the stuck runs found
+    assert slow.quick_pushes == 0 and 10 < took_quick < pushes - 3 and len(slow.spans) == 1 + gyro

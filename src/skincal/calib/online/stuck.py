@@ -81,6 +81,10 @@ accelerometer's three, m/s^2), and beyond what value a run at the axis' extreme 
 screening's constants, :func:`~skincal.calib.preprocess.screening.gyro_lost`)."""
 
 
+_OTHER_COLUMNS = [np.array(c) for c in ([1, 2], [0, 2], [0, 1], [4, 5, 0, 1, 2], [3, 5, 0, 1, 2], [3, 4, 0, 1, 2])]
+"""Per axis (accelerometer x, y, z, gyroscope x, y, z) the columns of ``[accel, gyro]`` that :func:`_others` takes."""
+
+
 def _others(c: int, k: int, a: FloatArray, g: FloatArray | None) -> FloatArray:
     """The readings that show the unit moving during a run of axis ``k`` of channel ``c`` (:data:`CHANNELS`)."""
     if c == 0:
@@ -103,6 +107,7 @@ class StuckScreen:
     def __init__(self) -> None:
         self._held: tuple[FloatArray, FloatArray, FloatArray | None] | None = None
         self._runs = [[_Run() for _ in range(3)] for _ in CHANNELS]
+        self._flat_runs = [r for runs in self._runs for r in runs]  # accelerometer x, y, z, gyroscope x, y, z
         self._lo = [np.full(3, np.inf) for _ in CHANNELS]  # each axis' extremes so far (a rail's value is one)
         self._hi = [np.full(3, -np.inf) for _ in CHANNELS]
         self._dt = float("nan")
@@ -113,6 +118,7 @@ class StuckScreen:
         self.gyro_dropped = 0
         self.t_end = float("-inf")
         self.quick = True  # False: every push through the per-axis path (the reference the quick one is tested on)
+        self.quick_pushes = 0  # pushes in which no run could be judged, screened all axes at once
 
     def min_run(self) -> float:
         """The samples a run needs to be judged: ``STUCK_MIN_S`` at the stream's median sample interval
@@ -144,8 +150,9 @@ class StuckScreen:
         if n == 0:
             return t, a, g
         min_run = self.min_run()
-        if self.quick and self._no_run_can_be_judged(a, g, min_run):
-            return self._release_unjudged(t, a, g, final)
+        if self.quick and (out := self._release_unjudged(t, a, g, min_run, final)) is not None:
+            self.quick_pushes += 1
+            return out
         judged, release = [], n
         for c, x in enumerate((a, g)):
             if x is None:
@@ -174,40 +181,34 @@ class StuckScreen:
         t, a = t[:release][keep], a[:release][keep]
         return t, a, None if g is None else g[:release][keep]
 
-    def _no_run_can_be_judged(self, a: FloatArray, g: FloatArray | None, min_run: float) -> bool:
-        """True when no axis' run in the samples can reach ``min_run``: each axis' repeated neighbours plus
-        one, plus the released run it may continue, fall short (the usual case of a chunk shorter than a
-        second)."""
-        x = a if g is None else np.hstack([a, g])
-        repeats = np.count_nonzero(x[1:] == x[:-1], axis=0) + 1
-        carried = [r.length if r.length and x[0, j] == r.value else 0
-                   for j, r in enumerate(r for runs in self._runs[: x.shape[1] // 3] for r in runs)]  # fmt: skip
-        return bool(np.all(repeats + np.asarray(carried) < min_run))
-
     def _release_unjudged(
-        self, t: FloatArray, a: FloatArray, g: FloatArray | None, final: bool
-    ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
-        """:meth:`push` when no run is judged (:meth:`_no_run_can_be_judged`): nothing is stuck; the samples from
-        the start of the newest run of repeats (longer than one sample) on any axis are held, unless ``final``;
-        each axis' run at the end of the released samples is carried over. All six axes at once: the same
-        state as the per-axis path, bit for bit (minima and maxima only)."""
+        self, t: FloatArray, a: FloatArray, g: FloatArray | None, min_run: float, final: bool
+    ) -> tuple[FloatArray, FloatArray, FloatArray | None] | None:
+        """:meth:`push` when no run can be judged (None otherwise): no axis' run in the samples can reach
+        ``min_run`` (each axis' repeated neighbours plus one, plus the released run it may continue, fall short:
+        the usual case of a chunk shorter than a second). Then nothing is stuck; the samples from the start of
+        the newest run of repeats (longer than one sample) on any axis are held, unless ``final``; each axis' run
+        at the end of the released samples is carried over. All axes at once: the same state as the per-axis
+        path, bit for bit (minima and maxima only)."""
         x = a if g is None else np.hstack([a, g])
         n, m = x.shape
-        changed = np.vstack([np.ones((1, m), dtype=bool), x[1:] != x[:-1]])  # (n, m): a run starts here
+        runs = self._flat_runs[:m]
+        same = x[1:] == x[:-1]
+        carried = np.array([bool(r.length) and x[0, j] == r.value for j, r in enumerate(runs)])
+        carried_length = np.array([r.length for r in runs]) * carried
+        if np.any(np.count_nonzero(same, axis=0) + 1 + carried_length >= min_run):
+            return None
+        changed = np.vstack([np.ones((1, m), dtype=bool), ~same])  # (n, m): a run starts here
         row = np.arange(n)[:, None]
         last_start = np.where(changed, row, 0).max(axis=0)  # each axis' newest run start
-        runs = [r for runs in self._runs[: m // 3] for r in runs]
-        carried = np.array([bool(r.length) and x[0, j] == r.value for j, r in enumerate(runs)])
-        length = n - last_start + np.where((last_start == 0) & carried, [r.length for r in runs], 0)
+        length = n - last_start + np.where(last_start == 0, carried_length, 0)
         release = n if final or not np.any(length > 1) else int(np.min(last_start[length > 1]))
         if release:
             start = np.where(changed[:release], row[:release], 0).max(axis=0)  # each axis' run at the release
             lo = np.minimum.accumulate(x[release - 1 :: -1], axis=0)[::-1]  # lo[i]: smallest of rows i..release-1
             hi = np.maximum.accumulate(x[release - 1 :: -1], axis=0)[::-1]
             for j, run in enumerate(runs):
-                c, k, i0 = j // 3, j % 3, int(start[j])
-                cols = [i for i in range(3) if i != k] + ([] if c == 0 else [0, 1, 2])
-                cols = cols if c == 0 else [3 + i for i in cols[:2]] + cols[2:]
+                i0, cols = int(start[j]), _OTHER_COLUMNS[j]
                 if i0 == 0 and carried[j]:
                     run.length += release
                     run.lo, run.hi = np.minimum(run.lo, lo[0, cols]), np.maximum(run.hi, hi[0, cols])
