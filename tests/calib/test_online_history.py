@@ -45,7 +45,7 @@ def test_the_grid_kept_block_by_block_is_the_whole_grids_gradient(seed):
         dy[..., KINEMATIC] = np.concatenate([b.dy for b in kept])
         np.testing.assert_array_equal(whole.t, t)
         np.testing.assert_array_equal(whole.y, y)
-        np.testing.assert_allclose(whole.dy, dy, rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(whole.dy, dy)  # the same arithmetic, row by row
         np.testing.assert_array_equal(whole.ok, np.concatenate([b.ok for b in kept]))
         np.testing.assert_array_equal(whole.speed, np.concatenate([b.speed for b in kept]))
         assert whole.resolved_rps == min(b.resolved_rps for b in kept)
@@ -73,3 +73,27 @@ def test_joint_chunks_in_any_order_merge_by_stamp_keeping_the_first_of_a_repeat(
     buffer.forget_before(2.0)
     kept = buffer.arrays()
     assert kept is not None and kept[0][0] == 2.0 and kept[0].size == 200
+
+
+def test_a_stream_whose_stamps_stop_advancing_is_merged_and_stays_bounded(monkeypatch):
+    """A driver repeating its last state with its last stamp reaches no block; the buffer merges every
+    ``MERGE_EVERY`` chunks (the repeats go), and merging then or only at the end gives the same states."""
+    from skincal.calib.online import history
+
+    t = np.arange(50) / 100.0
+    q = np.column_stack([np.sin(t), t])
+    chunks = [(t, q)] + [(t[-1:], q[-1:] + 1.0)] * (3 * history.MERGE_EVERY)
+    eager = JointBuffer()
+    for tc, qc in chunks:
+        eager.add(tc, qc, None)
+        assert len(eager._t) < history.MERGE_EVERY
+    monkeypatch.setattr(history, "MERGE_EVERY", 10**9)
+    late = JointBuffer()
+    for tc, qc in chunks:
+        late.add(tc, qc, None)
+    assert len(late._t) == len(chunks)
+    merged = eager.arrays()
+    assert merged is not None and merged[0].size == t.size
+    np.testing.assert_array_equal(merged[1], q)  # the first received of a repeated stamp is kept
+    for a, b in zip(merged, late.arrays(), strict=True):
+        np.testing.assert_array_equal(a, b)

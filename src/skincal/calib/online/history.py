@@ -13,6 +13,10 @@ KINEMATIC = slice(12, 15)
 """The columns of :attr:`Grid.y` whose derivative (``dw``) comes from the kinematics, not from differences."""
 
 
+MERGE_EVERY = 256
+"""Chunks of joint states :class:`JointBuffer` holds unmerged at most (the merge is the same whenever it runs)."""
+
+
 class JointBuffer:
     """Joint states ``(t, q, qd)`` as received (any order, repeats allowed), merged when :meth:`arrays` is asked:
     sorted by stamp (stable: of repeated stamps the first received is kept), ``qd`` from the positions
@@ -32,6 +36,8 @@ class JointBuffer:
         self._q.append(q)
         self._qd.append(qd)
         self.newest = max(self.newest, float(np.max(t)))
+        if len(self._t) >= MERGE_EVERY:  # a stream whose stamps stop advancing (a driver repeating its last
+            self.arrays()  # state) reaches no block: merged now, its repeats go and the memory stays bounded
 
     def arrays(self) -> tuple[FloatArray, FloatArray, FloatArray] | None:
         """The kept states merged in stamp order (None: none received)."""

@@ -483,9 +483,13 @@ def condition_joint_stream(
     noise includes the encoder step's rounding (step / sqrt(12)).
 
     ``outputs_from`` (s): the stream is conditioned for the instants from then on only (a streaming block
-    after its lookback): the decisions (stamps, noise levels, source) are taken on the whole stream, the
-    filtered states and the unreliable mask returned start :data:`OUTPUT_REACH` windows before it (a uniform
-    stream; the values there are those of the whole stream's, the filters being local).
+    after its lookback): the decisions (stamps, noise levels, source) are taken on the whole stream; with
+    the positions as the source (a uniform stream) the filtered states and the unreliable mask returned
+    start :data:`OUTPUT_REACH` windows before it. From ``outputs_from`` on, the states are the whole
+    stream's bit for bit (the Savitzky-Golay fits are local); the mask's running mean of the fit residual
+    is a running sum, equal to rounding, so the mask is the same unless a residual sits at its threshold
+    to the last bit. Other sources are returned whole (their interpolator derives the sample interval
+    from the stream it is given).
     """
     t = np.asarray(joints.t, dtype=float)
     if t.shape[0] >= 7 and is_low_rate(t):
@@ -522,19 +526,16 @@ def condition_joint_stream(
     info = dict(regularised_stamps=regularised, stamp_jitter_s=jitter, position_noise=sigma_q, velocity_noise=sigma_v)
     if t.shape[0] <= window_q:
         return joints, JointConditioning(source="velocities", qdd_noise=noise_v, **info)
-    refilled = t.shape[0] != np.asarray(joints.t).shape[0]
-    if uniform and outputs_from is not None:
-        i0 = max(0, int(np.searchsorted(t, outputs_from)) - OUTPUT_REACH * window_q)
-        if i0 > 0:  # reported qdd (velocities source) only where no sample was refilled
-            qdd = None if refilled or joints.qdd is None else np.asarray(joints.qdd)[i0:]
-            t, q, qd = t[i0:], q[i0:], qd[i0:]
-            joints = JointStates(t=t, q=q, qd=qd, qdd=qdd)
     if uniform and noise_q < noise_v:
+        if outputs_from is not None:  # the position filters only where the instants asked for need them
+            i0 = max(0, int(np.searchsorted(t, outputs_from)) - OUTPUT_REACH * window_q)
+            t, q = t[i0:], q[i0:]
         qd_q = savgol_filter(q, window_q, POSITION_POLYORDER, deriv=1, delta=dt, axis=0, mode="interp")
         qdd_q = savgol_filter(q, window_q, POSITION_POLYORDER, deriv=2, delta=dt, axis=0, mode="interp")
         out = JointStates(t=t, q=q, qd=qd_q, qdd=qdd_q)
         kinks = _kinks(q, window_q, sigma_q, KINK_FLOOR["positions"], POSITION_POLYORDER, dt)
         return out, JointConditioning(source="positions", qdd_noise=noise_q, unreliable=kinks, **info)
+    refilled = t.shape[0] != np.asarray(joints.t).shape[0]
     out = joints if not regularised else JointStates(t=t, q=q, qd=qd, qdd=None if refilled else joints.qdd)
     kinks = _kinks(qd, window, sigma_v, KINK_FLOOR["velocities"])
     return out, JointConditioning(source="velocities", qdd_noise=noise_v, unreliable=kinks, **info)
