@@ -199,9 +199,12 @@ class OnlineCalibrator:
     def _blocks(self, final: bool) -> None:
         o = self.options
         newest = self._joints.newest
-        if self._frontier is not None and newest < self._frontier + o.block_s + o.margin_s + o.max_delay_s and (
-                not final or newest - o.margin_s <= self._frontier + 1e-9):  # fmt: skip
-            return  # no block complete: the received states stay unmerged
+
+        def complete(T0: float) -> bool:  # a whole block from T0 is in (or the data's end with final)
+            return newest >= T0 + o.block_s + o.margin_s + o.max_delay_s or (final and newest - o.margin_s > T0 + 1e-9)
+
+        if self._frontier is not None and not complete(self._frontier):
+            return  # the received states stay unmerged
         joints = self._joints.arrays()
         if joints is None or joints[0].size < 8:
             return
@@ -210,11 +213,11 @@ class OnlineCalibrator:
             self._frontier = float(t[0]) + o.margin_s
         while True:
             T0 = self._frontier
+            if not complete(T0):
+                break
             T1 = T0 + o.block_s
             if newest < T1 + o.margin_s + o.max_delay_s:
-                if not final or newest - o.margin_s <= T0 + 1e-9:
-                    break
-                T1 = newest - o.margin_s
+                T1 = newest - o.margin_s  # the data's end (final)
             self._condition_block(t, q, qd, T0, T1)
             self._frontier = T1
         # forget joint states no later block needs

@@ -72,7 +72,9 @@ def _gradient(t: FloatArray, y: FloatArray) -> FloatArray:
 
         dy_i = -h2 / (h1 (h1 + h2)) y_{i-1} + (h2 - h1) / (h1 h2) y_i + h1 / (h2 (h1 + h2)) y_{i+1},
 
-    ``h1 = t_i - t_{i-1}``, ``h2 = t_{i+1} - t_i``."""
+    ``h1 = t_i - t_{i-1}``, ``h2 = t_{i+1} - t_i``. Written out rather than ``np.gradient`` of each block's rows:
+    that takes its equal-spacing formula whenever the rows it is given happen to be evenly spaced to the bit,
+    and a block's rows would then differ in the last bits from the same rows of the whole grid."""
     out = np.empty_like(y)
     h = np.diff(t)
     shape = (-1,) + (1,) * (y.ndim - 1)
